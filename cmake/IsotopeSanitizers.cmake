@@ -1,0 +1,10 @@
+# ISOTOPE_SANITIZE=address,undefined or thread: applied to every target in the tree.
+if(ISOTOPE_SANITIZE)
+  set(_san "-fsanitize=${ISOTOPE_SANITIZE}")
+  if(ISOTOPE_SANITIZE MATCHES "undefined")
+    string(APPEND _san " -fno-sanitize-recover=undefined")
+  endif()
+  separate_arguments(_san_list UNIX_COMMAND "${_san}")
+  add_compile_options(${_san_list} -fno-omit-frame-pointer -g)
+  add_link_options(${_san_list})
+endif()

@@ -1,0 +1,33 @@
+#pragma once
+// What a user chooses for one extraction.
+#include <string_view>
+#include <optional>
+
+namespace isotope {
+
+// Which saturated error a tetrahedron's refinement vertex is judged by (design.md).
+enum class ErrorIndicator {
+  bound,    // guaranteed L-infinity deviation of the coarse interpolant from the data (default)
+  surplus,  // the paper's |f(v) - (f(a)+f(b))/2|, saturated by max
+};
+
+enum class TopologyMode {
+  none,      // refine by error only (paper Sec. 3)
+  paper,     // the paper's critical points and intervals (Sec. 4.2-4.4), faithfully
+  preserve,  // the exact local rule of design.md: keeps components and Euler characteristic
+};
+
+struct ExtractOptions {
+  float iso = 0.0f;           // inside means value > iso
+  double eps = 0.0;           // refine while the chosen error is >= eps; 0 gives full resolution
+  ErrorIndicator error = ErrorIndicator::bound;
+  TopologyMode topology = TopologyMode::preserve;
+  double delta = 0.0;         // critical points of weight < delta may be dropped (issue 5)
+};
+
+std::string_view to_string(ErrorIndicator e);
+std::string_view to_string(TopologyMode t);
+std::optional<ErrorIndicator> parse_error_indicator(std::string_view s);
+std::optional<TopologyMode> parse_topology_mode(std::string_view s);
+
+}  // namespace isotope

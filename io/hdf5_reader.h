@@ -1,0 +1,13 @@
+#pragma once
+// One 3-D dataset of an HDF5 file, any integer or float type, C order (z, y, x): x fastest.
+// Attributes "spacing" and "origin" (3 values, x y z) are used when present.
+#include <string>
+
+#include "engine/volume.h"
+
+namespace isotope {
+
+// Throws IoError: missing file, not HDF5, missing dataset, rank != 3, non-numeric type, NaN.
+Volume read_hdf5(const std::string& file, const std::string& dataset);
+
+}  // namespace isotope
