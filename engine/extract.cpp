@@ -1,1 +1,147 @@
-// placeholder
+#include "engine/extract.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "engine/marching_tetrahedra.h"
+
+namespace isotope {
+namespace {
+
+using Tet = std::array<Coord, 4>;
+
+// Depth-first over the bisection tree (paper Sec. 3.2): cull by range, stop by the rule of
+// design.md, emit at stopping tetrahedra and at the leaves.
+class Traversal {
+ public:
+  Traversal(const MultiresVolume& mv, const ExtractOptions& options)
+      : mv_(mv), lattice_(mv.lattice()), options_(options),
+        builder_(options.iso, lattice_.side, mv.origin(), mv.spacing()) {
+    for (int i = 0; i < 3; ++i) box_max_[i] = mv.data_dims()[i] - 1;
+  }
+
+  void run() {
+    const int64_t n = lattice_.n;
+    // The six roots share the main diagonal and follow the Kuhn paths 0 -> a -> a+b -> (n,n,n).
+    static constexpr int kPerm[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
+    for (const auto& p : kPerm) {
+      Coord a{0, 0, 0}, ab{0, 0, 0};
+      a[p[0]] = n;
+      ab[p[0]] = n;
+      ab[p[1]] = n;
+      visit({Coord{0, 0, 0}, Coord{n, n, n}, ab, a}, 0);
+    }
+  }
+
+  Mesh take() { return builder_.take(); }
+  const ExtractStats& stats() const { return stats_; }
+
+ private:
+  void visit(const Tet& t, int level) {
+    ++stats_.tets_visited;
+    if (outside_box(t)) return;
+    if (level == lattice_.max_level()) return emit(t);
+    const Coord v{(t[0][0] + t[1][0]) / 2, (t[0][1] + t[1][1]) / 2, (t[0][2] + t[1][2]) / 2};
+    const DiamondRecord& rec = mv_.record(lattice_.index(v));
+    if (!(rec.lo <= options_.iso && options_.iso < rec.hi)) return;  // no value on each side
+    if (stops(rec)) return emit(t);
+    if (level % 3 == 0) {
+      visit({t[0], t[2], t[3], v}, level + 1);
+      visit({t[1], t[3], t[2], v}, level + 1);
+    } else {
+      visit({t[0], t[2], t[3], v}, level + 1);
+      visit({t[1], t[2], t[3], v}, level + 1);
+    }
+  }
+
+  bool stops(const DiamondRecord& rec) const {
+    const float err = options_.error == ErrorIndicator::bound ? rec.error_bound : rec.error_surplus;
+    if (!(static_cast<double>(err) < options_.eps)) return false;
+    const float iso = options_.iso;
+    switch (options_.topology) {
+      case TopologyMode::none: return true;
+      case TopologyMode::paper: return !(rec.paper_lo <= iso && iso < rec.paper_hi);
+      case TopologyMode::preserve:
+        return !(rec.exact_lo <= iso && iso < rec.exact_hi && static_cast<double>(rec.weight) >= options_.delta);
+    }
+    return true;
+  }
+
+  // The tetrahedron lies in a half-space beyond a face of the data box: it meets the box in a
+  // face at most. Leaves are unit-cell Kuhn tetrahedra, wholly inside or caught here.
+  bool outside_box(const Tet& t) const {
+    for (int a = 0; a < 3; ++a) {
+      const int64_t lo = std::min(std::min(t[0][a], t[1][a]), std::min(t[2][a], t[3][a]));
+      if (lo >= box_max_[a]) return true;
+    }
+    return false;
+  }
+
+  void emit(const Tet& t) {
+    ++stats_.tets_emitted;
+    builder_.add_tet(t, {mv_.value(lattice_.index(t[0])), mv_.value(lattice_.index(t[1])),
+                         mv_.value(lattice_.index(t[2])), mv_.value(lattice_.index(t[3]))});
+  }
+
+  const MultiresVolume& mv_;
+  const Lattice& lattice_;
+  ExtractOptions options_;
+  MeshBuilder builder_;
+  Coord box_max_{};
+  ExtractStats stats_;
+};
+
+void validate(const ExtractOptions& o) {
+  if (!std::isfinite(o.iso)) throw std::invalid_argument("the isovalue must be a finite number");
+  if (!(o.eps >= 0)) throw std::invalid_argument("eps must be >= 0");
+  if (!(o.delta >= 0)) throw std::invalid_argument("delta must be >= 0");
+}
+
+}  // namespace
+
+Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats) {
+  const auto start = std::chrono::steady_clock::now();
+  validate(options);
+  Traversal traversal(mv, options);
+  traversal.run();
+  if (stats) {
+    *stats = traversal.stats();
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  return traversal.take();
+}
+
+Mesh extract_full_resolution(const Volume& volume, float iso) {
+  if (!std::isfinite(iso)) throw std::invalid_argument("the isovalue must be a finite number");
+  const auto& d = volume.dims;
+  MeshBuilder builder(iso, std::max({d[0], d[1], d[2]}), volume.origin, volume.spacing);
+  static constexpr int kPerm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  for (int64_t z = 0; z + 1 < d[2]; ++z)
+    for (int64_t y = 0; y + 1 < d[1]; ++y)
+      for (int64_t x = 0; x + 1 < d[0]; ++x) {
+        int above = 0;
+        for (int c = 0; c < 8; ++c) above += volume.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)) > iso;
+        if (above == 0 || above == 8) continue;
+        // The cell's six Kuhn tetrahedra run from its all-even corner to the opposite one.
+        const Coord cell{x, y, z};
+        Coord e, s;
+        for (int a = 0; a < 3; ++a) {
+          e[a] = cell[a] % 2 == 0 ? cell[a] : cell[a] + 1;
+          s[a] = cell[a] % 2 == 0 ? 1 : -1;
+        }
+        for (const auto& p : kPerm) {
+          Tet t{e, e, e, e};
+          t[1][p[0]] += s[p[0]];
+          t[2] = t[1];
+          t[2][p[1]] += s[p[1]];
+          t[3] = {e[0] + s[0], e[1] + s[1], e[2] + s[2]};
+          builder.add_tet(t, {volume.at(t[0][0], t[0][1], t[0][2]), volume.at(t[1][0], t[1][1], t[1][2]),
+                              volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])});
+        }
+      }
+  return builder.take();
+}
+
+}  // namespace isotope

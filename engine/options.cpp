@@ -1,1 +1,36 @@
-// placeholder
+// Names of the extraction choices, as the command line and the reports spell them.
+#include "engine/options.h"
+
+namespace isotope {
+
+std::string_view to_string(ErrorIndicator e) {
+  switch (e) {
+    case ErrorIndicator::bound: return "bound";
+    case ErrorIndicator::surplus: return "surplus";
+  }
+  return "unknown";
+}
+
+std::string_view to_string(TopologyMode t) {
+  switch (t) {
+    case TopologyMode::none: return "none";
+    case TopologyMode::paper: return "paper";
+    case TopologyMode::preserve: return "preserve";
+  }
+  return "unknown";
+}
+
+std::optional<ErrorIndicator> parse_error_indicator(std::string_view s) {
+  if (s == "bound") return ErrorIndicator::bound;
+  if (s == "surplus") return ErrorIndicator::surplus;
+  return std::nullopt;
+}
+
+std::optional<TopologyMode> parse_topology_mode(std::string_view s) {
+  if (s == "none") return TopologyMode::none;
+  if (s == "paper") return TopologyMode::paper;
+  if (s == "preserve") return TopologyMode::preserve;
+  return std::nullopt;
+}
+
+}  // namespace isotope

@@ -1,0 +1,38 @@
+#pragma once
+// Marching tetrahedra with vertices welded by grid edge, so the mesh comes out indexed.
+// Every mesh vertex lies on a grid edge (p, q) of the hierarchy; p + q (in lattice
+// coordinates) is unique to that edge, so it is the vertex's key (design.md, "Extraction").
+#include <array>
+#include <cstdint>
+
+#include "engine/edge_vertex_map.h"
+#include "engine/lattice.h"
+#include "engine/mesh.h"
+
+namespace isotope {
+
+class MeshBuilder {
+ public:
+  // side: nodes per axis of the grid whose coordinates are passed in (keys use 2*side-1).
+  MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing);
+
+  // Emits the 0, 1 or 2 triangles of one tetrahedron. Triangles are wound counter-clockwise
+  // seen from the outside (value <= iso), whatever the order of the corners; a quadrilateral
+  // is split along the diagonal at its smallest key, so the result does not depend on it either.
+  void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values);
+
+  Mesh take() { return std::move(mesh_); }
+  const Mesh& mesh() const { return mesh_; }
+
+ private:
+  uint64_t edge_key(const Coord& p, const Coord& q) const;
+  uint32_t vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
+
+  float iso_;
+  int64_t key_side_;
+  std::array<double, 3> origin_, spacing_;
+  EdgeVertexMap map_;
+  Mesh mesh_;
+};
+
+}  // namespace isotope
