@@ -1,1 +1,95 @@
-// placeholder
+#include "tests/test_support.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "io/raw_reader.h"
+
+namespace isotope::testing {
+
+const std::vector<SharedVolume>& shared_volumes() {
+  static const std::vector<SharedVolume> v = {
+      {"ironProt", "ironProt_68x68x68_uint8.raw", {32.5f, 128.5f, 224.5f}},
+      {"neghip", "neghip_66x66x66_uint8.raw", {32.5f, 128.5f, 224.5f}},
+      {"hydrogen", "hydrogen_64x64x64_float32.raw", {0.005f, 0.05f, 0.3f}},
+      {"bolt", "bolt_70x123x66_uint8.raw", {64.5f, 240.5f, 254.5f}},
+  };
+  return v;
+}
+
+Volume load_shared(const SharedVolume& v) {
+  const std::string path = std::string(ISOTOPE_TEST_DATA) + "/" + v.file;
+  return read_raw(path, *parse_raw_name(path));
+}
+
+std::vector<std::array<std::array<float, 3>, 3>> triangle_set(const Mesh& mesh) {
+  std::vector<std::array<std::array<float, 3>, 3>> s;
+  s.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    std::array<std::array<float, 3>, 3> p{mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]};
+    std::sort(p.begin(), p.end());
+    s.push_back(p);
+  }
+  std::sort(s.begin(), s.end());
+  return s;
+}
+
+namespace {
+// Which faces of the data box a point lies on, as a bit mask (x-, x+, y-, y+, z-, z+).
+int box_faces(const std::array<float, 3>& p, const Volume& v) {
+  int mask = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double lo = v.origin[a], hi = v.origin[a] + v.spacing[a] * static_cast<double>(v.dims[a] - 1);
+    const double tol = 1e-5 * std::max(1.0, std::fabs(hi - lo));
+    if (std::fabs(p[a] - lo) <= tol) mask |= 1 << (2 * a);
+    if (std::fabs(p[a] - hi) <= tol) mask |= 2 << (2 * a);
+  }
+  return mask;
+}
+}  // namespace
+
+int64_t interior_boundary_edges(const Mesh& mesh, const Volume& volume) {
+  std::vector<std::pair<uint64_t, int>> edges;
+  for (const auto& t : mesh.triangles)
+    for (int i = 0; i < 3; ++i) {
+      const uint32_t a = t[i], b = t[(i + 1) % 3];
+      edges.push_back({uint64_t{std::min(a, b)} << 32 | std::max(a, b), 0});
+    }
+  std::sort(edges.begin(), edges.end());
+  int64_t cracks = 0;
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].first == edges[i].first) ++j;
+    if (j - i == 1) {
+      const auto a = static_cast<uint32_t>(edges[i].first >> 32), b = static_cast<uint32_t>(edges[i].first);
+      if ((box_faces(mesh.positions[a], volume) & box_faces(mesh.positions[b], volume)) == 0) ++cracks;
+    }
+    i = j;
+  }
+  return cracks;
+}
+
+int64_t vertices_outside_box(const Mesh& mesh, const Volume& v) {
+  int64_t n = 0;
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) {
+      const double lo = v.origin[a], hi = v.origin[a] + v.spacing[a] * static_cast<double>(v.dims[a] - 1);
+      const double tol = 1e-5 * std::max(1.0, std::fabs(hi - lo));
+      if (p[a] < lo - tol || p[a] > hi + tol) { ++n; break; }
+    }
+  return n;
+}
+
+Volume crop(const Volume& v, std::array<int64_t, 3> dims) {
+  Volume c;
+  c.dims = dims;
+  c.spacing = v.spacing;
+  c.origin = v.origin;
+  c.values.resize(static_cast<size_t>(dims[0] * dims[1] * dims[2]));
+  for (int64_t z = 0; z < dims[2]; ++z)
+    for (int64_t y = 0; y < dims[1]; ++y)
+      for (int64_t x = 0; x < dims[0]; ++x) c.values[c.index(x, y, z)] = v.at(x, y, z);
+  return c;
+}
+
+}  // namespace isotope::testing

@@ -1,1 +1,171 @@
-// placeholder
+// Topology preservation (design.md invariant 4): with the exact rule, components and Euler
+// characteristic at every eps equal those at eps = 0; the paper's rule and no control do not.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "engine/critical_rule.h"
+#include "engine/critical_table.h"
+#include "engine/diamond.h"
+#include "engine/extract.h"
+#include "engine/fields.h"
+#include "engine/mesh_topology.h"
+#include "engine/multires_volume.h"
+#include "tests/test_support.h"
+
+namespace isotope {
+namespace {
+
+using testing::crop;
+
+struct SweepVolume {
+  std::string name;
+  Volume volume;
+  std::vector<float> isovalues;
+};
+
+std::vector<SweepVolume> sweep_volumes() {
+  std::vector<SweepVolume> v;
+  for (uint64_t seed = 1; seed <= 6; ++seed) {
+    v.push_back({"noise17 seed " + std::to_string(seed), generate_noise(17, seed), {-0.3f, -0.1f, 0.1f, 0.3f}});
+    v.push_back({"noise 21x19x23 seed " + std::to_string(seed), crop(generate_noise(23, 100 + seed), {21, 19, 23}),
+                 {-0.3f, -0.1f, 0.1f, 0.3f}});
+  }
+  v.push_back({"algebraic 33", generate_algebraic(33), {-0.2f, 0.0f, 0.2f}});
+  v.push_back({"algebraic 65 shifted", generate_algebraic(65, {0.15625, 0.09375, 0}), {-0.1f, 0.0f, 0.1f}});
+  for (const auto& s : testing::shared_volumes())
+    v.push_back({s.name, testing::load_shared(s), {s.isovalues[0], s.isovalues[1], s.isovalues[2]}});
+  return v;
+}
+
+struct Tally {
+  int cases = 0, kept = 0;
+  double rate() const { return cases ? static_cast<double>(kept) / cases : 1.0; }
+};
+
+TEST(TopologyPreservation, ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere) {
+  Tally tally[3];
+  std::vector<std::string> preserve_failures;
+  for (const SweepVolume& sv : sweep_volumes()) {
+    const MultiresVolume mv = MultiresVolume::build(sv.volume);
+    float lo = sv.volume.values[0], hi = lo;
+    for (float f : sv.volume.values) { lo = std::min(lo, f); hi = std::max(hi, f); }
+    for (float iso : sv.isovalues) {
+      ExtractOptions full;
+      full.iso = iso;
+      const MeshTopology ref = measure_topology(extract(mv, full));
+      for (double rel : {0.002, 0.01, 0.04, 0.15, 0.5, 2.0})
+        for (ErrorIndicator err : {ErrorIndicator::bound, ErrorIndicator::surplus})
+          for (TopologyMode mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve}) {
+            ExtractOptions o;
+            o.iso = iso;
+            o.eps = rel * (hi - lo);
+            o.error = err;
+            o.topology = mode;
+            const MeshTopology t = measure_topology(extract(mv, o));
+            const bool kept = t.components == ref.components && t.euler_characteristic == ref.euler_characteristic;
+            Tally& k = tally[static_cast<int>(mode)];
+            ++k.cases;
+            k.kept += kept;
+            if (mode == TopologyMode::preserve && !kept)
+              preserve_failures.push_back(sv.name + " iso " + std::to_string(iso) + " eps " + std::to_string(o.eps) +
+                                          " " + std::string(to_string(err)) + ": components " +
+                                          std::to_string(t.components) + " vs " + std::to_string(ref.components) +
+                                          ", chi " + std::to_string(t.euler_characteristic) + " vs " +
+                                          std::to_string(ref.euler_characteristic));
+          }
+    }
+  }
+  std::printf("topology kept in %d cases each: none %.1f%%, paper %.1f%%, preserve %.1f%%\n", tally[0].cases,
+              100 * tally[0].rate(), 100 * tally[1].rate(), 100 * tally[2].rate());
+  for (const auto& f : preserve_failures) ADD_FAILURE() << f;
+  EXPECT_GE(tally[2].cases, 300);
+  // The sweep must be able to tell the modes apart, or it proves nothing about preserve.
+  EXPECT_LT(tally[0].rate(), 0.97);
+  EXPECT_LT(tally[1].rate(), 0.99);
+}
+
+// design.md's smallest case: a 3x3x3 grid whose root cube diamond the paper calls regular,
+// although refining it splits one component into two at iso 0.8585. Every finer vertex has
+// zero surplus, so the field at full resolution is the once-refined one.
+Volume paper_counterexample() {
+  const Lattice lattice = Lattice::enclosing({3, 3, 3});
+  Volume v;
+  v.dims = {3, 3, 3};
+  v.values.assign(27, 0.0f);
+  auto set = [&](Coord c, float f) { v.values[v.index(c[0], c[1], c[2])] = f; };
+  const Diamond root = diamond_of({1, 1, 1}, lattice);
+  set(root.v, 0.449f);
+  set(root.a, 0.895f);
+  set(root.b, 0.951f);
+  const float ring[6] = {0.845f, 0.507f, 0.236f, 0.019f, 0.325f, 0.437f};
+  for (int i = 0; i < 6; ++i) set(root.ring[i], ring[i]);
+  for (int level = 1; level < lattice.max_level(); ++level)
+    for (int64_t i = 0; i < 27; ++i) {
+      const Coord c = lattice.coord(i);
+      if (c == Coord{1, 1, 1} || (c[0] % 2 == 0 && c[1] % 2 == 0 && c[2] % 2 == 0)) continue;
+      const Diamond d = diamond_of(c, lattice);
+      if (d.level == level) set(c, 0.5f * (v.at(d.a[0], d.a[1], d.a[2]) + v.at(d.b[0], d.b[1], d.b[2])));
+    }
+  return v;
+}
+
+TEST(PaperRule, MissesTheRootCubeCounterexampleThatTheExactRuleCatches) {
+  const Volume v = paper_counterexample();
+  const Lattice lattice = Lattice::enclosing(v.dims);
+  const Diamond root = diamond_of({1, 1, 1}, lattice);
+  DiamondValues dv;
+  dv.type = root.type;
+  dv.fa = 0.895f;
+  dv.fb = 0.951f;
+  dv.fv = 0.449f;
+  for (int i = 0; i < 6; ++i) dv.ring[i] = v.at(root.ring[i][0], root.ring[i][1], root.ring[i][2]);
+  const float iso = 0.8585f;
+  EXPECT_FALSE(is_critical_pattern(dv.type, sign_pattern(dv, dv.fv))) << "the paper's table at f(v)";
+  EXPECT_TRUE(paper_interval(dv).empty());
+  EXPECT_TRUE(exact_rule_fires(dv, iso)) << "the pattern relative to the isovalue is critical";
+  EXPECT_TRUE(exact_interval(dv).contains(iso));
+
+  const MultiresVolume mv = MultiresVolume::build(v);
+  ExtractOptions o;
+  o.iso = iso;
+  const MeshTopology full = measure_topology(extract(mv, o));
+  EXPECT_EQ(full.components, 2);
+  o.eps = 10;  // coarse enough that only topology control can refine
+  o.topology = TopologyMode::paper;
+  EXPECT_EQ(measure_topology(extract(mv, o)).components, 1) << "the paper's rule merges the two components";
+  o.topology = TopologyMode::none;
+  EXPECT_EQ(measure_topology(extract(mv, o)).components, 1);
+  o.topology = TopologyMode::preserve;
+  const MeshTopology kept = measure_topology(extract(mv, o));
+  EXPECT_EQ(kept.components, full.components);
+  EXPECT_EQ(kept.euler_characteristic, full.euler_characteristic);
+}
+
+// The paper's Table 1 setting and its shifted variant (issue 2, the demo): at the paper's
+// setting every mode keeps the one component; shifted, the modes part.
+TEST(AlgebraicFunction, ShiftedSingularityPartsTheModesAndPreserveKeepsOneComponent) {
+  const MultiresVolume mv = MultiresVolume::build(generate_algebraic(65, {0.15625, 0.09375, 0}));
+  ExtractOptions o;
+  const MeshTopology full = measure_topology(extract(mv, o));
+  ASSERT_EQ(full.components, 1);
+  int none_wrong = 0, paper_wrong = 0;
+  for (double eps : {1.0 / 64, 1.0 / 16, 0.25, 1.0}) {
+    o.eps = eps;
+    o.topology = TopologyMode::preserve;
+    const MeshTopology p = measure_topology(extract(mv, o));
+    EXPECT_EQ(p.components, 1) << "eps " << eps;
+    EXPECT_EQ(p.euler_characteristic, full.euler_characteristic) << "eps " << eps;
+    o.topology = TopologyMode::paper;
+    paper_wrong += measure_topology(extract(mv, o)).components != 1;
+    o.topology = TopologyMode::none;
+    none_wrong += measure_topology(extract(mv, o)).components != 1;
+  }
+  EXPECT_GE(paper_wrong, 2);
+  EXPECT_GE(none_wrong, 2);
+}
+
+}  // namespace
+}  // namespace isotope

@@ -1,0 +1,46 @@
+#pragma once
+// Shared fixtures of the engine tests: volumes, sweeps, and mesh comparisons.
+#include <array>
+#include <string>
+#include <vector>
+
+#include "engine/extract.h"
+#include "engine/mesh.h"
+#include "engine/mesh_topology.h"
+#include "engine/volume.h"
+
+namespace isotope::testing {
+
+struct SharedVolume {
+  std::string name, file;
+  std::array<float, 3> isovalues;
+};
+
+// The four volumes of ../shared/data with their suggested isovalues (data README).
+const std::vector<SharedVolume>& shared_volumes();
+Volume load_shared(const SharedVolume& v);
+
+// Triangles as sorted position triples, sorted: equal iff the meshes have the same triangles.
+std::vector<std::array<std::array<float, 3>, 3>> triangle_set(const Mesh& mesh);
+
+// Boundary edges that do not lie in a face of the data box (cracks); physical coordinates.
+int64_t interior_boundary_edges(const Mesh& mesh, const Volume& volume);
+// Vertices outside the data box.
+int64_t vertices_outside_box(const Mesh& mesh, const Volume& volume);
+
+// A small grid with a caller-chosen size, values from f(x, y, z) at integer nodes.
+template <class F>
+Volume make_volume(std::array<int64_t, 3> dims, F f) {
+  Volume v;
+  v.dims = dims;
+  v.values.resize(static_cast<size_t>(dims[0] * dims[1] * dims[2]));
+  for (int64_t z = 0; z < dims[2]; ++z)
+    for (int64_t y = 0; y < dims[1]; ++y)
+      for (int64_t x = 0; x < dims[0]; ++x) v.values[v.index(x, y, z)] = static_cast<float>(f(x, y, z));
+  return v;
+}
+
+// Cuts a sub-box out of a volume (for dimensions that are not 2^k + 1).
+Volume crop(const Volume& v, std::array<int64_t, 3> dims);
+
+}  // namespace isotope::testing
