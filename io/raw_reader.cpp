@@ -1,1 +1,208 @@
-// placeholder
+#include "io/raw_reader.h"
+
+#include <algorithm>
+#include <bit>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <new>
+#include <sstream>
+#include <vector>
+
+#include "io/io_error.h"
+
+namespace isotope {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string lowercase(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return s;
+}
+
+std::optional<int64_t> parse_dim(const std::string& token) {
+  int64_t v = 0;
+  const char* end = token.data() + token.size();
+  const auto [ptr, ec] = std::from_chars(token.data(), end, v);
+  if (ec != std::errc() || ptr != end || v < 1) return std::nullopt;
+  return v;
+}
+
+// "301x324x56" -> {301, 324, 56}; digits only, so signs and blanks are rejected.
+std::optional<std::array<int64_t, 3>> parse_dims(const std::string& token) {
+  std::array<int64_t, 3> dims{};
+  size_t start = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    const size_t x = axis < 2 ? token.find('x', start) : token.size();
+    if (x == std::string::npos) return std::nullopt;
+    const auto d = parse_dim(token.substr(start, x - start));
+    if (!d) return std::nullopt;
+    dims[axis] = *d;
+    start = x + 1;
+  }
+  return dims;
+}
+
+std::string dims_text(const std::array<int64_t, 3>& d) {
+  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
+}
+
+template <typename T>
+T load_le(const unsigned char* p) {
+  std::array<unsigned char, sizeof(T)> b;
+  std::memcpy(b.data(), p, sizeof(T));
+  if constexpr (std::endian::native == std::endian::big) std::reverse(b.begin(), b.end());
+  return std::bit_cast<T>(b);
+}
+
+template <typename T>
+void decode(const unsigned char* in, size_t count, float* out) {
+  for (size_t i = 0; i < count; ++i) out[i] = static_cast<float>(load_le<T>(in + i * sizeof(T)));
+}
+
+void decode_block(ScalarType t, const unsigned char* in, size_t count, float* out) {
+  switch (t) {
+    case ScalarType::uint8: decode<uint8_t>(in, count, out); break;
+    case ScalarType::uint16: decode<uint16_t>(in, count, out); break;
+    case ScalarType::int16: decode<int16_t>(in, count, out); break;
+    case ScalarType::float32: decode<float>(in, count, out); break;
+    case ScalarType::float64: decode<double>(in, count, out); break;
+  }
+}
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+// Distinguishes "missing" from "a directory" from "wrong size" before any allocation.
+void check_raw_file(const std::string& path, const RawLayout& layout, int64_t expected_bytes) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (!fs::exists(st)) throw IoError(path + ": no such file");
+  if (fs::is_directory(st)) throw IoError(path + ": is a directory, not a volume file");
+  const auto size = fs::file_size(path, ec);
+  if (ec) throw IoError(path + ": cannot determine file size: " + ec.message());
+  if (static_cast<int64_t>(size) != expected_bytes) {
+    throw IoError(path + ": size " + std::to_string(size) + " bytes, expected " +
+                  std::to_string(expected_bytes) + " for " + dims_text(layout.dims) + " " +
+                  scalar_type_name(layout.type));
+  }
+}
+
+void read_values(const std::string& path, ScalarType type, std::vector<float>& values) {
+  FilePtr file(std::fopen(path.c_str(), "rb"));
+  if (!file) throw IoError(path + ": cannot open: " + std::strerror(errno));
+  const size_t elem = static_cast<size_t>(scalar_type_size(type));
+  constexpr size_t kBlockValues = size_t{1} << 20;  // bounds the staging buffer to 8 MiB
+  std::vector<unsigned char> buffer(std::min(values.size(), kBlockValues) * elem);
+  for (size_t done = 0; done < values.size();) {
+    const size_t n = std::min(kBlockValues, values.size() - done);
+    const size_t got = std::fread(buffer.data(), 1, n * elem, file.get());
+    if (got != n * elem) {
+      const std::string why = std::ferror(file.get()) ? std::strerror(errno) : "unexpected end of file";
+      throw IoError(path + ": read failed after " + std::to_string(done * elem + got) + " bytes: " + why);
+    }
+    decode_block(type, buffer.data(), n, values.data() + done);
+    done += n;
+  }
+}
+
+}  // namespace
+
+std::optional<ScalarType> parse_scalar_type(const std::string& name) {
+  const std::string n = lowercase(name);
+  if (n == "uint8" || n == "u8") return ScalarType::uint8;
+  if (n == "uint16" || n == "u16") return ScalarType::uint16;
+  if (n == "int16" || n == "i16") return ScalarType::int16;
+  if (n == "float32" || n == "f32" || n == "float") return ScalarType::float32;
+  if (n == "float64" || n == "f64" || n == "double") return ScalarType::float64;
+  return std::nullopt;
+}
+
+const char* scalar_type_name(ScalarType t) {
+  switch (t) {
+    case ScalarType::uint8: return "uint8";
+    case ScalarType::uint16: return "uint16";
+    case ScalarType::int16: return "int16";
+    case ScalarType::float32: return "float32";
+    case ScalarType::float64: return "float64";
+  }
+  return "unknown";
+}
+
+int scalar_type_size(ScalarType t) {
+  switch (t) {
+    case ScalarType::uint8: return 1;
+    case ScalarType::uint16: return 2;
+    case ScalarType::int16: return 2;
+    case ScalarType::float32: return 4;
+    case ScalarType::float64: return 8;
+  }
+  return 1;
+}
+
+std::optional<RawLayout> parse_raw_name(const std::string& path) {
+  // The layout is the last two '_' tokens of the stem: NAME_XxYxZ_TYPE.ext
+  const std::string stem = lowercase(fs::path(path).stem().string());
+  const size_t type_sep = stem.rfind('_');
+  if (type_sep == std::string::npos || type_sep == 0) return std::nullopt;
+  const size_t dims_sep = stem.rfind('_', type_sep - 1);
+  const size_t dims_start = dims_sep == std::string::npos ? 0 : dims_sep + 1;
+  const auto type = parse_scalar_type(stem.substr(type_sep + 1));
+  const auto dims = parse_dims(stem.substr(dims_start, type_sep - dims_start));
+  if (!type || !dims) return std::nullopt;
+  return RawLayout{*dims, *type};
+}
+
+int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes,
+                           const std::string& file) {
+  for (int64_t d : dims) {
+    if (d < 1) throw IoError(file + ": dimensions " + dims_text(dims) + " invalid, each must be >= 1");
+  }
+  const int64_t limit = std::numeric_limits<int64_t>::max() / std::max(element_bytes, 1);
+  int64_t count = 1;
+  for (int64_t d : dims) {
+    if (count > limit / d) throw IoError(file + ": dimensions " + dims_text(dims) + " too large");
+    count *= d;
+  }
+  return count;
+}
+
+void check_finite(const Volume& volume, const std::string& file) {
+  const auto bad = std::find_if(volume.values.begin(), volume.values.end(),
+                                [](float v) { return !std::isfinite(v); });
+  if (bad == volume.values.end()) return;
+  const int64_t i = bad - volume.values.begin();
+  const int64_t nx = volume.dims[0], ny = volume.dims[1];
+  std::ostringstream msg;
+  msg << file << ": value " << *bad << " at (x,y,z) = (" << i % nx << "," << (i / nx) % ny << ","
+      << i / (nx * ny) << ") is not finite (NaN, infinite, or beyond float range)";
+  throw IoError(msg.str());
+}
+
+Volume read_raw(const std::string& path, const RawLayout& layout) {
+  const int elem = scalar_type_size(layout.type);
+  const int64_t count = checked_node_count(layout.dims, elem, path);
+  check_raw_file(path, layout, count * elem);
+  Volume volume;
+  volume.dims = layout.dims;
+  try {
+    volume.values.resize(static_cast<size_t>(count));
+  } catch (const std::bad_alloc&) {
+    throw IoError(path + ": " + dims_text(layout.dims) + " volume does not fit in memory");
+  }
+  read_values(path, layout.type, volume.values);
+  check_finite(volume, path);
+  return volume;
+}
+
+}  // namespace isotope

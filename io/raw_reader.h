@@ -25,4 +25,11 @@ int scalar_type_size(ScalarType t);
 // Throws IoError: missing/unreadable file, size not equal to the layout, NaN or infinite values.
 Volume read_raw(const std::string& path, const RawLayout& layout);
 
+// Shared by the readers and writers. Throws IoError naming FILE when a dimension is < 1 or
+// dims[0]*dims[1]*dims[2]*element_bytes does not fit in int64; returns the node count.
+int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes,
+                           const std::string& file);
+// Throws IoError naming FILE and the (x, y, z) of the first NaN or infinite value.
+void check_finite(const Volume& volume, const std::string& file);
+
 }  // namespace isotope

@@ -1,1 +1,82 @@
-// placeholder
+#include "io/volume_reader.h"
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <system_error>
+
+#include "io/hdf5_reader.h"
+#include "io/io_error.h"
+
+namespace isotope {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Hdf5Spec {
+  std::string file, dataset;
+};
+
+// "FILE:/dataset", split at the last ':' followed by '/', so ':' may appear earlier in FILE.
+// A spec that names an existing file as a whole is never split.
+std::optional<Hdf5Spec> split_hdf5_spec(const std::string& spec) {
+  std::error_code ec;
+  if (fs::exists(spec, ec)) return std::nullopt;
+  const size_t colon = spec.rfind(":/");
+  if (colon == std::string::npos || colon == 0) return std::nullopt;
+  return Hdf5Spec{spec.substr(0, colon), spec.substr(colon + 1)};
+}
+
+bool has_hdf5_extension(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext == ".h5" || ext == ".hdf5";
+}
+
+std::string join(const std::vector<std::string>& items) {
+  std::string out;
+  for (const auto& s : items) out += (out.empty() ? "" : ", ") + s;
+  return out;
+}
+
+Volume read_only_3d_dataset(const std::string& file) {
+  const auto names = list_3d_datasets(file);
+  if (names.size() == 1) return read_hdf5(file, names.front());
+  if (names.empty()) throw IoError(file + ": contains no 3-D numeric dataset");
+  throw IoError(file + ": contains several 3-D datasets (" + join(names) + "); name one as " +
+                file + ":/DATASET");
+}
+
+RawLayout raw_layout(const VolumeSource& source) {
+  // Command-line values win over the name, field by field.
+  const auto from_name = parse_raw_name(source.spec);
+  auto dims = source.dims;
+  auto type = source.type;
+  if (!dims && from_name) dims = from_name->dims;
+  if (!type && from_name) type = from_name->type;
+  if (dims && type) return RawLayout{*dims, *type};
+  const char* missing = !dims && !type ? "dimensions and type" : !dims ? "dimensions" : "type";
+  throw IoError(source.spec + ": cannot tell the " + missing +
+                " from the file name (expected NAME_XxYxZ_TYPE.raw); pass --dims and --type");
+}
+
+// A mistyped path should say so, not ask for --dims and --type.
+void require_regular_file(const std::string& path) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (!fs::exists(st)) throw IoError(path + ": no such file");
+  if (fs::is_directory(st)) throw IoError(path + ": is a directory, not a volume file");
+}
+
+}  // namespace
+
+Volume read_volume(const VolumeSource& source) {
+  if (source.spec.empty()) throw IoError("no volume file given");
+  if (const auto h5 = split_hdf5_spec(source.spec)) return read_hdf5(h5->file, h5->dataset);
+  if (has_hdf5_extension(source.spec)) return read_only_3d_dataset(source.spec);
+  require_regular_file(source.spec);
+  return read_raw(source.spec, raw_layout(source));
+}
+
+}  // namespace isotope

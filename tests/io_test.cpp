@@ -1,1 +1,733 @@
-// placeholder
+// The I/O boundary: readers agree with each other on the shared volumes, every bad input
+// becomes an IoError naming the file, and writers are atomic and round-trip exactly.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <hdf5.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "io/atomic_file.h"
+#include "io/hdf5_reader.h"
+#include "io/io_error.h"
+#include "io/ply_writer.h"
+#include "io/raw_reader.h"
+#include "io/volume_reader.h"
+#include "io/volume_writer.h"
+
+namespace isotope {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kData = ISOTOPE_TEST_DATA;
+
+#define EXPECT_CONTAINS(text, part) \
+  EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
+
+// A fresh, empty directory per test, removed afterwards.
+class IoTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    static std::atomic<int> serial{0};
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() / ("isotope_io_" + std::to_string(::getpid()) + "_" +
+                                        info->name() + "_" + std::to_string(serial++));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  std::vector<std::string> entries() const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  }
+
+  fs::path dir_;
+};
+
+void write_bytes(const std::string& path, const void* data, size_t size) {
+  std::ofstream out(path, std::ios::binary);
+  out.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
+  ASSERT_TRUE(out.good()) << path;
+}
+
+template <typename T>
+void write_values(const std::string& path, const std::vector<T>& values) {
+  write_bytes(path, values.data(), values.size() * sizeof(T));
+}
+
+std::vector<unsigned char> read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// The message of the IoError F throws; a test failure when it throws nothing.
+std::string io_error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const IoError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "expected an IoError";
+  return "";
+}
+
+Volume sample_volume() {
+  Volume v;
+  v.dims = {5, 4, 3};
+  v.spacing = {0.5, 2.0, 3.25};
+  v.origin = {-1.0, 0.0, 7.5};
+  for (int64_t i = 0; i < v.node_count(); ++i) v.values.push_back(static_cast<float>(i) * 0.37f - 4.0f);
+  return v;
+}
+
+size_t open_hdf5_objects() { return static_cast<size_t>(H5Fget_obj_count(H5F_OBJ_ALL, H5F_OBJ_ALL)); }
+
+// Test-side HDF5 writer for inputs the production writer never produces.
+class H5Builder {
+ public:
+  explicit H5Builder(const std::string& path) {
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    file_ = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    EXPECT_GE(file_, 0) << path;
+  }
+  ~H5Builder() {
+    for (hid_t ds : datasets_) H5Dclose(ds);
+    H5Fclose(file_);
+  }
+  H5Builder(const H5Builder&) = delete;
+  H5Builder& operator=(const H5Builder&) = delete;
+
+  // SHAPE in C order; a non-empty CHUNK means chunked and gzip-compressed.
+  hid_t add(const std::string& name, hid_t file_type, hid_t mem_type, const std::vector<hsize_t>& shape,
+            const void* data, const std::vector<hsize_t>& chunk = {}) {
+    const hid_t space = H5Screate_simple(static_cast<int>(shape.size()), shape.data(), nullptr);
+    const hid_t lcpl = H5Pcreate(H5P_LINK_CREATE);
+    H5Pset_create_intermediate_group(lcpl, 1);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    if (!chunk.empty()) {
+      EXPECT_GE(H5Pset_chunk(dcpl, static_cast<int>(chunk.size()), chunk.data()), 0);
+      EXPECT_GE(H5Pset_deflate(dcpl, 6), 0);
+    }
+    const hid_t ds = H5Dcreate2(file_, name.c_str(), file_type, space, lcpl, dcpl, H5P_DEFAULT);
+    EXPECT_GE(ds, 0) << name;
+    EXPECT_GE(H5Dwrite(ds, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), 0) << name;
+    H5Pclose(dcpl);
+    H5Pclose(lcpl);
+    H5Sclose(space);
+    datasets_.push_back(ds);
+    return ds;
+  }
+  void attribute(hid_t ds, const char* name, const std::vector<double>& v) {
+    const hsize_t n = v.size();
+    const hid_t space = H5Screate_simple(1, &n, nullptr);
+    const hid_t attr = H5Acreate2(ds, name, H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT);
+    EXPECT_GE(H5Awrite(attr, H5T_NATIVE_DOUBLE, v.data()), 0);
+    H5Aclose(attr);
+    H5Sclose(space);
+  }
+
+ private:
+  hid_t file_ = H5I_INVALID_HID;
+  std::vector<hid_t> datasets_;
+};
+
+std::vector<float> iota_floats(size_t n) {
+  std::vector<float> v(n);
+  for (size_t i = 0; i < n; ++i) v[i] = static_cast<float>(i);
+  return v;
+}
+
+// ---------------------------------------------------------------- shared volumes
+
+struct SharedVolume {
+  const char* raw;
+  const char* h5;
+  std::array<int64_t, 3> dims;
+  float min, max;
+};
+
+const SharedVolume kShared[] = {
+    {"ironProt_68x68x68_uint8.raw", "ironProt.h5", {68, 68, 68}, 0, 255},
+    {"neghip_66x66x66_uint8.raw", "neghip.h5", {66, 66, 66}, 0, 255},
+    {"hydrogen_64x64x64_float32.raw", "hydrogen.h5", {64, 64, 64}, 0, 1},
+    {"bolt_70x123x66_uint8.raw", "bolt.h5", {70, 123, 66}, 0, 255},
+};
+
+TEST(SharedVolumes, EveryRawEqualsItsHdf5ValueForValue) {
+  for (const auto& s : kShared) {
+    SCOPED_TRACE(s.raw);
+    const std::string raw_path = (kData / s.raw).string();
+    const auto layout = parse_raw_name(raw_path);
+    ASSERT_TRUE(layout.has_value());
+    const Volume raw = read_raw(raw_path, *layout);
+    const Volume h5 = read_hdf5((kData / s.h5).string(), "/volume");
+    EXPECT_EQ(raw.dims, s.dims);
+    EXPECT_EQ(h5.dims, s.dims);
+    EXPECT_EQ(h5.spacing, (std::array<double, 3>{1, 1, 1}));
+    EXPECT_EQ(h5.origin, (std::array<double, 3>{0, 0, 0}));
+    ASSERT_EQ(raw.values.size(), static_cast<size_t>(s.dims[0] * s.dims[1] * s.dims[2]));
+    ASSERT_EQ(h5.values.size(), raw.values.size());
+    EXPECT_TRUE(raw.values == h5.values);
+    EXPECT_EQ(*std::min_element(raw.values.begin(), raw.values.end()), s.min);
+    EXPECT_EQ(*std::max_element(raw.values.begin(), raw.values.end()), s.max);
+  }
+}
+
+TEST(SharedVolumes, ReadVolumeOpensBothSpellingsOfEachVolume) {
+  for (const auto& s : kShared) {
+    SCOPED_TRACE(s.raw);
+    const Volume by_name = read_volume({(kData / s.h5).string(), {}, {}});
+    const Volume by_spec = read_volume({(kData / s.h5).string() + ":/volume", {}, {}});
+    const Volume raw = read_volume({(kData / s.raw).string(), {}, {}});
+    EXPECT_EQ(by_name.dims, s.dims);
+    EXPECT_TRUE(by_name.values == raw.values);
+    EXPECT_TRUE(by_spec.values == raw.values);
+  }
+}
+
+// ---------------------------------------------------------------- raw names
+
+TEST(ParseRawName, ReadsDimsAndTypeFromTheEndOfTheStem) {
+  const auto a = parse_raw_name("lobster_301x324x56_uint8.raw");
+  ASSERT_TRUE(a.has_value());
+  EXPECT_EQ(a->dims, (std::array<int64_t, 3>{301, 324, 56}));
+  EXPECT_EQ(a->type, ScalarType::uint8);
+
+  const auto b = parse_raw_name("/data/run_2x2x2_int16/my_vol_part_64x32x16_float32.raw");
+  ASSERT_TRUE(b.has_value());
+  EXPECT_EQ(b->dims, (std::array<int64_t, 3>{64, 32, 16}));
+  EXPECT_EQ(b->type, ScalarType::float32);
+
+  const auto c = parse_raw_name("8x9x10_u16.raw");
+  ASSERT_TRUE(c.has_value());
+  EXPECT_EQ(c->dims, (std::array<int64_t, 3>{8, 9, 10}));
+  EXPECT_EQ(c->type, ScalarType::uint16);
+
+  const auto d = parse_raw_name("Skull_256X256X113_DOUBLE.dat");
+  ASSERT_TRUE(d.has_value());
+  EXPECT_EQ(d->dims, (std::array<int64_t, 3>{256, 256, 113}));
+  EXPECT_EQ(d->type, ScalarType::float64);
+}
+
+TEST(ParseRawName, AcceptsTheShortTypeAliases) {
+  EXPECT_EQ(parse_scalar_type("u8"), ScalarType::uint8);
+  EXPECT_EQ(parse_scalar_type("u16"), ScalarType::uint16);
+  EXPECT_EQ(parse_scalar_type("i16"), ScalarType::int16);
+  EXPECT_EQ(parse_scalar_type("f32"), ScalarType::float32);
+  EXPECT_EQ(parse_scalar_type("float"), ScalarType::float32);
+  EXPECT_EQ(parse_scalar_type("f64"), ScalarType::float64);
+  EXPECT_EQ(parse_scalar_type("double"), ScalarType::float64);
+  EXPECT_EQ(parse_scalar_type("int32"), std::nullopt);
+  EXPECT_EQ(parse_scalar_type(""), std::nullopt);
+}
+
+TEST(ParseRawName, ReturnsNulloptWhenTheNameDoesNotSay) {
+  for (const char* name : {"lobster.raw", "lobster_uint8.raw", "lobster_301x324_uint8.raw",
+                           "lobster_301x324x56x2_uint8.raw", "lobster_301x324x56_int32.raw",
+                           "lobster_301x324x56.raw", "lobster_0x324x56_uint8.raw",
+                           "lobster_-1x324x56_uint8.raw", "lobster_+1x324x56_uint8.raw",
+                           "lobster_1xx2_uint8.raw", "lobster_1x2x3x_uint8.raw", "lobster_ 1x2x3_uint8.raw",
+                           "lobster_99999999999999999999x1x1_uint8.raw", "_uint8.raw", ""}) {
+    EXPECT_FALSE(parse_raw_name(name).has_value()) << name;
+  }
+}
+
+TEST(ScalarTypes, NamesAndSizesMatchTheLayout) {
+  EXPECT_STREQ(scalar_type_name(ScalarType::int16), "int16");
+  EXPECT_EQ(scalar_type_size(ScalarType::uint8), 1);
+  EXPECT_EQ(scalar_type_size(ScalarType::uint16), 2);
+  EXPECT_EQ(scalar_type_size(ScalarType::int16), 2);
+  EXPECT_EQ(scalar_type_size(ScalarType::float32), 4);
+  EXPECT_EQ(scalar_type_size(ScalarType::float64), 8);
+}
+
+// ---------------------------------------------------------------- raw reader
+
+TEST_F(IoTest, RawSizeMismatchNamesFileSizesAndLayout) {
+  const std::string p = path("neghip_66x66x66_uint8.raw");
+  write_values(p, std::vector<uint8_t>(287495));
+  const std::string msg = io_error_of([&] { read_raw(p, *parse_raw_name(p)); });
+  EXPECT_CONTAINS(msg, "neghip_66x66x66_uint8.raw");
+  EXPECT_CONTAINS(msg, "size 287495 bytes, expected 287496 for 66x66x66 uint8");
+}
+
+TEST_F(IoTest, RawTruncatedFileIsRejected) {
+  const std::string p = path("v_4x4x4_float32.raw");
+  write_values(p, std::vector<float>(40));
+  const std::string msg = io_error_of([&] { read_raw(p, *parse_raw_name(p)); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "size 160 bytes, expected 256");
+}
+
+TEST_F(IoTest, RawMissingFileIsRejectedByName) {
+  const std::string p = path("absent_2x2x2_uint8.raw");
+  const std::string msg = io_error_of([&] { read_raw(p, *parse_raw_name(p)); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "no such file");
+}
+
+TEST_F(IoTest, RawDirectoryInsteadOfFileIsRejected) {
+  const std::string p = path("dir_2x2x2_uint8.raw");
+  fs::create_directory(p);
+  EXPECT_CONTAINS(io_error_of([&] { read_raw(p, *parse_raw_name(p)); }), "is a directory");
+}
+
+TEST_F(IoTest, RawNanIsRejectedWithItsCoordinates) {
+  const std::string p = path("v_4x3x5_float32.raw");
+  Volume v;
+  v.dims = {4, 3, 5};
+  std::vector<float> values = iota_floats(60);
+  v.values = values;
+  values[v.index(2, 1, 3)] = std::numeric_limits<float>::quiet_NaN();
+  values[v.index(3, 2, 4)] = std::numeric_limits<float>::quiet_NaN();  // later: not reported
+  write_values(p, values);
+  const std::string msg = io_error_of([&] { read_raw(p, *parse_raw_name(p)); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "(2,1,3)");
+  EXPECT_CONTAINS(msg, "not finite");
+}
+
+TEST_F(IoTest, RawInfinityAndFloat64BeyondFloatRangeAreRejected) {
+  const std::string inf = path("inf_2x1x1_float64.raw");
+  write_values(inf, std::vector<double>{1.0, -std::numeric_limits<double>::infinity()});
+  EXPECT_CONTAINS(io_error_of([&] { read_raw(inf, *parse_raw_name(inf)); }), "(1,0,0)");
+  const std::string big = path("big_1x1x2_float64.raw");
+  write_values(big, std::vector<double>{1.0, 1e300});
+  EXPECT_CONTAINS(io_error_of([&] { read_raw(big, *parse_raw_name(big)); }), "(0,0,1)");
+}
+
+TEST_F(IoTest, RawDecodesEveryScalarTypeLittleEndianXFastest) {
+  const std::string u16 = path("a_3x1x1_uint16.raw");
+  write_values(u16, std::vector<uint8_t>{0x01, 0x00, 0x00, 0x01, 0xff, 0xff});
+  EXPECT_EQ(read_raw(u16, *parse_raw_name(u16)).values, (std::vector<float>{1, 256, 65535}));
+
+  const std::string i16 = path("b_1x3x1_int16.raw");
+  write_values(i16, std::vector<int16_t>{-32768, -1, 32767});
+  EXPECT_EQ(read_raw(i16, *parse_raw_name(i16)).values, (std::vector<float>{-32768, -1, 32767}));
+
+  const std::string f64 = path("c_1x1x2_float64.raw");
+  write_values(f64, std::vector<double>{0.1, -2.5});
+  EXPECT_EQ(read_raw(f64, *parse_raw_name(f64)).values, (std::vector<float>{0.1f, -2.5f}));
+
+  const std::string u8 = path("d_2x2x1_uint8.raw");
+  write_values(u8, std::vector<uint8_t>{0, 1, 2, 255});
+  const Volume v = read_raw(u8, *parse_raw_name(u8));
+  EXPECT_EQ(v.at(1, 0, 0), 1.0f);
+  EXPECT_EQ(v.at(0, 1, 0), 2.0f);
+  EXPECT_EQ(v.at(1, 1, 0), 255.0f);
+}
+
+TEST_F(IoTest, RawZeroAndOverflowingDimsAreRejected) {
+  const std::string p = path("x.raw");
+  write_values(p, std::vector<uint8_t>(8));
+  EXPECT_CONTAINS(io_error_of([&] { read_raw(p, {{2, 0, 2}, ScalarType::uint8}); }), ">= 1");
+  EXPECT_CONTAINS(io_error_of([&] { read_raw(p, {{-2, 2, 2}, ScalarType::uint8}); }), ">= 1");
+  const int64_t big = int64_t{1} << 31;
+  EXPECT_CONTAINS(io_error_of([&] { read_raw(p, {{big, big, big}, ScalarType::uint8}); }), "too large");
+  EXPECT_CONTAINS(io_error_of([&] { read_raw(p, {{big, big, 2}, ScalarType::float64}); }), "too large");
+}
+
+// ---------------------------------------------------------------- HDF5 reader
+
+TEST_F(IoTest, Hdf5MissingFileIsRejectedByName) {
+  const std::string p = path("absent.h5");
+  const std::string msg = io_error_of([&] { read_hdf5(p, "/volume"); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "no such file");
+}
+
+TEST_F(IoTest, NonHdf5FileNamedH5IsRejected) {
+  const std::string p = path("fake.h5");
+  write_values(p, std::vector<uint8_t>(1000, 7));
+  const std::string msg = io_error_of([&] { read_hdf5(p, "/volume"); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "not an HDF5 file");
+  EXPECT_CONTAINS(io_error_of([&] { read_volume({p, {}, {}}); }), "not an HDF5 file");
+}
+
+TEST_F(IoTest, Hdf5MissingDatasetListsThe3dDatasetsThatExist) {
+  const std::string p = path("many.h5");
+  {
+    H5Builder b(p);
+    const auto v = iota_floats(24);
+    b.add("/volume", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {2, 3, 4}, v.data());
+    b.add("/grp/density", H5T_STD_U8LE, H5T_NATIVE_FLOAT, {2, 3, 4}, v.data());
+    b.add("/flat", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {4, 6}, v.data());
+  }
+  const std::string msg = io_error_of([&] { read_hdf5(p, "/nope/missing"); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "no dataset '/nope/missing'");
+  EXPECT_CONTAINS(msg, "/grp/density, /volume");
+  EXPECT_EQ(msg.find("/flat"), std::string::npos) << msg;
+  EXPECT_EQ(list_3d_datasets(p), (std::vector<std::string>{"/grp/density", "/volume"}));
+}
+
+TEST_F(IoTest, Hdf5RankOtherThanThreeIsRejected) {
+  const std::string p = path("flat.h5");
+  {
+    H5Builder b(p);
+    const auto v = iota_floats(24);
+    b.add("/flat", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {4, 6}, v.data());
+  }
+  const std::string msg = io_error_of([&] { read_hdf5(p, "/flat"); });
+  EXPECT_CONTAINS(msg, p + ":/flat");
+  EXPECT_CONTAINS(msg, "rank 2, expected 3");
+}
+
+TEST_F(IoTest, Hdf5NonNumericTypeIsRejected) {
+  const std::string p = path("text.h5");
+  {
+    H5Builder b(p);
+    const hid_t str = H5Tcopy(H5T_C_S1);
+    H5Tset_size(str, 4);
+    const std::string text(8 * 4, 'a');
+    b.add("/text", str, str, {2, 2, 2}, text.data());
+    H5Tclose(str);
+  }
+  EXPECT_CONTAINS(io_error_of([&] { read_hdf5(p, "/text"); }), "not numeric");
+  EXPECT_TRUE(list_3d_datasets(p).empty());
+  EXPECT_CONTAINS(io_error_of([&] { read_volume({p, {}, {}}); }), "no 3-D numeric dataset");
+}
+
+TEST_F(IoTest, Hdf5NanIsRejectedWithItsCoordinates) {
+  const std::string p = path("nan.h5");
+  std::vector<float> v = iota_floats(4 * 3 * 2);
+  v[(1 * 3 + 2) * 4 + 3] = std::numeric_limits<float>::quiet_NaN();  // (x,y,z) = (3,2,1)
+  {
+    H5Builder b(p);
+    b.add("/volume", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {2, 3, 4}, v.data());
+  }
+  const std::string msg = io_error_of([&] { read_hdf5(p, "/volume"); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "(3,2,1)");
+}
+
+TEST_F(IoTest, Hdf5ChunkedGzipUint16ReadsExactlyWithAttributes) {
+  const std::string p = path("chunked.h5");
+  const int64_t nx = 17, ny = 13, nz = 11;  // not multiples of the chunk, so edge chunks are partial
+  std::vector<uint16_t> v(static_cast<size_t>(nx * ny * nz));
+  for (size_t i = 0; i < v.size(); ++i) v[i] = static_cast<uint16_t>((i * 7919u) % 65536u);
+  {
+    H5Builder b(p);
+    const hid_t ds = b.add("/scan/volume", H5T_STD_U16LE, H5T_NATIVE_UINT16,
+                           {hsize_t(nz), hsize_t(ny), hsize_t(nx)}, v.data(), {3, 4, 5});
+    b.attribute(ds, "spacing", {0.5, 2.0, 3.0});
+    b.attribute(ds, "origin", {-1.0, 0.0, 4.5});
+  }
+  const Volume vol = read_hdf5(p, "/scan/volume");
+  EXPECT_EQ(vol.dims, (std::array<int64_t, 3>{nx, ny, nz}));
+  EXPECT_EQ(vol.spacing, (std::array<double, 3>{0.5, 2.0, 3.0}));
+  EXPECT_EQ(vol.origin, (std::array<double, 3>{-1.0, 0.0, 4.5}));
+  ASSERT_EQ(vol.values.size(), v.size());
+  for (size_t i = 0; i < v.size(); ++i) ASSERT_EQ(vol.values[i], static_cast<float>(v[i])) << i;
+  EXPECT_EQ(vol.at(16, 0, 0), static_cast<float>(v[16]));
+}
+
+TEST_F(IoTest, Hdf5Float64IsRoundedToFloat) {
+  const std::string p = path("f64.h5");
+  const std::vector<double> v{0.1, 1.0 / 3.0, -2.0, 1e-7, 5, 6, 7, 8};
+  {
+    H5Builder b(p);
+    b.add("/volume", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, {2, 2, 2}, v.data());
+  }
+  const Volume vol = read_hdf5(p, "/volume");
+  for (size_t i = 0; i < v.size(); ++i) EXPECT_EQ(vol.values[i], static_cast<float>(v[i])) << i;
+}
+
+TEST_F(IoTest, Hdf5BadSpacingAttributeIsRejected) {
+  const std::string p = path("badspacing.h5");
+  {
+    H5Builder b(p);
+    const auto v = iota_floats(8);
+    const hid_t ds = b.add("/volume", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {2, 2, 2}, v.data());
+    b.attribute(ds, "spacing", {1.0, 2.0});
+  }
+  EXPECT_CONTAINS(io_error_of([&] { read_hdf5(p, "/volume"); }), "'spacing' must hold 3 numbers");
+}
+
+TEST_F(IoTest, Hdf5ErrorPathsLeaveNoHandleOpen) {
+  const std::string p = path("handles.h5");
+  {
+    H5Builder b(p);
+    const auto v = iota_floats(24);
+    b.add("/flat", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {4, 6}, v.data());
+    b.add("/volume", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {2, 3, 4}, v.data());
+  }
+  const size_t before = open_hdf5_objects();
+  io_error_of([&] { read_hdf5(p, "/flat"); });
+  io_error_of([&] { read_hdf5(p, "/missing"); });
+  EXPECT_EQ(read_hdf5(p, "/volume").values.size(), 24u);
+  EXPECT_EQ(open_hdf5_objects(), before);
+}
+
+// ---------------------------------------------------------------- read_volume
+
+TEST_F(IoTest, ReadVolumeSplitsTheSpecAtTheLastColonSlash) {
+  fs::create_directory(path("odd:dir"));
+  const std::string p = path("odd:dir/two.h5");
+  {
+    H5Builder b(p);
+    const auto v = iota_floats(24);
+    b.add("/a/first", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {2, 3, 4}, v.data());
+    b.add("/b/second", H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {4, 3, 2}, v.data());
+  }
+  EXPECT_EQ(read_volume({p + ":/b/second", {}, {}}).dims, (std::array<int64_t, 3>{2, 3, 4}));
+  EXPECT_EQ(read_volume({p + ":/a/first", {}, {}}).dims, (std::array<int64_t, 3>{4, 3, 2}));
+  const std::string msg = io_error_of([&] { read_volume({p, {}, {}}); });
+  EXPECT_CONTAINS(msg, "/a/first, /b/second");
+  EXPECT_CONTAINS(msg, p + ":/DATASET");
+}
+
+TEST_F(IoTest, ReadVolumeRawUsesOverridesBeforeTheName) {
+  const std::string named = path("v_2x2x2_uint8.raw");
+  write_values(named, std::vector<uint8_t>{0, 1, 2, 3, 4, 5, 6, 7});
+  EXPECT_EQ(read_volume({named, {}, {}}).dims, (std::array<int64_t, 3>{2, 2, 2}));
+  const Volume flat = read_volume({named, std::array<int64_t, 3>{8, 1, 1}, {}});
+  EXPECT_EQ(flat.dims, (std::array<int64_t, 3>{8, 1, 1}));
+  EXPECT_EQ(flat.at(7, 0, 0), 7.0f);
+  const Volume wide = read_volume({named, std::array<int64_t, 3>{2, 2, 1}, ScalarType::uint16});
+  EXPECT_EQ(wide.at(0, 0, 0), 256.0f);
+}
+
+TEST_F(IoTest, ReadVolumeAsksForDimsAndTypeWhenTheNameSaysNothing) {
+  const std::string p = path("blob.bin");
+  write_values(p, std::vector<uint8_t>(8));
+  const std::string msg = io_error_of([&] { read_volume({p, {}, {}}); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "pass --dims and --type");
+  EXPECT_CONTAINS(io_error_of([&] { read_volume({p, std::array<int64_t, 3>{2, 2, 2}, {}}); }),
+                  "cannot tell the type");
+  EXPECT_EQ(read_volume({p, std::array<int64_t, 3>{2, 2, 2}, ScalarType::uint8}).values.size(), 8u);
+}
+
+TEST_F(IoTest, ReadVolumeReportsAMissingFileBeforeAskingForALayout) {
+  const std::string p = path("typo.bin");
+  const std::string msg = io_error_of([&] { read_volume({p, {}, {}}); });
+  EXPECT_CONTAINS(msg, p + ": no such file");
+  EXPECT_CONTAINS(io_error_of([&] { read_volume({dir_.string(), {}, {}}); }), "is a directory");
+  EXPECT_CONTAINS(io_error_of([&] { read_volume({path("gone.h5") + ":/volume", {}, {}}); }), "no such file");
+}
+
+// ---------------------------------------------------------------- writers
+
+TEST_F(IoTest, WriteHdf5ThenReadHdf5RoundTripsExactly) {
+  const Volume v = sample_volume();
+  const std::string p = path("out.h5");
+  write_hdf5(v, p);
+  const Volume back = read_hdf5(p, "/volume");
+  EXPECT_EQ(back.dims, v.dims);
+  EXPECT_EQ(back.spacing, v.spacing);
+  EXPECT_EQ(back.origin, v.origin);
+  EXPECT_EQ(back.values, v.values);
+  EXPECT_EQ(entries(), (std::vector<std::string>{"out.h5"}));
+
+  // Shape on disk is (z, y, x) float32.
+  const hid_t f = H5Fopen(p.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  const hid_t ds = H5Dopen2(f, "/volume", H5P_DEFAULT);
+  const hid_t space = H5Dget_space(ds);
+  const hid_t type = H5Dget_type(ds);
+  hsize_t shape[3] = {0, 0, 0};
+  H5Sget_simple_extent_dims(space, shape, nullptr);
+  EXPECT_EQ(shape[0], 3u);
+  EXPECT_EQ(shape[1], 4u);
+  EXPECT_EQ(shape[2], 5u);
+  EXPECT_GT(H5Tequal(type, H5T_IEEE_F32LE), 0);
+  H5Tclose(type);
+  H5Sclose(space);
+  H5Dclose(ds);
+  H5Fclose(f);
+}
+
+TEST_F(IoTest, WriteHdf5ReplacesAnExistingFile) {
+  const std::string p = path("out.h5");
+  write_values(p, std::vector<uint8_t>(100, 1));
+  write_hdf5(sample_volume(), p);
+  EXPECT_EQ(read_hdf5(p, "/volume").values, sample_volume().values);
+  EXPECT_EQ(entries(), (std::vector<std::string>{"out.h5"}));
+}
+
+TEST_F(IoTest, WriteRawFloat32ThenReadRawRoundTripsExactly) {
+  const Volume v = sample_volume();
+  const std::string p = path("out_5x4x3_float32.raw");
+  write_raw_float32(v, p);
+  EXPECT_EQ(fs::file_size(p), 60u * 4u);
+  const Volume back = read_raw(p, *parse_raw_name(p));
+  EXPECT_EQ(back.dims, v.dims);
+  EXPECT_EQ(back.values, v.values);
+  EXPECT_EQ(entries(), (std::vector<std::string>{"out_5x4x3_float32.raw"}));
+}
+
+TEST_F(IoTest, WritersRejectAVolumeWhoseValuesDoNotMatchItsDims) {
+  Volume v = sample_volume();
+  v.values.pop_back();
+  EXPECT_CONTAINS(io_error_of([&] { write_raw_float32(v, path("a.raw")); }), "59 values");
+  EXPECT_CONTAINS(io_error_of([&] { write_hdf5(v, path("a.h5")); }), "59 values");
+  EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(IoTest, WritingIntoAMissingDirectoryThrowsAndLeavesNoFile) {
+  const std::string missing = path("no/such/dir");
+  const Volume v = sample_volume();
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.triangles = {{0, 1, 2}};
+  EXPECT_CONTAINS(io_error_of([&] { write_raw_float32(v, missing + "/v.raw"); }), "does not exist");
+  EXPECT_CONTAINS(io_error_of([&] { write_hdf5(v, missing + "/v.h5"); }), "does not exist");
+  EXPECT_CONTAINS(io_error_of([&] { write_ply(m, missing + "/m.ply"); }), missing + "/m.ply");
+  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("file/x")); }), "does not exist");
+  EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(IoTest, WritingIntoAReadOnlyDirectoryThrows) {
+  if (::geteuid() == 0) GTEST_SKIP() << "root may write anywhere";
+  fs::create_directory(path("ro"));
+  fs::permissions(path("ro"), fs::perms::owner_read | fs::perms::owner_exec);
+  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("ro/x.ply")); }), "not writable");
+  fs::permissions(path("ro"), fs::perms::owner_all);
+  EXPECT_TRUE(fs::is_empty(path("ro")));
+}
+
+// ---------------------------------------------------------------- AtomicFile
+
+TEST_F(IoTest, AtomicFileDestroyedWithoutCommitLeavesNoFile) {
+  const std::string p = path("partial.bin");
+  {
+    AtomicFile f(p);
+    f.write("abc", 3);
+    EXPECT_TRUE(fs::exists(f.temp_path()));
+    EXPECT_EQ(fs::path(f.temp_path()).parent_path(), dir_);
+    EXPECT_FALSE(fs::exists(p));
+  }
+  EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(IoTest, AtomicFileCommitReplacesTheTargetAndRemovesTheTemporary) {
+  const std::string p = path("done.bin");
+  write_values(p, std::vector<uint8_t>{9, 9, 9, 9, 9});
+  {
+    AtomicFile f(p);
+    f.write("xyz", 3);
+    EXPECT_EQ(read_bytes(p).size(), 5u);  // the old file stays intact until commit
+    f.commit();
+    EXPECT_THROW(f.write("more", 4), IoError);
+  }
+  EXPECT_EQ(read_bytes(p), (std::vector<unsigned char>{'x', 'y', 'z'}));
+  EXPECT_EQ(entries(), (std::vector<std::string>{"done.bin"}));
+}
+
+TEST_F(IoTest, AtomicFileTargetThatIsADirectoryFailsAtCommit) {
+  fs::create_directory(path("taken"));
+  {
+    AtomicFile f(path("taken"));
+    f.write("x", 1);
+    EXPECT_CONTAINS(io_error_of([&] { f.commit(); }), "rename");
+  }
+  EXPECT_EQ(entries(), (std::vector<std::string>{"taken"}));
+}
+
+// ---------------------------------------------------------------- PLY
+
+struct ParsedPly {
+  std::vector<std::string> header;
+  Mesh mesh;
+  std::vector<uint8_t> face_counts;
+  size_t trailing_bytes = 0;
+};
+
+template <typename T>
+T take_le(const std::vector<unsigned char>& bytes, size_t& at) {
+  std::array<unsigned char, sizeof(T)> b{};
+  for (size_t i = 0; i < sizeof(T); ++i) b[i] = bytes.at(at + i);
+  at += sizeof(T);
+  if constexpr (std::endian::native == std::endian::big) std::reverse(b.begin(), b.end());
+  return std::bit_cast<T>(b);
+}
+
+ParsedPly parse_ply(const std::string& path, size_t vertices, size_t faces) {
+  const auto bytes = read_bytes(path);
+  const std::string text(bytes.begin(), bytes.end());
+  const std::string end = "end_header\n";
+  const size_t body = text.find(end) + end.size();
+  ParsedPly out;
+  std::istringstream head(text.substr(0, body));
+  for (std::string line; std::getline(head, line);) out.header.push_back(line);
+  size_t at = body;
+  for (size_t i = 0; i < vertices; ++i) {
+    std::array<float, 3> p{};
+    for (float& c : p) c = take_le<float>(bytes, at);
+    out.mesh.positions.push_back(p);
+  }
+  for (size_t i = 0; i < faces; ++i) {
+    out.face_counts.push_back(take_le<uint8_t>(bytes, at));
+    std::array<uint32_t, 3> t{};
+    for (uint32_t& v : t) v = static_cast<uint32_t>(take_le<int32_t>(bytes, at));
+    out.mesh.triangles.push_back(t);
+  }
+  out.trailing_bytes = bytes.size() - at;
+  return out;
+}
+
+TEST_F(IoTest, PlyWrittenParsesBackToTheSameMesh) {
+  Mesh m;
+  for (int i = 0; i < 70000; ++i) {  // more than one write block
+    const float f = static_cast<float>(i);
+    m.positions.push_back({f * 0.5f, -f, f / 3.0f});
+  }
+  for (uint32_t i = 0; i + 2 < 70000; i += 1) m.triangles.push_back({i, i + 2, i + 1});
+  const std::string p = path("mesh.ply");
+  write_ply(m, p);
+  const ParsedPly ply = parse_ply(p, m.positions.size(), m.triangles.size());
+  EXPECT_EQ(ply.header, (std::vector<std::string>{
+                            "ply", "format binary_little_endian 1.0", "comment written by isotope",
+                            "element vertex 70000", "property float x", "property float y",
+                            "property float z", "element face 69998",
+                            "property list uchar int vertex_indices", "end_header"}));
+  EXPECT_TRUE(ply.mesh.positions == m.positions);
+  EXPECT_TRUE(ply.mesh.triangles == m.triangles);
+  EXPECT_TRUE(std::all_of(ply.face_counts.begin(), ply.face_counts.end(), [](uint8_t c) { return c == 3; }));
+  EXPECT_EQ(ply.trailing_bytes, 0u);
+  EXPECT_EQ(entries(), (std::vector<std::string>{"mesh.ply"}));
+}
+
+TEST_F(IoTest, PlyOfAnEmptyMeshIsAValidHeaderOnly) {
+  const std::string p = path("empty.ply");
+  write_ply(Mesh{}, p);
+  const ParsedPly ply = parse_ply(p, 0, 0);
+  EXPECT_EQ(ply.header.at(3), "element vertex 0");
+  EXPECT_EQ(ply.header.at(7), "element face 0");
+  EXPECT_EQ(ply.trailing_bytes, 0u);
+}
+
+TEST_F(IoTest, PlyWithADanglingIndexIsRejectedAndNotWritten) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.triangles = {{0, 1, 2}, {0, 3, 1}};
+  const std::string p = path("bad.ply");
+  const std::string msg = io_error_of([&] { write_ply(m, p); });
+  EXPECT_CONTAINS(msg, "triangle 1 references vertex 3");
+  EXPECT_TRUE(entries().empty());
+}
+
+}  // namespace
+}  // namespace isotope
