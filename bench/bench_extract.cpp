@@ -1,1 +1,267 @@
-// placeholder
+// Google Benchmark suite: adaptive extraction against the full-resolution baseline,
+// preprocessing on one core and on all cores, and the critical-pattern table.
+// How to build, run and compare: bench/README.md.
+//
+// Every input (volume, preprocessed hierarchy) is built once per process in a function-local
+// static, outside any timed loop. Times are wall-clock (UseRealTime) because preprocessing runs
+// on oneTBB's worker threads, whose CPU time the main thread's clock would not see.
+#include <benchmark/benchmark.h>
+#include <tbb/global_control.h>
+
+#include <cstdint>
+#include <cstdio>
+#include <exception>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "engine/critical_table.h"
+#include "engine/diamond.h"
+#include "engine/extract.h"
+#include "engine/fields.h"
+#include "engine/mesh.h"
+#include "engine/multires_volume.h"
+#include "engine/options.h"
+#include "engine/volume.h"
+#include "io/raw_reader.h"
+
+namespace {
+
+using isotope::ExtractOptions;
+using isotope::ExtractStats;
+using isotope::Mesh;
+using isotope::MultiresVolume;
+using isotope::TopologyMode;
+using isotope::Volume;
+
+// ---- Inputs, each built once per process ----------------------------------------------------
+
+enum class Dataset { algebraic129, algebraic257, bolt };
+
+const char* dataset_name(Dataset d) {
+  switch (d) {
+    case Dataset::algebraic129: return "algebraic129";
+    case Dataset::algebraic257: return "algebraic257";
+    case Dataset::bolt: return "bolt";
+  }
+  return "?";
+}
+
+// The isovalue each dataset is extracted at: the algebraic function's surface of the paper's
+// Table 1, and the bolt's outer envelope (data/README.md: 20754 crossed cells).
+float dataset_iso(Dataset d) { return d == Dataset::bolt ? 64.5f : 0.0f; }
+
+const Volume& bolt_volume() {
+  static const Volume v = [] {
+    const std::string path = std::string(ISOTOPE_TEST_DATA) + "/bolt_70x123x66_uint8.raw";
+    const auto layout = isotope::parse_raw_name(path);
+    if (!layout) throw std::runtime_error("cannot parse the layout of " + path);
+    return isotope::read_raw(path, *layout);
+  }();
+  return v;
+}
+
+const Volume& volume_of(Dataset d) {
+  switch (d) {
+    case Dataset::algebraic129: {
+      static const Volume v = isotope::generate_algebraic(129);
+      return v;
+    }
+    case Dataset::algebraic257: {
+      static const Volume v = isotope::generate_algebraic(257);
+      return v;
+    }
+    case Dataset::bolt: return bolt_volume();
+  }
+  throw std::logic_error("unknown dataset");
+}
+
+const MultiresVolume& multires_of(Dataset d) {
+  switch (d) {
+    case Dataset::algebraic129: {
+      static const MultiresVolume mv = MultiresVolume::build(volume_of(d));
+      return mv;
+    }
+    case Dataset::algebraic257: {
+      static const MultiresVolume mv = MultiresVolume::build(volume_of(d));
+      return mv;
+    }
+    case Dataset::bolt: {
+      static const MultiresVolume mv = MultiresVolume::build(volume_of(d));
+      return mv;
+    }
+  }
+  throw std::logic_error("unknown dataset");
+}
+
+// Runs SETUP, reporting a failure (missing data file, engine error) as a skipped benchmark:
+// an exception must not escape into the benchmark runner.
+template <class Setup>
+bool prepare(benchmark::State& state, Setup setup) {
+  try {
+    setup();
+    return true;
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+    return false;
+  }
+}
+
+void set_triangle_counters(benchmark::State& state, int64_t total_triangles) {
+  const auto t = static_cast<double>(total_triangles);
+  state.counters["triangles"] = benchmark::Counter(t, benchmark::Counter::kAvgIterations);
+  state.counters["triangles_per_second"] = benchmark::Counter(t, benchmark::Counter::kIsRate);
+}
+
+// ---- Benchmarks -------------------------------------------------------------------------------
+
+// extract(): the adaptive traversal of the hierarchy, stopping rule, marching tetrahedra, welding.
+void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mode) {
+  const MultiresVolume* mv = nullptr;
+  if (!prepare(state, [&] { mv = &multires_of(d); })) return;
+  ExtractOptions options;
+  options.iso = dataset_iso(d);
+  options.eps = eps;
+  options.error = isotope::ErrorIndicator::bound;
+  options.topology = mode;
+
+  int64_t triangles = 0, tets_visited = 0;
+  for (auto _ : state) {
+    ExtractStats stats;
+    Mesh mesh = isotope::extract(*mv, options, &stats);
+    triangles += static_cast<int64_t>(mesh.triangles.size());
+    tets_visited += stats.tets_visited;
+    benchmark::DoNotOptimize(mesh.triangles.data());
+  }
+  set_triangle_counters(state, triangles);
+  state.counters["tets_visited"] =
+      benchmark::Counter(static_cast<double>(tets_visited), benchmark::Counter::kAvgIterations);
+}
+
+// extract_full_resolution(): marching tetrahedra over every finest tetrahedron, no hierarchy.
+// Its triangles_per_second is the yardstick for BM_Extract's at eps = 0.
+void BM_FullResolutionBaseline(benchmark::State& state, Dataset d) {
+  const Volume* volume = nullptr;
+  if (!prepare(state, [&] { volume = &volume_of(d); })) return;
+  const float iso = dataset_iso(d);
+
+  int64_t triangles = 0;
+  for (auto _ : state) {
+    Mesh mesh = isotope::extract_full_resolution(*volume, iso);
+    triangles += static_cast<int64_t>(mesh.triangles.size());
+    benchmark::DoNotOptimize(mesh.triangles.data());
+  }
+  set_triangle_counters(state, triangles);
+}
+
+// MultiresVolume::build(): embedding plus saturation of every per-vertex record. THREADS = 0
+// leaves oneTBB its default parallelism; otherwise it is capped for the whole timed loop.
+void BM_Preprocess(benchmark::State& state, Dataset d, int threads) {
+  const Volume* volume = nullptr;
+  if (!prepare(state, [&] { volume = &volume_of(d); })) return;
+  std::optional<tbb::global_control> cap;
+  if (threads > 0) cap.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+
+  int64_t lattice_nodes = 0;
+  for (auto _ : state) {
+    std::optional<MultiresVolume> mv = MultiresVolume::build(*volume);
+    benchmark::DoNotOptimize(&*mv);
+    state.PauseTiming();  // freeing the records is not part of preprocessing
+    const int64_t side = mv->lattice().side;
+    lattice_nodes = side * side * side;
+    mv.reset();
+    state.ResumeTiming();
+  }
+  state.counters["voxels_per_second"] = benchmark::Counter(
+      static_cast<double>(volume->node_count()) * static_cast<double>(state.iterations()),
+      benchmark::Counter::kIsRate);
+  state.counters["lattice_nodes"] = static_cast<double>(lattice_nodes);
+  state.counters["threads"] = static_cast<double>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
+// is_critical_pattern() over every pattern of the three polyhedron types (2^8 + 2^6 + 2^10).
+void BM_CriticalTableLookup(benchmark::State& state) {
+  constexpr isotope::PolyhedronType types[] = {isotope::PolyhedronType::cube,
+                                               isotope::PolyhedronType::octahedron,
+                                               isotope::PolyhedronType::diamond};
+  int64_t patterns = 0;
+  for (const auto type : types) patterns += int64_t{1} << (isotope::ring_size(type) + 2);
+  benchmark::DoNotOptimize(isotope::is_critical_pattern(types[0], 0));  // builds the tables
+
+  int64_t critical = 0;
+  for (auto _ : state) {
+    critical = 0;
+    for (const auto type : types) {
+      const uint32_t count = uint32_t{1} << (isotope::ring_size(type) + 2);
+      for (uint32_t p = 0; p < count; ++p) {
+        benchmark::DoNotOptimize(p);
+        critical += isotope::is_critical_pattern(type, p) ? 1 : 0;
+      }
+    }
+    benchmark::DoNotOptimize(critical);
+  }
+  state.SetItemsProcessed(state.iterations() * patterns);
+  state.counters["critical"] = static_cast<double>(critical);  // 68 + 8 + 400 = 476
+}
+
+std::string format_eps(double eps) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%g", eps);
+  return buffer;
+}
+
+// Registration in one table, so names read BM_Extract/<dataset>/eps:<eps>/mode:<mode>.
+void register_benchmarks() {
+  struct ExtractCase {
+    Dataset dataset;
+    std::vector<double> eps;  // in data units
+  };
+  const ExtractCase extract_cases[] = {
+      {Dataset::algebraic257, {0.0, 0.01, 0.1}},
+      {Dataset::bolt, {0.0, 8.0, 32.0}},
+  };
+  for (const auto& c : extract_cases) {
+    for (const double eps : c.eps) {
+      for (const TopologyMode mode : {TopologyMode::none, TopologyMode::preserve}) {
+        const std::string name = std::string("BM_Extract/") + dataset_name(c.dataset) +
+                                 "/eps:" + format_eps(eps) + "/mode:" +
+                                 std::string(isotope::to_string(mode));
+        auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Extract, c.dataset, eps, mode);
+        b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);
+      }
+    }
+    benchmark::RegisterBenchmark(
+        (std::string("BM_FullResolutionBaseline/") + dataset_name(c.dataset)).c_str(),
+        BM_FullResolutionBaseline, c.dataset)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime()
+        ->MinTime(0.5);
+  }
+
+  for (const Dataset d : {Dataset::algebraic129, Dataset::algebraic257, Dataset::bolt}) {
+    for (const int threads : {1, 0}) {
+      const std::string name = std::string("BM_Preprocess/") + dataset_name(d) +
+                               (threads == 1 ? "/threads:1" : "/threads:all");
+      benchmark::RegisterBenchmark(name.c_str(), BM_Preprocess, d, threads)
+          ->Unit(benchmark::kMillisecond)
+          ->UseRealTime()
+          ->MinTime(0.5);
+    }
+  }
+
+  benchmark::RegisterBenchmark("BM_CriticalTableLookup", BM_CriticalTableLookup)
+      ->Unit(benchmark::kMicrosecond);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  register_benchmarks();
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

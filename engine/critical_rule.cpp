@@ -28,6 +28,9 @@ bool exact_rule_fires(const DiamondValues& d, float t) {
 }
 
 IsoInterval exact_interval(const DiamondValues& d) {
+  // It can only fire where v lies strictly beyond both a and b: t in [fv, min(fa, fb)) or
+  // [max(fa, fb), fv). Most vertices of smooth data lie between their edge's ends.
+  if (d.fv >= std::min(d.fa, d.fb) && d.fv <= std::max(d.fa, d.fb)) return {};
   float w[11];
   int n = 0;
   w[n++] = d.fa;

@@ -44,9 +44,10 @@ class Traversal {
     if (outside_box(t)) return;
     if (level == lattice_.max_level()) return emit(t);
     const Coord v{(t[0][0] + t[1][0]) / 2, (t[0][1] + t[1][1]) / 2, (t[0][2] + t[1][2]) / 2};
-    const DiamondRecord& rec = mv_.record(lattice_.index(v));
-    if (!(rec.lo <= options_.iso && options_.iso < rec.hi)) return;  // no value on each side
-    if (stops(rec)) return emit(t);
+    const int64_t slot = mv_.slot(v);
+    const DiamondBounds& b = mv_.bounds(slot);
+    if (!(b.lo <= options_.iso && options_.iso < b.hi)) return;  // no value on each side
+    if (stops(b, slot)) return emit(t);
     if (level % 3 == 0) {
       visit({t[0], t[2], t[3], v}, level + 1);
       visit({t[1], t[3], t[2], v}, level + 1);
@@ -56,10 +57,11 @@ class Traversal {
     }
   }
 
-  bool stops(const DiamondRecord& rec) const {
-    const float err = options_.error == ErrorIndicator::bound ? rec.error_bound : rec.error_surplus;
+  bool stops(const DiamondBounds& b, int64_t slot) const {
+    const float err = options_.error == ErrorIndicator::bound ? b.error_bound : b.error_surplus;
     if (!(static_cast<double>(err) < options_.eps)) return false;
     const float iso = options_.iso;
+    const DiamondTopology& rec = mv_.topology(slot);
     switch (options_.topology) {
       case TopologyMode::none: return true;
       case TopologyMode::paper: return !(rec.paper_lo <= iso && iso < rec.paper_hi);
@@ -81,8 +83,7 @@ class Traversal {
 
   void emit(const Tet& t) {
     ++stats_.tets_emitted;
-    builder_.add_tet(t, {mv_.value(lattice_.index(t[0])), mv_.value(lattice_.index(t[1])),
-                         mv_.value(lattice_.index(t[2])), mv_.value(lattice_.index(t[3]))});
+    builder_.add_tet(t, {mv_.value(t[0]), mv_.value(t[1]), mv_.value(t[2]), mv_.value(t[3])});
   }
 
   const MultiresVolume& mv_;

@@ -39,52 +39,40 @@ void validate(const Volume& volume) {
       throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
 }
 
-// Nodes beyond the data box replicate the nearest data node: ranges stay tight, and no diamond
-// that reaches past the box is ever stopped at (its error is infinite), so these values are
-// never interpolated into the mesh (design.md, "Volumes that are not (2^k+1)^3").
-std::vector<float> embed(const Volume& volume, const Lattice& lattice) {
-  std::vector<float> values(static_cast<size_t>(lattice.node_count()));
-  tbb::parallel_for(int64_t{0}, lattice.side, [&](int64_t z) {
-    const int64_t sz = std::min(z, volume.dims[2] - 1);
-    for (int64_t y = 0; y < lattice.side; ++y) {
-      const int64_t sy = std::min(y, volume.dims[1] - 1);
-      for (int64_t x = 0; x < lattice.side; ++x)
-        values[static_cast<size_t>(lattice.index(x, y, z))] = volume.at(std::min(x, volume.dims[0] - 1), sy, sz);
-    }
-  });
-  return values;
+int64_t squared_distance(const Coord& p, const Coord& q) {
+  int64_t d = 0;
+  for (int a = 0; a < 3; ++a) d += (p[a] - q[a]) * (p[a] - q[a]);
+  return d;
 }
 
-struct Counters {
-  std::atomic<int64_t> paper[3] = {0, 0, 0}, exact[3] = {0, 0, 0};
-};
+}  // namespace
 
+// Computes one refinement vertex's record from its polyhedron and the (already final)
+// records of its children's refinement vertices.
 class RecordBuilder {
  public:
-  RecordBuilder(const Lattice& lattice, const std::array<int64_t, 3>& dims, const std::vector<float>& values,
-                std::vector<DiamondRecord>& records)
-      : lattice_(lattice), dims_(dims), values_(values), records_(records) {}
+  explicit RecordBuilder(MultiresVolume& mv) : mv_(mv), lattice_(mv.lattice_) {}
 
-  // Computes v's record from its polyhedron and the (already final) records of its children.
-  void build(const Coord& v, int64_t local_counts[2][3]) const {
+  void build(const Coord& v, int64_t counts[2][3]) const {
     const Diamond d = diamond_of(v, lattice_);
     DiamondValues dv;
     dv.type = d.type;
-    dv.fa = value(d.a);
-    dv.fb = value(d.b);
-    dv.fv = value(d.v);
+    dv.fa = mv_.value(d.a);
+    dv.fb = mv_.value(d.b);
+    dv.fv = mv_.value(d.v);
     bool inside_box = in_box(d.a) && in_box(d.b);
-    float lo = std::min({dv.fa, dv.fb, dv.fv}), hi = std::max({dv.fa, dv.fb, dv.fv});
+    DiamondBounds bounds;
+    bounds.lo = std::min({dv.fa, dv.fb, dv.fv});
+    bounds.hi = std::max({dv.fa, dv.fb, dv.fv});
     for (int i = 0; i < d.ring_count; ++i) {
       const bool real = lattice_.contains(d.ring[i]);
-      dv.ring[i] = value(real ? d.ring[i] : mirror_into(d.ring[i], lattice_));
+      dv.ring[i] = mv_.value(real ? d.ring[i] : mirror_into(d.ring[i], lattice_));
       if (!real) continue;
       inside_box = inside_box && in_box(d.ring[i]);
-      lo = std::min(lo, dv.ring[i]);
-      hi = std::max(hi, dv.ring[i]);
+      bounds.lo = std::min(bounds.lo, dv.ring[i]);
+      bounds.hi = std::max(bounds.hi, dv.ring[i]);
     }
 
-    DiamondRecord rec;
     double child_bound = 0;
     float child_surplus = 0;
     IsoInterval exact_bar, paper_bar;
@@ -94,67 +82,87 @@ class RecordBuilder {
         const Coord& p = d.ring[i];
         const Coord& q = d.ring[(i + 1) % d.ring_count];
         if (!lattice_.contains(p) || !lattice_.contains(q)) continue;  // a missing tet of a cut diamond
-        for (const Coord& end : {d.a, d.b}) {
-          const DiamondRecord& c = record(longest_edge_midpoint({end, d.v, p, q}));
-          child_bound = std::max(child_bound, static_cast<double>(c.error_bound));
-          child_surplus = std::max(child_surplus, c.error_surplus);
-          lo = std::min(lo, c.lo);
-          hi = std::max(hi, c.hi);
-          exact_bar.hull({c.exact_lo, c.exact_hi});
-          paper_bar.hull({c.paper_lo, c.paper_hi});
-          weight = std::max(weight, c.weight);
+        for (const Coord* end : {&d.a, &d.b}) {
+          // Child (end, v, p, q) is bisected at the midpoint of its longest edge, which in all
+          // three polyhedra joins `end` to the farther of p and q (checked by the hierarchy test).
+          const Coord& far = squared_distance(*end, p) > squared_distance(*end, q) ? p : q;
+          const int64_t c = mv_.slot({((*end)[0] + far[0]) / 2, ((*end)[1] + far[1]) / 2, ((*end)[2] + far[2]) / 2});
+          const DiamondBounds& cb = mv_.bounds(c);
+          child_bound = std::max(child_bound, static_cast<double>(cb.error_bound));
+          child_surplus = std::max(child_surplus, cb.error_surplus);
+          bounds.lo = std::min(bounds.lo, cb.lo);
+          bounds.hi = std::max(bounds.hi, cb.hi);
+          const DiamondTopology& ct = mv_.topology(c);
+          exact_bar.hull({ct.exact_lo, ct.exact_hi});
+          paper_bar.hull({ct.paper_lo, ct.paper_hi});
+          weight = std::max(weight, ct.weight);
         }
       }
     }
-    rec.lo = lo;
-    rec.hi = hi;
     if (!inside_box) {
-      rec.error_bound = rec.error_surplus = kInfinity;
+      // Refine always: its tetrahedra reach past the data box (design.md, "Volumes that are not
+      // (2^k+1)^3"), so they are cut down to unit cells, each wholly inside or outside.
+      bounds.error_bound = bounds.error_surplus = kInfinity;
     } else {
       const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
-      rec.error_bound = round_up(eta + child_bound);
-      rec.error_surplus = std::max(round_up(eta), child_surplus);
+      bounds.error_bound = round_up(eta + child_bound);
+      bounds.error_surplus = std::max(round_up(eta), child_surplus);
       const IsoInterval exact = exact_interval(dv);
       const IsoInterval paper = paper_interval(dv);
-      local_counts[0][static_cast<int>(d.type)] += paper.empty() ? 0 : 1;
-      local_counts[1][static_cast<int>(d.type)] += exact.empty() ? 0 : 1;
+      counts[0][static_cast<int>(d.type)] += paper.empty() ? 0 : 1;
+      counts[1][static_cast<int>(d.type)] += exact.empty() ? 0 : 1;
       exact_bar.hull(exact);
       paper_bar.hull(paper);
       weight = std::max(weight, exact.length());
     }
-    if (!exact_bar.empty()) { rec.exact_lo = exact_bar.lo; rec.exact_hi = exact_bar.hi; }
-    if (!paper_bar.empty()) { rec.paper_lo = paper_bar.lo; rec.paper_hi = paper_bar.hi; }
-    rec.weight = weight;
-    records_[static_cast<size_t>(lattice_.index(v))] = rec;
+    const int64_t s = mv_.slot(v);
+    mv_.bounds_[static_cast<size_t>(s)] = bounds;
+    DiamondTopology& topo = mv_.topology_[static_cast<size_t>(s)];
+    if (!exact_bar.empty()) { topo.exact_lo = exact_bar.lo; topo.exact_hi = exact_bar.hi; }
+    if (!paper_bar.empty()) { topo.paper_lo = paper_bar.lo; topo.paper_hi = paper_bar.hi; }
+    topo.weight = weight;
+  }
+
+  // Nodes beyond the data box replicate the nearest data node: ranges stay tight, and no diamond
+  // that reaches past the box is ever stopped at, so these values never reach the mesh.
+  void embed(const Volume& volume) const {
+    const Lattice& l = lattice_;
+    tbb::parallel_for(int64_t{0}, l.side, [&](int64_t z) {
+      const int64_t sz = std::min(z, volume.dims[2] - 1);
+      for (int64_t y = 0; y < l.side; ++y) {
+        const int64_t sy = std::min(y, volume.dims[1] - 1);
+        for (int64_t x = 0; x < l.side; ++x)
+          mv_.values_[static_cast<size_t>(mv_.slot({x, y, z}))] = volume.at(std::min(x, volume.dims[0] - 1), sy, sz);
+      }
+    });
   }
 
  private:
-  float value(const Coord& c) const { return values_[static_cast<size_t>(lattice_.index(c))]; }
-  const DiamondRecord& record(const Coord& c) const { return records_[static_cast<size_t>(lattice_.index(c))]; }
-  bool in_box(const Coord& c) const { return c[0] < dims_[0] && c[1] < dims_[1] && c[2] < dims_[2]; }
+  bool in_box(const Coord& c) const {
+    return c[0] < mv_.data_dims_[0] && c[1] < mv_.data_dims_[1] && c[2] < mv_.data_dims_[2];
+  }
 
+  MultiresVolume& mv_;
   const Lattice& lattice_;
-  const std::array<int64_t, 3>& dims_;
-  const std::vector<float>& values_;
-  std::vector<DiamondRecord>& records_;
 };
-
-}  // namespace
 
 MultiresVolume MultiresVolume::build(const Volume& volume) {
   const auto start = std::chrono::steady_clock::now();
   validate(volume);
   MultiresVolume mv;
   mv.lattice_ = Lattice::enclosing(volume.dims);
+  mv.layout_ = BrickLayout(mv.lattice_.side);
   mv.data_dims_ = volume.dims;
   mv.spacing_ = volume.spacing;
   mv.origin_ = volume.origin;
-  mv.values_ = embed(volume, mv.lattice_);
-  mv.records_.resize(static_cast<size_t>(mv.lattice_.node_count()));
+  mv.values_.resize(static_cast<size_t>(mv.layout_.size));
+  mv.bounds_.resize(static_cast<size_t>(mv.layout_.size));
+  mv.topology_.resize(static_cast<size_t>(mv.layout_.size));
 
+  const RecordBuilder builder(mv);
+  builder.embed(volume);
   const Lattice& lat = mv.lattice_;
-  const RecordBuilder builder(lat, mv.data_dims_, mv.values_, mv.records_);
-  Counters counters;
+  std::atomic<int64_t> paper[3] = {0, 0, 0}, exact[3] = {0, 0, 0};
   // Bottom-up, level by level (paper Sec. 3.2): scale j = 0 is the finest, and within a scale
   // edge midpoints (m = 1) are finer than face centres (m = 2), which are finer than cube centres.
   for (int j = 0; j < lat.k; ++j) {
@@ -163,24 +171,24 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
       tbb::parallel_for(int64_t{0}, lat.n / h + 1, [&](int64_t zi) {
         int64_t counts[2][3] = {{0, 0, 0}, {0, 0, 0}};
         const int64_t z = zi * h;
-        const int oz = (z / h) & 1;
+        const int oz = static_cast<int>(zi & 1);
         for (int64_t y = 0; y <= lat.n; y += h) {
-          const int oy = (y / h) & 1;
+          const int oy = static_cast<int>((y >> j) & 1);
           for (int64_t x = 0; x <= lat.n; x += h) {
-            const int ox = (x / h) & 1;  // odd multiple of h: exactly j trailing zeros
+            const int ox = static_cast<int>((x >> j) & 1);  // odd multiple of h: exactly j trailing zeros
             if (ox + oy + oz == m) builder.build({x, y, z}, counts);
           }
         }
         for (int t = 0; t < 3; ++t) {
-          counters.paper[t] += counts[0][t];
-          counters.exact[t] += counts[1][t];
+          paper[t] += counts[0][t];
+          exact[t] += counts[1][t];
         }
       });
     }
   }
   for (int t = 0; t < 3; ++t) {
-    mv.stats_.critical_paper[t] = counters.paper[t];
-    mv.stats_.critical_exact[t] = counters.exact[t];
+    mv.stats_.critical_paper[t] = paper[t];
+    mv.stats_.critical_exact[t] = exact[t];
   }
   mv.stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return mv;

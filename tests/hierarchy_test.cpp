@@ -88,7 +88,21 @@ TEST_P(HierarchyByDepth, DiamondFromCoordinatesMatchesTheRecursion) {
     for (int i = 0; i < d.ring_count; ++i) {
       const Coord& p = d.ring[i];
       const Coord& q = d.ring[(i + 1) % d.ring_count];
-      if (l.contains(p) && l.contains(q)) mine.insert(key(l, {d.a, d.b, p, q}));
+      if (!l.contains(p) || !l.contains(q)) continue;
+      mine.insert(key(l, {d.a, d.b, p, q}));
+      // Preprocessing relies on this: a child (end, v, p, q) is bisected at the midpoint of
+      // `end` and the farther of p and q.
+      for (const Coord& end : {d.a, d.b}) {
+        auto dist = [&](const Coord& x) {
+          int64_t s = 0;
+          for (int c = 0; c < 3; ++c) s += (x[c] - end[c]) * (x[c] - end[c]);
+          return s;
+        };
+        const Coord& far = dist(p) > dist(q) ? p : q;
+        ASSERT_NE(dist(p), dist(q));
+        const Coord mid{(end[0] + far[0]) / 2, (end[1] + far[1]) / 2, (end[2] + far[2]) / 2};
+        EXPECT_EQ(longest_edge_midpoint({end, d.v, p, q}), mid);
+      }
     }
     EXPECT_EQ(mine, tets) << "node " << vi;
     // Inside the domain the diamond is whole; on its faces it is cut to 2 or 4 tetrahedra.
