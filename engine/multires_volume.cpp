@@ -165,20 +165,23 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
   std::atomic<int64_t> paper[3] = {0, 0, 0}, exact[3] = {0, 0, 0};
   // Bottom-up, level by level (paper Sec. 3.2): scale j = 0 is the finest, and within a scale
   // edge midpoints (m = 1) are finer than face centres (m = 2), which are finer than cube centres.
+  // Nodes are visited brick by brick, so the children's records a node reads are close by.
+  const int64_t bricks = mv.layout_.bricks_x, width = int64_t{1} << BrickLayout::kBits;
   for (int j = 0; j < lat.k; ++j) {
     const int64_t h = int64_t{1} << j;
+    auto first = [h](int64_t b) { return (b + h - 1) / h * h; };  // first multiple of h >= b
     for (int m = 1; m <= 3; ++m) {
-      tbb::parallel_for(int64_t{0}, lat.n / h + 1, [&](int64_t zi) {
+      tbb::parallel_for(int64_t{0}, bricks * bricks, [&](int64_t bzy) {
         int64_t counts[2][3] = {{0, 0, 0}, {0, 0, 0}};
-        const int64_t z = zi * h;
-        const int oz = static_cast<int>(zi & 1);
-        for (int64_t y = 0; y <= lat.n; y += h) {
-          const int oy = static_cast<int>((y >> j) & 1);
-          for (int64_t x = 0; x <= lat.n; x += h) {
-            const int ox = static_cast<int>((x >> j) & 1);  // odd multiple of h: exactly j trailing zeros
-            if (ox + oy + oz == m) builder.build({x, y, z}, counts);
-          }
-        }
+        const int64_t z0 = bzy / bricks * width, y0 = bzy % bricks * width;
+        for (int64_t x0 = 0; x0 < bricks * width; x0 += width)
+          for (int64_t z = first(z0); z < std::min(z0 + width, lat.side); z += h)
+            for (int64_t y = first(y0); y < std::min(y0 + width, lat.side); y += h)
+              for (int64_t x = first(x0); x < std::min(x0 + width, lat.side); x += h) {
+                // An odd multiple of h has exactly j trailing zeros.
+                const int64_t odd = ((x >> j) & 1) + ((y >> j) & 1) + ((z >> j) & 1);
+                if (odd == m) builder.build({x, y, z}, counts);
+              }
         for (int t = 0; t < 3; ++t) {
           paper[t] += counts[0][t];
           exact[t] += counts[1][t];
