@@ -1,6 +1,7 @@
 #include "engine/critical_rule.h"
 
 #include <algorithm>
+#include <array>
 
 #include "engine/critical_table.h"
 
@@ -31,14 +32,14 @@ IsoInterval exact_interval(const DiamondValues& d) {
   // It can only fire where v lies strictly beyond both a and b: t in [fv, min(fa, fb)) or
   // [max(fa, fb), fv). Most vertices of smooth data lie between their edge's ends.
   if (d.fv >= std::min(d.fa, d.fb) && d.fv <= std::max(d.fa, d.fb)) return {};
-  float w[11];
-  int n = 0;
-  w[n++] = d.fa;
-  w[n++] = d.fb;
-  w[n++] = d.fv;
-  for (int i = 0; i < ring_size(d.type); ++i) w[n++] = d.ring[i];
-  std::sort(w, w + n);
-  n = static_cast<int>(std::unique(w, w + n) - w);
+  std::array<float, 11> w{};
+  const int r = ring_size(d.type);
+  w[0] = d.fa;
+  w[1] = d.fb;
+  w[2] = d.fv;
+  std::copy(d.ring, d.ring + r, w.begin() + 3);
+  std::sort(w.begin(), w.begin() + 3 + r);
+  const int n = static_cast<int>(std::unique(w.begin(), w.begin() + 3 + r) - w.begin());
   // On [w[i], w[i+1]) every sign is that of t = w[i] (value > w[i]); outside [w[0], w[n-1])
   // all signs agree and nothing fires.
   IsoInterval x;

@@ -12,6 +12,27 @@ namespace {
 
 using Tet = std::array<Coord, 4>;
 
+// A lattice node packed as x | y << 21 | z << 42: a tetrahedron is 32 bytes, and the midpoint
+// of an edge is (p + q) >> 1, since each component of p + q is even and no carry crosses a field.
+using Packed = uint64_t;
+constexpr int kFieldBits = 21;
+constexpr Packed kFieldMask = (Packed{1} << kFieldBits) - 1;
+Packed pack(const Coord& c) {
+  return static_cast<Packed>(c[0]) | static_cast<Packed>(c[1]) << kFieldBits | static_cast<Packed>(c[2]) << (2 * kFieldBits);
+}
+Coord unpack(Packed p) {
+  return {static_cast<int64_t>(p & kFieldMask), static_cast<int64_t>((p >> kFieldBits) & kFieldMask),
+          static_cast<int64_t>(p >> (2 * kFieldBits))};
+}
+using PackedTet = std::array<Packed, 4>;
+
+int64_t orientation(const Tet& c) {
+  const int64_t ax = c[1][0] - c[0][0], ay = c[1][1] - c[0][1], az = c[1][2] - c[0][2];
+  const int64_t bx = c[2][0] - c[0][0], by = c[2][1] - c[0][1], bz = c[2][2] - c[0][2];
+  const int64_t cx = c[3][0] - c[0][0], cy = c[3][1] - c[0][1], cz = c[3][2] - c[0][2];
+  return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx);
+}
+
 // Depth-first over the bisection tree (paper Sec. 3.2): cull by range, stop by the rule of
 // design.md, emit at stopping tetrahedra and at the leaves.
 class Traversal {
@@ -19,7 +40,10 @@ class Traversal {
   Traversal(const MultiresVolume& mv, const ExtractOptions& options)
       : mv_(mv), lattice_(mv.lattice()), options_(options),
         builder_(options.iso, lattice_.side, mv.origin(), mv.spacing()) {
-    for (int i = 0; i < 3; ++i) box_max_[i] = mv.data_dims()[i] - 1;
+    for (int i = 0; i < 3; ++i) {
+      box_max_[i] = mv.data_dims()[i] - 1;
+      clip_ = clip_ || box_max_[i] < lattice_.n;
+    }
   }
 
   void run() {
@@ -31,7 +55,8 @@ class Traversal {
       a[p[0]] = n;
       ab[p[0]] = n;
       ab[p[1]] = n;
-      visit({Coord{0, 0, 0}, Coord{n, n, n}, ab, a}, 0);
+      const Tet root{Coord{0, 0, 0}, Coord{n, n, n}, ab, a};
+      visit({pack(root[0]), pack(root[1]), pack(root[2]), pack(root[3])}, 0, orientation(root) > 0);
     }
   }
 
@@ -39,21 +64,24 @@ class Traversal {
   const ExtractStats& stats() const { return stats_; }
 
  private:
-  void visit(const Tet& t, int level) {
+  // `positive`: the corners in this order span a positively oriented tetrahedron. Bisection
+  // keeps it for the first child and, at l mod 3 == 0, for the second; otherwise the second
+  // child is mirrored (its corners are an odd permutation of the parent's, up to the midpoint).
+  void visit(const PackedTet& t, int level, bool positive) {
     ++stats_.tets_visited;
-    if (outside_box(t)) return;
-    if (level == lattice_.max_level()) return emit(t);
-    const Coord v{(t[0][0] + t[1][0]) / 2, (t[0][1] + t[1][1]) / 2, (t[0][2] + t[1][2]) / 2};
-    const int64_t slot = mv_.slot(v);
+    if (clip_ && outside_box(t)) return;
+    if (level == lattice_.max_level()) return emit(t, positive);
+    const Packed v = (t[0] + t[1]) >> 1;
+    const int64_t slot = mv_.record_slot(unpack(v));
     const DiamondBounds& b = mv_.bounds(slot);
     if (!(b.lo <= options_.iso && options_.iso < b.hi)) return;  // no value on each side
-    if (stops(b, slot)) return emit(t);
+    if (stops(b, slot)) return emit(t, positive);
     if (level % 3 == 0) {
-      visit({t[0], t[2], t[3], v}, level + 1);
-      visit({t[1], t[3], t[2], v}, level + 1);
+      visit({t[0], t[2], t[3], v}, level + 1, positive);
+      visit({t[1], t[3], t[2], v}, level + 1, positive);
     } else {
-      visit({t[0], t[2], t[3], v}, level + 1);
-      visit({t[1], t[2], t[3], v}, level + 1);
+      visit({t[0], t[2], t[3], v}, level + 1, positive);
+      visit({t[1], t[2], t[3], v}, level + 1, !positive);
     }
   }
 
@@ -73,17 +101,20 @@ class Traversal {
 
   // The tetrahedron lies in a half-space beyond a face of the data box: it meets the box in a
   // face at most. Leaves are unit-cell Kuhn tetrahedra, wholly inside or caught here.
-  bool outside_box(const Tet& t) const {
+  bool outside_box(const PackedTet& t) const {
     for (int a = 0; a < 3; ++a) {
-      const int64_t lo = std::min(std::min(t[0][a], t[1][a]), std::min(t[2][a], t[3][a]));
-      if (lo >= box_max_[a]) return true;
+      const int shift = a * kFieldBits;
+      Packed lo = kFieldMask;
+      for (Packed p : t) lo = std::min(lo, (p >> shift) & kFieldMask);
+      if (static_cast<int64_t>(lo) >= box_max_[a]) return true;
     }
     return false;
   }
 
-  void emit(const Tet& t) {
+  void emit(const PackedTet& t, bool positive) {
     ++stats_.tets_emitted;
-    builder_.add_tet(t, {mv_.value(t[0]), mv_.value(t[1]), mv_.value(t[2]), mv_.value(t[3])});
+    const Tet c{unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])};
+    builder_.add_tet(c, {mv_.value(c[0]), mv_.value(c[1]), mv_.value(c[2]), mv_.value(c[3])}, positive);
   }
 
   const MultiresVolume& mv_;
@@ -91,6 +122,7 @@ class Traversal {
   ExtractOptions options_;
   MeshBuilder builder_;
   Coord box_max_{};
+  bool clip_ = false;  // the data box is smaller than the lattice
   ExtractStats stats_;
 };
 
@@ -139,7 +171,8 @@ Mesh extract_full_resolution(const Volume& volume, float iso) {
           t[2][p[1]] += s[p[1]];
           t[3] = {e[0] + s[0], e[1] + s[1], e[2] + s[2]};
           builder.add_tet(t, {volume.at(t[0][0], t[0][1], t[0][2]), volume.at(t[1][0], t[1][1], t[1][2]),
-                              volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])});
+                              volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])},
+                          orientation(t) > 0);
         }
       }
   return builder.take();

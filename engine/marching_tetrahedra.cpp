@@ -61,21 +61,19 @@ bool before(const Coord& p, const Coord& q) {
   return p[2] != q[2] ? p[2] < q[2] : p[1] != q[1] ? p[1] < q[1] : p[0] < q[0];
 }
 
-int64_t orientation(const std::array<Coord, 4>& c) {
-  const int64_t ax = c[1][0] - c[0][0], ay = c[1][1] - c[0][1], az = c[1][2] - c[0][2];
-  const int64_t bx = c[2][0] - c[0][0], by = c[2][1] - c[0][1], bz = c[2][2] - c[0][2];
-  const int64_t cx = c[3][0] - c[0][0], cy = c[3][1] - c[0][1], cz = c[3][2] - c[0][2];
-  return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx);
-}
 
 }  // namespace
 
 MeshBuilder::MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin,
                          const std::array<double, 3>& spacing)
-    : iso_(iso), key_side_(2 * side - 1), origin_(origin), spacing_(spacing) {}
+    : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing) {}
 
+// p + q in brick order (16^3 doubled coordinates, i.e. the 8^3 node bricks): edges met close
+// together in the traversal get close keys, and the welding table keeps them close in memory.
 uint64_t MeshBuilder::edge_key(const Coord& p, const Coord& q) const {
-  return static_cast<uint64_t>(((p[2] + q[2]) * key_side_ + (p[1] + q[1])) * key_side_ + (p[0] + q[0]));
+  const int64_t x = p[0] + q[0], y = p[1] + q[1], z = p[2] + q[2];
+  const int64_t brick = ((z >> 4) * key_bricks_ + (y >> 4)) * key_bricks_ + (x >> 4);
+  return static_cast<uint64_t>(brick << 12 | (z & 15) << 8 | (y & 15) << 4 | (x & 15));
 }
 
 uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coord& q0, float f1) {
@@ -96,7 +94,7 @@ uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coor
   return fresh;
 }
 
-void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values) {
+void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive) {
   int c = 0;
   for (int i = 0; i < 4; ++i) c |= (values[i] > iso_ ? 1 : 0) << i;
   const Case& k = table()[static_cast<size_t>(c)];
@@ -108,7 +106,7 @@ void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<
     keys[i] = edge_key(corners[a], corners[b]);
     v[i] = vertex(keys[i], corners[a], values[a], corners[b], values[b]);
   }
-  const bool flip = orientation(corners) < 0;
+  const bool flip = !positive;
   auto emit = [&](uint32_t x, uint32_t y, uint32_t z) {
     if (flip) std::swap(y, z);
     mesh_.triangles.push_back({x, y, z});

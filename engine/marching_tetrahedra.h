@@ -13,13 +13,14 @@ namespace isotope {
 
 class MeshBuilder {
  public:
-  // side: nodes per axis of the grid whose coordinates are passed in (keys use 2*side-1).
+  // side: nodes per axis of the grid whose coordinates are passed in.
   MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing);
 
-  // Emits the 0, 1 or 2 triangles of one tetrahedron. Triangles are wound counter-clockwise
-  // seen from the outside (value <= iso), whatever the order of the corners; a quadrilateral
-  // is split along the diagonal at its smallest key, so the result does not depend on it either.
-  void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values);
+  // Emits the 0, 1 or 2 triangles of one tetrahedron. `positive`: det(c1-c0, c2-c0, c3-c0) > 0.
+  // Triangles are wound counter-clockwise seen from the outside (value <= iso); a quadrilateral
+  // is split along the diagonal at its smallest edge key, so the triangle set does not depend on
+  // the order of the corners.
+  void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive);
 
   Mesh take() { return std::move(mesh_); }
   const Mesh& mesh() const { return mesh_; }
@@ -29,7 +30,7 @@ class MeshBuilder {
   uint32_t vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
 
   float iso_;
-  int64_t key_side_;
+  int64_t key_bricks_;  // bricks per axis of the doubled lattice
   std::array<double, 3> origin_, spacing_;
   EdgeVertexMap map_;
   Mesh mesh_;

@@ -31,6 +31,9 @@ void validate(const Volume& volume) {
       throw std::invalid_argument("volume dimensions must be at least 2 nodes per axis, got " +
                                   std::to_string(volume.dims[0]) + "x" + std::to_string(volume.dims[1]) +
                                   "x" + std::to_string(volume.dims[2]));
+  for (int i = 0; i < 3; ++i)
+    if (volume.dims[i] > (int64_t{1} << 19) + 1)  // the traversal packs coordinates in 21 bits
+      throw std::invalid_argument("volume dimensions above 524289 nodes per axis are not supported");
   if (static_cast<int64_t>(volume.values.size()) != volume.node_count())
     throw std::invalid_argument("volume holds " + std::to_string(volume.values.size()) +
                                 " values, its dimensions need " + std::to_string(volume.node_count()));
@@ -86,7 +89,7 @@ class RecordBuilder {
           // Child (end, v, p, q) is bisected at the midpoint of its longest edge, which in all
           // three polyhedra joins `end` to the farther of p and q (checked by the hierarchy test).
           const Coord& far = squared_distance(*end, p) > squared_distance(*end, q) ? p : q;
-          const int64_t c = mv_.slot({((*end)[0] + far[0]) / 2, ((*end)[1] + far[1]) / 2, ((*end)[2] + far[2]) / 2});
+          const int64_t c = mv_.record_slot({((*end)[0] + far[0]) / 2, ((*end)[1] + far[1]) / 2, ((*end)[2] + far[2]) / 2});
           const DiamondBounds& cb = mv_.bounds(c);
           child_bound = std::max(child_bound, static_cast<double>(cb.error_bound));
           child_surplus = std::max(child_surplus, cb.error_surplus);
@@ -115,7 +118,7 @@ class RecordBuilder {
       paper_bar.hull(paper);
       weight = std::max(weight, exact.length());
     }
-    const int64_t s = mv_.slot(v);
+    const int64_t s = mv_.record_slot(v);
     mv_.bounds_[static_cast<size_t>(s)] = bounds;
     DiamondTopology& topo = mv_.topology_[static_cast<size_t>(s)];
     if (!exact_bar.empty()) { topo.exact_lo = exact_bar.lo; topo.exact_hi = exact_bar.hi; }
@@ -132,7 +135,7 @@ class RecordBuilder {
       for (int64_t y = 0; y < l.side; ++y) {
         const int64_t sy = std::min(y, volume.dims[1] - 1);
         for (int64_t x = 0; x < l.side; ++x)
-          mv_.values_[static_cast<size_t>(mv_.slot({x, y, z}))] = volume.at(std::min(x, volume.dims[0] - 1), sy, sz);
+          mv_.values_[static_cast<size_t>(mv_.layout_.slot(x, y, z))] = volume.at(std::min(x, volume.dims[0] - 1), sy, sz);
       }
     });
   }
@@ -156,8 +159,14 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
   mv.spacing_ = volume.spacing;
   mv.origin_ = volume.origin;
   mv.values_.resize(static_cast<size_t>(mv.layout_.size));
-  mv.bounds_.resize(static_cast<size_t>(mv.layout_.size));
-  mv.topology_.resize(static_cast<size_t>(mv.layout_.size));
+  int64_t records = 0;
+  for (int j = 0; j <= mv.lattice_.k; ++j) {
+    mv.scale_layout_.emplace_back((mv.lattice_.n >> j) + 1);
+    mv.scale_offset_.push_back(records);
+    records += mv.scale_layout_.back().size;
+  }
+  mv.bounds_.resize(static_cast<size_t>(records));
+  mv.topology_.resize(static_cast<size_t>(records));
 
   const RecordBuilder builder(mv);
   builder.embed(volume);

@@ -1,7 +1,9 @@
 #pragma once
 // A volume prepared for adaptive extraction: embedded in a (2^k+1)^3 lattice and annotated with
 // one saturated record per refinement vertex (design.md, "Per-vertex record").
+#include <algorithm>
 #include <array>
+#include <bit>
 #include <cstdint>
 #include <vector>
 
@@ -44,17 +46,31 @@ class MultiresVolume {
   const std::array<double, 3>& origin() const { return origin_; }
   const PreprocessStats& stats() const { return stats_; }
 
-  int64_t slot(const Coord& c) const { return layout_.slot(c[0], c[1], c[2]); }
   // Value at any lattice node (replicated from the nearest data node outside the data box).
-  float value(int64_t slot) const { return values_[static_cast<size_t>(slot)]; }
-  float value(const Coord& c) const { return value(slot(c)); }
-  const DiamondBounds& bounds(int64_t slot) const { return bounds_[static_cast<size_t>(slot)]; }
-  const DiamondTopology& topology(int64_t slot) const { return topology_[static_cast<size_t>(slot)]; }
+  float value(const Coord& c) const { return values_[static_cast<size_t>(layout_.slot(c[0], c[1], c[2]))]; }
+
+  // Where v's record lives. Records of scale j (coordinates multiples of 2^j, fewest trailing
+  // zeros j) have their own bricked array over the multiples of 2^j: the coarse levels take
+  // little memory and stay in cache, and the records of one subtree lie together.
+  int64_t record_slot(const Coord& v) const {
+    const int j = scale_of(v);
+    return scale_offset_[static_cast<size_t>(j)] +
+           scale_layout_[static_cast<size_t>(j)].slot(v[0] >> j, v[1] >> j, v[2] >> j);
+  }
+  const DiamondBounds& bounds(int64_t record) const { return bounds_[static_cast<size_t>(record)]; }
+  const DiamondTopology& topology(int64_t record) const { return topology_[static_cast<size_t>(record)]; }
 
  private:
   friend class RecordBuilder;
   Lattice lattice_;
-  BrickLayout layout_;
+  int scale_of(const Coord& v) const {
+    const uint64_t bits = static_cast<uint64_t>(v[0] | v[1] | v[2]);
+    return bits == 0 ? lattice_.k : std::min(lattice_.k, std::countr_zero(bits));
+  }
+
+  BrickLayout layout_;                       // values: every lattice node
+  std::vector<BrickLayout> scale_layout_;    // records: one layout per scale 0..k
+  std::vector<int64_t> scale_offset_;
   std::array<int64_t, 3> data_dims_{};
   std::array<double, 3> spacing_{1, 1, 1};
   std::array<double, 3> origin_{0, 0, 0};

@@ -1,1 +1,267 @@
-// placeholder
+// The isotope command end to end: help and exit codes, reports of generated shapes, and bad
+// input that must fail with a message and leave no output file behind (design.md, invariant 6).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    root_ = fs::temp_directory_path() /
+            ("isotope_cli_" + std::to_string(getpid()) + "_" + info->name());
+    fs::remove_all(root_);
+    fs::create_directories(root_ / "logs");
+    fs::create_directories(work());
+  }
+  void TearDown() override {
+    std::error_code ignored;
+    fs::remove_all(root_, ignored);
+  }
+
+  fs::path work() const { return root_ / "work"; }
+  std::string in_work(const std::string& name) const { return (work() / name).string(); }
+
+  Result run(const std::string& args) {
+    const fs::path out = root_ / "logs" / "stdout", err = root_ / "logs" / "stderr";
+    const std::string cmd = quote(ISOTOPE_BINARY) + " " + args + " >" + quote(out.string()) + " 2>" + quote(err.string());
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+  }
+
+  std::set<std::string> listing() const {
+    std::set<std::string> names;
+    for (const auto& e : fs::recursive_directory_iterator(work())) names.insert(e.path().string());
+    return names;
+  }
+
+  // generate SHAPE into work/NAME; asserts success.
+  std::string generate(const std::string& shape, int size, const std::string& name) {
+    const std::string path = in_work(name);
+    const Result r = run("generate " + shape + " --size " + std::to_string(size) + " -q -o " + quote(path));
+    EXPECT_EQ(r.code, 0) << r.err;
+    return path;
+  }
+
+  nlohmann::json extract_report(const std::string& input_and_options) {
+    const std::string mesh = in_work("mesh.ply"), report = in_work("report.json");
+    const Result r = run("extract " + input_and_options + " -q -o " + quote(mesh) + " --report " + quote(report));
+    EXPECT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(r.out.empty()) << "--quiet printed: " << r.out;
+    EXPECT_TRUE(fs::exists(mesh));
+    if (!fs::exists(report)) return nlohmann::json::object();
+    return nlohmann::json::parse(slurp(report));
+  }
+
+  // Runs a failing extract; checks the exit code, the message and that no file appeared.
+  void expect_failure(const std::string& args, int expected_code, const std::string& message_part = "") {
+    const std::set<std::string> before = listing();
+    const Result r = run(args);
+    if (expected_code >= 0) {
+      EXPECT_EQ(r.code, expected_code) << args << "\nstderr: " << r.err;
+    } else {
+      EXPECT_NE(r.code, 0) << args;
+    }
+    EXPECT_FALSE(r.err.empty()) << "no message on stderr for: " << args;
+    if (expected_code == 1) {
+      EXPECT_NE(r.err.find("isotope: error: "), std::string::npos) << r.err;
+    }
+    if (!message_part.empty()) {
+      EXPECT_NE(r.err.find(message_part), std::string::npos) << r.err;
+    }
+    EXPECT_EQ(listing(), before) << "a file was left behind by: " << args;
+  }
+
+  std::string outputs() const {
+    return " -o " + quote(in_work("out.ply")) + " --report " + quote(in_work("out.json"));
+  }
+
+  fs::path root_;
+};
+
+const std::string kData = ISOTOPE_TEST_DATA;
+
+TEST_F(Cli, HelpOfEveryCommandExitsZeroAndNamesItsOptions) {
+  const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
+      {"--help", {"extract", "generate", "demo", "--version"}},
+      {"extract --help", {"--iso", "--eps", "--error", "--topology", "--report", "--dims", "--type", "--output", "--quiet"}},
+      {"generate --help", {"--size", "--shift", "--seed", "--output", "algebraic", "linked-tori", "nested-spheres", "noise"}},
+      {"demo --help", {"--out", "--data"}},
+  };
+  for (const auto& [args, words] : cases) {
+    const Result r = run(args);
+    EXPECT_EQ(r.code, 0) << args;
+    for (const std::string& w : words) EXPECT_NE(r.out.find(w), std::string::npos) << args << " lacks " << w;
+  }
+}
+
+TEST_F(Cli, VersionExitsZero) {
+  const Result r = run("--version");
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.out.find("isotope"), std::string::npos);
+}
+
+TEST_F(Cli, UsageErrorsExitTwo) {
+  EXPECT_EQ(run("").code, 2);
+  EXPECT_EQ(run("frobnicate").code, 2);
+  EXPECT_EQ(run("extract --bogus").code, 2);
+  EXPECT_EQ(run("extract x.raw -o y.ply").code, 2);  // --iso missing
+  EXPECT_EQ(run("extract x.raw --iso 0").code, 2);   // output missing
+  EXPECT_EQ(run("extract x.raw --iso 0 --topology sometimes -o y.ply").code, 2);
+  EXPECT_EQ(run("generate cube -o y.raw").code, 2);
+}
+
+TEST_F(Cli, GeneratedSphereExtractsAsOneClosedSphere) {
+  const std::string vol = generate("sphere", 33, "s_33x33x33_float32.raw");
+  const nlohmann::json r = extract_report(quote(vol) + " --iso 0");
+  EXPECT_GT(r.value("triangles", 0), 0);
+  EXPECT_GT(r.value("vertices", 0), 0);
+  EXPECT_EQ(r.value("components", -1), 1);
+  EXPECT_EQ(r.value("euler_characteristic", -1), 2);
+  EXPECT_EQ(r.value("boundary_edges", -1), 0);
+  EXPECT_EQ(r.value("nonmanifold_edges", -1), 0);
+  EXPECT_TRUE(r.contains("seconds"));
+  EXPECT_EQ(r.value("error", ""), "bound");
+  EXPECT_EQ(r.value("topology", ""), "preserve");
+}
+
+TEST_F(Cli, GeneratedClosedShapesKeepTheirTopologyAtCoarseEps) {
+  struct Shape {
+    const char* name;
+    int components, chi;
+  };
+  for (const Shape& s : {Shape{"torus", 1, 0}, Shape{"linked-tori", 2, 0}, Shape{"nested-spheres", 3, 6}}) {
+    const std::string vol = generate(s.name, 33, std::string(s.name) + "_33x33x33_float32.raw");
+    for (const char* eps : {"0", "0.05"}) {
+      const nlohmann::json r = extract_report(quote(vol) + " --iso 0 --eps " + eps);
+      EXPECT_GT(r.value("triangles", 0), 0) << s.name << " eps " << eps;
+      EXPECT_EQ(r.value("components", -1), s.components) << s.name << " eps " << eps;
+      EXPECT_EQ(r.value("euler_characteristic", -1), s.chi) << s.name << " eps " << eps;
+      EXPECT_EQ(r.value("boundary_edges", -1), 0) << s.name << " eps " << eps;
+      EXPECT_EQ(r.value("nonmanifold_edges", -1), 0) << s.name << " eps " << eps;
+    }
+  }
+}
+
+TEST_F(Cli, GeneratedHdf5AndRawGiveTheSameMesh) {
+  const std::string raw = generate("noise", 17, "n_17x17x17_float32.raw");
+  const std::string h5 = generate("noise", 17, "n.h5");
+  const nlohmann::json a = extract_report(quote(raw) + " --iso 0.1 --eps 0.02");
+  const nlohmann::json b = extract_report(quote(h5 + ":/volume") + " --iso 0.1 --eps 0.02");
+  EXPECT_GT(a.value("triangles", 0), 0);
+  EXPECT_EQ(a.value("triangles", -1), b.value("triangles", -2));
+  EXPECT_EQ(a.value("euler_characteristic", -1), b.value("euler_characteristic", -2));
+}
+
+TEST_F(Cli, RealHdf5AndRawGiveTheSameTriangleCount) {
+  const nlohmann::json a = extract_report(quote(kData + "/neghip_66x66x66_uint8.raw") + " --iso 128.5");
+  const nlohmann::json b = extract_report(quote(kData + "/neghip.h5:/volume") + " --iso 128.5");
+  EXPECT_GT(a.value("triangles", 0), 0);
+  EXPECT_EQ(a.value("triangles", -1), b.value("triangles", -2));
+  EXPECT_EQ(a.value("components", -1), b.value("components", -2));
+  EXPECT_EQ(a["data_dims"], b["data_dims"]);
+}
+
+TEST_F(Cli, RawSizeNotMatchingDimsFailsAndWritesNothing) {
+  const std::string vol = generate("sphere", 9, "plain.raw");
+  expect_failure("extract " + quote(vol) + " --dims 9x9x10 --type float32 --iso 0" + outputs(), 1);
+  expect_failure("extract " + quote(vol) + " --dims 9x9x8 --type float32 --iso 0" + outputs(), 1);
+  expect_failure("extract " + quote(vol) + " --iso 0" + outputs(), 1);  // neither name nor --dims say
+}
+
+TEST_F(Cli, TruncatedRawFailsAndWritesNothing) {
+  const std::string vol = generate("sphere", 9, "t_9x9x9_float32.raw");
+  fs::resize_file(vol, fs::file_size(vol) - 6);
+  expect_failure("extract " + quote(vol) + " --iso 0" + outputs(), 1);
+}
+
+TEST_F(Cli, MissingFileFailsAndWritesNothing) {
+  expect_failure("extract " + quote(in_work("gone_8x8x8_uint8.raw")) + " --iso 0" + outputs(), 1);
+  expect_failure("extract " + quote(in_work("gone.h5:/volume")) + " --iso 0" + outputs(), 1);
+}
+
+TEST_F(Cli, MissingHdf5DatasetFailsAndWritesNothing) {
+  expect_failure("extract " + quote(kData + "/neghip.h5:/nope") + " --iso 128.5" + outputs(), 1, "nope");
+}
+
+TEST_F(Cli, NanInDataFailsAndWritesNothing) {
+  std::vector<float> v(4 * 4 * 4, 1.0f);
+  v[21] = std::numeric_limits<float>::quiet_NaN();
+  const std::string vol = in_work("nan_4x4x4_float32.raw");
+  {
+    std::ofstream out(vol, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(float)));
+  }
+  expect_failure("extract " + quote(vol) + " --iso 0.5" + outputs(), 1);
+}
+
+TEST_F(Cli, OutputIntoMissingDirectoryFailsAndWritesNothing) {
+  const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
+  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(in_work("no/such/dir/m.ply")), 1);
+  // A report that cannot be written must not leave the mesh behind either.
+  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(in_work("m.ply")) + " --report " +
+                     quote(in_work("no/such/dir/r.json")),
+                 1);
+  expect_failure("generate sphere --size 9 -o " + quote(in_work("no/such/dir/s.raw")), 1);
+}
+
+TEST_F(Cli, InvalidNumbersAreUsageErrors) {
+  const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
+  expect_failure("extract " + quote(vol) + " --iso 0 --eps -1" + outputs(), 2);
+  expect_failure("extract " + quote(vol) + " --iso nan" + outputs(), 2);
+  expect_failure("extract " + quote(vol) + " --iso inf" + outputs(), 2);
+  expect_failure("extract " + quote(vol) + " --iso zero" + outputs(), 2);
+  expect_failure("extract " + quote(vol) + " --iso 0 --dims 9x9" + outputs(), 2);
+  expect_failure("generate sphere --size 1 -o " + quote(in_work("x.raw")), 2);
+  expect_failure("generate sphere --size 9 -o " + quote(in_work("x.vtk")), 2);
+  expect_failure("generate sphere --size 9 --shift 1,2,3 -o " + quote(in_work("x.raw")), 2);
+}
+
+TEST_F(Cli, ExtractAcceptsFractionsAndNegativeIsovalues) {
+  const std::string vol = generate("algebraic", 17, "a_17x17x17_float32.raw");
+  const nlohmann::json r = extract_report(quote(vol) + " --iso -0.25 --eps 1/16 --error surplus --topology paper");
+  EXPECT_GT(r.value("triangles", 0), 0);
+  EXPECT_DOUBLE_EQ(r.value("eps", -1.0), 0.0625);
+  EXPECT_DOUBLE_EQ(r.value("iso", 0.0), -0.25);
+  EXPECT_EQ(r.value("error", ""), "surplus");
+  EXPECT_EQ(r.value("topology", ""), "paper");
+}
+
+}  // namespace

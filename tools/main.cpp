@@ -1,1 +1,71 @@
-// placeholder
+// isotope: multiresolution isosurfaces on a tetrahedral bisection hierarchy
+// (Gerstner & Pajarola, IEEE Visualization 2000). Entry point and exit-code policy:
+// 0 success (and --help, --version), 1 runtime failure, 2 usage error.
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <charconv>
+#include <cmath>
+#include <exception>
+#include <iostream>
+
+#include "io/io_error.h"
+#include "tools/commands.h"
+
+#ifndef ISOTOPE_VERSION
+#define ISOTOPE_VERSION "unknown"
+#endif
+
+namespace isotope::tools {
+
+std::optional<double> parse_real(const std::string& text) {
+  auto parse_one = [](std::string_view s) -> std::optional<double> {
+    if (s.empty()) return std::nullopt;
+    if (s.front() == '+') s.remove_prefix(1);
+    double v = 0;
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec != std::errc() || end != s.data() + s.size()) return std::nullopt;
+    return v;
+  };
+  const size_t slash = text.find('/');
+  if (slash == std::string::npos) return parse_one(text);
+  const auto num = parse_one(std::string_view(text).substr(0, slash));
+  const auto den = parse_one(std::string_view(text).substr(slash + 1));
+  if (!num || !den || *den == 0) return std::nullopt;
+  return *num / *den;
+}
+
+bool progress_enabled(bool quiet) { return !quiet && isatty(STDERR_FILENO) == 1; }
+
+}  // namespace isotope::tools
+
+int main(int argc, char** argv) {
+  using namespace isotope::tools;
+  CLI::App app{"isotope " ISOTOPE_VERSION
+               ": multiresolution isosurface extraction with topology control\n"
+               "(Gerstner & Pajarola, IEEE Visualization 2000)"};
+  app.name("isotope");
+  app.set_version_flag("--version", std::string("isotope ") + ISOTOPE_VERSION);
+  app.require_subcommand(1);
+  const Command extract = add_extract_command(app);
+  const Command generate = add_generate_command(app);
+  const Command demo = add_demo_command(app);
+  app.footer("Run 'isotope COMMAND --help' for the options of a command.");
+  app.failure_message([](const CLI::App*, const CLI::Error& e) {
+    return std::string("isotope: usage error: ") + e.what() + "\nRun 'isotope --help' or 'isotope COMMAND --help'.\n";
+  });
+
+  try {
+    app.parse(argc, argv);
+    if (app.got_subcommand("extract")) return extract();
+    if (app.got_subcommand("generate")) return generate();
+    if (app.got_subcommand("demo")) return demo();
+    return 2;  // unreachable: require_subcommand(1)
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);  // prints help, version or the usage message
+    return code == 0 ? 0 : 2;      // CLI11's own codes (105, 106, ...) are all usage errors here
+  } catch (const std::exception& e) {
+    std::cerr << "isotope: error: " << e.what() << '\n';
+    return 1;
+  }
+}

@@ -1,0 +1,27 @@
+#pragma once
+// The subcommands of the isotope tool. Each one registers its options on the application and
+// returns the function that runs it after a successful parse; main() maps what it throws to
+// exit codes (CLI::ParseError: usage, 2; anything else: runtime failure, 1).
+#include <functional>
+#include <optional>
+#include <string>
+
+namespace CLI {
+class App;
+}
+
+namespace isotope::tools {
+
+using Command = std::function<int()>;  // returns the exit code
+
+Command add_extract_command(CLI::App& app);   // isotope extract INPUT --iso V -o MESH.ply
+Command add_generate_command(CLI::App& app);  // isotope generate SHAPE --size N -o FILE
+Command add_demo_command(CLI::App& app);      // isotope demo [--out DIR] [--data DIR]
+
+// A real number as typed by a user: "0.25", "-3e-2" or a fraction "1/64"; nullopt otherwise.
+std::optional<double> parse_real(const std::string& text);
+
+// Progress and timing lines go to stderr only when it is a terminal and --quiet is not given.
+bool progress_enabled(bool quiet);
+
+}  // namespace isotope::tools
