@@ -1,6 +1,7 @@
 #include "engine/extract.h"
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -72,6 +73,7 @@ class Traversal {
     if (clip_ && outside_box(t)) return;
     if (level == lattice_.max_level()) return emit(t, positive);
     const Packed v = (t[0] + t[1]) >> 1;
+    assert(mv_.has_record(unpack(v)) && "the outside test keeps the traversal near the data box");
     const int64_t slot = mv_.record_slot(unpack(v));
     const DiamondBounds& b = mv_.bounds(slot);
     if (!(b.lo <= options_.iso && options_.iso < b.hi)) return;  // no value on each side

@@ -81,15 +81,20 @@ class RecordBuilder {
     IsoInterval exact_bar, paper_bar;
     float weight = 0;
     if (d.level + 1 < lattice_.max_level()) {  // else the children are leaves, with no record
-      for (int i = 0; i < d.ring_count; ++i) {
-        const Coord& p = d.ring[i];
-        const Coord& q = d.ring[(i + 1) % d.ring_count];
-        if (!lattice_.contains(p) || !lattice_.contains(q)) continue;  // a missing tet of a cut diamond
-        for (const Coord* end : {&d.a, &d.b}) {
-          // Child (end, v, p, q) is bisected at the midpoint of its longest edge, which in all
-          // three polyhedra joins `end` to the farther of p and q (checked by the hierarchy test).
-          const Coord& far = squared_distance(*end, p) > squared_distance(*end, q) ? p : q;
-          const int64_t c = mv_.record_slot({((*end)[0] + far[0]) / 2, ((*end)[1] + far[1]) / 2, ((*end)[2] + far[2]) / 2});
+      // The children of tetrahedron (a, b, p, q) are (a, v, p, q) and (b, v, p, q), bisected at
+      // the midpoint of `end` and the farther of p and q (checked by the hierarchy test). Far
+      // vertices alternate around the ring, so each child is shared by two tetrahedra: visit each
+      // (end, far ring vertex) pair once. A real far vertex always has a real tetrahedron.
+      for (const Coord* end : {&d.a, &d.b})
+        for (int i = 0; i < d.ring_count; ++i) {
+          const Coord& r = d.ring[i];
+          if (squared_distance(*end, r) < squared_distance(*end, d.ring[(i + 1) % d.ring_count])) continue;
+          if (!lattice_.contains(r)) continue;  // a missing tetrahedron of a cut diamond
+          const Coord u{((*end)[0] + r[0]) / 2, ((*end)[1] + r[1]) / 2, ((*end)[2] + r[2]) / 2};
+          // Without a record, u's whole diamond lies beyond a face of the data box: no data
+          // node below it, and v, which reaches out there too, is refined anyway.
+          if (!mv_.has_record(u)) continue;
+          const int64_t c = mv_.record_slot(u);
           const DiamondBounds& cb = mv_.bounds(c);
           child_bound = std::max(child_bound, static_cast<double>(cb.error_bound));
           child_surplus = std::max(child_surplus, cb.error_surplus);
@@ -100,7 +105,6 @@ class RecordBuilder {
           paper_bar.hull({ct.paper_lo, ct.paper_hi});
           weight = std::max(weight, ct.weight);
         }
-      }
     }
     if (!inside_box) {
       // Refine always: its tetrahedra reach past the data box (design.md, "Volumes that are not
@@ -126,17 +130,11 @@ class RecordBuilder {
     topo.weight = weight;
   }
 
-  // Nodes beyond the data box replicate the nearest data node: ranges stay tight, and no diamond
-  // that reaches past the box is ever stopped at, so these values never reach the mesh.
-  void embed(const Volume& volume) const {
-    const Lattice& l = lattice_;
-    tbb::parallel_for(int64_t{0}, l.side, [&](int64_t z) {
-      const int64_t sz = std::min(z, volume.dims[2] - 1);
-      for (int64_t y = 0; y < l.side; ++y) {
-        const int64_t sy = std::min(y, volume.dims[1] - 1);
-        for (int64_t x = 0; x < l.side; ++x)
-          mv_.values_[static_cast<size_t>(mv_.layout_.slot(x, y, z))] = volume.at(std::min(x, volume.dims[0] - 1), sy, sz);
-      }
+  void copy_values(const Volume& volume) const {
+    tbb::parallel_for(int64_t{0}, volume.dims[2], [&](int64_t z) {
+      for (int64_t y = 0; y < volume.dims[1]; ++y)
+        for (int64_t x = 0; x < volume.dims[0]; ++x)
+          mv_.values_[static_cast<size_t>(mv_.layout_.slot(x, y, z))] = volume.at(x, y, z);
     });
   }
 
@@ -154,14 +152,20 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
   validate(volume);
   MultiresVolume mv;
   mv.lattice_ = Lattice::enclosing(volume.dims);
-  mv.layout_ = BrickLayout(mv.lattice_.side);
   mv.data_dims_ = volume.dims;
   mv.spacing_ = volume.spacing;
   mv.origin_ = volume.origin;
+  // Lattice nodes beyond the data box are never stored: value() answers with the nearest data
+  // node, which keeps ranges tight, and no diamond that reaches past the box is ever stopped at,
+  // so those values never reach the mesh (design.md, "Volumes that are not (2^k+1)^3").
+  mv.layout_ = BrickLayout(volume.dims);
   mv.values_.resize(static_cast<size_t>(mv.layout_.size));
   int64_t records = 0;
+  std::vector<std::array<int64_t, 3>> scale_nodes;
   for (int j = 0; j <= mv.lattice_.k; ++j) {
-    mv.scale_layout_.emplace_back((mv.lattice_.n >> j) + 1);
+    scale_nodes.push_back({(mv.record_extent(0, j) >> j) + 1, (mv.record_extent(1, j) >> j) + 1,
+                           (mv.record_extent(2, j) >> j) + 1});
+    mv.scale_layout_.emplace_back(scale_nodes.back());
     mv.scale_offset_.push_back(records);
     records += mv.scale_layout_.back().size;
   }
@@ -169,28 +173,26 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
   mv.topology_.resize(static_cast<size_t>(records));
 
   const RecordBuilder builder(mv);
-  builder.embed(volume);
-  const Lattice& lat = mv.lattice_;
+  builder.copy_values(volume);
   std::atomic<int64_t> paper[3] = {0, 0, 0}, exact[3] = {0, 0, 0};
   // Bottom-up, level by level (paper Sec. 3.2): scale j = 0 is the finest, and within a scale
   // edge midpoints (m = 1) are finer than face centres (m = 2), which are finer than cube centres.
-  // Nodes are visited brick by brick, so the children's records a node reads are close by.
-  const int64_t bricks = mv.layout_.bricks_x, width = int64_t{1} << BrickLayout::kBits;
-  for (int j = 0; j < lat.k; ++j) {
-    const int64_t h = int64_t{1} << j;
-    auto first = [h](int64_t b) { return (b + h - 1) / h * h; };  // first multiple of h >= b
+  // In units of 2^j, a node of scale j has m odd coordinates. Nodes are visited brick by brick
+  // of their scale's layout, so the children's records a node reads are close by.
+  constexpr int64_t kWidth = int64_t{1} << BrickLayout::kBits;
+  for (int j = 0; j < mv.lattice_.k; ++j) {
+    const std::array<int64_t, 3> nodes = scale_nodes[static_cast<size_t>(j)];
+    const int64_t bx = (nodes[0] + kWidth - 1) / kWidth, by = (nodes[1] + kWidth - 1) / kWidth,
+                  bz = (nodes[2] + kWidth - 1) / kWidth;
     for (int m = 1; m <= 3; ++m) {
-      tbb::parallel_for(int64_t{0}, bricks * bricks, [&](int64_t bzy) {
+      tbb::parallel_for(int64_t{0}, bz * by, [&](int64_t bzy) {
         int64_t counts[2][3] = {{0, 0, 0}, {0, 0, 0}};
-        const int64_t z0 = bzy / bricks * width, y0 = bzy % bricks * width;
-        for (int64_t x0 = 0; x0 < bricks * width; x0 += width)
-          for (int64_t z = first(z0); z < std::min(z0 + width, lat.side); z += h)
-            for (int64_t y = first(y0); y < std::min(y0 + width, lat.side); y += h)
-              for (int64_t x = first(x0); x < std::min(x0 + width, lat.side); x += h) {
-                // An odd multiple of h has exactly j trailing zeros.
-                const int64_t odd = ((x >> j) & 1) + ((y >> j) & 1) + ((z >> j) & 1);
-                if (odd == m) builder.build({x, y, z}, counts);
-              }
+        const int64_t z0 = bzy / by * kWidth, y0 = bzy % by * kWidth;
+        for (int64_t x0 = 0; x0 < bx * kWidth; x0 += kWidth)
+          for (int64_t z = z0; z < std::min(z0 + kWidth, nodes[2]); ++z)
+            for (int64_t y = y0; y < std::min(y0 + kWidth, nodes[1]); ++y)
+              for (int64_t x = x0; x < std::min(x0 + kWidth, nodes[0]); ++x)
+                if ((x & 1) + (y & 1) + (z & 1) == m) builder.build({x << j, y << j, z << j}, counts);
         for (int t = 0; t < 3; ++t) {
           paper[t] += counts[0][t];
           exact[t] += counts[1][t];

@@ -46,16 +46,36 @@ class MultiresVolume {
   const std::array<double, 3>& origin() const { return origin_; }
   const PreprocessStats& stats() const { return stats_; }
 
-  // Value at any lattice node (replicated from the nearest data node outside the data box).
-  float value(const Coord& c) const { return values_[static_cast<size_t>(layout_.slot(c[0], c[1], c[2]))]; }
+  // Value at any lattice node: outside the data box, that of the nearest data node.
+  float value(const Coord& c) const {
+    const int64_t x = std::min(c[0], data_dims_[0] - 1), y = std::min(c[1], data_dims_[1] - 1),
+                  z = std::min(c[2], data_dims_[2] - 1);
+    return values_[static_cast<size_t>(layout_.slot(x, y, z))];
+  }
 
-  // Where v's record lives. Records of scale j (coordinates multiples of 2^j, fewest trailing
-  // zeros j) have their own bricked array over the multiples of 2^j: the coarse levels take
-  // little memory and stay in cache, and the records of one subtree lie together.
+  // Records of scale j (coordinates multiples of 2^j, fewest trailing zeros j) have their own
+  // bricked array over the multiples of 2^j: the coarse levels take little memory and stay in
+  // cache, and the records of one subtree lie together. Each array stops 2^j beyond the data
+  // box: a tetrahedron whose refinement vertex lies farther out is beyond a face of the box, and
+  // the traversal never reads it (its corners are within 2^j of that vertex).
+  bool has_record(const Coord& v) const {
+    const int j = scale_of(v);
+    for (int a = 0; a < 3; ++a)
+      if (v[a] > record_extent(a, j)) return false;
+    return true;
+  }
   int64_t record_slot(const Coord& v) const {
     const int j = scale_of(v);
     return scale_offset_[static_cast<size_t>(j)] +
            scale_layout_[static_cast<size_t>(j)].slot(v[0] >> j, v[1] >> j, v[2] >> j);
+  }
+  // Largest coordinate along axis a with a record at scale j.
+  int64_t record_extent(int a, int j) const {
+    return std::min(lattice_.n, (data_dims_[a] - 1 + (int64_t{1} << j)) >> j << j);
+  }
+  int64_t memory_bytes() const {
+    return static_cast<int64_t>(values_.size() * sizeof(float) + bounds_.size() * sizeof(DiamondBounds) +
+                                topology_.size() * sizeof(DiamondTopology));
   }
   const DiamondBounds& bounds(int64_t record) const { return bounds_[static_cast<size_t>(record)]; }
   const DiamondTopology& topology(int64_t record) const { return topology_[static_cast<size_t>(record)]; }
@@ -68,7 +88,7 @@ class MultiresVolume {
     return bits == 0 ? lattice_.k : std::min(lattice_.k, std::countr_zero(bits));
   }
 
-  BrickLayout layout_;                       // values: every lattice node
+  BrickLayout layout_;                       // values: the data box
   std::vector<BrickLayout> scale_layout_;    // records: one layout per scale 0..k
   std::vector<int64_t> scale_offset_;
   std::array<int64_t, 3> data_dims_{};
