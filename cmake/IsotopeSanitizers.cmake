@@ -6,5 +6,8 @@ if(ISOTOPE_SANITIZE)
   endif()
   separate_arguments(_san_list UNIX_COMMAND "${_san}")
   add_compile_options(${_san_list} -fno-omit-frame-pointer -g)
+  if(ISOTOPE_SANITIZE MATCHES "thread")
+    add_compile_definitions(ISOTOPE_STD_THREADS)  # see engine/parallel.h
+  endif()
   add_link_options(${_san_list})
 endif()

@@ -8,10 +8,9 @@
 #include <stdexcept>
 #include <string>
 
-#include <tbb/parallel_for.h>
-
 #include "engine/critical_rule.h"
 #include "engine/diamond.h"
+#include "engine/parallel.h"
 
 namespace isotope {
 namespace {
@@ -131,7 +130,7 @@ class RecordBuilder {
   }
 
   void copy_values(const Volume& volume) const {
-    tbb::parallel_for(int64_t{0}, volume.dims[2], [&](int64_t z) {
+    parallel_for(int64_t{0}, volume.dims[2], [&](int64_t z) {
       for (int64_t y = 0; y < volume.dims[1]; ++y)
         for (int64_t x = 0; x < volume.dims[0]; ++x)
           mv_.values_[static_cast<size_t>(mv_.layout_.slot(x, y, z))] = volume.at(x, y, z);
@@ -185,7 +184,7 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
     const int64_t bx = (nodes[0] + kWidth - 1) / kWidth, by = (nodes[1] + kWidth - 1) / kWidth,
                   bz = (nodes[2] + kWidth - 1) / kWidth;
     for (int m = 1; m <= 3; ++m) {
-      tbb::parallel_for(int64_t{0}, bz * by, [&](int64_t bzy) {
+      parallel_for(int64_t{0}, bz * by, [&](int64_t bzy) {
         int64_t counts[2][3] = {{0, 0, 0}, {0, 0, 0}};
         const int64_t z0 = bzy / by * kWidth, y0 = bzy % by * kWidth;
         for (int64_t x0 = 0; x0 < bx * kWidth; x0 += kWidth)

@@ -13,9 +13,17 @@ cmake --build build-ci -j "$jobs"
 ctest --test-dir build-ci --output-on-failure -j2
 
 echo "== RelWithDebInfo, address,undefined sanitizers (build-asan)"
-cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DISOTOPE_WERROR=ON \
+# Assertions stay on here (no NDEBUG): they check the traversal's invariants on every test.
+cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=address,undefined -DISOTOPE_BUILD_BENCH=OFF
 cmake --build build-asan -j "$jobs"
 ctest --test-dir build-asan --output-on-failure -j2
+
+# The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there).
+echo "== RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
+cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
+  -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF
+cmake --build build-tsan --target test_determinism -j "$jobs"
+TSAN_OPTIONS="halt_on_error=1" ctest --test-dir build-tsan --output-on-failure -R Determinism
 
 echo "== all tests passed"

@@ -1,0 +1,39 @@
+#pragma once
+// The one place that runs the engine's loops in parallel (style.md, habit 9). oneTBB normally;
+// plain std::threads when built for ThreadSanitizer (ISOTOPE_STD_THREADS), because Debian's
+// libtbb is not instrumented and TSan would report TBB's own task hand-offs as races, hiding
+// any of ours. Both honour tbb::global_control's max_allowed_parallelism, so one thread runs
+// the same body serially.
+#include <algorithm>
+#include <cstdint>
+#include <thread>
+#include <vector>
+
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+namespace isotope {
+
+// Calls body(i) for every i in [begin, end), in any order, possibly concurrently.
+template <class Body>
+void parallel_for(int64_t begin, int64_t end, const Body& body) {
+  const auto threads = static_cast<int64_t>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  if (threads <= 1 || end - begin <= 1) {
+    for (int64_t i = begin; i < end; ++i) body(i);
+    return;
+  }
+#ifdef ISOTOPE_STD_THREADS
+  std::vector<std::thread> pool;
+  const int64_t count = std::min(threads, end - begin);
+  for (int64_t t = 0; t < count; ++t)
+    pool.emplace_back([&, t] {
+      for (int64_t i = begin + t; i < end; i += count) body(i);
+    });
+  for (std::thread& th : pool) th.join();
+#else
+  tbb::parallel_for(begin, end, body);
+#endif
+}
+
+}  // namespace isotope
