@@ -188,10 +188,14 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
         int64_t counts[2][3] = {{0, 0, 0}, {0, 0, 0}};
         const int64_t z0 = bzy / by * kWidth, y0 = bzy % by * kWidth;
         for (int64_t x0 = 0; x0 < bx * kWidth; x0 += kWidth)
-          for (int64_t z = z0; z < std::min(z0 + kWidth, nodes[2]); ++z)
-            for (int64_t y = y0; y < std::min(y0 + kWidth, nodes[1]); ++y)
-              for (int64_t x = x0; x < std::min(x0 + kWidth, nodes[0]); ++x)
-                if ((x & 1) + (y & 1) + (z & 1) == m) builder.build({x << j, y << j, z << j}, counts);
+          for (int odd = 0; odd < 8; ++odd) {  // which of x, y, z are odd (in units of 2^j)
+            const int ox = odd & 1, oy = (odd >> 1) & 1, oz = odd >> 2;
+            if (ox + oy + oz != m) continue;
+            for (int64_t z = z0 + oz; z < std::min(z0 + kWidth, nodes[2]); z += 2)
+              for (int64_t y = y0 + oy; y < std::min(y0 + kWidth, nodes[1]); y += 2)
+                for (int64_t x = x0 + ox; x < std::min(x0 + kWidth, nodes[0]); x += 2)
+                  builder.build({x << j, y << j, z << j}, counts);
+          }
         for (int t = 0; t < 3; ++t) {
           paper[t] += counts[0][t];
           exact[t] += counts[1][t];

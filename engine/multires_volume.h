@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "engine/brick_layout.h"
+#include "engine/huge_page_allocator.h"
 #include "engine/lattice.h"
 #include "engine/volume.h"
 
@@ -94,9 +95,9 @@ class MultiresVolume {
   std::array<int64_t, 3> data_dims_{};
   std::array<double, 3> spacing_{1, 1, 1};
   std::array<double, 3> origin_{0, 0, 0};
-  std::vector<float> values_;
-  std::vector<DiamondBounds> bounds_;
-  std::vector<DiamondTopology> topology_;
+  std::vector<float, HugePageAllocator<float>> values_;
+  std::vector<DiamondBounds, HugePageAllocator<DiamondBounds>> bounds_;
+  std::vector<DiamondTopology, HugePageAllocator<DiamondTopology>> topology_;
   PreprocessStats stats_;
 };
 
