@@ -146,7 +146,7 @@ class RecordBuilder {
   const Lattice& lattice_;
 };
 
-MultiresVolume MultiresVolume::build(const Volume& volume) {
+MultiresVolume MultiresVolume::build(const Volume& volume, const ProgressCallback& progress) {
   const auto start = std::chrono::steady_clock::now();
   validate(volume);
   MultiresVolume mv;
@@ -173,6 +173,12 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
 
   const RecordBuilder builder(mv);
   builder.copy_values(volume);
+  int64_t work = 0;  // nodes of each scale that are not all-even there, i.e. not coarser
+  for (int j = 0; j < mv.lattice_.k; ++j) {
+    const auto& n = scale_nodes[static_cast<size_t>(j)];
+    work += n[0] * n[1] * n[2] - (n[0] + 1) / 2 * ((n[1] + 1) / 2) * ((n[2] + 1) / 2);
+  }
+  ProgressReporter reporter(progress, work);
   std::atomic<int64_t> paper[3] = {0, 0, 0}, exact[3] = {0, 0, 0};
   // Bottom-up, level by level (paper Sec. 3.2): scale j = 0 is the finest, and within a scale
   // edge midpoints (m = 1) are finer than face centres (m = 2), which are finer than cube centres.
@@ -186,6 +192,7 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
     for (int m = 1; m <= 3; ++m) {
       parallel_for(int64_t{0}, bz * by, [&](int64_t bzy) {
         int64_t counts[2][3] = {{0, 0, 0}, {0, 0, 0}};
+        int64_t built = 0;
         const int64_t z0 = bzy / by * kWidth, y0 = bzy % by * kWidth;
         for (int64_t x0 = 0; x0 < bx * kWidth; x0 += kWidth)
           for (int odd = 0; odd < 8; ++odd) {  // which of x, y, z are odd (in units of 2^j)
@@ -193,13 +200,14 @@ MultiresVolume MultiresVolume::build(const Volume& volume) {
             if (ox + oy + oz != m) continue;
             for (int64_t z = z0 + oz; z < std::min(z0 + kWidth, nodes[2]); z += 2)
               for (int64_t y = y0 + oy; y < std::min(y0 + kWidth, nodes[1]); y += 2)
-                for (int64_t x = x0 + ox; x < std::min(x0 + kWidth, nodes[0]); x += 2)
+                for (int64_t x = x0 + ox; x < std::min(x0 + kWidth, nodes[0]); x += 2, ++built)
                   builder.build({x << j, y << j, z << j}, counts);
           }
         for (int t = 0; t < 3; ++t) {
           paper[t] += counts[0][t];
           exact[t] += counts[1][t];
         }
+        reporter.advance(built);
       });
     }
   }

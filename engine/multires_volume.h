@@ -10,6 +10,7 @@
 #include "engine/brick_layout.h"
 #include "engine/huge_page_allocator.h"
 #include "engine/lattice.h"
+#include "engine/progress.h"
 #include "engine/volume.h"
 
 namespace isotope {
@@ -38,8 +39,8 @@ struct PreprocessStats {
 class MultiresVolume {
  public:
   // Embeds and preprocesses (in parallel). Throws std::invalid_argument for dims < 2 or
-  // non-finite values.
-  static MultiresVolume build(const Volume& volume);
+  // non-finite values. `progress`, if given, hears the fraction done (see engine/progress.h).
+  static MultiresVolume build(const Volume& volume, const ProgressCallback& progress = {});
 
   const Lattice& lattice() const { return lattice_; }
   const std::array<int64_t, 3>& data_dims() const { return data_dims_; }

@@ -121,7 +121,7 @@ int run_extract(const ExtractArgs& a) {
   }
 
   start = std::chrono::steady_clock::now();
-  const MultiresVolume mv = MultiresVolume::build(volume);
+  const MultiresVolume mv = MultiresVolume::build(volume, progress ? progress_bar("preprocessing") : ProgressCallback{});
   run.preprocess_seconds = seconds_since(start);
   run.preprocess = mv.stats();
   run.lattice_k = mv.lattice().k;

@@ -24,4 +24,7 @@ std::optional<double> parse_real(const std::string& text);
 // Progress and timing lines go to stderr only when it is a terminal and --quiet is not given.
 bool progress_enabled(bool quiet);
 
+// A one-line bar on stderr ("isotope: preprocessing  42%"), redrawn in place, ended at 100%.
+std::function<void(double)> progress_bar(std::string label);
+
 }  // namespace isotope::tools

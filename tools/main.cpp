@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <charconv>
+#include <cstdio>
 #include <cmath>
 #include <exception>
 #include <iostream>
@@ -36,6 +37,14 @@ std::optional<double> parse_real(const std::string& text) {
 }
 
 bool progress_enabled(bool quiet) { return !quiet && isatty(STDERR_FILENO) == 1; }
+
+std::function<void(double)> progress_bar(std::string label) {
+  return [label = std::move(label)](double fraction) {
+    std::fprintf(stderr, "\risotope: %s %3d%%%s", label.c_str(), static_cast<int>(100 * fraction + 0.5),
+                 fraction >= 1.0 ? "\n" : "");
+    std::fflush(stderr);
+  };
+}
 
 }  // namespace isotope::tools
 
