@@ -7,6 +7,7 @@
 
 #include "io/hdf5_reader.h"
 #include "io/io_error.h"
+#include "io/nrrd_reader.h"
 
 namespace isotope {
 namespace {
@@ -27,11 +28,21 @@ std::optional<Hdf5Spec> split_hdf5_spec(const std::string& spec) {
   return Hdf5Spec{spec.substr(0, colon), spec.substr(colon + 1)};
 }
 
-bool has_hdf5_extension(const std::string& path) {
+std::string lowercase_extension(const std::string& path) {
   std::string ext = fs::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+bool has_hdf5_extension(const std::string& path) {
+  const std::string ext = lowercase_extension(path);
   return ext == ".h5" || ext == ".hdf5";
+}
+
+bool has_nrrd_extension(const std::string& path) {
+  const std::string ext = lowercase_extension(path);
+  return ext == ".nrrd" || ext == ".nhdr";
 }
 
 std::string join(const std::vector<std::string>& items) {
@@ -75,6 +86,7 @@ Volume read_volume(const VolumeSource& source) {
   if (source.spec.empty()) throw IoError("no volume file given");
   if (const auto h5 = split_hdf5_spec(source.spec)) return read_hdf5(h5->file, h5->dataset);
   if (has_hdf5_extension(source.spec)) return read_only_3d_dataset(source.spec);
+  if (has_nrrd_extension(source.spec)) return read_nrrd(source.spec);  // the header says dims and type
   require_regular_file(source.spec);
   return read_raw(source.spec, raw_layout(source));
 }

@@ -7,7 +7,7 @@ packages=(
   g++ cmake make pkg-config
   libtbb-dev libhdf5-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
-  libzstd-dev libxxhash-dev
+  libzstd-dev libxxhash-dev zlib1g-dev
 )
 
 missing=()

@@ -1,29 +1,37 @@
 #!/usr/bin/env bash
 # What CI runs: a warnings-as-errors Release build with every test, then the tests again
-# under AddressSanitizer and UndefinedBehaviorSanitizer. Fails on the first error.
+# under AddressSanitizer and UndefinedBehaviorSanitizer, then the parallel tests under
+# ThreadSanitizer. Fails on the first error.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 jobs=$(nproc)
 bash scripts/install-deps.sh
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+run_ctest() { ctest "$@" | tee -a "$log"; }
 
 echo "== Release, -Werror (build-ci)"
 cmake -S . -B build-ci -DCMAKE_BUILD_TYPE=Release -DISOTOPE_WERROR=ON
 cmake --build build-ci -j "$jobs"
-ctest --test-dir build-ci --output-on-failure -j2
+run_ctest --test-dir build-ci --output-on-failure -j2
 
 echo "== RelWithDebInfo, address,undefined sanitizers (build-asan)"
 # Assertions stay on here (no NDEBUG): they check the traversal's invariants on every test.
 cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=address,undefined -DISOTOPE_BUILD_BENCH=OFF
 cmake --build build-asan -j "$jobs"
-ctest --test-dir build-asan --output-on-failure -j2
+run_ctest --test-dir build-asan --output-on-failure -j2
 
 # The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there).
 echo "== RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF
 cmake --build build-tsan --target test_determinism -j "$jobs"
-TSAN_OPTIONS="halt_on_error=1" ctest --test-dir build-tsan --output-on-failure -R Determinism
+TSAN_OPTIONS="halt_on_error=1" run_ctest --test-dir build-tsan --output-on-failure -R Determinism
 
-echo "== all tests passed"
+# One closing line over the three runs (each ctest above has already failed the script on error).
+total=0
+for n in $(sed -n 's/.*tests failed out of \([0-9]*\).*/\1/p' "$log"); do total=$((total + n)); done
+echo "== all tests passed (Release, ASan+UBSan, TSan)"
+echo "$total passed, 0 failed"
