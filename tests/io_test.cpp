@@ -28,6 +28,7 @@
 #include "io/raw_reader.h"
 #include "io/volume_reader.h"
 #include "io/volume_writer.h"
+#include "tests/temp_dir_test.h"
 
 namespace isotope {
 namespace {
@@ -36,34 +37,7 @@ namespace fs = std::filesystem;
 
 const fs::path kData = ISOTOPE_TEST_DATA;
 
-#define EXPECT_CONTAINS(text, part) \
-  EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
-
-// A fresh, empty directory per test, removed afterwards.
-class IoTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    static std::atomic<int> serial{0};
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() / ("isotope_io_" + std::to_string(::getpid()) + "_" +
-                                        info->name() + "_" + std::to_string(serial++));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  std::vector<std::string> entries() const {
-    std::vector<std::string> names;
-    for (const auto& e : fs::directory_iterator(dir_)) names.push_back(e.path().filename().string());
-    std::sort(names.begin(), names.end());
-    return names;
-  }
-
-  fs::path dir_;
-};
+using IoTest = testing::TempDirTest;
 
 void write_bytes(const std::string& path, const void* data, size_t size) {
   std::ofstream out(path, std::ios::binary);

@@ -21,6 +21,7 @@
 #include "io/nrrd_reader.h"
 #include "io/raw_reader.h"
 #include "io/volume_reader.h"
+#include "tests/temp_dir_test.h"
 
 namespace isotope {
 namespace {
@@ -33,28 +34,7 @@ const fs::path kData = ISOTOPE_TEST_DATA;
 const std::string kNeghip = (kData / "neghip_66x66x66_uint8.raw").string();
 const std::string kHydrogen = (kData / "hydrogen_64x64x64_float32.raw").string();
 
-#define EXPECT_CONTAINS(text, part) \
-  EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
-
-// A fresh, empty directory per test, removed afterwards.
-class NrrdTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    static std::atomic<int> serial{0};
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() / ("isotope_nrrd_" + std::to_string(::getpid()) + "_" + info->name() +
-                                        "_" + std::to_string(serial++));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
-  fs::path dir_;
-};
+using NrrdTest = testing::TempDirTest;
 
 Bytes read_bytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
