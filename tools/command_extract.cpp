@@ -33,7 +33,6 @@ struct ExtractArgs {
   std::string eps = "0";
   std::string error = "bound";
   std::string topology = "preserve";
-  std::string delta = "0";
   std::string dims;
   std::string type;
   std::string output;
@@ -88,7 +87,6 @@ int run_extract(const ExtractArgs& a) {
   run.options.iso = static_cast<float>(*parse_real(a.iso));
   if (!std::isfinite(run.options.iso)) throw CLI::ValidationError("--iso", "out of the float range: " + a.iso);
   run.options.eps = *parse_real(a.eps);
-  run.options.delta = *parse_real(a.delta);
   run.options.error = *parse_error_indicator(a.error);
   run.options.topology = *parse_topology_mode(a.topology);
 
@@ -164,7 +162,7 @@ Command add_extract_command(CLI::App& app) {
   auto a = std::make_shared<ExtractArgs>();
   CLI::App* cmd = app.add_subcommand("extract", "Extract an adaptive isosurface from a volume into a PLY mesh");
   cmd->add_option("INPUT", a->input,
-                  "Volume: NAME_XxYxZ_TYPE.raw, any .raw with --dims/--type, or FILE.h5:/path/to/dataset")
+                  "Volume: NAME_XxYxZ_TYPE.raw, any .raw with --dims/--type, FILE.h5:/path/to/dataset, or .nrrd/.nhdr")
       ->required();
   cmd->add_option("--iso", a->iso, "Isovalue (inside means value > iso)")
       ->required()
@@ -181,10 +179,6 @@ Command add_extract_command(CLI::App& app) {
   cmd->add_option("--topology", a->topology,
                   "Topology control: none, paper (the paper's critical intervals) or preserve (exact local rule)")
       ->check(CLI::IsMember({"none", "paper", "preserve"}))
-      ->capture_default_str();
-  cmd->add_option("--delta", a->delta, "Critical points of simplification weight < delta may be dropped")
-      ->check(real_validator(true))
-      ->type_name("D")
       ->capture_default_str();
   cmd->add_option("--dims", a->dims, "Raw input: nodes per axis, e.g. 301x324x56 (overrides the file name)")
       ->check(CLI::Validator(

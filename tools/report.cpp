@@ -27,7 +27,6 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["eps"] = run.options.eps;
   j["error"] = std::string(to_string(run.options.error));
   j["topology"] = std::string(to_string(run.options.topology));
-  j["delta"] = run.options.delta;
   j["data_dims"] = run.data_dims;
   j["lattice_k"] = run.lattice_k;
   j["lattice_side"] = (int64_t{1} << run.lattice_k) + 1;
