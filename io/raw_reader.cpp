@@ -36,21 +36,6 @@ std::optional<int64_t> parse_dim(const std::string& token) {
   return v;
 }
 
-// "301x324x56" -> {301, 324, 56}; digits only, so signs and blanks are rejected.
-std::optional<std::array<int64_t, 3>> parse_dims(const std::string& token) {
-  std::array<int64_t, 3> dims{};
-  size_t start = 0;
-  for (int axis = 0; axis < 3; ++axis) {
-    const size_t x = axis < 2 ? token.find('x', start) : token.size();
-    if (x == std::string::npos) return std::nullopt;
-    const auto d = parse_dim(token.substr(start, x - start));
-    if (!d) return std::nullopt;
-    dims[axis] = *d;
-    start = x + 1;
-  }
-  return dims;
-}
-
 std::string dims_text(const std::array<int64_t, 3>& d) {
   return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]);
 }
@@ -117,6 +102,21 @@ void read_values(const std::string& path, ScalarType type, std::vector<float>& v
 }
 
 }  // namespace
+
+std::optional<std::array<int64_t, 3>> parse_dims(const std::string& token) {
+  std::array<int64_t, 3> dims{};
+  size_t start = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    const size_t x = axis < 2 ? token.find('x', start) : token.size();
+    if (x == std::string::npos) return std::nullopt;
+    const auto d = parse_dim(token.substr(start, x - start));
+    if (!d) return std::nullopt;
+    dims[axis] = *d;
+    start = x + 1;
+  }
+  return dims;
+}
+
 
 std::optional<ScalarType> parse_scalar_type(const std::string& name) {
   const std::string n = lowercase(name);

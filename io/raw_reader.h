@@ -19,6 +19,8 @@ struct RawLayout {
 // "lobster_301x324x56_uint8.raw" -> {301,324,56}, uint8; nullopt when the name does not say.
 std::optional<RawLayout> parse_raw_name(const std::string& path);
 std::optional<ScalarType> parse_scalar_type(const std::string& name);  // uint8|uint16|int16|float32|float64
+// "301x324x56" -> {301, 324, 56}; digits only and each >= 1, so signs and blanks are rejected.
+std::optional<std::array<int64_t, 3>> parse_dims(const std::string& text);
 const char* scalar_type_name(ScalarType t);
 int scalar_type_size(ScalarType t);
 

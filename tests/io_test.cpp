@@ -28,6 +28,7 @@
 #include "io/raw_reader.h"
 #include "io/volume_reader.h"
 #include "io/volume_writer.h"
+#include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
 
 namespace isotope {
@@ -55,16 +56,7 @@ std::vector<unsigned char> read_bytes(const std::string& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
-// The message of the IoError F throws; a test failure when it throws nothing.
-std::string io_error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected an IoError";
-  return "";
-}
+using testing::io_error_of;
 
 Volume sample_volume() {
   Volume v;

@@ -21,6 +21,7 @@
 #include "io/nrrd_reader.h"
 #include "io/raw_reader.h"
 #include "io/volume_reader.h"
+#include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
 
 namespace isotope {
@@ -92,16 +93,7 @@ Bytes gzip(const Bytes& data) {
 
 Volume read_shared_raw(const std::string& raw_path) { return read_raw(raw_path, *parse_raw_name(raw_path)); }
 
-// The message of the IoError F throws; a test failure when it throws nothing.
-std::string io_error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected an IoError";
-  return "";
-}
+using testing::io_error_of;
 
 // The message read_nrrd gives for a file of TEXT then DATA.
 std::string nrrd_error(const std::string& p, const std::string& text, const Bytes& data = {}) {
