@@ -30,7 +30,6 @@ Diamond diamond_of(const Coord& v, const Lattice& lattice) {
 
   Diamond d;
   d.v = v;
-  d.scale = j;
   d.level = 3 * (k - 1 - j) + (3 - m);
   if (m == 3) {  // cube centre: the edge is the cube's Kuhn diagonal
     d.type = PolyhedronType::cube;

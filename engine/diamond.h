@@ -18,7 +18,6 @@ struct Diamond {
   Coord v{}, a{}, b{};     // refinement vertex and the endpoints of its refinement edge
   PolyhedronType type = PolyhedronType::cube;
   int level = 0;           // level of the tetrahedra bisected at v
-  int scale = 0;           // j: v's coordinates are multiples of 2^j
   int ring_count = 0;
   std::array<Coord, 8> ring{};  // in cycle order; may lie outside the lattice (cut diamonds)
 };

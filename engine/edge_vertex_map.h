@@ -31,7 +31,6 @@ class EdgeVertexMap {
       }
     }
   }
-  size_t size() const { return size_; }
 
  private:
   static size_t capacity_for(size_t n) {

@@ -6,12 +6,11 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "engine/kuhn.h"
 #include "engine/marching_tetrahedra.h"
 
 namespace isotope {
 namespace {
-
-using Tet = std::array<Coord, 4>;
 
 // A lattice node packed as x | y << 21 | z << 42: a tetrahedron is 32 bytes, and the midpoint
 // of an edge is (p + q) >> 1, since each component of p + q is even and no carry crosses a field.
@@ -49,16 +48,8 @@ class Traversal {
 
   void run() {
     const int64_t n = lattice_.n;
-    // The six roots share the main diagonal and follow the Kuhn paths 0 -> a -> a+b -> (n,n,n).
-    static constexpr int kPerm[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
-    for (const auto& p : kPerm) {
-      Coord a{0, 0, 0}, ab{0, 0, 0};
-      a[p[0]] = n;
-      ab[p[0]] = n;
-      ab[p[1]] = n;
-      const Tet root{Coord{0, 0, 0}, Coord{n, n, n}, ab, a};
+    for (const Tet& root : kuhn_tetrahedra({0, 0, 0}, {n, n, n}))
       visit({pack(root[0]), pack(root[1]), pack(root[2]), pack(root[3])}, 0, orientation(root) > 0);
-    }
   }
 
   Mesh take() { return builder_.take(); }
@@ -152,30 +143,16 @@ Mesh extract_full_resolution(const Volume& volume, float iso) {
   if (!std::isfinite(iso)) throw std::invalid_argument("the isovalue must be a finite number");
   const auto& d = volume.dims;
   MeshBuilder builder(iso, std::max({d[0], d[1], d[2]}), volume.origin, volume.spacing);
-  static constexpr int kPerm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
   for (int64_t z = 0; z + 1 < d[2]; ++z)
     for (int64_t y = 0; y + 1 < d[1]; ++y)
       for (int64_t x = 0; x + 1 < d[0]; ++x) {
         int above = 0;
         for (int c = 0; c < 8; ++c) above += volume.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)) > iso;
         if (above == 0 || above == 8) continue;
-        // The cell's six Kuhn tetrahedra run from its all-even corner to the opposite one.
-        const Coord cell{x, y, z};
-        Coord e, s;
-        for (int a = 0; a < 3; ++a) {
-          e[a] = cell[a] % 2 == 0 ? cell[a] : cell[a] + 1;
-          s[a] = cell[a] % 2 == 0 ? 1 : -1;
-        }
-        for (const auto& p : kPerm) {
-          Tet t{e, e, e, e};
-          t[1][p[0]] += s[p[0]];
-          t[2] = t[1];
-          t[2][p[1]] += s[p[1]];
-          t[3] = {e[0] + s[0], e[1] + s[1], e[2] + s[2]};
+        for (const Tet& t : cell_tetrahedra({x, y, z}))
           builder.add_tet(t, {volume.at(t[0][0], t[0][1], t[0][2]), volume.at(t[1][0], t[1][1], t[1][2]),
                               volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])},
                           orientation(t) > 0);
-        }
       }
   return builder.take();
 }

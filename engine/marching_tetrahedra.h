@@ -23,7 +23,6 @@ class MeshBuilder {
   void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive);
 
   Mesh take() { return std::move(mesh_); }
-  const Mesh& mesh() const { return mesh_; }
 
  private:
   uint64_t edge_key(const Coord& p, const Coord& q) const;

@@ -58,75 +58,27 @@ class RecordBuilder {
   void build(const Coord& v, int64_t counts[2][3]) const {
     const Diamond d = diamond_of(v, lattice_);
     DiamondValues dv;
-    dv.type = d.type;
-    dv.fa = mv_.value(d.a);
-    dv.fb = mv_.value(d.b);
-    dv.fv = mv_.value(d.v);
-    bool inside_box = in_box(d.a) && in_box(d.b);
     DiamondBounds bounds;
-    bounds.lo = std::min({dv.fa, dv.fb, dv.fv});
-    bounds.hi = std::max({dv.fa, dv.fb, dv.fv});
-    for (int i = 0; i < d.ring_count; ++i) {
-      const bool real = lattice_.contains(d.ring[i]);
-      dv.ring[i] = mv_.value(real ? d.ring[i] : mirror_into(d.ring[i], lattice_));
-      if (!real) continue;
-      inside_box = inside_box && in_box(d.ring[i]);
-      bounds.lo = std::min(bounds.lo, dv.ring[i]);
-      bounds.hi = std::max(bounds.hi, dv.ring[i]);
-    }
-
-    double child_bound = 0;
-    float child_surplus = 0;
-    IsoInterval exact_bar, paper_bar;
-    float weight = 0;
-    if (d.level + 1 < lattice_.max_level()) {  // else the children are leaves, with no record
-      // The children of tetrahedron (a, b, p, q) are (a, v, p, q) and (b, v, p, q), bisected at
-      // the midpoint of `end` and the farther of p and q (checked by the hierarchy test). Far
-      // vertices alternate around the ring, so each child is shared by two tetrahedra: visit each
-      // (end, far ring vertex) pair once. A real far vertex always has a real tetrahedron.
-      for (const Coord* end : {&d.a, &d.b})
-        for (int i = 0; i < d.ring_count; ++i) {
-          const Coord& r = d.ring[i];
-          if (squared_distance(*end, r) < squared_distance(*end, d.ring[(i + 1) % d.ring_count])) continue;
-          if (!lattice_.contains(r)) continue;  // a missing tetrahedron of a cut diamond
-          const Coord u{((*end)[0] + r[0]) / 2, ((*end)[1] + r[1]) / 2, ((*end)[2] + r[2]) / 2};
-          // Without a record, u's whole diamond lies beyond a face of the data box: no data
-          // node below it, and v, which reaches out there too, is refined anyway.
-          if (!mv_.has_record(u)) continue;
-          const int64_t c = mv_.record_slot(u);
-          const DiamondBounds& cb = mv_.bounds(c);
-          child_bound = std::max(child_bound, static_cast<double>(cb.error_bound));
-          child_surplus = std::max(child_surplus, cb.error_surplus);
-          bounds.lo = std::min(bounds.lo, cb.lo);
-          bounds.hi = std::max(bounds.hi, cb.hi);
-          const DiamondTopology& ct = mv_.topology(c);
-          exact_bar.hull({ct.exact_lo, ct.exact_hi});
-          paper_bar.hull({ct.paper_lo, ct.paper_hi});
-          weight = std::max(weight, ct.weight);
-        }
-    }
+    const bool inside_box = read_polyhedron(d, dv, bounds);
+    Saturated sat;
+    if (d.level + 1 < lattice_.max_level()) saturate_from_children(d, bounds, sat);  // else leaves, no record
     if (!inside_box) {
       // Refine always: its tetrahedra reach past the data box (design.md, "Volumes that are not
       // (2^k+1)^3"), so they are cut down to unit cells, each wholly inside or outside.
       bounds.error_bound = bounds.error_surplus = kInfinity;
     } else {
       const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
-      bounds.error_bound = round_up(eta + child_bound);
-      bounds.error_surplus = std::max(round_up(eta), child_surplus);
+      bounds.error_bound = round_up(eta + sat.bound);
+      bounds.error_surplus = std::max(round_up(eta), sat.surplus);
       const IsoInterval exact = exact_interval(dv);
       const IsoInterval paper = paper_interval(dv);
       counts[0][static_cast<int>(d.type)] += paper.empty() ? 0 : 1;
       counts[1][static_cast<int>(d.type)] += exact.empty() ? 0 : 1;
-      exact_bar.hull(exact);
-      paper_bar.hull(paper);
-      weight = std::max(weight, exact.length());
+      sat.exact.hull(exact);
+      sat.paper.hull(paper);
+      sat.weight = std::max(sat.weight, exact.length());
     }
-    const int64_t s = mv_.record_slot(v);
-    mv_.bounds_[static_cast<size_t>(s)] = bounds;
-    DiamondTopology& topo = mv_.topology_[static_cast<size_t>(s)];
-    if (!exact_bar.empty()) { topo.exact_lo = exact_bar.lo; topo.exact_hi = exact_bar.hi; }
-    if (!paper_bar.empty()) { topo.paper_lo = paper_bar.lo; topo.paper_hi = paper_bar.hi; }
-    topo.weight = weight;
+    store(v, bounds, sat);
   }
 
   void copy_values(const Volume& volume) const {
@@ -138,6 +90,71 @@ class RecordBuilder {
   }
 
  private:
+  // What v inherits from the records of its children's refinement vertices.
+  struct Saturated {
+    double bound = 0;
+    float surplus = 0;
+    IsoInterval exact, paper;
+    float weight = 0;
+  };
+
+  // Values at v's polyhedron (mirrored across the domain faces where the diamond is cut, paper
+  // Sec. 4.3) and their range; true when every real vertex lies in the data box.
+  bool read_polyhedron(const Diamond& d, DiamondValues& dv, DiamondBounds& bounds) const {
+    dv.type = d.type;
+    dv.fa = mv_.value(d.a);
+    dv.fb = mv_.value(d.b);
+    dv.fv = mv_.value(d.v);
+    bool inside_box = in_box(d.a) && in_box(d.b);
+    bounds.lo = std::min({dv.fa, dv.fb, dv.fv});
+    bounds.hi = std::max({dv.fa, dv.fb, dv.fv});
+    for (int i = 0; i < d.ring_count; ++i) {
+      const bool real = lattice_.contains(d.ring[i]);
+      dv.ring[i] = mv_.value(real ? d.ring[i] : mirror_into(d.ring[i], lattice_));
+      if (!real) continue;
+      inside_box = inside_box && in_box(d.ring[i]);
+      bounds.lo = std::min(bounds.lo, dv.ring[i]);
+      bounds.hi = std::max(bounds.hi, dv.ring[i]);
+    }
+    return inside_box;
+  }
+
+  // The children of tetrahedron (a, b, p, q) are (a, v, p, q) and (b, v, p, q), bisected at the
+  // midpoint of `end` and the farther of p and q (checked by the hierarchy test). Far vertices
+  // alternate around the ring, so each child is shared by two tetrahedra: visit each (end, far
+  // ring vertex) pair once. A real far vertex always has a real tetrahedron.
+  void saturate_from_children(const Diamond& d, DiamondBounds& bounds, Saturated& sat) const {
+    for (const Coord* end : {&d.a, &d.b})
+      for (int i = 0; i < d.ring_count; ++i) {
+        const Coord& r = d.ring[i];
+        if (squared_distance(*end, r) < squared_distance(*end, d.ring[(i + 1) % d.ring_count])) continue;
+        if (!lattice_.contains(r)) continue;  // a missing tetrahedron of a cut diamond
+        const Coord u{((*end)[0] + r[0]) / 2, ((*end)[1] + r[1]) / 2, ((*end)[2] + r[2]) / 2};
+        // Without a record, u's whole diamond lies beyond a face of the data box: no data node
+        // below it, and v, which reaches out there too, is refined anyway.
+        if (!mv_.has_record(u)) continue;
+        const int64_t c = mv_.record_slot(u);
+        const DiamondBounds& cb = mv_.bounds(c);
+        sat.bound = std::max(sat.bound, static_cast<double>(cb.error_bound));
+        sat.surplus = std::max(sat.surplus, cb.error_surplus);
+        bounds.lo = std::min(bounds.lo, cb.lo);
+        bounds.hi = std::max(bounds.hi, cb.hi);
+        const DiamondTopology& ct = mv_.topology(c);
+        sat.exact.hull({ct.exact_lo, ct.exact_hi});
+        sat.paper.hull({ct.paper_lo, ct.paper_hi});
+        sat.weight = std::max(sat.weight, ct.weight);
+      }
+  }
+
+  void store(const Coord& v, const DiamondBounds& bounds, const Saturated& sat) const {
+    const int64_t s = mv_.record_slot(v);
+    mv_.bounds_[static_cast<size_t>(s)] = bounds;
+    DiamondTopology& topo = mv_.topology_[static_cast<size_t>(s)];
+    if (!sat.exact.empty()) { topo.exact_lo = sat.exact.lo; topo.exact_hi = sat.exact.hi; }
+    if (!sat.paper.empty()) { topo.paper_lo = sat.paper.lo; topo.paper_hi = sat.paper.hi; }
+    topo.weight = sat.weight;
+  }
+
   bool in_box(const Coord& c) const {
     return c[0] < mv_.data_dims_[0] && c[1] < mv_.data_dims_[1] && c[2] < mv_.data_dims_[2];
   }

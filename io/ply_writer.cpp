@@ -47,29 +47,32 @@ std::string header(const Mesh& mesh) {
          "\nproperty list uchar int vertex_indices\nend_header\n";
 }
 
-void write_vertices(AtomicFile& out, const Mesh& mesh) {
-  std::vector<unsigned char> buffer(std::min(kBlockItems, mesh.positions.size()) * 12);
-  for (size_t i = 0; i < mesh.positions.size(); i += kBlockItems) {
-    const size_t n = std::min(kBlockItems, mesh.positions.size() - i);
+// Encodes `items` into fixed-size records a block at a time, so a large mesh costs a few
+// hundred writes and one block of memory.
+template <typename Items, typename Encode>
+void write_records(AtomicFile& out, const Items& items, size_t record_bytes, Encode encode) {
+  std::vector<unsigned char> buffer(std::min(kBlockItems, items.size()) * record_bytes);
+  for (size_t i = 0; i < items.size(); i += kBlockItems) {
+    const size_t n = std::min(kBlockItems, items.size() - i);
     unsigned char* p = buffer.data();
-    for (size_t k = 0; k < n; ++k) {
-      for (float c : mesh.positions[i + k]) p = put_le(p, c);
-    }
-    out.write(buffer.data(), n * 12);
+    for (size_t k = 0; k < n; ++k) p = encode(p, items[i + k]);
+    out.write(buffer.data(), n * record_bytes);
   }
 }
 
+void write_vertices(AtomicFile& out, const Mesh& mesh) {
+  write_records(out, mesh.positions, 12, [](unsigned char* p, const std::array<float, 3>& v) {
+    for (float c : v) p = put_le(p, c);
+    return p;
+  });
+}
+
 void write_faces(AtomicFile& out, const Mesh& mesh) {
-  std::vector<unsigned char> buffer(std::min(kBlockItems, mesh.triangles.size()) * 13);
-  for (size_t i = 0; i < mesh.triangles.size(); i += kBlockItems) {
-    const size_t n = std::min(kBlockItems, mesh.triangles.size() - i);
-    unsigned char* p = buffer.data();
-    for (size_t k = 0; k < n; ++k) {
-      p = put_le(p, uint8_t{3});
-      for (uint32_t v : mesh.triangles[i + k]) p = put_le(p, static_cast<int32_t>(v));
-    }
-    out.write(buffer.data(), n * 13);
-  }
+  write_records(out, mesh.triangles, 13, [](unsigned char* p, const std::array<uint32_t, 3>& t) {
+    p = put_le(p, uint8_t{3});
+    for (uint32_t v : t) p = put_le(p, static_cast<int32_t>(v));
+    return p;
+  });
 }
 
 }  // namespace

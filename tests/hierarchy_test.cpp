@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "engine/diamond.h"
+#include "engine/kuhn.h"
 #include "engine/lattice.h"
 
 namespace isotope {
@@ -52,14 +53,7 @@ Recursion recurse(const Lattice& l) {
     }
   };
   const int64_t n = l.n;
-  static constexpr int kPerm[6][2] = {{0, 1}, {0, 2}, {1, 0}, {1, 2}, {2, 0}, {2, 1}};
-  for (const auto& p : kPerm) {
-    Coord a{0, 0, 0}, ab{0, 0, 0};
-    a[p[0]] = n;
-    ab[p[0]] = n;
-    ab[p[1]] = n;
-    visit({Coord{0, 0, 0}, Coord{n, n, n}, ab, a}, 0);
-  }
+  for (const Tet& root : kuhn_tetrahedra({0, 0, 0}, {n, n, n})) visit(root, 0);
   return r;
 }
 
@@ -114,24 +108,10 @@ TEST_P(HierarchyByDepth, DiamondFromCoordinatesMatchesTheRecursion) {
 TEST_P(HierarchyByDepth, LeavesAreTheKuhnTetrahedraAroundEachCellsEvenDiagonal) {
   const Lattice l = lattice_of(GetParam());
   std::set<TetKey> kuhn;
-  static constexpr int kPerm[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
   for (int64_t z = 0; z < l.n; ++z)
     for (int64_t y = 0; y < l.n; ++y)
-      for (int64_t x = 0; x < l.n; ++x) {
-        const Coord cell{x, y, z};
-        Coord e, s;
-        for (int a = 0; a < 3; ++a) {
-          e[a] = cell[a] % 2 == 0 ? cell[a] : cell[a] + 1;
-          s[a] = cell[a] % 2 == 0 ? 1 : -1;
-        }
-        for (const auto& p : kPerm) {
-          Coord t1 = e, t2;
-          t1[p[0]] += s[p[0]];
-          t2 = t1;
-          t2[p[1]] += s[p[1]];
-          kuhn.insert(key(l, {e, t1, t2, Coord{e[0] + s[0], e[1] + s[1], e[2] + s[2]}}));
-        }
-      }
+      for (int64_t x = 0; x < l.n; ++x)
+        for (const Tet& t : cell_tetrahedra({x, y, z})) kuhn.insert(key(l, t));
   EXPECT_EQ(recurse(l).leaves, kuhn);
 }
 
