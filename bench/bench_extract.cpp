@@ -19,6 +19,7 @@
 #include "engine/critical_table.h"
 #include "engine/diamond.h"
 #include "engine/extract.h"
+#include "bench/bench_support.h"
 #include "engine/fields.h"
 #include "engine/mesh.h"
 #include "engine/multires_volume.h"
@@ -29,6 +30,7 @@
 namespace {
 
 using isotope::ExtractOptions;
+using isotope::bench::prepare;
 using isotope::ExtractStats;
 using isotope::Mesh;
 using isotope::MultiresVolume;
@@ -95,18 +97,6 @@ const MultiresVolume& multires_of(Dataset d) {
   throw std::logic_error("unknown dataset");
 }
 
-// Runs SETUP, reporting a failure (missing data file, engine error) as a skipped benchmark:
-// an exception must not escape into the benchmark runner.
-template <class Setup>
-bool prepare(benchmark::State& state, Setup setup) {
-  try {
-    setup();
-    return true;
-  } catch (const std::exception& e) {
-    state.SkipWithError(e.what());
-    return false;
-  }
-}
 
 void set_triangle_counters(benchmark::State& state, int64_t total_triangles) {
   const auto t = static_cast<double>(total_triangles);

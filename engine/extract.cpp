@@ -130,7 +130,13 @@ void validate(const ExtractOptions& o) {
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats) {
   const auto start = std::chrono::steady_clock::now();
   validate(options);
-  Traversal traversal(mv, options);
+  ExtractOptions in_codes = options;  // identity unless the volume holds quantized codes
+  if (mv.value_offset() != 0 || mv.value_scale() != 1) {
+    in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - mv.value_offset()) / mv.value_scale());
+    in_codes.eps = options.eps / mv.value_scale();
+    in_codes.delta = options.delta / mv.value_scale();
+  }
+  Traversal traversal(mv, in_codes);
   traversal.run();
   if (stats) {
     *stats = traversal.stats();

@@ -11,24 +11,10 @@
 #include "engine/huge_page_allocator.h"
 #include "engine/lattice.h"
 #include "engine/progress.h"
+#include "engine/record.h"
 #include "engine/volume.h"
 
 namespace isotope {
-
-// What every visit of the traversal reads: saturated range and errors of v's diamond.
-struct DiamondBounds {
-  float lo = 0, hi = 0;      // value range of every node below v
-  float error_bound = 0;     // guaranteed L-infinity bound (infinite where the diamond leaves the data box)
-  float error_surplus = 0;   // the paper's saturated surplus eta_bar
-};
-
-// What only a tetrahedron that the error would let stop reads. Intervals are half-open
-// [lo, hi), empty when lo >= hi.
-struct DiamondTopology {
-  float exact_lo = 1, exact_hi = 0;  // hull X_bar of isovalues where the exact rule fires
-  float paper_lo = 1, paper_hi = 0;  // hull I_bar of the paper's critical intervals
-  float weight = 0;                  // saturated simplification weight (max of |X|)
-};
 
 struct PreprocessStats {
   int64_t critical_paper[3] = {0, 0, 0};  // per diamond type (cube, octahedron, diamond): paper's flag at f(v)
@@ -41,6 +27,23 @@ class MultiresVolume {
   // Embeds and preprocesses (in parallel). Throws std::invalid_argument for dims < 2 or
   // non-finite values. `progress`, if given, hears the fraction done (see engine/progress.h).
   static MultiresVolume build(const Volume& volume, const ProgressCallback& progress = {});
+  // An empty volume of these dimensions, to be filled with set_value and set_record (a store
+  // being loaded). Throws std::invalid_argument as build does.
+  static MultiresVolume allocate(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
+                                 const std::array<double, 3>& origin);
+  void set_value(int64_t x, int64_t y, int64_t z, float f) { values_[static_cast<size_t>(layout_.slot(x, y, z))] = f; }
+  void set_record(const Coord& v, const Record& r) {
+    const auto s = static_cast<size_t>(record_slot(v));
+    bounds_[s] = r.bounds;
+    topology_[s] = r.topology;
+  }
+  void set_stats(const PreprocessStats& stats) { stats_ = stats; }
+
+  // Values and records may be held as integer codes of a quantized store: a data value is then
+  // value_offset + value_scale * code, and extract() maps isovalue and thresholds onto codes.
+  double value_offset() const { return value_offset_; }
+  double value_scale() const { return value_scale_; }
+  void set_value_map(double offset, double scale) { value_offset_ = offset, value_scale_ = scale; }
 
   const Lattice& lattice() const { return lattice_; }
   const std::array<int64_t, 3>& data_dims() const { return data_dims_; }
@@ -55,11 +58,9 @@ class MultiresVolume {
     return values_[static_cast<size_t>(layout_.slot(x, y, z))];
   }
 
-  // Records of scale j (coordinates multiples of 2^j, fewest trailing zeros j) have their own
-  // bricked array over the multiples of 2^j: the coarse levels take little memory and stay in
-  // cache, and the records of one subtree lie together. Each array stops 2^j beyond the data
-  // box: a tetrahedron whose refinement vertex lies farther out is beyond a face of the box, and
-  // the traversal never reads it (its corners are within 2^j of that vertex).
+  // Records of scale j (engine/record.h) have their own bricked array over the multiples of 2^j:
+  // the coarse levels take little memory and stay in cache, and the records of one subtree lie
+  // together. Each array stops at record_extent.
   bool has_record(const Coord& v) const {
     const int j = scale_of(v);
     for (int a = 0; a < 3; ++a)
@@ -72,9 +73,7 @@ class MultiresVolume {
            scale_layout_[static_cast<size_t>(j)].slot(v[0] >> j, v[1] >> j, v[2] >> j);
   }
   // Largest coordinate along axis a with a record at scale j.
-  int64_t record_extent(int a, int j) const {
-    return std::min(lattice_.n, (data_dims_[a] - 1 + (int64_t{1} << j)) >> j << j);
-  }
+  int64_t record_extent(int a, int j) const { return isotope::record_extent(lattice_, data_dims_, a, j); }
   int64_t memory_bytes() const {
     return static_cast<int64_t>(values_.size() * sizeof(float) + bounds_.size() * sizeof(DiamondBounds) +
                                 topology_.size() * sizeof(DiamondTopology));
@@ -83,12 +82,8 @@ class MultiresVolume {
   const DiamondTopology& topology(int64_t record) const { return topology_[static_cast<size_t>(record)]; }
 
  private:
-  friend class RecordBuilder;
   Lattice lattice_;
-  int scale_of(const Coord& v) const {
-    const uint64_t bits = static_cast<uint64_t>(v[0] | v[1] | v[2]);
-    return bits == 0 ? lattice_.k : std::min(lattice_.k, std::countr_zero(bits));
-  }
+  int scale_of(const Coord& v) const { return isotope::scale_of(v, lattice_); }
 
   BrickLayout layout_;                       // values: the data box
   std::vector<BrickLayout> scale_layout_;    // records: one layout per scale 0..k
@@ -100,6 +95,7 @@ class MultiresVolume {
   std::vector<DiamondBounds, HugePageAllocator<DiamondBounds>> bounds_;
   std::vector<DiamondTopology, HugePageAllocator<DiamondTopology>> topology_;
   PreprocessStats stats_;
+  double value_offset_ = 0, value_scale_ = 1;
 };
 
 }  // namespace isotope

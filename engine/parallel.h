@@ -6,6 +6,8 @@
 // the same body serially.
 #include <algorithm>
 #include <cstdint>
+#include <exception>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -26,11 +28,19 @@ void parallel_for(int64_t begin, int64_t end, const Body& body) {
 #ifdef ISOTOPE_STD_THREADS
   std::vector<std::thread> pool;
   const int64_t count = std::min(threads, end - begin);
+  std::mutex mutex;
+  std::exception_ptr first;  // rethrown after the join, as tbb::parallel_for does
   for (int64_t t = 0; t < count; ++t)
     pool.emplace_back([&, t] {
-      for (int64_t i = begin + t; i < end; i += count) body(i);
+      try {
+        for (int64_t i = begin + t; i < end; i += count) body(i);
+      } catch (...) {
+        const std::lock_guard<std::mutex> lock(mutex);
+        if (!first) first = std::current_exception();
+      }
     });
   for (std::thread& th : pool) th.join();
+  if (first) std::rethrow_exception(first);
 #else
   tbb::parallel_for(begin, end, body);
 #endif

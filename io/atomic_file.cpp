@@ -83,6 +83,16 @@ void AtomicFile::write(const void* data, size_t bytes) {
   errno = 0;
   if (std::fwrite(data, 1, bytes, file_) != bytes)
     throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
+  size_ += bytes;
+}
+
+void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
+  if (file_ == nullptr) throw IoError(path_ + ": write after commit");
+  if (offset + bytes > size_) throw IoError(path_ + ": write_at past the end of what was written");
+  errno = 0;
+  const bool ok = std::fseek(file_, static_cast<long>(offset), SEEK_SET) == 0 &&
+                  std::fwrite(data, 1, bytes, file_) == bytes && std::fseek(file_, 0, SEEK_END) == 0;
+  if (!ok) throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
 }
 
 void AtomicFile::commit() {

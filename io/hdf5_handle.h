@@ -1,11 +1,15 @@
 #pragma once
 // Private to io/*.cpp (needs hdf5.h, which only the io library sees): an owning HDF5 id
-// that is closed on every path, and the HDF5 error text that goes into IoError messages.
+// that is closed on every path, the HDF5 error text that goes into IoError messages, the lock
+// every HDF5 call holds, and the dataset lookups the HDF5 readers share.
 #include <hdf5.h>
 
+#include <array>
 #include <cerrno>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <mutex>
 #include <string>
 #include <utility>
 
@@ -59,5 +63,23 @@ inline std::string hdf5_error_detail() {
   const std::string text = std::strerror(err);
   return err == ENOSPC || err == EDQUOT ? "disk full (" + text + ")" : text;
 }
+
+// Debian's libhdf5 is the serial build, which must not be entered from two threads at once:
+// every HDF5 call, handle closes included, runs under this one process-wide lock.
+inline std::mutex& hdf5_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+// Defined in hdf5_reader.cpp; the caller holds hdf5_mutex(). Each throws IoError naming the
+// file (and dataset) and what is wrong.
+Hdf5Handle open_hdf5_file(const std::string& file);  // exists, is HDF5, opens read-only
+// Lists the file's 3-D datasets in the message when DATASET is missing.
+Hdf5Handle open_hdf5_dataset(hid_t file_id, const std::string& file, const std::string& dataset);
+// Numeric and rank 3; returns the dims as (x, y, z). WHERE names the dataset in messages.
+std::array<int64_t, 3> hdf5_dataset_dims(hid_t dataset, const std::string& where);
+// The "spacing" and "origin" attributes when present; absent ones leave the values untouched.
+void read_hdf5_geometry(hid_t dataset, const std::string& where, std::array<double, 3>& spacing,
+                        std::array<double, 3>& origin);
 
 }  // namespace isotope

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <cstdint>
+#include <mutex>
 #include <new>
 
 #include "io/hdf5_handle.h"
@@ -21,20 +22,6 @@ std::string join(const std::vector<std::string>& items) {
   std::string out;
   for (const auto& s : items) out += (out.empty() ? "" : ", ") + s;
   return out;
-}
-
-Hdf5Handle open_file(const std::string& file) {
-  silence_hdf5_errors();
-  std::error_code ec;
-  const fs::file_status st = fs::status(file, ec);
-  if (!fs::exists(st)) throw IoError(file + ": no such file");
-  if (fs::is_directory(st)) throw IoError(file + ": is a directory, not an HDF5 file");
-  const htri_t is_hdf5 = H5Fis_hdf5(file.c_str());
-  if (is_hdf5 == 0) throw IoError(file + ": not an HDF5 file");
-  if (is_hdf5 < 0) throw IoError(file + ": cannot open: " + hdf5_error_detail());
-  Hdf5Handle f(H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-  if (!f) throw IoError(file + ": cannot open HDF5 file: " + hdf5_error_detail());
-  return f;
 }
 
 bool is_numeric(hid_t dataset) {
@@ -80,30 +67,6 @@ std::vector<std::string> datasets_3d(hid_t file_id, const std::string& file) {
   return names;
 }
 
-Hdf5Handle open_dataset(hid_t file_id, const std::string& file, const std::string& dataset) {
-  // H5Lexists fails on a missing intermediate group, so a failed open is the test.
-  Hdf5Handle ds(H5Dopen2(file_id, dataset.c_str(), H5P_DEFAULT), H5Dclose);
-  if (ds) return ds;
-  const auto found = datasets_3d(file_id, file);
-  throw IoError(file + ": no dataset '" + dataset + "'; 3-D datasets in the file: " +
-                (found.empty() ? "none" : join(found)));
-}
-
-std::array<int64_t, 3> dataset_dims(hid_t ds, const std::string& where) {
-  if (!is_numeric(ds)) throw IoError(where + ": type is not numeric (need integer or float)");
-  const Hdf5Handle space(H5Dget_space(ds), H5Sclose);
-  if (!space) throw IoError(where + ": cannot read dataspace: " + hdf5_error_detail());
-  const int rank = H5Sget_simple_extent_ndims(space.get());
-  if (rank != 3) throw IoError(where + ": rank " + std::to_string(rank) + ", expected 3 (z, y, x)");
-  hsize_t zyx[3] = {0, 0, 0};
-  if (H5Sget_simple_extent_dims(space.get(), zyx, nullptr) < 0)
-    throw IoError(where + ": cannot read dimensions: " + hdf5_error_detail());
-  for (hsize_t d : zyx) {
-    if (d > static_cast<hsize_t>(INT64_MAX)) throw IoError(where + ": dimensions too large");
-  }
-  return {static_cast<int64_t>(zyx[2]), static_cast<int64_t>(zyx[1]), static_cast<int64_t>(zyx[0])};
-}
-
 // Reads a 3-number attribute (x, y, z) when present; absent leaves VALUE untouched.
 void read_xyz_attribute(hid_t ds, const char* name, const std::string& where, bool positive,
                         std::array<double, 3>& value) {
@@ -130,20 +93,65 @@ void read_xyz_attribute(hid_t ds, const char* name, const std::string& where, bo
 
 }  // namespace
 
+Hdf5Handle open_hdf5_file(const std::string& file) {
+  silence_hdf5_errors();
+  std::error_code ec;
+  const fs::file_status st = fs::status(file, ec);
+  if (!fs::exists(st)) throw IoError(file + ": no such file");
+  if (fs::is_directory(st)) throw IoError(file + ": is a directory, not an HDF5 file");
+  const htri_t is_hdf5 = H5Fis_hdf5(file.c_str());
+  if (is_hdf5 == 0) throw IoError(file + ": not an HDF5 file");
+  if (is_hdf5 < 0) throw IoError(file + ": cannot open: " + hdf5_error_detail());
+  Hdf5Handle f(H5Fopen(file.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
+  if (!f) throw IoError(file + ": cannot open HDF5 file: " + hdf5_error_detail());
+  return f;
+}
+
+Hdf5Handle open_hdf5_dataset(hid_t file_id, const std::string& file, const std::string& dataset) {
+  // H5Lexists fails on a missing intermediate group, so a failed open is the test.
+  Hdf5Handle ds(H5Dopen2(file_id, dataset.c_str(), H5P_DEFAULT), H5Dclose);
+  if (ds) return ds;
+  const auto found = datasets_3d(file_id, file);
+  throw IoError(file + ": no dataset '" + dataset + "'; 3-D datasets in the file: " +
+                (found.empty() ? "none" : join(found)));
+}
+
+std::array<int64_t, 3> hdf5_dataset_dims(hid_t ds, const std::string& where) {
+  if (!is_numeric(ds)) throw IoError(where + ": type is not numeric (need integer or float)");
+  const Hdf5Handle space(H5Dget_space(ds), H5Sclose);
+  if (!space) throw IoError(where + ": cannot read dataspace: " + hdf5_error_detail());
+  const int rank = H5Sget_simple_extent_ndims(space.get());
+  if (rank != 3) throw IoError(where + ": rank " + std::to_string(rank) + ", expected 3 (z, y, x)");
+  hsize_t zyx[3] = {0, 0, 0};
+  if (H5Sget_simple_extent_dims(space.get(), zyx, nullptr) < 0)
+    throw IoError(where + ": cannot read dimensions: " + hdf5_error_detail());
+  for (hsize_t d : zyx) {
+    if (d > static_cast<hsize_t>(INT64_MAX)) throw IoError(where + ": dimensions too large");
+  }
+  return {static_cast<int64_t>(zyx[2]), static_cast<int64_t>(zyx[1]), static_cast<int64_t>(zyx[0])};
+}
+
+void read_hdf5_geometry(hid_t ds, const std::string& where, std::array<double, 3>& spacing,
+                        std::array<double, 3>& origin) {
+  read_xyz_attribute(ds, "spacing", where, true, spacing);
+  read_xyz_attribute(ds, "origin", where, false, origin);
+}
+
 std::vector<std::string> list_3d_datasets(const std::string& file) {
-  const Hdf5Handle f = open_file(file);
+  const std::lock_guard lock(hdf5_mutex());  // declared first, so released after the handles close
+  const Hdf5Handle f = open_hdf5_file(file);
   return datasets_3d(f.get(), file);
 }
 
 Volume read_hdf5(const std::string& file, const std::string& dataset) {
-  const Hdf5Handle f = open_file(file);
-  const Hdf5Handle ds = open_dataset(f.get(), file, dataset);
+  const std::lock_guard lock(hdf5_mutex());
+  const Hdf5Handle f = open_hdf5_file(file);
+  const Hdf5Handle ds = open_hdf5_dataset(f.get(), file, dataset);
   const std::string where = file + ":" + dataset;
   Volume volume;
-  volume.dims = dataset_dims(ds.get(), where);
+  volume.dims = hdf5_dataset_dims(ds.get(), where);
   const int64_t count = checked_node_count(volume.dims, static_cast<int>(sizeof(float)), where);
-  read_xyz_attribute(ds.get(), "spacing", where, true, volume.spacing);
-  read_xyz_attribute(ds.get(), "origin", where, false, volume.origin);
+  read_hdf5_geometry(ds.get(), where, volume.spacing, volume.origin);
   try {
     volume.values.resize(static_cast<size_t>(count));
   } catch (const std::bad_alloc&) {

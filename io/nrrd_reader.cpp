@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <cctype>
 #include <cerrno>
 #include <charconv>
@@ -19,7 +18,6 @@
 #include <optional>
 #include <sstream>
 #include <system_error>
-#include <type_traits>
 #include <vector>
 
 #include "io/io_error.h"
@@ -30,13 +28,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-enum class Encoding { raw, gzip };
-
 // The header fields isotope uses, each validated as it is read; the rest are ignored.
 struct NrrdHeader {
   std::optional<std::array<int64_t, 3>> sizes;
   std::optional<ScalarType> type;
-  std::optional<Encoding> encoding;
+  std::optional<NrrdEncoding> encoding;
   std::optional<bool> big_endian;
   std::optional<std::array<double, 3>> spacings;
   std::optional<std::array<double, 3>> direction_lengths;
@@ -49,7 +45,7 @@ struct NrrdHeader {
 };
 
 constexpr size_t kMaxHeaderLine = size_t{1} << 16;  // a binary file without newlines stops here
-constexpr size_t kBlockValues = size_t{1} << 20;    // bounds the staging buffer to 8 MiB
+constexpr size_t kBlockBytes = size_t{1} << 20;     // a whole number of values of every type
 constexpr size_t kGzipInputChunk = size_t{1} << 16;
 
 struct FileCloser {
@@ -203,9 +199,9 @@ void set_type(NrrdHeader& h, const std::string& v, const std::string& path) {
 void set_encoding(NrrdHeader& h, const std::string& v, const std::string& path) {
   const std::string name = normalized(v);
   if (name == "raw") {
-    h.encoding = Encoding::raw;
+    h.encoding = NrrdEncoding::raw;
   } else if (name == "gzip" || name == "gz") {
-    h.encoding = Encoding::gzip;
+    h.encoding = NrrdEncoding::gzip;
   } else {
     bad_field(path, "encoding", v, "not supported; expected raw or gzip");
   }
@@ -361,42 +357,10 @@ void check_header(const NrrdHeader& h, const std::string& path) {
                   " data");
   if (h.spacings && h.direction_lengths)
     throw IoError(path + ": header has both 'spacings' and 'space directions'; NRRD allows one");
-  if (h.byte_skip == -1 && *h.encoding != Encoding::raw)
+  if (h.byte_skip == -1 && *h.encoding != NrrdEncoding::raw)
     throw IoError(path + ": 'byte skip: -1' is only allowed with raw encoding");
   if (!h.data_file && !h.ends_with_blank_line)
     throw IoError(path + ": header ends without the blank line that precedes attached data");
-}
-
-// ---------------------------------------------------------------- values
-
-template <typename T>
-float to_float(T v) {
-  // A double beyond float range has no defined conversion; infinity lets check_finite report it.
-  if constexpr (std::is_same_v<T, double>) {
-    if (std::fabs(v) > std::numeric_limits<float>::max())
-      return v > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
-  }
-  return static_cast<float>(v);
-}
-
-template <typename T>
-void decode(const unsigned char* in, size_t count, bool swap, float* out) {
-  for (size_t i = 0; i < count; ++i) {
-    std::array<unsigned char, sizeof(T)> b;
-    std::memcpy(b.data(), in + i * sizeof(T), sizeof(T));
-    if (swap) std::reverse(b.begin(), b.end());
-    out[i] = to_float(std::bit_cast<T>(b));
-  }
-}
-
-void decode_block(ScalarType t, bool swap, const unsigned char* in, size_t count, float* out) {
-  switch (t) {
-    case ScalarType::uint8: decode<uint8_t>(in, count, swap, out); break;
-    case ScalarType::uint16: decode<uint16_t>(in, count, swap, out); break;
-    case ScalarType::int16: decode<int16_t>(in, count, swap, out); break;
-    case ScalarType::float32: decode<float>(in, count, swap, out); break;
-    case ScalarType::float64: decode<double>(in, count, swap, out); break;
-  }
 }
 
 // ---------------------------------------------------------------- data sources
@@ -481,20 +445,17 @@ class GzipSource {
 };
 
 template <typename Source>
-void decode_all(Source& source, const NrrdHeader& h, std::vector<float>& values, const std::string& where) {
-  const size_t elem = static_cast<size_t>(scalar_type_size(*h.type));
-  // Single-byte types need no "endian" field and are never swapped.
-  const bool swap = h.big_endian.value_or(false) != (std::endian::native == std::endian::big);
-  std::vector<unsigned char> block(std::min(values.size(), kBlockValues) * elem);
-  for (size_t done = 0; done < values.size();) {
-    const size_t n = std::min(kBlockValues, values.size() - done);
-    const size_t got = source.read(block.data(), n * elem);
-    if (got != n * elem) {
-      throw IoError(where + ": data truncated: " + std::to_string(done * elem + got) + " of " +
-                    std::to_string(values.size() * elem) + " bytes");
+void stream_blocks(Source& source, int64_t total, const NrrdBlockSink& sink, const std::string& where) {
+  std::vector<unsigned char> block(static_cast<size_t>(std::min<int64_t>(total, kBlockBytes)));
+  for (int64_t done = 0; done < total;) {
+    const size_t n = static_cast<size_t>(std::min<int64_t>(total - done, kBlockBytes));
+    const size_t got = source.read(block.data(), n);
+    if (got != n) {
+      throw IoError(where + ": data truncated: " + std::to_string(done + static_cast<int64_t>(got)) + " of " +
+                    std::to_string(total) + " bytes");
     }
-    decode_block(*h.type, swap, block.data(), n, values.data() + done);
-    done += n;
+    sink(block.data(), n);
+    done += static_cast<int64_t>(n);
   }
 }
 
@@ -523,7 +484,7 @@ int64_t remaining_bytes(std::FILE* f, const std::string& where) {
 // hold the data, so a header that lies about the sizes never causes a huge allocation.
 void seek_data(std::FILE* f, const NrrdHeader& h, int64_t data_bytes, const std::string& where) {
   skip_lines(f, h.line_skip, where);  // lines of the file as stored, before any decompression
-  if (*h.encoding == Encoding::gzip) {
+  if (*h.encoding == NrrdEncoding::gzip) {
     // Deflate expands at most 1032:1 (zlib FAQ), so fewer compressed bytes cannot hold the data.
     if (remaining_bytes(f, where) < data_bytes / 1032)
       throw IoError(where + ": data truncated: too little gzip data for " + std::to_string(data_bytes) +
@@ -539,17 +500,6 @@ void seek_data(std::FILE* f, const NrrdHeader& h, int64_t data_bytes, const std:
   if (left < data_bytes)
     throw IoError(where + ": data truncated: " + std::to_string(left) + " of " + std::to_string(data_bytes) +
                   " bytes");
-}
-
-void decode_data(std::FILE* f, const NrrdHeader& h, std::vector<float>& values, const std::string& where) {
-  if (*h.encoding == Encoding::raw) {
-    RawSource source{f, where};
-    return decode_all(source, h, values, where);
-  }
-  GzipSource source(f, where);
-  source.skip(h.byte_skip);
-  decode_all(source, h, values, where);
-  source.expect_end(values.size() * static_cast<size_t>(scalar_type_size(*h.type)));
 }
 
 // ---------------------------------------------------------------- files
@@ -570,35 +520,75 @@ std::string data_file_path(const std::string& header, const std::string& name) {
   return p.is_absolute() ? p.string() : (fs::path(header).parent_path() / p).string();
 }
 
-Volume empty_volume(const NrrdHeader& h, int64_t count, const std::string& path) {
+Volume empty_volume(const NrrdLayout& layout, const std::string& path) {
   Volume volume;
-  volume.dims = *h.sizes;
-  volume.spacing = h.spacings ? *h.spacings : h.direction_lengths.value_or(volume.spacing);
-  volume.origin = h.origin.value_or(volume.origin);
+  volume.dims = layout.dims;
+  volume.spacing = layout.spacing;
+  volume.origin = layout.origin;
   try {
-    volume.values.resize(static_cast<size_t>(count));
+    volume.values.resize(static_cast<size_t>(volume.node_count()));
   } catch (const std::bad_alloc&) {
-    throw IoError(path + ": volume of " + std::to_string(count) + " nodes does not fit in memory");
+    throw IoError(path + ": volume of " + std::to_string(volume.node_count()) + " nodes does not fit in memory");
   }
   return volume;
 }
 
+// The header's fields as a layout; the data's position is filled in by the caller.
+NrrdLayout layout_of(const NrrdHeader& h) {
+  NrrdLayout layout;
+  layout.encoding = *h.encoding;
+  layout.type = *h.type;
+  layout.big_endian = h.big_endian.value_or(false);  // single-byte types need no "endian" field
+  layout.dims = *h.sizes;
+  layout.spacing = h.spacings ? *h.spacings : h.direction_lengths.value_or(layout.spacing);
+  layout.origin = h.origin.value_or(layout.origin);
+  layout.inflated_skip = layout.encoding == NrrdEncoding::gzip ? h.byte_skip : 0;
+  return layout;
+}
+
 }  // namespace
 
-Volume read_nrrd(const std::string& path) {
+NrrdLayout read_nrrd_layout(const std::string& path) {
   const FilePtr header_file = open_file(path, path);
   const NrrdHeader h = read_header(header_file.get(), path);
   check_header(h, path);
-  const int elem = scalar_type_size(*h.type);
-  const int64_t count = checked_node_count(*h.sizes, elem, path);
+  const int64_t count = checked_node_count(*h.sizes, scalar_type_size(*h.type), path);
+  NrrdLayout layout = layout_of(h);
   // Detached data are named in messages as "HEADER: data file DATA" so both files are known.
-  const std::string data_path = h.data_file ? data_file_path(path, *h.data_file) : path;
-  const std::string where = h.data_file ? path + ": data file " + data_path : path;
-  const FilePtr detached = h.data_file ? open_file(data_path, where) : nullptr;
+  layout.data_path = h.data_file ? data_file_path(path, *h.data_file) : path;
+  layout.where = h.data_file ? path + ": data file " + layout.data_path : path;
+  const FilePtr detached = h.data_file ? open_file(layout.data_path, layout.where) : nullptr;
   std::FILE* data = detached ? detached.get() : header_file.get();
-  seek_data(data, h, count * elem, where);
-  Volume volume = empty_volume(h, count, path);
-  decode_data(data, h, volume.values, where);
+  seek_data(data, h, count * scalar_type_size(*h.type), layout.where);
+  layout.data_offset = std::ftell(data);
+  if (layout.data_offset < 0) throw IoError(layout.where + ": cannot tell position: " + std::strerror(errno));
+  return layout;
+}
+
+void stream_nrrd_data(const NrrdLayout& layout, const NrrdBlockSink& sink) {
+  const std::string& where = layout.where;
+  const FilePtr file = open_file(layout.data_path, where);
+  if (std::fseek(file.get(), static_cast<long>(layout.data_offset), SEEK_SET) != 0)
+    throw IoError(where + ": cannot seek: " + std::strerror(errno));
+  if (layout.encoding == NrrdEncoding::raw) {
+    RawSource source{file.get(), where};
+    return stream_blocks(source, layout.data_bytes(), sink, where);
+  }
+  GzipSource source(file.get(), where);
+  source.skip(layout.inflated_skip);
+  stream_blocks(source, layout.data_bytes(), sink, where);
+  source.expect_end(static_cast<size_t>(layout.data_bytes()));
+}
+
+Volume read_nrrd(const std::string& path) {
+  const NrrdLayout layout = read_nrrd_layout(path);
+  Volume volume = empty_volume(layout, path);
+  const size_t elem = static_cast<size_t>(scalar_type_size(layout.type));
+  float* out = volume.values.data();
+  stream_nrrd_data(layout, [&](const unsigned char* bytes, size_t size) {
+    decode_scalars(layout.type, layout.big_endian, bytes, size / elem, out);
+    out += size / elem;
+  });
   check_finite(volume, path);
   return volume;
 }

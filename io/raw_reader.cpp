@@ -13,6 +13,8 @@
 #include <memory>
 #include <new>
 #include <sstream>
+#include <system_error>
+#include <type_traits>
 #include <vector>
 
 #include "io/io_error.h"
@@ -41,47 +43,34 @@ std::string dims_text(const std::array<int64_t, 3>& d) {
 }
 
 template <typename T>
-T load_le(const unsigned char* p) {
-  std::array<unsigned char, sizeof(T)> b;
-  std::memcpy(b.data(), p, sizeof(T));
-  if constexpr (std::endian::native == std::endian::big) std::reverse(b.begin(), b.end());
-  return std::bit_cast<T>(b);
+float to_float(T v) {
+  // A double beyond float range has no defined conversion; infinity lets check_finite report it.
+  if constexpr (std::is_same_v<T, double>) {
+    if (std::fabs(v) > std::numeric_limits<float>::max())
+      return v > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
+  }
+  return static_cast<float>(v);
+}
+
+template <typename T, bool kSwap>
+void decode(const unsigned char* in, size_t count, float* out) {
+  for (size_t i = 0; i < count; ++i) {
+    std::array<unsigned char, sizeof(T)> b;
+    std::memcpy(b.data(), in + i * sizeof(T), sizeof(T));
+    if constexpr (kSwap) std::reverse(b.begin(), b.end());
+    out[i] = to_float(std::bit_cast<T>(b));
+  }
 }
 
 template <typename T>
-void decode(const unsigned char* in, size_t count, float* out) {
-  for (size_t i = 0; i < count; ++i) out[i] = static_cast<float>(load_le<T>(in + i * sizeof(T)));
-}
-
-void decode_block(ScalarType t, const unsigned char* in, size_t count, float* out) {
-  switch (t) {
-    case ScalarType::uint8: decode<uint8_t>(in, count, out); break;
-    case ScalarType::uint16: decode<uint16_t>(in, count, out); break;
-    case ScalarType::int16: decode<int16_t>(in, count, out); break;
-    case ScalarType::float32: decode<float>(in, count, out); break;
-    case ScalarType::float64: decode<double>(in, count, out); break;
-  }
+void decode(bool swap, const unsigned char* in, size_t count, float* out) {
+  swap ? decode<T, true>(in, count, out) : decode<T, false>(in, count, out);
 }
 
 struct FileCloser {
   void operator()(std::FILE* f) const { std::fclose(f); }
 };
 using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
-
-// Distinguishes "missing" from "a directory" from "wrong size" before any allocation.
-void check_raw_file(const std::string& path, const RawLayout& layout, int64_t expected_bytes) {
-  std::error_code ec;
-  const fs::file_status st = fs::status(path, ec);
-  if (!fs::exists(st)) throw IoError(path + ": no such file");
-  if (fs::is_directory(st)) throw IoError(path + ": is a directory, not a volume file");
-  const auto size = fs::file_size(path, ec);
-  if (ec) throw IoError(path + ": cannot determine file size: " + ec.message());
-  if (static_cast<int64_t>(size) != expected_bytes) {
-    throw IoError(path + ": size " + std::to_string(size) + " bytes, expected " +
-                  std::to_string(expected_bytes) + " for " + dims_text(layout.dims) + " " +
-                  scalar_type_name(layout.type));
-  }
-}
 
 void read_values(const std::string& path, ScalarType type, std::vector<float>& values) {
   FilePtr file(std::fopen(path.c_str(), "rb"));
@@ -96,7 +85,7 @@ void read_values(const std::string& path, ScalarType type, std::vector<float>& v
       const std::string why = std::ferror(file.get()) ? std::strerror(errno) : "unexpected end of file";
       throw IoError(path + ": read failed after " + std::to_string(done * elem + got) + " bytes: " + why);
     }
-    decode_block(type, buffer.data(), n, values.data() + done);
+    decode_scalars(type, false, buffer.data(), n, values.data() + done);
     done += n;
   }
 }
@@ -178,21 +167,53 @@ int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes
 }
 
 void check_finite(const Volume& volume, const std::string& file) {
-  const auto bad = std::find_if(volume.values.begin(), volume.values.end(),
-                                [](float v) { return !std::isfinite(v); });
-  if (bad == volume.values.end()) return;
-  const int64_t i = bad - volume.values.begin();
-  const int64_t nx = volume.dims[0], ny = volume.dims[1];
+  check_finite(volume.values.data(), {0, 0, 0}, volume.dims, file);
+}
+
+void check_finite(const float* values, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                  const std::string& file) {
+  const int64_t count = size[0] * size[1] * size[2];
+  const float* bad = std::find_if(values, values + count, [](float v) { return !std::isfinite(v); });
+  if (bad == values + count) return;
+  const int64_t i = bad - values;
+  const int64_t nx = size[0], ny = size[1];
   std::ostringstream msg;
-  msg << file << ": value " << *bad << " at (x,y,z) = (" << i % nx << "," << (i / nx) % ny << ","
-      << i / (nx * ny) << ") is not finite (NaN, infinite, or beyond float range)";
+  msg << file << ": value " << *bad << " at (x,y,z) = (" << lo[0] + i % nx << "," << lo[1] + (i / nx) % ny
+      << "," << lo[2] + i / (nx * ny) << ") is not finite (NaN, infinite, or beyond float range)";
   throw IoError(msg.str());
 }
 
-Volume read_raw(const std::string& path, const RawLayout& layout) {
+void decode_scalars(ScalarType type, bool big_endian, const unsigned char* in, size_t count, float* out) {
+  const bool swap = big_endian != (std::endian::native == std::endian::big);
+  switch (type) {
+    case ScalarType::uint8: decode<uint8_t>(false, in, count, out); break;
+    case ScalarType::uint16: decode<uint16_t>(swap, in, count, out); break;
+    case ScalarType::int16: decode<int16_t>(swap, in, count, out); break;
+    case ScalarType::float32: decode<float>(swap, in, count, out); break;
+    case ScalarType::float64: decode<double>(swap, in, count, out); break;
+  }
+}
+
+int64_t check_raw_file(const std::string& path, const RawLayout& layout) {
   const int elem = scalar_type_size(layout.type);
-  const int64_t count = checked_node_count(layout.dims, elem, path);
-  check_raw_file(path, layout, count * elem);
+  const int64_t expected_bytes = checked_node_count(layout.dims, elem, path) * elem;
+  // Distinguishes "missing" from "a directory" from "wrong size" before any allocation.
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (!fs::exists(st)) throw IoError(path + ": no such file");
+  if (fs::is_directory(st)) throw IoError(path + ": is a directory, not a volume file");
+  const auto size = fs::file_size(path, ec);
+  if (ec) throw IoError(path + ": cannot determine file size: " + ec.message());
+  if (static_cast<int64_t>(size) != expected_bytes) {
+    throw IoError(path + ": size " + std::to_string(size) + " bytes, expected " +
+                  std::to_string(expected_bytes) + " for " + dims_text(layout.dims) + " " +
+                  scalar_type_name(layout.type));
+  }
+  return expected_bytes;
+}
+
+Volume read_raw(const std::string& path, const RawLayout& layout) {
+  const int64_t count = check_raw_file(path, layout) / scalar_type_size(layout.type);
   Volume volume;
   volume.dims = layout.dims;
   try {

@@ -51,9 +51,9 @@ std::string join(const std::vector<std::string>& items) {
   return out;
 }
 
-Volume read_only_3d_dataset(const std::string& file) {
+std::string only_3d_dataset(const std::string& file) {
   const auto names = list_3d_datasets(file);
-  if (names.size() == 1) return read_hdf5(file, names.front());
+  if (names.size() == 1) return names.front();
   if (names.empty()) throw IoError(file + ": contains no 3-D numeric dataset");
   throw IoError(file + ": contains several 3-D datasets (" + join(names) + "); name one as " +
                 file + ":/DATASET");
@@ -82,13 +82,24 @@ void require_regular_file(const std::string& path) {
 
 }  // namespace
 
-Volume read_volume(const VolumeSource& source) {
+VolumeLocation locate_volume(const VolumeSource& source) {
+  using Format = VolumeLocation::Format;
   if (source.spec.empty()) throw IoError("no volume file given");
-  if (const auto h5 = split_hdf5_spec(source.spec)) return read_hdf5(h5->file, h5->dataset);
-  if (has_hdf5_extension(source.spec)) return read_only_3d_dataset(source.spec);
-  if (has_nrrd_extension(source.spec)) return read_nrrd(source.spec);  // the header says dims and type
+  if (const auto h5 = split_hdf5_spec(source.spec)) return {Format::hdf5, h5->file, h5->dataset, {}};
+  if (has_hdf5_extension(source.spec)) return {Format::hdf5, source.spec, only_3d_dataset(source.spec), {}};
+  if (has_nrrd_extension(source.spec)) return {Format::nrrd, source.spec, "", {}};  // the header says dims and type
   require_regular_file(source.spec);
-  return read_raw(source.spec, raw_layout(source));
+  return {Format::raw, source.spec, "", raw_layout(source)};
+}
+
+Volume read_volume(const VolumeSource& source) {
+  const VolumeLocation at = locate_volume(source);
+  switch (at.format) {
+    case VolumeLocation::Format::hdf5: return read_hdf5(at.file, at.dataset);
+    case VolumeLocation::Format::nrrd: return read_nrrd(at.file);
+    case VolumeLocation::Format::raw: break;
+  }
+  return read_raw(at.file, at.layout);
 }
 
 }  // namespace isotope

@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstdint>
+#include <optional>
+#include <span>
 #include <vector>
 
 #include "io/atomic_file.h"
@@ -13,30 +16,52 @@
 namespace isotope {
 namespace {
 
-void check_shape(const Volume& volume, const std::string& path) {
-  const int64_t count = checked_node_count(volume.dims, static_cast<int>(sizeof(float)), path);
+void check_shape(const Volume& volume, const std::string& path, int element_bytes) {
+  const int64_t count = checked_node_count(volume.dims, element_bytes, path);
   if (static_cast<int64_t>(volume.values.size()) != count) {
     throw IoError(path + ": volume holds " + std::to_string(volume.values.size()) +
                   " values but its dimensions need " + std::to_string(count));
   }
 }
 
-uint32_t byteswap32(uint32_t b) {
-  return (b >> 24) | ((b >> 8) & 0xff00u) | ((b << 8) & 0xff0000u) | (b << 24);
+struct CodeRange {
+  double lo, hi;
+};
+
+// The codes an integer type offers; none for float types, which store values as they are.
+std::optional<CodeRange> code_range(ScalarType type) {
+  switch (type) {
+    case ScalarType::uint8: return CodeRange{0, 255};
+    case ScalarType::uint16: return CodeRange{0, 65535};
+    case ScalarType::int16: return CodeRange{-32768, 32767};
+    case ScalarType::float32:
+    case ScalarType::float64: return std::nullopt;
+  }
+  return std::nullopt;
 }
 
-void write_floats_le(AtomicFile& out, const std::vector<float>& values) {
-  if constexpr (std::endian::native == std::endian::little) {
-    out.write(values.data(), values.size() * sizeof(float));
-  } else {
-    constexpr size_t kBlock = size_t{1} << 18;
-    std::vector<uint32_t> buffer;
-    for (size_t i = 0; i < values.size(); i += kBlock) {
-      const size_t n = std::min(kBlock, values.size() - i);
-      buffer.resize(n);
-      for (size_t k = 0; k < n; ++k) buffer[k] = byteswap32(std::bit_cast<uint32_t>(values[i + k]));
-      out.write(buffer.data(), n * sizeof(uint32_t));
-    }
+// IN as Bytes-wide little-endian words, whatever the host's byte order; BITS gives each word.
+template <int Bytes, class Bits>
+void encode_le(std::span<const float> in, unsigned char* out, Bits bits) {
+  for (size_t i = 0; i < in.size(); ++i) {
+    const uint64_t word = bits(in[i]);
+    for (int k = 0; k < Bytes; ++k) out[i * Bytes + k] = static_cast<unsigned char>(word >> (8 * k));
+  }
+}
+
+void encode_block(const RawEncoding& e, std::span<const float> in, unsigned char* out) {
+  // The clamp only absorbs rounding at the ends: (max - min) * scale may exceed the span by an ulp.
+  const CodeRange range = code_range(e.type).value_or(CodeRange{0, 0});
+  const auto code = [&e, range](float v) {
+    return static_cast<uint64_t>(static_cast<int64_t>(std::clamp(std::round(e.code(v)), range.lo, range.hi)));
+  };
+  switch (e.type) {
+    case ScalarType::uint8: return encode_le<1>(in, out, code);
+    case ScalarType::uint16:
+    case ScalarType::int16: return encode_le<2>(in, out, code);
+    case ScalarType::float32: return encode_le<4>(in, out, [](float v) { return uint64_t{std::bit_cast<uint32_t>(v)}; });
+    case ScalarType::float64:
+      return encode_le<8>(in, out, [](float v) { return std::bit_cast<uint64_t>(static_cast<double>(v)); });
   }
 }
 
@@ -68,15 +93,46 @@ void write_volume_dataset(hid_t file, const Volume& volume, const std::string& p
 
 }  // namespace
 
-void write_raw_float32(const Volume& volume, const std::string& path) {
-  check_shape(volume, path);
+bool RawEncoding::is_mapped() const { return code_range(type).has_value(); }
+
+double RawEncoding::code(double v) const { return is_mapped() ? first + (v - min) * scale : v; }
+
+RawEncoding raw_encoding(const Volume& volume, ScalarType type) {
+  RawEncoding e;
+  e.type = type;
+  if (!volume.values.empty()) {
+    const auto [lo, hi] = std::minmax_element(volume.values.begin(), volume.values.end());
+    e.min = *lo;
+    e.max = *hi;
+  }
+  if (const auto range = code_range(type)) {
+    e.first = range->lo;
+    e.scale = e.max > e.min ? (range->hi - range->lo) / (e.max - e.min) : 0.0;
+  }
+  return e;
+}
+
+RawEncoding write_raw(const Volume& volume, const std::string& path, ScalarType type) {
+  const int bytes = scalar_type_size(type);
+  check_shape(volume, path, bytes);
+  // A NaN has no code; float types pass values through as they are.
+  if (code_range(type)) check_finite(volume, path);
+  const RawEncoding e = raw_encoding(volume, type);
   AtomicFile out(path);
-  write_floats_le(out, volume.values);
+  constexpr size_t kBlock = size_t{1} << 16;
+  std::vector<unsigned char> buffer(kBlock * static_cast<size_t>(bytes));
+  const std::span<const float> values(volume.values);
+  for (size_t i = 0; i < values.size(); i += kBlock) {
+    const std::span<const float> block = values.subspan(i, std::min(kBlock, values.size() - i));
+    encode_block(e, block, buffer.data());
+    out.write(buffer.data(), block.size() * static_cast<size_t>(bytes));
+  }
   out.commit();
+  return e;
 }
 
 void write_hdf5(const Volume& volume, const std::string& path) {
-  check_shape(volume, path);
+  check_shape(volume, path, static_cast<int>(sizeof(float)));
   silence_hdf5_errors();
   // AtomicFile reserves a unique temporary beside PATH and removes it on any failure;
   // HDF5 writes that same path through its own descriptor, and commit() fsyncs and renames it.

@@ -1,6 +1,8 @@
 // The isotope command end to end: help and exit codes, reports of generated shapes, and bad
 // input that must fail with a message and leave no output file behind (design.md, invariant 6).
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -120,9 +122,12 @@ const std::string kData = ISOTOPE_TEST_DATA;
 
 TEST_F(Cli, HelpOfEveryCommandExitsZeroAndNamesItsOptions) {
   const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
-      {"--help", {"extract", "generate", "demo", "--version"}},
+      {"--help", {"extract", "convert", "info", "verify", "generate", "demo", "--version"}},
+      {"convert --help", {"--memory-mb", "--threads", "--zstd-level", "--quantize", "--dims", "--type", "--quiet"}},
+      {"info --help", {"STORE", "--json"}},
+      {"verify --help", {"STORE", "--threads", "--quiet"}},
       {"extract --help", {"--iso", "--eps", "--error", "--topology", "--report", "--dims", "--type", "--output", "--quiet"}},
-      {"generate --help", {"--size", "--shift", "--seed", "--output", "algebraic", "linked-tori", "nested-spheres", "noise"}},
+      {"generate --help", {"--size", "--shift", "--seed", "--output", "--type", "uint16", "algebraic", "linked-tori", "nested-spheres", "noise"}},
       {"demo --help", {"--out", "--data"}},
   };
   for (const auto& [args, words] : cases) {
@@ -178,6 +183,35 @@ TEST_F(Cli, GeneratedClosedShapesKeepTheirTopologyAtCoarseEps) {
       EXPECT_EQ(r.value("nonmanifold_edges", -1), 0) << s.name << " eps " << eps;
     }
   }
+}
+
+// The printed code of iso 0 is where the surface lies in the stored uint16 values.
+TEST_F(Cli, GenerateUint16PrintsTheMappingAndItsIsoCodeFindsTheShape) {
+  const std::string vol = in_work("s_17x17x17_uint16.raw");
+  const Result r = run("generate sphere --size 17 --type uint16 -o " + quote(vol));
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(fs::file_size(vol), 17u * 17u * 17u * 2u);
+  EXPECT_NE(r.out.find("-> 0,"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("-> 65535"), std::string::npos) << r.out;
+  const size_t at = r.out.find("iso 0 -> ");
+  ASSERT_NE(at, std::string::npos) << r.out;
+  const std::string iso = r.out.substr(at + 9, r.out.find('\n', at) - at - 9);
+  const nlohmann::json report = extract_report(quote(vol) + " --iso " + iso);
+  EXPECT_EQ(report.value("components", -1), 1);
+  EXPECT_EQ(report.value("euler_characteristic", -1), 2);
+}
+
+TEST_F(Cli, GenerateUint8WritesOneBytePerNode) {
+  const std::string vol = in_work("n_9x9x9_uint8.raw");
+  ASSERT_EQ(run("generate noise --size 9 --type uint8 -q -o " + quote(vol)).code, 0);
+  EXPECT_EQ(fs::file_size(vol), 729u);
+}
+
+TEST_F(Cli, GenerateTypeThatTheOutputCannotCarryIsAUsageError) {
+  expect_failure("generate sphere --size 9 --type uint16 -o " + quote(in_work("s.h5")), 2, "float32");
+  expect_failure("generate sphere --size 9 --type uint8 -o " + quote(in_work("s_9x9x9_uint16.raw")), 2, "uint16");
+  expect_failure("generate sphere --size 9 -o " + quote(in_work("s_8x8x8_float32.raw")), 2, "8x8x8");
+  expect_failure("generate sphere --size 9 --type int16 -o " + quote(in_work("s.raw")), 2);
 }
 
 TEST_F(Cli, GeneratedHdf5AndRawGiveTheSameMesh) {
@@ -262,6 +296,78 @@ TEST_F(Cli, ExtractAcceptsFractionsAndNegativeIsovalues) {
   EXPECT_DOUBLE_EQ(r.value("iso", 0.0), -0.25);
   EXPECT_EQ(r.value("error", ""), "surplus");
   EXPECT_EQ(r.value("topology", ""), "paper");
+}
+
+// The store commands end to end: convert, info, verify, and extract giving the same mesh file
+// from the store as from the raw input.
+TEST_F(Cli, ConvertInfoVerifyAndExtractFromTheStore) {
+  const std::string raw = kData + "/neghip_66x66x66_uint8.raw", store = in_work("neghip.isotope");
+  const Result c = run("convert " + quote(raw) + " " + quote(store) + " --memory-mb 8 --threads 2");
+  ASSERT_EQ(c.code, 0) << c.err;
+  EXPECT_NE(c.out.find("66x66x66 uint8"), std::string::npos) << c.out;
+  const Result info = run("info --json " + quote(store));
+  ASSERT_EQ(info.code, 0) << info.err;
+  const nlohmann::json j = nlohmann::json::parse(info.out);
+  EXPECT_EQ(j["dims"], nlohmann::json({66, 66, 66}));
+  EXPECT_EQ(j["type"], "uint8");
+  EXPECT_LE(j["size_ratio"].get<double>(), 1.5);
+  EXPECT_GT(j["critical_exact"]["cube"].get<int64_t>(), 0);
+  EXPECT_EQ(run("info " + quote(store)).code, 0);
+  const Result v = run("verify " + quote(store));
+  EXPECT_EQ(v.code, 0) << v.err;
+  EXPECT_NE(v.out.find("ok"), std::string::npos);
+  for (const std::string eps : {"0", "8"}) {
+    ASSERT_EQ(run("extract " + quote(raw) + " --iso 128.5 --eps " + eps + " -q -o " + quote(in_work("a.ply"))).code, 0);
+    ASSERT_EQ(run("extract " + quote(store) + " --iso 128.5 --eps " + eps + " -q -o " + quote(in_work("b.ply"))).code, 0);
+    EXPECT_EQ(slurp(work() / "a.ply"), slurp(work() / "b.ply")) << "eps " << eps;
+  }
+}
+
+TEST_F(Cli, CorruptStoreIsNamedByVerifyAndExtract) {
+  const std::string store = in_work("bolt.isotope");
+  ASSERT_EQ(run("convert -q " + quote(kData + "/bolt_70x123x66_uint8.raw") + " " + quote(store)).code, 0);
+  std::string bytes = slurp(store);
+  bytes[bytes.size() / 2] = static_cast<char>(bytes[bytes.size() / 2] ^ 0x40);
+  std::ofstream(store, std::ios::binary | std::ios::trunc) << bytes;
+  expect_failure("verify " + quote(store), 1, "brick ");
+  expect_failure("extract " + quote(store) + " --iso 100 -o " + quote(in_work("m.ply")), 1, "brick ");
+  std::ofstream(store, std::ios::binary | std::ios::trunc) << "not a store at all";
+  expect_failure("verify " + quote(store), 1, "not an isotope store");
+  expect_failure("info " + quote(store), 1, "not an isotope store");
+}
+
+TEST_F(Cli, ConvertFailuresLeaveNothing) {
+  const std::string bolt = quote(kData + "/bolt_70x123x66_uint8.raw");
+  expect_failure("convert " + quote(in_work("missing_9x9x9_uint8.raw")) + " " + quote(in_work("o.isotope")), 1);
+  expect_failure("convert " + bolt + " " + quote(in_work("no/such/dir/o.isotope")), 1, "does not exist");
+  expect_failure("convert " + bolt + " " + quote(in_work("o.isotope")) + " --quantize 8", 1, "integer");
+  expect_failure("convert " + bolt + " " + quote(in_work("o.isotope")) + " --quantize 12", 2);
+  expect_failure("convert " + bolt + " " + quote(in_work("o.isotope")) + " --zstd-level 30", 2);
+  expect_failure("convert " + bolt, 2);
+  expect_failure("verify " + quote(in_work("nothing.isotope")), 1);
+}
+
+// Ctrl-C during a convert: exit 1, "interrupted", no store and no temporary left.
+TEST_F(Cli, InterruptedConvertLeavesNothing) {
+  const std::string vol = generate("noise", 161, "n_161x161x161_float32.raw");
+  const std::set<std::string> before = listing();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int null = open("/dev/null", O_WRONLY);
+    dup2(null, STDOUT_FILENO);
+    execl(ISOTOPE_BINARY, ISOTOPE_BINARY, "convert", vol.c_str(), in_work("n.isotope").c_str(), "--threads", "1",
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  usleep(400 * 1000);
+  kill(pid, SIGINT);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  if (WEXITSTATUS(status) == 0) GTEST_SKIP() << "the convert finished before the signal";
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_EQ(listing(), before);
 }
 
 }  // namespace

@@ -536,7 +536,7 @@ TEST_F(IoTest, WriteHdf5ReplacesAnExistingFile) {
 TEST_F(IoTest, WriteRawFloat32ThenReadRawRoundTripsExactly) {
   const Volume v = sample_volume();
   const std::string p = path("out_5x4x3_float32.raw");
-  write_raw_float32(v, p);
+  EXPECT_FALSE(write_raw(v, p, ScalarType::float32).is_mapped());
   EXPECT_EQ(fs::file_size(p), 60u * 4u);
   const Volume back = read_raw(p, *parse_raw_name(p));
   EXPECT_EQ(back.dims, v.dims);
@@ -544,10 +544,80 @@ TEST_F(IoTest, WriteRawFloat32ThenReadRawRoundTripsExactly) {
   EXPECT_EQ(entries(), (std::vector<std::string>{"out_5x4x3_float32.raw"}));
 }
 
+// sample_volume spans [-4, 18.57]: min must become code 0 and max the type's top code.
+TEST_F(IoTest, WriteRawIntegerTypesStretchMinToZeroAndMaxToTheTopCode) {
+  const Volume v = sample_volume();
+  const std::string p8 = path("u8.raw"), p16 = path("u16.raw");
+  const RawEncoding e8 = write_raw(v, p8, ScalarType::uint8);
+  const RawEncoding e16 = write_raw(v, p16, ScalarType::uint16);
+  ASSERT_EQ(fs::file_size(p8), 60u);
+  ASSERT_EQ(fs::file_size(p16), 120u);
+  const std::vector<unsigned char> b8 = read_bytes(p8), b16 = read_bytes(p16);
+  EXPECT_EQ(b8.front(), 0);
+  EXPECT_EQ(b8.back(), 255);
+  EXPECT_EQ(b16[0] | b16[1] << 8, 0);
+  EXPECT_EQ(b16[118] | b16[119] << 8, 65535);
+  EXPECT_EQ(e16.min, v.values.front());
+  EXPECT_EQ(e16.max, v.values.back());
+  EXPECT_DOUBLE_EQ(e8.code(e8.max), 255.0);
+  EXPECT_DOUBLE_EQ(e16.code((e16.min + e16.max) / 2), 32767.5);
+}
+
+TEST_F(IoTest, WriteRawRoundsEachValueToTheNearestCode) {
+  Volume v;
+  v.dims = {5, 1, 1};
+  v.values = {0.0f, 1.0f, 1.4f, 1.6f, 255.0f};  // scale 1: codes are the values rounded
+  write_raw(v, path("r.raw"), ScalarType::uint8);
+  EXPECT_EQ(read_bytes(path("r.raw")), (std::vector<unsigned char>{0, 1, 1, 2, 255}));
+}
+
+TEST_F(IoTest, WriteRawConstantFieldStoresCodeZero) {
+  Volume v;
+  v.dims = {2, 2, 2};
+  v.values.assign(8, 3.5f);
+  const RawEncoding e = write_raw(v, path("c.raw"), ScalarType::uint16);
+  EXPECT_EQ(read_bytes(path("c.raw")), std::vector<unsigned char>(16, 0));
+  EXPECT_EQ(e.code(3.5), 0.0);
+}
+
+TEST_F(IoTest, WriteRawIntegerTypeRejectsNanAndLeavesNoFile) {
+  Volume v = sample_volume();
+  v.values[7] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_CONTAINS(io_error_of([&] { write_raw(v, path("n.raw"), ScalarType::uint16); }), "(x,y,z) = (2,1,0)");
+  EXPECT_TRUE(entries().empty());
+}
+
+// The name carries the layout, so read_volume needs no overrides; it reads back the codes.
+TEST_F(IoTest, WriteRawUint16NamedByConventionReadsBackThroughReadVolume) {
+  const Volume v = sample_volume();
+  const std::string p = path("sample_5x4x3_uint16.raw");
+  const RawEncoding e = write_raw(v, p, ScalarType::uint16);
+  const Volume back = read_volume(VolumeSource{p, std::nullopt, std::nullopt});
+  EXPECT_EQ(back.dims, v.dims);
+  ASSERT_EQ(back.values.size(), v.values.size());
+  for (size_t i = 0; i < v.values.size(); ++i) EXPECT_EQ(back.values[i], std::round(e.code(v.values[i]))) << i;
+}
+
+TEST_F(IoTest, WriteRawEveryTypeRoundTripsThroughReadRaw) {
+  const Volume v = sample_volume();
+  for (const ScalarType t : {ScalarType::uint8, ScalarType::uint16, ScalarType::int16, ScalarType::float32, ScalarType::float64}) {
+    const std::string p = path("v.raw");
+    const RawEncoding e = write_raw(v, p, t);
+    EXPECT_EQ(fs::file_size(p), 60u * static_cast<size_t>(scalar_type_size(t))) << scalar_type_name(t);
+    const Volume back = read_raw(p, RawLayout{v.dims, t});
+    for (size_t i = 0; i < v.values.size(); ++i)
+      EXPECT_EQ(back.values[i], e.is_mapped() ? std::round(e.code(v.values[i])) : v.values[i]) << scalar_type_name(t) << " " << i;
+  }
+  const RawEncoding e = raw_encoding(v, ScalarType::int16);
+  EXPECT_EQ(e.code(e.min), -32768.0);
+  EXPECT_NEAR(e.code(e.max), 32767.0, 1e-9);
+}
+
 TEST_F(IoTest, WritersRejectAVolumeWhoseValuesDoNotMatchItsDims) {
   Volume v = sample_volume();
   v.values.pop_back();
-  EXPECT_CONTAINS(io_error_of([&] { write_raw_float32(v, path("a.raw")); }), "59 values");
+  EXPECT_CONTAINS(io_error_of([&] { write_raw(v, path("a.raw"), ScalarType::float32); }), "59 values");
+  EXPECT_CONTAINS(io_error_of([&] { write_raw(v, path("a.raw"), ScalarType::uint16); }), "59 values");
   EXPECT_CONTAINS(io_error_of([&] { write_hdf5(v, path("a.h5")); }), "59 values");
   EXPECT_TRUE(entries().empty());
 }
@@ -558,7 +628,7 @@ TEST_F(IoTest, WritingIntoAMissingDirectoryThrowsAndLeavesNoFile) {
   Mesh m;
   m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
   m.triangles = {{0, 1, 2}};
-  EXPECT_CONTAINS(io_error_of([&] { write_raw_float32(v, missing + "/v.raw"); }), "does not exist");
+  EXPECT_CONTAINS(io_error_of([&] { write_raw(v, missing + "/v.raw", ScalarType::float32); }), "does not exist");
   EXPECT_CONTAINS(io_error_of([&] { write_hdf5(v, missing + "/v.h5"); }), "does not exist");
   EXPECT_CONTAINS(io_error_of([&] { write_ply(m, missing + "/m.ply"); }), missing + "/m.ply");
   EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("file/x")); }), "does not exist");

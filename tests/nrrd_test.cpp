@@ -21,6 +21,7 @@
 #include "io/nrrd_reader.h"
 #include "io/raw_reader.h"
 #include "io/volume_reader.h"
+#include "tests/byte_files.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
 
@@ -29,25 +30,17 @@ namespace {
 
 namespace fs = std::filesystem;
 
-using Bytes = std::vector<unsigned char>;
+using testing::Bytes;
+using testing::bytes_of;
+using testing::gzip;
+using testing::read_bytes;
+using testing::write_file;
 
 const fs::path kData = ISOTOPE_TEST_DATA;
 const std::string kNeghip = (kData / "neghip_66x66x66_uint8.raw").string();
 const std::string kHydrogen = (kData / "hydrogen_64x64x64_float32.raw").string();
 
 using NrrdTest = testing::TempDirTest;
-
-Bytes read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write_file(const std::string& path, const std::string& text, const Bytes& data = {}) {
-  std::ofstream out(path, std::ios::binary);
-  out.write(text.data(), static_cast<std::streamsize>(text.size()));
-  out.write(reinterpret_cast<const char*>(data.data()), static_cast<std::streamsize>(data.size()));
-  ASSERT_TRUE(out.good()) << path;
-}
 
 // "NRRD0004", the field lines, and the blank line that ends the header.
 std::string header(const std::vector<std::string>& fields, const std::string& magic = "NRRD0004") {
@@ -63,32 +56,6 @@ std::string volume_header(const std::string& sizes, const std::string& type, con
                                      "encoding: " + encoding};
   fields.insert(fields.end(), extra.begin(), extra.end());
   return header(fields);
-}
-
-template <typename T>
-Bytes bytes_of(const std::vector<T>& values, std::endian order) {
-  Bytes out;
-  for (T v : values) {
-    auto b = std::bit_cast<std::array<unsigned char, sizeof(T)>>(v);
-    if (order != std::endian::native) std::reverse(b.begin(), b.end());
-    out.insert(out.end(), b.begin(), b.end());
-  }
-  return out;
-}
-
-// A complete gzip member (header, deflate data, CRC-32 and length), as teem writes it.
-Bytes gzip(const Bytes& data) {
-  z_stream zs{};
-  EXPECT_EQ(deflateInit2(&zs, Z_BEST_SPEED, Z_DEFLATED, 16 + MAX_WBITS, 8, Z_DEFAULT_STRATEGY), Z_OK);
-  Bytes out(deflateBound(&zs, static_cast<uLong>(data.size())));
-  zs.next_in = const_cast<Bytef*>(data.data());
-  zs.avail_in = static_cast<uInt>(data.size());
-  zs.next_out = out.data();
-  zs.avail_out = static_cast<uInt>(out.size());
-  EXPECT_EQ(deflate(&zs, Z_FINISH), Z_STREAM_END);
-  out.resize(zs.total_out);
-  deflateEnd(&zs);
-  return out;
 }
 
 Volume read_shared_raw(const std::string& raw_path) { return read_raw(raw_path, *parse_raw_name(raw_path)); }

@@ -20,6 +20,7 @@
 #include "io/atomic_file.h"
 #include "io/io_error.h"
 #include "io/ply_writer.h"
+#include "io/store_reader.h"
 #include "io/volume_reader.h"
 #include "tools/commands.h"
 #include "tools/report.h"
@@ -57,6 +58,43 @@ CLI::Validator real_validator(bool non_negative) {
       "");
 }
 
+// The volume ready for extraction: a store is loaded as it is; any other input is read and
+// preprocessed in memory (the same records, see tests/store_test.cpp).
+MultiresVolume prepare(const ExtractArgs& a, ExtractionRun& run, bool progress) {
+  auto start = std::chrono::steady_clock::now();
+  if (is_store_file(a.input)) {
+    if (!a.dims.empty() || !a.type.empty()) throw CLI::ValidationError("--dims/--type", "do not apply to a store");
+    const StoreReader store(a.input);
+    MultiresVolume mv = store.load(progress ? progress_bar("loading store") : ProgressCallback{});
+    run.read_seconds = seconds_since(start);
+    run.data_dims = mv.data_dims();
+    run.preprocess = mv.stats();
+    run.lattice_k = mv.lattice().k;
+    return mv;
+  }
+  VolumeSource source;
+  source.spec = a.input;
+  if (!a.dims.empty()) source.dims = parse_dims(a.dims);
+  if (!a.type.empty()) source.type = parse_scalar_type(a.type);
+  const Volume volume = read_volume(source);
+  run.read_seconds = seconds_since(start);
+  run.data_dims = volume.dims;
+  if (progress) {
+    std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(volume.dims[0]),
+                 static_cast<long long>(volume.dims[1]), static_cast<long long>(volume.dims[2]), run.read_seconds);
+  }
+  start = std::chrono::steady_clock::now();
+  MultiresVolume mv = MultiresVolume::build(volume, progress ? progress_bar("preprocessing") : ProgressCallback{});
+  run.preprocess_seconds = seconds_since(start);
+  run.preprocess = mv.stats();
+  run.lattice_k = mv.lattice().k;
+  if (progress) {
+    std::fprintf(stderr, "isotope: preprocessed (lattice %lld^3) in %.3f s\n",
+                 static_cast<long long>(mv.lattice().side), run.preprocess_seconds);
+  }
+  return mv;
+}
+
 int run_extract(const ExtractArgs& a) {
   const bool progress = progress_enabled(a.quiet);
   ExtractionRun run;
@@ -82,31 +120,8 @@ int run_extract(const ExtractArgs& a) {
     threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
   }
 
-  VolumeSource source;
-  source.spec = a.input;
-  if (!a.dims.empty()) source.dims = parse_dims(a.dims);
-  if (!a.type.empty()) source.type = parse_scalar_type(a.type);
-
+  const MultiresVolume mv = prepare(a, run, progress);
   auto start = std::chrono::steady_clock::now();
-  const Volume volume = read_volume(source);
-  run.read_seconds = seconds_since(start);
-  run.data_dims = volume.dims;
-  if (progress) {
-    std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(volume.dims[0]),
-                 static_cast<long long>(volume.dims[1]), static_cast<long long>(volume.dims[2]), run.read_seconds);
-  }
-
-  start = std::chrono::steady_clock::now();
-  const MultiresVolume mv = MultiresVolume::build(volume, progress ? progress_bar("preprocessing") : ProgressCallback{});
-  run.preprocess_seconds = seconds_since(start);
-  run.preprocess = mv.stats();
-  run.lattice_k = mv.lattice().k;
-  if (progress) {
-    std::fprintf(stderr, "isotope: preprocessed (lattice %lld^3) in %.3f s\n",
-                 static_cast<long long>(mv.lattice().side), run.preprocess_seconds);
-  }
-
-  start = std::chrono::steady_clock::now();
   const Mesh mesh = extract(mv, run.options, &run.extract);
   run.extract_seconds = seconds_since(start);
   start = std::chrono::steady_clock::now();
@@ -140,7 +155,8 @@ Command add_extract_command(CLI::App& app) {
   auto a = std::make_shared<ExtractArgs>();
   CLI::App* cmd = app.add_subcommand("extract", "Extract an adaptive isosurface from a volume into a PLY mesh");
   cmd->add_option("INPUT", a->input,
-                  "Volume: NAME_XxYxZ_TYPE.raw, any .raw with --dims/--type, FILE.h5:/path/to/dataset, or .nrrd/.nhdr")
+                  "Store made by 'isotope convert', or a volume: NAME_XxYxZ_TYPE.raw, any .raw with --dims/--type, "
+                  "FILE.h5:/path/to/dataset, .nrrd/.nhdr")
       ->required();
   cmd->add_option("--iso", a->iso, "Isovalue (inside means value > iso)")
       ->required()

@@ -1,5 +1,6 @@
 // isotope generate: synthetic volumes with known isosurfaces (engine/fields.h), written as
-// float32 .raw (x fastest) or as HDF5 dataset /volume, chosen by the output's extension.
+// .raw (x fastest; float32, or uint8/uint16 stretched over the field's range) or as float32
+// HDF5 dataset /volume, chosen by the output's extension.
 #include <CLI/CLI.hpp>
 #include <array>
 #include <cmath>
@@ -25,6 +26,7 @@ struct GenerateArgs {
   uint64_t seed = 1;
   int bumps = 24;
   std::string output;
+  std::string type = "float32";
   bool quiet = false;
 };
 
@@ -32,6 +34,12 @@ const std::vector<std::string> kShapes = {"algebraic", "sphere", "torus", "linke
 
 bool ends_with(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// {9,9,9}, uint16 -> "9x9x9 uint16".
+std::string layout_text(const std::array<int64_t, 3>& dims, ScalarType type) {
+  return std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " " +
+         scalar_type_name(type);
 }
 
 // "5/32,3/32,0" -> {0.15625, 0.09375, 0}.
@@ -49,10 +57,35 @@ std::optional<std::array<double, 3>> parse_shift(const std::string& text) {
   return v;
 }
 
+// A raw name that states a layout must state the one written, or reading it back would fail
+// on the size or, worse, decode the bytes as another type of the same width.
+void check_name_matches(const GenerateArgs& a, ScalarType type) {
+  const auto named = parse_raw_name(a.output);
+  if (!named) return;
+  if (named->dims != std::array<int64_t, 3>{a.size, a.size, a.size} || named->type != type) {
+    throw CLI::ValidationError("-o", "the name says " + layout_text(named->dims, named->type) + " but the volume is " +
+                                         layout_text({a.size, a.size, a.size}, type) + ": " + a.output);
+  }
+}
+
+// The stretch of an integer encoding, so that isovalues can be chosen in the stored codes.
+void print_encoding(const RawEncoding& e) {
+  if (!e.is_mapped()) return;
+  const std::string first = e.first != 0 ? std::to_string(static_cast<long long>(e.first)) + " + " : "";
+  std::printf("%s codes: code(v) = %s(v - (%.9g)) * %.9g, stored rounded; min %.9g -> %g, max %.9g -> %g",
+              scalar_type_name(e.type), first.c_str(), e.min, e.scale, e.min, e.code(e.min), e.max,
+              std::round(e.code(e.max)));
+  if (e.min <= 0 && 0 <= e.max) std::printf("; iso 0 -> %.9g", e.code(0));
+  std::printf("\n");
+}
+
 int run_generate(const GenerateArgs& a, CLI::App* cmd) {
   const bool raw = ends_with(a.output, ".raw");
   const bool h5 = ends_with(a.output, ".h5") || ends_with(a.output, ".hdf5");
-  if (!raw && !h5) throw CLI::ValidationError("-o", "the output must end in .raw (float32) or .h5/.hdf5: " + a.output);
+  if (!raw && !h5) throw CLI::ValidationError("-o", "the output must end in .raw or .h5/.hdf5: " + a.output);
+  const ScalarType type = *parse_scalar_type(a.type);
+  if (h5 && type != ScalarType::float32) throw CLI::ValidationError("--type", "HDF5 output is float32; --type applies to .raw");
+  check_name_matches(a, type);
   if (cmd->count("--shift") > 0 && a.shape != "algebraic") {
     throw CLI::ValidationError("--shift", "only the algebraic field takes --shift");
   }
@@ -75,18 +108,19 @@ int run_generate(const GenerateArgs& a, CLI::App* cmd) {
     v = generate_noise(a.size, a.seed, a.bumps);
   }
 
+  RawEncoding encoding;
   if (raw) {
-    write_raw_float32(v, a.output);
+    encoding = write_raw(v, a.output, type);
   } else {
     write_hdf5(v, a.output);
   }
   if (!a.quiet) {
-    std::printf("%s: %s field, %lldx%lldx%lld float32%s\n", a.output.c_str(), a.shape.c_str(),
-                static_cast<long long>(a.size), static_cast<long long>(a.size), static_cast<long long>(a.size),
-                h5 ? ", dataset /volume" : "");
+    const std::string layout = layout_text(v.dims, type);
+    std::printf("%s: %s field, %s%s\n", a.output.c_str(), a.shape.c_str(), layout.c_str(), h5 ? ", dataset /volume" : "");
+    print_encoding(encoding);
     if (raw && !parse_raw_name(a.output)) {
-      std::printf("note: the name does not carry the layout; extract it with --dims %lldx%lldx%lld --type float32\n",
-                  static_cast<long long>(a.size), static_cast<long long>(a.size), static_cast<long long>(a.size));
+      std::printf("note: the name does not carry the layout; extract it with --dims %s --type %s\n",
+                  layout.substr(0, layout.find(' ')).c_str(), scalar_type_name(type));
     }
   }
   return 0;
@@ -115,9 +149,14 @@ Command add_generate_command(CLI::App& app) {
           ""));
   cmd->add_option("--seed", a->seed, "noise: random seed")->capture_default_str();
   cmd->add_option("--bumps", a->bumps, "noise: number of Gaussians")->check(CLI::Range(1, 100000))->capture_default_str();
-  cmd->add_option("-o,--output", a->output, "Output: FILE.raw (float32, x fastest) or FILE.h5 (dataset /volume)")
+  cmd->add_option("-o,--output", a->output, "Output: FILE.raw (--type, x fastest) or FILE.h5 (float32 dataset /volume)")
       ->required()
       ->type_name("FILE");
+  cmd->add_option("--type", a->type,
+                  ".raw value type; uint8/uint16 map the field's [min, max] onto [0, 255] / [0, 65535],\n"
+                  "rounded, and print the mapping (HDF5 output is always float32)")
+      ->check(CLI::IsMember({"uint8", "uint16", "float32"}))
+      ->capture_default_str();
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");
   return [a, cmd] { return run_generate(*a, cmd); };
 }

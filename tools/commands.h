@@ -17,6 +17,9 @@ using Command = std::function<int()>;  // returns the exit code
 Command add_extract_command(CLI::App& app);   // isotope extract INPUT --iso V -o MESH.ply
 Command add_generate_command(CLI::App& app);  // isotope generate SHAPE --size N -o FILE
 Command add_demo_command(CLI::App& app);      // isotope demo [--out DIR] [--data DIR]
+Command add_convert_command(CLI::App& app);   // isotope convert INPUT OUTPUT.isotope
+Command add_info_command(CLI::App& app);      // isotope info STORE
+Command add_verify_command(CLI::App& app);    // isotope verify STORE
 
 // A real number as typed by a user: "0.25", "-3e-2" or a fraction "1/64"; nullopt otherwise.
 std::optional<double> parse_real(const std::string& text);

@@ -58,6 +58,9 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   const Command extract = add_extract_command(app);
   const Command generate = add_generate_command(app);
+  const Command convert = add_convert_command(app);
+  const Command info = add_info_command(app);
+  const Command verify = add_verify_command(app);
   const Command demo = add_demo_command(app);
   app.footer("Run 'isotope COMMAND --help' for the options of a command.");
   app.failure_message([](const CLI::App*, const CLI::Error& e) {
@@ -68,6 +71,9 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
     if (app.got_subcommand("extract")) return extract();
     if (app.got_subcommand("generate")) return generate();
+    if (app.got_subcommand("convert")) return convert();
+    if (app.got_subcommand("info")) return info();
+    if (app.got_subcommand("verify")) return verify();
     if (app.got_subcommand("demo")) return demo();
     return 2;  // unreachable: require_subcommand(1)
   } catch (const CLI::ParseError& e) {

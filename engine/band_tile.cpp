@@ -1,0 +1,160 @@
+#include "engine/band_tile.h"
+
+#include <algorithm>
+#include <cassert>
+#include <tuple>
+
+namespace isotope {
+
+std::pair<Box3, Box3> BandTile::window_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi) {
+  const int64_t top = layout.lattice().n >> band;
+  Box3 lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max<int64_t>(0, core_lo[a] - 2);
+    hi[a] = std::min(top, core_hi[a] - 1 + 2);
+  }
+  return {lo, hi};
+}
+
+BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi, Buffers buffers)
+    : layout_(layout), j_(band), core_lo_(core_lo), core_hi_(core_hi), values_(std::move(buffers.values)),
+      records_(std::move(buffers.records)), children_(std::move(buffers.children)) {
+  top_ = layout.lattice().n >> band;
+  std::tie(lo_, hi_) = window_of(layout, band, core_lo, core_hi);
+  for (int a = 0; a < 3; ++a) {
+    size_[a] = hi_[a] - lo_[a] + 1;
+    cells_[a] = std::max<int64_t>(1, size_[a] - 1);
+    next_lo_[a] = core_lo[a] / 2;
+    next_hi_[a] = core_hi[a] / 2;
+    if (band == layout.lattice().k) next_hi_[a] = next_lo_[a];  // no band above the corners
+    else if (core_hi[a] == layout.band(band).nodes[a]) next_hi_[a] = layout.band(band + 1).nodes[a];
+  }
+  // Grown, never cleared: every entry read is written first (values by the caller, records by
+  // build() before any parent reads them, children by the caller where they exist), and
+  // re-initializing the arrays of a large tile costs as much as filling them.
+  const auto nodes = static_cast<size_t>(size_[0] * size_[1] * size_[2]);
+  if (values_.size() < nodes) values_.resize(nodes);
+  if (records_.size() < nodes) records_.resize(nodes);
+  const auto cells = static_cast<size_t>(cells_[0] * cells_[1] * cells_[2]);
+  if (band > 0 && children_.size() < cells) children_.resize(cells);
+}
+
+float BandTile::value(const Coord& c) const {
+  const Box3 g{c[0] >> j_, c[1] >> j_, c[2] >> j_};
+  assert(g[0] >= lo_[0] && g[0] <= hi_[0] && g[1] >= lo_[1] && g[1] <= hi_[1] && g[2] >= lo_[2] && g[2] <= hi_[2]);
+  return node_value(g);
+}
+
+bool BandTile::child(const Coord& u, Record& r) const {
+  const Lattice& l = layout_.lattice();
+  const int s = scale_of(u, l);
+  for (int a = 0; a < 3; ++a)
+    if (u[a] > record_extent(l, layout_.dims(), a, s)) return false;
+  if (s == j_) {
+    r = node_record({u[0] >> j_, u[1] >> j_, u[2] >> j_});
+  } else {
+    assert(s == j_ - 1 && "a scale-j vertex's children are of scale j or j-1 cube centres");
+    r = child_record({u[0] >> j_, u[1] >> j_, u[2] >> j_});
+  }
+  return true;
+}
+
+Record BandTile::next_child(const Box3& g) const {
+  const Band& band = layout_.band(j_);
+  const Box3 c{2 * g[0] + 1, 2 * g[1] + 1, 2 * g[2] + 1};
+  for (int a = 0; a < 3; ++a)
+    if (c[a] >= band.nodes[a]) return Record{};
+  return node_record(c);
+}
+
+void BandTile::store(const Coord& v, const Record& r) {
+  records_[static_cast<size_t>(index({v[0] >> j_, v[1] >> j_, v[2] >> j_}, size_))] = r;
+}
+
+// Whether every node g's record depends on lies in the window (or beyond a lattice face, where
+// the diamond is cut): one step for edge midpoints; for face and cube centres two steps along
+// their odd axes (children one step away, and those children's own reach), one along the even.
+bool BandTile::computable(const Box3& g, int odd) const {
+  for (int a = 0; a < 3; ++a) {
+    const int64_t m = (odd >= 2 && (g[a] & 1)) ? 2 : 1;
+    if (g[a] - m < lo_[a] && lo_[a] != 0) return false;
+    if (g[a] + m > hi_[a] && hi_[a] != top_) return false;
+  }
+  return true;
+}
+
+bool BandTile::inside_data_box(const Box3& g) const {
+  const int64_t h = int64_t{1} << j_;
+  for (int a = 0; a < 3; ++a)
+    if ((g[a] << j_) - h < 0 || (g[a] << j_) + h > layout_.dims()[a] - 1) return false;
+  return true;
+}
+
+const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
+  DiamondTemplate& t = templates_[(g[0] & 3) | (g[1] & 3) << 2 | (g[2] & 3) << 4];
+  if (t.ready) return t;
+  const Lattice& l = layout_.lattice();
+  const Diamond d = diamond_of({g[0] << j_, g[1] << j_, g[2] << j_}, l);
+  const int64_t base = index(g, size_), cell_base = index(g, cells_);
+  auto value_offset = [&](const Coord& p) { return index({p[0] >> j_, p[1] >> j_, p[2] >> j_}, size_) - base; };
+  t.type = d.type;
+  t.ring_count = d.ring_count;
+  t.a = value_offset(d.a);
+  t.b = value_offset(d.b);
+  for (int i = 0; i < d.ring_count; ++i) t.ring[i] = value_offset(d.ring[i]);
+  for_each_child(d, l, [&](const Coord& u) {
+    const Box3 gu{u[0] >> j_, u[1] >> j_, u[2] >> j_};
+    if (scale_of(u, l) == j_) t.same[t.same_count++] = index(gu, size_) - base;
+    else t.cube[t.cube_count++] = index(gu, cells_) - cell_base;
+  });
+  t.ready = true;
+  return t;
+}
+
+// RecordBuilder::build for a diamond inside the data box, reading through a template; the same
+// record bit for bit (the max and hull folds do not depend on the order of the children).
+void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts) {
+  const int64_t base = index(g, size_);
+  const float* v = values_.data() + base;
+  DiamondValues dv;
+  dv.type = t.type;
+  dv.fa = v[t.a];
+  dv.fb = v[t.b];
+  dv.fv = v[0];
+  DiamondBounds range;
+  range.lo = std::min({dv.fa, dv.fb, dv.fv});
+  range.hi = std::max({dv.fa, dv.fb, dv.fv});
+  for (int i = 0; i < t.ring_count; ++i) {
+    dv.ring[i] = v[t.ring[i]];
+    range.lo = std::min(range.lo, dv.ring[i]);
+    range.hi = std::max(range.hi, dv.ring[i]);
+  }
+  Saturation sat;
+  for (int i = 0; i < t.same_count; ++i) sat.add(records_[static_cast<size_t>(base + t.same[i])], range);
+  const int64_t cell_base = index(g, cells_);
+  for (int i = 0; i < t.cube_count; ++i) sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range);
+  records_[static_cast<size_t>(base)] = finish_record(dv, true, range, sat, counts);
+}
+
+void BandTile::build(CriticalCounts& counts) {
+  const Lattice& l = layout_.lattice();
+  if (j_ >= l.k) return;  // the corners: no records
+  const Band& band = layout_.band(j_);
+  RecordBuilder<BandTile> builder(*this);
+  CriticalCounts halo_counts = {{0, 0, 0}, {0, 0, 0}};  // halo nodes belong to (and are counted by) other tiles
+  // Finest first, as in MultiresVolume::build: edge midpoints, face centres, cube centres.
+  for (int m = 1; m <= 3; ++m)
+    for (int64_t z = lo_[2]; z <= std::min(hi_[2], band.nodes[2] - 1); ++z)
+      for (int64_t y = lo_[1]; y <= std::min(hi_[1], band.nodes[1] - 1); ++y)
+        for (int64_t x = lo_[0]; x <= std::min(hi_[0], band.nodes[0] - 1); ++x) {
+          const int odd = static_cast<int>((x & 1) + (y & 1) + (z & 1));
+          if (odd != m || !computable({x, y, z}, m)) continue;
+          const bool core = x >= core_lo_[0] && x < core_hi_[0] && y >= core_lo_[1] && y < core_hi_[1] &&
+                            z >= core_lo_[2] && z < core_hi_[2];
+          CriticalCounts& c = core ? counts : halo_counts;
+          if (inside_data_box({x, y, z})) build_fast({x, y, z}, template_for({x, y, z}), c);
+          else builder.build({x << j_, y << j_, z << j_}, c);
+        }
+}
+
+}  // namespace isotope

@@ -1,0 +1,21 @@
+#pragma once
+// Lossless transform of one float array of a store brick into bytes that zstd compresses well:
+// integer-valued fields (uint8/uint16 scans and their metadata) become narrow byte-shuffled
+// deltas, constant fields a single value, anything else byte-shuffled bit patterns.
+// The byte layout is specified in docs/FORMAT.md, "Field encoding".
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace isotope {
+
+// Appends a self-describing, lossless encoding of `values` to `out` (decode restores every bit,
+// incl. -0.0, +-inf, NaN payloads, denormals).
+void encode_field(std::span<const float> values, std::vector<uint8_t>& out);
+
+// Decodes one field starting at `p` into `values` (whose size the caller knows and must match the
+// encoded count, else IoError); returns the pointer just past it. Never reads outside [p, end),
+// never crashes on hostile bytes: throws IoError("...what is malformed...") instead.
+const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<float> values);
+
+}  // namespace isotope

@@ -1,0 +1,119 @@
+// The banded build (engine/band_tile.h) against MultiresVolume::build: every record bit for bit,
+// with the bands chained through nothing but each tile's next-band output, as the store writer
+// chains them through its scratch files.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "engine/band_tile.h"
+#include "engine/fields.h"
+#include "engine/multires_volume.h"
+#include "tests/test_support.h"
+
+namespace isotope {
+namespace {
+
+struct NextBand {
+  Box3 nodes{};
+  std::vector<float> values;
+  std::vector<Record> children;
+  size_t at(const Box3& g) const { return static_cast<size_t>((g[2] * nodes[1] + g[1]) * nodes[0] + g[0]); }
+};
+
+bool same_bits(const Record& a, const Record& b) { return std::memcmp(&a, &b, sizeof(Record)) == 0; }
+
+// Runs every band tile by tile (tiles of one brick, in any order) and checks each core record.
+int64_t check_banded(const Volume& volume, int brick_bits) {
+  const MultiresVolume mv = MultiresVolume::build(volume);
+  const StoreLayout layout(volume.dims, brick_bits);
+  const int64_t t = layout.brick_width();
+  NextBand in;
+  int64_t checked = 0;
+  for (const Band& band : layout.bands()) {
+    const int j = band.scale;
+    NextBand out;
+    if (j < layout.lattice().k) {
+      out.nodes = layout.band(j + 1).nodes;
+      out.values.assign(static_cast<size_t>(out.nodes[0] * out.nodes[1] * out.nodes[2]), NAN);
+      out.children.resize(out.values.size());
+    }
+    for (int64_t bz = 0; bz < band.bricks[2]; ++bz)
+      for (int64_t by = 0; by < band.bricks[1]; ++by)
+        for (int64_t bx = 0; bx < band.bricks[0]; ++bx) {
+          const Box3 lo{bx * t, by * t, bz * t};
+          const Box3 hi{std::min(lo[0] + t, band.nodes[0]), std::min(lo[1] + t, band.nodes[1]),
+                        std::min(lo[2] + t, band.nodes[2])};
+          BandTile tile(layout, j, lo, hi);
+          const Box3 s = tile.window_size();
+          for (int64_t z = 0; z < s[2]; ++z)
+            for (int64_t y = 0; y < s[1]; ++y)
+              for (int64_t x = 0; x < s[0]; ++x) {
+                const Box3 g{tile.window_lo()[0] + x, tile.window_lo()[1] + y, tile.window_lo()[2] + z};
+                float v;
+                if (j == 0) {
+                  v = volume.at(std::min(g[0], volume.dims[0] - 1), std::min(g[1], volume.dims[1] - 1),
+                                std::min(g[2], volume.dims[2] - 1));
+                } else {
+                  v = in.values[in.at({std::min(g[0], in.nodes[0] - 1), std::min(g[1], in.nodes[1] - 1),
+                                       std::min(g[2], in.nodes[2] - 1)})];
+                }
+                tile.values()[static_cast<size_t>((z * s[1] + y) * s[0] + x)] = v;
+                if (j > 0 && x + 1 < s[0] && y + 1 < s[1] && z + 1 < s[2] && g[0] < in.nodes[0] &&
+                    g[1] < in.nodes[1] && g[2] < in.nodes[2])
+                  tile.children()[static_cast<size_t>((z * (s[1] - 1) + y) * (s[0] - 1) + x)] = in.children[in.at(g)];
+              }
+          CriticalCounts counts = {{0, 0, 0}, {0, 0, 0}};
+          tile.build(counts);
+          for (int64_t z = lo[2]; z < hi[2]; ++z)
+            for (int64_t y = lo[1]; y < hi[1]; ++y)
+              for (int64_t x = lo[0]; x < hi[0]; ++x) {
+                if (!((x | y | z) & 1) || j == layout.lattice().k) continue;
+                const Coord v{x << j, y << j, z << j};
+                EXPECT_TRUE(mv.has_record(v));
+                const int64_t slot = mv.record_slot(v);
+                const Record expected{mv.bounds(slot), mv.topology(slot)};
+                EXPECT_TRUE(same_bits(tile.node_record({x, y, z}), expected))
+                    << "band " << j << " node " << x << " " << y << " " << z;
+                ++checked;
+              }
+          for (int64_t z = tile.next_lo()[2]; z < tile.next_hi()[2]; ++z)
+            for (int64_t y = tile.next_lo()[1]; y < tile.next_hi()[1]; ++y)
+              for (int64_t x = tile.next_lo()[0]; x < tile.next_hi()[0]; ++x) {
+                out.values[out.at({x, y, z})] = tile.next_value({x, y, z});
+                out.children[out.at({x, y, z})] = tile.next_child({x, y, z});
+              }
+        }
+    for (float v : out.values) EXPECT_FALSE(std::isnan(v)) << "band " << j + 1 << " input not covered";
+    in = std::move(out);
+  }
+  // Every record of the in-memory build was among them.
+  int64_t records = 0;
+  const Lattice& l = mv.lattice();
+  for (int64_t z = 0; z <= l.n; ++z)
+    for (int64_t y = 0; y <= l.n; ++y)
+      for (int64_t x = 0; x <= l.n; ++x) records += scale_of({x, y, z}, l) < l.k && mv.has_record({x, y, z});
+  EXPECT_EQ(checked, records);
+  return checked;
+}
+
+TEST(BandBuild, EqualsInMemoryBuildOnOddDimensions) {
+  for (const auto& dims : std::vector<Box3>{{2, 2, 2}, {3, 5, 2}, {17, 17, 17}, {30, 19, 23}, {41, 9, 70}}) {
+    const Volume v = testing::crop(generate_noise(70, 7), dims);
+    for (int bits : {1, 2, 3}) {
+      const int64_t checked = check_banded(v, bits);
+      if (dims[0] > 2) {
+        EXPECT_GT(checked, v.node_count() / 2);
+      }
+    }
+  }
+}
+
+TEST(BandBuild, EqualsInMemoryBuildOnRealVolume) {
+  for (const auto& shared : testing::shared_volumes()) {
+    const Volume v = testing::load_shared(shared);
+    EXPECT_GT(check_banded(v, 4), v.node_count() / 2) << shared.name;
+  }
+}
+
+}  // namespace
+}  // namespace isotope

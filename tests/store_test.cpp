@@ -1,0 +1,356 @@
+// The store (docs/FORMAT.md): convert -> load gives the in-memory preprocessing bit for bit and
+// the same meshes; the file does not depend on threads or the memory budget; every corruption
+// is caught, named, and never crashes.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <functional>
+#include <cstring>
+#include <fstream>
+#include <random>
+
+#include <hdf5.h>
+
+#include "engine/extract.h"
+#include "engine/fields.h"
+#include "engine/multires_volume.h"
+#include "engine/record_builder.h"
+#include "io/box_reader.h"
+#include "io/io_error.h"
+#include "io/store_reader.h"
+#include "io/store_writer.h"
+#include "tbb/global_control.h"
+#include "tests/byte_files.h"
+#include "tests/io_error_of.h"
+#include "tests/temp_dir_test.h"
+#include "tests/test_support.h"
+
+namespace isotope {
+namespace {
+
+using testing::io_error_of;
+using testing::read_bytes;
+using testing::TempDirTest;
+
+// The IoError's message, or "" when f succeeds (anything else thrown fails the test).
+std::string message_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const IoError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+std::string dims_name(const Volume& v) {
+  return std::to_string(v.dims[0]) + "x" + std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
+}
+
+// `fold`: what a quantized store adds to every error (rounded up, infinity stays).
+bool same_record(const MultiresVolume& a, const MultiresVolume& b, int64_t slot, float fold) {
+  DiamondBounds expected = b.bounds(slot);
+  if (fold != 0) {
+    expected.error_bound = round_up(static_cast<double>(expected.error_bound) + fold);
+    expected.error_surplus = round_up(static_cast<double>(expected.error_surplus) + fold);
+  }
+  return std::memcmp(&a.bounds(slot), &expected, sizeof(DiamondBounds)) == 0 &&
+         std::memcmp(&a.topology(slot), &b.topology(slot), sizeof(DiamondTopology)) == 0;
+}
+
+class Store : public TempDirTest {
+ protected:
+  // Writes `v` as float32 raw and converts it; returns the store's path.
+  std::string convert(const Volume& v, const std::string& name, ConvertOptions options = {}) {
+    const std::string raw = path(name + "_" + dims_name(v) + "_float32.raw");
+    std::ofstream(raw, std::ios::binary)
+        .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
+    const std::string store = path(name + ".isotope");
+    const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir_.string());
+    convert_to_store(*input, store, options);
+    return store;
+  }
+
+  // Every value and record of the loaded store equals the in-memory build's, bit for bit.
+  void expect_round_trip(const Volume& v, const std::string& store, float fold = 0) {
+    const MultiresVolume expected = MultiresVolume::build(v);
+    const MultiresVolume loaded = StoreReader(store).load();
+    ASSERT_EQ(loaded.lattice().n, expected.lattice().n);
+    const Lattice& l = expected.lattice();
+    int64_t records = 0, mismatches = 0;
+    for (int64_t z = 0; z <= l.n; ++z)
+      for (int64_t y = 0; y <= l.n; ++y)
+        for (int64_t x = 0; x <= l.n; ++x) {
+          const Coord c{x, y, z};
+          if (x < v.dims[0] && y < v.dims[1] && z < v.dims[2]) {
+            const float a = loaded.value(c), b = expected.value(c);
+            mismatches += std::memcmp(&a, &b, sizeof a) != 0;
+          }
+          if (scale_of(c, l) == l.k || !expected.has_record(c)) continue;
+          ++records;
+          if (!same_record(loaded, expected, expected.record_slot(c), fold)) {
+            if (++mismatches < 5) ADD_FAILURE() << "record differs at " << x << " " << y << " " << z;
+          }
+        }
+    EXPECT_EQ(mismatches, 0) << "of " << records << " records";
+    for (int t = 0; t < 3; ++t) {
+      EXPECT_EQ(loaded.stats().critical_paper[t], expected.stats().critical_paper[t]);
+      EXPECT_EQ(loaded.stats().critical_exact[t], expected.stats().critical_exact[t]);
+    }
+  }
+};
+
+TEST_F(Store, RoundTripIsExactOnOddDimensionsAndSmallBricks) {
+  const std::vector<Volume> volumes = {testing::crop(generate_noise(70, 3), {30, 19, 23}),
+                                       testing::crop(generate_noise(70, 4), {41, 9, 70}),
+                                       testing::crop(generate_algebraic(40), {40, 33, 37}),
+                                       testing::crop(generate_noise(9, 5), {2, 9, 5})};
+  for (const Volume& v : volumes)
+    for (int bits : {2, 5}) {
+      ConvertOptions o;
+      o.brick_bits = bits;
+      SCOPED_TRACE(dims_name(v) + " brick bits " + std::to_string(bits));
+      expect_round_trip(v, convert(v, "v" + std::to_string(bits), o));
+    }
+}
+
+TEST_F(Store, RoundTripIsExactOnRealVolumes) {
+  for (const auto& shared : testing::shared_volumes()) {
+    SCOPED_TRACE(shared.name);
+    const Volume v = testing::load_shared(shared);
+    expect_round_trip(v, convert(v, shared.name));
+  }
+}
+
+TEST_F(Store, ExtractionFromStoreEqualsInMemory) {
+  struct Case {
+    Volume volume;
+    std::vector<float> isovalues;
+  };
+  std::vector<Case> cases = {{testing::crop(generate_noise(40, 11), {40, 35, 29}), {-0.3f, 0.0f, 0.25f}},
+                             {testing::crop(generate_algebraic(40, {5.0 / 32, 3.0 / 32, 0}), {37, 40, 33}), {0.0f, 0.1f}}};
+  for (const auto& shared : testing::shared_volumes())
+    cases.push_back({testing::load_shared(shared), {shared.isovalues[0], shared.isovalues[1], shared.isovalues[2]}});
+  int compared = 0;
+  for (Case& c : cases) {
+    c.volume.spacing = {1, 1, 1};  // what a raw file carries
+    c.volume.origin = {0, 0, 0};
+    const MultiresVolume memory = MultiresVolume::build(c.volume);
+    const MultiresVolume stored = StoreReader(convert(c.volume, "case" + std::to_string(compared))).load();
+    for (float iso : c.isovalues)
+      for (double eps : {0.0, 0.01, 0.1, 1.0, 16.0})
+        for (auto mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve})
+          for (auto error : {ErrorIndicator::bound, ErrorIndicator::surplus}) {
+            ExtractOptions o;
+            o.iso = iso, o.eps = eps, o.topology = mode, o.error = error;
+            const Mesh a = extract(memory, o), b = extract(stored, o);
+            ASSERT_EQ(a.positions, b.positions) << "iso " << iso << " eps " << eps;
+            ASSERT_EQ(a.triangles, b.triangles) << "iso " << iso << " eps " << eps;
+            ++compared;
+          }
+  }
+  EXPECT_GE(compared, 300);
+}
+
+// A chunked, gzip-compressed HDF5 dataset (chunks that do not align with the tiles) converts to
+// the same records as the volume in memory.
+TEST_F(Store, ChunkedCompressedHdf5Converts) {
+  Volume v = testing::load_shared(testing::shared_volumes()[1]);  // neghip, uint8 values
+  std::vector<uint16_t> data(v.values.begin(), v.values.end());
+  const std::string h5 = path("chunked.h5");
+  const hsize_t zyx[3] = {static_cast<hsize_t>(v.dims[2]), static_cast<hsize_t>(v.dims[1]),
+                          static_cast<hsize_t>(v.dims[0])};
+  const hsize_t chunk[3] = {7, 11, 13};
+  const hid_t file = H5Fcreate(h5.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  const hid_t space = H5Screate_simple(3, zyx, nullptr);
+  const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+  ASSERT_GE(H5Pset_chunk(dcpl, 3, chunk), 0);
+  ASSERT_GE(H5Pset_deflate(dcpl, 6), 0);
+  const hid_t ds = H5Dcreate2(file, "/density", H5T_STD_U16LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+  ASSERT_GE(ds, 0);
+  ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_UINT16, H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data()), 0);
+  H5Dclose(ds);
+  H5Pclose(dcpl);
+  H5Sclose(space);
+  H5Fclose(file);
+
+  const auto input = open_box_reader({h5 + ":/density", std::nullopt, std::nullopt}, dir_.string());
+  EXPECT_EQ(input->info().type, "uint16");
+  const std::string store = path("chunked.isotope");
+  convert_to_store(*input, store, {});
+  expect_round_trip(v, store);
+  verify_store(store);
+}
+
+TEST_F(Store, FileDoesNotDependOnThreadsOrMemoryBudget) {
+  const Volume v = testing::crop(generate_noise(70, 8), {70, 45, 39});
+  ConvertOptions small;
+  small.memory_mb = 1;  // one tile in flight
+  const auto a = read_bytes(convert(v, "a", small));
+  const auto b = read_bytes(convert(v, "b"));
+  testing::Bytes c;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    c = read_bytes(convert(v, "c"));
+  }
+  EXPECT_FALSE(a.empty());
+  EXPECT_TRUE(a == b);
+  EXPECT_TRUE(a == c);
+}
+
+TEST_F(Store, CancelledConvertLeavesNothing) {
+  const Volume v = generate_noise(65, 2);
+  std::atomic<bool> cancel{false};
+  ConvertOptions o;
+  o.memory_mb = 1;
+  o.progress = [&](double f) {
+    if (f > 0.3) cancel = true;
+  };
+  o.cancel = &cancel;
+  const auto before = entries();
+  EXPECT_CONTAINS(io_error_of([&] { convert(v, "cancelled", o); }), "interrupted");
+  auto after = entries();
+  after.erase(std::remove(after.begin(), after.end(), "cancelled_65x65x65_float32.raw"), after.end());
+  EXPECT_EQ(after, before);
+}
+
+// Quantized float data: the store is exact for the quantized field (codes), with half a code
+// step added to every error; extraction maps the isovalue onto codes.
+TEST_F(Store, QuantizedStoreIsExactForTheQuantizedField) {
+  Volume v = testing::load_shared(testing::shared_volumes()[2]);  // hydrogen, float32
+  ASSERT_EQ(v.dims[0], 64);
+  for (int bits : {8, 16}) {
+    ConvertOptions o;
+    o.quantize_bits = bits;
+    const std::string store = convert(v, "q" + std::to_string(bits), o);
+    const StoreHeader h = StoreReader(store).header();
+    EXPECT_EQ(h.quantize_bits, bits);
+    Volume codes = v;
+    for (float& x : codes.values)
+      x = std::clamp(std::nearbyint(static_cast<float>((x - h.value_offset) / h.value_scale)), 0.0f,
+                     static_cast<float>((1 << bits) - 1));
+    expect_round_trip(codes, store, kQuantizationError);
+    const MultiresVolume stored = StoreReader(store).load();
+    const MultiresVolume memory = MultiresVolume::build(codes);
+    for (float iso : {0.05f, 0.1f, 0.3f})
+      for (double eps : {0.0, 0.02, 0.2}) {
+        ExtractOptions physical, in_codes;
+        physical.iso = iso, physical.eps = eps;
+        in_codes.iso = static_cast<float>((iso - h.value_offset) / h.value_scale);
+        // Codes are integers, errors half-integers: err + 1/2 < eps exactly when err < eps - 1/2.
+        in_codes.eps = std::max(0.0, eps / h.value_scale - kQuantizationError);
+        const Mesh a = extract(stored, physical), b = extract(memory, in_codes);
+        EXPECT_EQ(a.triangles, b.triangles) << bits << " bits, iso " << iso << " eps " << eps;
+        EXPECT_EQ(a.positions, b.positions);
+      }
+  }
+  // Smaller than lossless: 8 bits well below, 16 bits below.
+  const auto lossless = std::filesystem::file_size(convert(v, "lossless"));
+  EXPECT_LT(std::filesystem::file_size(path("q8.isotope")) * 4, lossless);
+  EXPECT_LT(std::filesystem::file_size(path("q16.isotope")), lossless);
+}
+
+TEST_F(Store, QuantizeRefusesIntegerData) {
+  Volume v = testing::load_shared(testing::shared_volumes()[0]);
+  ConvertOptions o;
+  o.quantize_bits = 8;
+  // An integer volume read back as float32 raw is float data; mark it integer through a uint8 file.
+  const std::string raw = path("i_" + dims_name(v) + "_uint8.raw");
+  testing::Bytes bytes(v.values.begin(), v.values.end());
+  testing::write_file(raw, "", bytes);
+  const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir_.string());
+  EXPECT_CONTAINS(io_error_of([&] { convert_to_store(*input, path("i.isotope"), o); }), "integer data");
+  EXPECT_FALSE(std::filesystem::exists(path("i.isotope")));
+}
+
+// Corruption: every byte of a store is covered by a checksum, so any change is caught.
+class StoreCorruption : public Store {
+ protected:
+  void SetUp() override {
+    Store::SetUp();
+    ConvertOptions o;
+    o.brick_bits = 3;  // many small bricks
+    good_ = read_bytes(convert(testing::crop(generate_noise(40, 21), {21, 17, 19}), "good", o));
+    bad_ = path("bad.isotope");
+  }
+  // What verify says about `bytes`, or "" when it accepts them.
+  std::string verify_message(const testing::Bytes& bytes) {
+    testing::write_file(bad_, "", bytes);
+    return message_of([&] { verify_store(bad_); });
+  }
+  testing::Bytes good_;
+  std::string bad_;
+};
+
+TEST_F(StoreCorruption, GoodStoreVerifies) { EXPECT_EQ(verify_message(good_), ""); }
+
+TEST_F(StoreCorruption, FlippedByteInEveryBrickIsNamed) {
+  testing::write_file(bad_, "", good_);
+  const StoreReader reader(bad_);
+  std::mt19937 rng(5);
+  for (size_t i = 0; i < reader.directory().size(); ++i) {
+    const BrickEntry& e = reader.directory()[i];
+    auto bytes = good_;
+    bytes[e.offset + rng() % e.compressed_bytes] ^= static_cast<uint8_t>(1 + rng() % 255);
+    const std::string name = "brick " + std::to_string(i) + " ";
+    EXPECT_CONTAINS(verify_message(bytes), name);
+    // extract reads the store through load(): the same message.
+    EXPECT_CONTAINS(io_error_of([&] { StoreReader(bad_).load(); }), name);
+  }
+}
+
+TEST_F(StoreCorruption, TruncationWrongMagicAndVersion) {
+  for (size_t size : {size_t{0}, size_t{7}, size_t{100}, kHeaderBytes, kHeaderBytes + 1, good_.size() / 2, good_.size() - 1}) {
+    auto bytes = good_;
+    bytes.resize(size);
+    const std::string m = verify_message(bytes);
+    EXPECT_TRUE(m.find("truncated") != std::string::npos || m.find("not an isotope store") != std::string::npos) << m;
+  }
+  auto magic = good_;
+  magic[0] = 'X';
+  EXPECT_CONTAINS(verify_message(magic), "not an isotope store");
+  auto version = good_;
+  version[8] = 2;
+  EXPECT_CONTAINS(verify_message(version), "version 2 is not supported");
+  auto header = good_;
+  header[40] ^= 1;
+  EXPECT_CONTAINS(verify_message(header), "header checksum");
+  auto directory = good_;
+  directory[good_.size() - 10] ^= 1;
+  EXPECT_CONTAINS(verify_message(directory), "directory checksum");
+  auto longer = good_;
+  longer.push_back(0);
+  EXPECT_CONTAINS(verify_message(longer), "unexpected bytes");
+}
+
+// Randomized: flips, overwrites, truncations and insertions anywhere. Each one must be caught
+// (an IoError, never a crash), by verify and by load.
+TEST_F(StoreCorruption, RandomizedCorruptionIsAlwaysCaught) {
+  std::mt19937 rng(1234);
+  constexpr int kIterations = 400;
+  int caught = 0;
+  for (int it = 0; it < kIterations; ++it) {
+    auto bytes = good_;
+    switch (rng() % 4) {
+      case 0: bytes[rng() % bytes.size()] ^= static_cast<uint8_t>(1 + rng() % 255); break;
+      case 1: {
+        const size_t at = rng() % bytes.size(), n = std::min<size_t>(1 + rng() % 64, bytes.size() - at);
+        for (size_t i = 0; i < n; ++i) bytes[at + i] = static_cast<uint8_t>(rng());
+        if (bytes == good_) continue;
+        break;
+      }
+      case 2: bytes.resize(rng() % bytes.size()); break;
+      default: bytes.insert(bytes.begin() + static_cast<std::ptrdiff_t>(rng() % bytes.size()), static_cast<uint8_t>(rng()));
+    }
+    const std::string m = verify_message(bytes);
+    EXPECT_NE(m, "") << "iteration " << it << " went unnoticed";
+    EXPECT_NE(message_of([&] { StoreReader(bad_).load(); }), "") << "iteration " << it;
+    caught += !m.empty();
+  }
+  EXPECT_GT(caught, kIterations * 9 / 10);
+}
+
+}  // namespace
+}  // namespace isotope
