@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "engine/diamond.h"
+#include "engine/huge_page_allocator.h"
 #include "engine/record.h"
 #include "engine/record_builder.h"
 #include "engine/store_layout.h"
@@ -23,9 +24,11 @@ class BandTile {
  public:
   // The tile's arrays, handed from one tile to the next so that their pages are touched once,
   // not faulted in again for every tile.
+  template <class T>
+  using Array = std::vector<T, HugePageAllocator<T>>;  // a large tile's hundreds of MB, in few page faults
   struct Buffers {
-    std::vector<float> values;
-    std::vector<Record> records, children;
+    Array<float> values;
+    Array<Record> records, children;
   };
 
   // Band j, core = G_j nodes [core_lo, core_hi) per axis.
@@ -45,8 +48,8 @@ class BandTile {
   // grid, that of the nearest grid node. For j > 0, the record of the scale j-1 cube centre of
   // each window cell (cell i spans nodes i and i+1), window_size - 1 per axis; entries whose
   // centre lies beyond record_extent are never read.
-  std::vector<float>& values() { return values_; }
-  std::vector<Record>& children() { return children_; }
+  Array<float>& values() { return values_; }
+  Array<Record>& children() { return children_; }
 
   // Computes the records of the core's scale-j nodes (and of the halo nodes they depend on).
   void build(CriticalCounts& counts);
@@ -102,9 +105,9 @@ class BandTile {
   int j_;
   Box3 core_lo_, core_hi_, lo_{}, hi_{}, size_{}, cells_{}, next_lo_{}, next_hi_{};
   int64_t top_ = 0;  // n >> j: the lattice's far face in G_j units
-  std::vector<float> values_;
-  std::vector<Record> records_;
-  std::vector<Record> children_;
+  Array<float> values_;
+  Array<Record> records_;
+  Array<Record> children_;
 };
 
 }  // namespace isotope

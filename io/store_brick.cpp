@@ -72,7 +72,7 @@ std::vector<float> halo_values_of(const BandTile& tile, const Box3& origin) {
 
 void fill_from_halo(BandTile& tile, const std::vector<float>& halo) {
   const Box3 lo = tile.window_lo(), hi = tile.window_hi(), size = tile.window_size();
-  std::vector<float>& v = tile.values();
+  auto& v = tile.values();
   for (int64_t z = lo[2]; z <= hi[2]; ++z)
     for (int64_t y = lo[1]; y <= hi[1]; ++y)
       for (int64_t x = lo[0]; x <= hi[0]; ++x)

@@ -59,7 +59,7 @@ void fill_from_input(BandTile& tile, const BoxReader& input) {
   }
   std::vector<float> box(static_cast<size_t>(rsize[0] * rsize[1] * rsize[2]));
   input.read_box(rlo, rsize, box.data());
-  std::vector<float>& v = tile.values();
+  auto& v = tile.values();
   for (int64_t z = 0; z < size[2]; ++z)
     for (int64_t y = 0; y < size[1]; ++y) {
       const int64_t bz = std::min(lo[2] + z, dims[2] - 1) - rlo[2], by = std::min(lo[1] + y, dims[1] - 1) - rlo[1];
@@ -75,7 +75,7 @@ void fill_from_scratch(BandTile& tile, const BandScratch& in) {
   const Box3 lo = tile.window_lo(), hi = tile.window_hi(), size = tile.window_size();
   const int64_t x0 = std::min(lo[0], n[0] - 1), count = std::min(hi[0], n[0] - 1) - x0 + 1;
   std::vector<float> row(static_cast<size_t>(count));
-  std::vector<float>& v = tile.values();
+  auto& v = tile.values();
   for (int64_t z = 0; z < size[2]; ++z)
     for (int64_t y = 0; y < size[1]; ++y) {
       in.read_values(x0, count, std::min(lo[1] + y, n[1] - 1), std::min(lo[2] + z, n[2] - 1), row.data());
@@ -87,7 +87,7 @@ void fill_from_scratch(BandTile& tile, const BandScratch& in) {
   const Box3 cells{size[0] - 1, size[1] - 1, size[2] - 1};
   const int64_t cx = std::min(cells[0], n[0] - lo[0]);
   if (cx <= 0) return;
-  std::vector<Record>& c = tile.children();
+  auto& c = tile.children();
   for (int64_t z = 0; z < cells[2] && lo[2] + z < n[2]; ++z)
     for (int64_t y = 0; y < cells[1] && lo[1] + y < n[1]; ++y)
       in.read_children(lo[0], cx, lo[1] + y, lo[2] + z, c.data() + (z * cells[1] + y) * cells[0]);
@@ -235,7 +235,7 @@ class Converter {
                                                    (band.bricks[2] + c - 1) / c}, 0};
     const std::vector<Box3> tiles = bricks_in_morton_order(tiles_band);
     std::vector<TileResult> results(static_cast<size_t>(in_flight_));
-    buffers_.resize(results.size());
+    if (buffers_.empty()) presize_buffers(band);
     for (size_t first = 0; first < tiles.size(); first += results.size()) {
       if (options_.cancel && options_.cancel->load()) throw IoError("interrupted");
       const size_t count = std::min(results.size(), tiles.size() - first);
@@ -244,6 +244,23 @@ class Converter {
         results[slot] = run_tile(band, tiles[first + slot], in, next, buffers_[slot], progress);
       });
       for (size_t i = 0; i < count; ++i) append(band, results[i]);
+    }
+  }
+
+  // Band 0 has the largest windows; sized once for them, a slot's arrays never grow again (growing
+  // would copy them and fault in fresh pages for every larger tile at the volume's edges).
+  void presize_buffers(const Band& band) {
+    size_t nodes = 1, cells = 1;
+    for (int a = 0; a < 3; ++a) {
+      const auto w = static_cast<size_t>(std::min(tile_bricks_ * layout_.brick_width(), band.nodes[a]) + 4);
+      nodes *= w;
+      cells *= w - 1;
+    }
+    buffers_.resize(static_cast<size_t>(in_flight_));
+    for (BandTile::Buffers& b : buffers_) {
+      b.values.resize(nodes);
+      b.records.resize(nodes);
+      b.children.resize(cells);
     }
   }
 
