@@ -20,11 +20,18 @@ ScratchFile::ScratchFile(const std::string& directory) : directory_(directory) {
   ::unlink(buf.data());
 }
 
+ScratchFile::ScratchFile(uint64_t memory_bytes) : memory_(static_cast<size_t>(memory_bytes)) {}
+
 ScratchFile::~ScratchFile() {
   if (fd_ >= 0) ::close(fd_);
 }
 
 void ScratchFile::write(const void* data, size_t bytes, uint64_t offset) const {
+  if (fd_ < 0) {
+    if (offset + bytes > memory_.size()) throw IoError("scratch write past its end");
+    std::memcpy(const_cast<char*>(memory_.data()) + offset, data, bytes);
+    return;
+  }
   const auto* p = static_cast<const char*>(data);
   while (bytes > 0) {
     const ssize_t n = ::pwrite(fd_, p, bytes, static_cast<off_t>(offset));
@@ -39,6 +46,11 @@ void ScratchFile::write(const void* data, size_t bytes, uint64_t offset) const {
 }
 
 void ScratchFile::read(void* data, size_t bytes, uint64_t offset) const {
+  if (fd_ < 0) {
+    if (offset + bytes > memory_.size()) throw IoError("scratch read past its end");
+    std::memcpy(data, memory_.data() + offset, bytes);
+    return;
+  }
   auto* p = static_cast<char*>(data);
   while (bytes > 0) {
     const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));

@@ -1,16 +1,21 @@
 #pragma once
-// A nameless scratch file for data too large for memory: created in a chosen directory and
-// unlinked at once, so nothing is left behind however the process ends. pread/pwrite only, so
-// any number of threads may use disjoint ranges at once.
+// Scratch space for data that may be too large for memory: a nameless file created in a chosen
+// directory and unlinked at once, so nothing is left behind however the process ends; or, when
+// the caller can afford it, the same in memory. Any number of threads may use disjoint ranges
+// at once.
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
+
+#include "engine/huge_page_allocator.h"
 
 namespace isotope {
 
 class ScratchFile {
  public:
-  explicit ScratchFile(const std::string& directory);  // throws IoError
+  explicit ScratchFile(const std::string& directory);  // a file; throws IoError
+  explicit ScratchFile(uint64_t memory_bytes);          // in memory, this size
   ~ScratchFile();
   ScratchFile(const ScratchFile&) = delete;
   ScratchFile& operator=(const ScratchFile&) = delete;
@@ -21,6 +26,7 @@ class ScratchFile {
  private:
   std::string directory_;
   int fd_ = -1;
+  std::vector<char, HugePageAllocator<char>> memory_;
 };
 
 }  // namespace isotope

@@ -86,11 +86,17 @@ void decode_brick(const uint8_t* compressed, const BrickEntry& entry, std::vecto
 
 // Position of local node (x, y, z) of a brick in the values array, and of a scale-j node in the
 // records array.
-inline uint32_t brick_morton(int64_t x, int64_t y, int64_t z, int bits) {
-  uint32_t m = 0;
-  for (int i = 0; i < bits; ++i)
-    m |= static_cast<uint32_t>(((x >> i & 1) << (3 * i)) | ((y >> i & 1) << (3 * i + 1)) | ((z >> i & 1) << (3 * i + 2)));
-  return m;
+// Spreads the low 10 bits of v to every third bit (brick coordinates have at most 8).
+inline uint32_t spread_bits_3(int64_t v) {
+  auto x = static_cast<uint32_t>(v) & 0x3ffu;
+  x = (x | x << 16) & 0x30000ffu;
+  x = (x | x << 8) & 0x300f00fu;
+  x = (x | x << 4) & 0x30c30c3u;
+  x = (x | x << 2) & 0x9249249u;
+  return x;
+}
+inline uint32_t brick_morton(int64_t x, int64_t y, int64_t z, [[maybe_unused]] int bits) {
+  return spread_bits_3(x) | spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
 }
 inline uint32_t brick_record_index(uint32_t morton) { return (morton >> 3) * 7 + (morton & 7) - 1; }
 

@@ -27,6 +27,10 @@ namespace {
 class BandScratch {
  public:
   BandScratch(const std::string& dir, const Box3& nodes) : nodes_(nodes), values_(dir), children_(dir) {}
+  explicit BandScratch(const Box3& nodes)
+      : nodes_(nodes), values_(count(nodes) * sizeof(float)), children_(count(nodes) * sizeof(Record)) {}
+  static uint64_t count(const Box3& n) { return static_cast<uint64_t>(n[0] * n[1] * n[2]); }
+  static uint64_t bytes(const Box3& n) { return count(n) * (sizeof(float) + sizeof(Record)); }
 
   const Box3& nodes() const { return nodes_; }
   uint64_t at(int64_t x, int64_t y, int64_t z) const {
@@ -193,11 +197,16 @@ class Converter {
       : input_(quantized_or(input, options)), options_(options), layout_(input.info().dims, options.brick_bits), out_(output),
         scratch_dir_(std::filesystem::absolute(output).parent_path().string()) {
     // Tiles of c^3 bricks: larger tiles read their halo and their input rows in fewer, longer
-    // calls. The largest c that still keeps every thread busy within three quarters of the budget.
+    // calls. The largest c that keeps every thread busy within three quarters of the budget.
     const auto threads = static_cast<int64_t>(
         tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
     const int64_t budget = options.memory_mb * (int64_t{3} << 20) / 4;
-    for (tile_bricks_ = 4; tile_bricks_ > 1 && budget / tile_bytes(layout_, tile_bricks_) < threads;) tile_bricks_ /= 2;
+    // Smaller tiles too when band 0 would not give every thread a few of them.
+    const Box3& bricks = layout_.band(0).bricks;
+    auto tiles = [&](int64_t c) { return ((bricks[0] + c - 1) / c) * ((bricks[1] + c - 1) / c) * ((bricks[2] + c - 1) / c); };
+    for (tile_bricks_ = 4;
+         tile_bricks_ > 1 && (budget / tile_bytes(layout_, tile_bricks_) < threads || tiles(tile_bricks_) < 4 * threads);)
+      tile_bricks_ /= 2;
     in_flight_ = static_cast<int>(std::clamp<int64_t>(budget / tile_bytes(layout_, tile_bricks_), 1, 2 * threads));
     entries_.resize(static_cast<size_t>(layout_.brick_count()));
   }
@@ -212,8 +221,14 @@ class Converter {
     std::unique_ptr<BandScratch> in;
     for (const Band& band : layout_.bands()) {
       std::unique_ptr<BandScratch> next;
-      if (band.scale < layout_.lattice().k)
-        next = std::make_unique<BandScratch>(scratch_dir_, layout_.band(band.scale + 1).nodes);
+      if (band.scale < layout_.lattice().k) {
+        // In memory when it and the band it comes from fit in a quarter of the budget; else on
+        // disk, where a tile's window costs a read call per row.
+        const Box3& nodes = layout_.band(band.scale + 1).nodes;
+        const uint64_t held = BandScratch::bytes(nodes) + (in ? BandScratch::bytes(in->nodes()) : 0);
+        if (held <= static_cast<uint64_t>(options_.memory_mb) << 18) next = std::make_unique<BandScratch>(nodes);
+        else next = std::make_unique<BandScratch>(scratch_dir_, nodes);
+      }
       run_band(band, in.get(), next.get(), progress);
       in = std::move(next);
     }
