@@ -12,7 +12,7 @@
 namespace isotope {
 
 struct ConvertOptions {
-  int64_t memory_mb = 1024;  // budget for tiles in flight; the band scratch lives on disk
+  int64_t memory_mb = 1024;  // tiles in flight and band scratch; scratch beyond a quarter of it goes to disk
   int zstd_level = 3;
   int brick_bits = StoreLayout::kDefaultBrickBits;
   // 0: values as read (lossless). 8 or 16: float values as codes 0 .. 2^bits-1 over the data

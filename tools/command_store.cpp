@@ -161,7 +161,8 @@ Command add_convert_command(CLI::App& app) {
                   "Volume: NAME_XxYxZ_TYPE.raw, any .raw with --dims/--type, FILE.h5:/path/to/dataset, or .nrrd/.nhdr")
       ->required();
   cmd->add_option("OUTPUT", a->output, "Store to write (e.g. volume.isotope)")->required();
-  cmd->add_option("--memory-mb", a->memory_mb, "Memory budget for the tiles in flight, in MB")
+  cmd->add_option("--memory-mb", a->memory_mb, "Memory budget in MB: tiles in flight and level-to-level scratch; what does not fit goes to "
+                  "unlinked scratch files beside the output")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber)->capture_default_str();

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <exception>
 #include <iostream>
+#include <new>
 
 #include "io/io_error.h"
 #include "tools/commands.h"
@@ -79,6 +80,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     const int code = app.exit(e);  // prints help, version or the usage message
     return code == 0 ? 0 : 2;      // CLI11's own codes (105, 106, ...) are all usage errors here
+  } catch (const std::bad_alloc&) {
+    std::cerr << "isotope: error: out of memory\n";
+    return 1;
   } catch (const std::exception& e) {
     std::cerr << "isotope: error: " << e.what() << '\n';
     return 1;
