@@ -85,11 +85,33 @@ std::string StoreReader::describe_brick(int64_t index) const {
          std::to_string(b[0]) + " " + std::to_string(b[1]) + " " + std::to_string(b[2]) + ")";
 }
 
+std::vector<uint8_t> StoreReader::read_compressed(int64_t index) const {
+  const BrickEntry& e = directory_.at(static_cast<size_t>(index));
+  std::vector<uint8_t> bytes(e.compressed_bytes);
+  pread_all(fd_, bytes.data(), bytes.size(), e.offset, describe_brick(index));
+  return bytes;
+}
+
+std::vector<float> StoreReader::read_stored_values(int64_t index) const {
+  const BrickEntry& e = directory_.at(static_cast<size_t>(index));
+  const std::vector<uint8_t> bytes = read_compressed(index);
+  if (locate_brick(index).first == 0) {
+    const int64_t w = halo_width(layout_);
+    std::vector<float> halo(static_cast<size_t>(w * w * w));
+    std::vector<Record> none;
+    decode_brick(bytes.data(), e, halo, none, describe_brick(index));
+    return halo;
+  }
+  std::vector<float> values(static_cast<size_t>(layout_.brick_nodes()));
+  std::vector<Record> records(static_cast<size_t>(layout_.brick_records()));
+  decode_brick(bytes.data(), e, values, records, describe_brick(index));
+  return values;
+}
+
 BrickContents StoreReader::read_brick(int64_t index) const {
   const BrickEntry& e = directory_.at(static_cast<size_t>(index));
   const std::string where = describe_brick(index);
-  std::vector<uint8_t> bytes(e.compressed_bytes);
-  pread_all(fd_, bytes.data(), bytes.size(), e.offset, where);
+  const std::vector<uint8_t> bytes = read_compressed(index);
   const auto [j, b] = locate_brick(index);
   if (j == 0) {  // values with a halo; the records are rebuilt from them (io/store_brick.h)
     const int64_t w = halo_width(layout_);
@@ -184,6 +206,69 @@ std::string check_brick(const StoreReader& store, int64_t index, const BrickCont
   return {};
 }
 
+// Band 0: the halos of neighbouring bricks overlap, and must agree there (they are copies of the
+// same nodes). Compared with the brick's seven neighbours above it in x, y and/or z.
+std::string check_halos(const StoreReader& store, int64_t index) {
+  const StoreLayout& layout = store.layout();
+  const auto [j, b] = store.locate_brick(index);
+  const Band& band = layout.band(0);
+  const int64_t t = layout.brick_width(), w = halo_width(layout);
+  const std::vector<float> mine = store.read_stored_values(index);
+  for (int d = 1; d < 8; ++d) {
+    const Box3 nb{b[0] + (d & 1), b[1] + (d >> 1 & 1), b[2] + (d >> 2)};
+    if (nb[0] >= band.bricks[0] || nb[1] >= band.bricks[1] || nb[2] >= band.bricks[2]) continue;
+    const int64_t other_index = layout.brick_index(0, nb);
+    const std::vector<float> other = store.read_stored_values(other_index);
+    // The overlap of the boxes [b t - 2, b t + t + 2) and [nb t - 2, ...), per axis.
+    Box3 lo, hi;
+    for (int a = 0; a < 3; ++a) lo[a] = nb[a] * t - 2, hi[a] = b[a] * t + t + 2;
+    for (int64_t z = lo[2]; z < hi[2]; ++z)
+      for (int64_t y = lo[1]; y < hi[1]; ++y)
+        for (int64_t x = lo[0]; x < hi[0]; ++x) {
+          auto at = [&](const Box3& brick) {
+            return static_cast<size_t>(((z - brick[2] * t + 2) * w + (y - brick[1] * t + 2)) * w + (x - brick[0] * t + 2));
+          };
+          if (!same_bits(&mine[at(b)], &other[at(nb)], sizeof(float)))
+            return "its halo disagrees with brick " + std::to_string(other_index) + " at node " + std::to_string(x) +
+                   " " + std::to_string(y) + " " + std::to_string(z);
+        }
+  }
+  return {};
+}
+
+// Bands j >= 1 repeat values of band j-1: node g holds band j-1's value at 2g (clamped to its grid).
+std::string check_values_against_finer_band(const StoreReader& store, int64_t index) {
+  const StoreLayout& layout = store.layout();
+  const auto [j, b] = store.locate_brick(index);
+  const Band &band = layout.band(j), &finer = layout.band(j - 1);
+  const int bits = layout.brick_bits();
+  const int64_t t = layout.brick_width(), w = halo_width(layout);
+  const std::vector<float> mine = store.read_stored_values(index);
+  std::vector<std::pair<int64_t, std::vector<float>>> cache;  // the few finer bricks below this one
+  auto finer_value = [&](const Box3& q) {
+    const Box3 fb{q[0] >> bits, q[1] >> bits, q[2] >> bits};
+    const int64_t fi = layout.brick_index(j - 1, fb);
+    auto it = std::find_if(cache.begin(), cache.end(), [&](const auto& c) { return c.first == fi; });
+    if (it == cache.end()) it = cache.insert(cache.end(), {fi, store.read_stored_values(fi)});
+    const Box3 l{q[0] - fb[0] * t, q[1] - fb[1] * t, q[2] - fb[2] * t};
+    const auto k = j - 1 == 0 ? static_cast<size_t>(((l[2] + 2) * w + (l[1] + 2)) * w + (l[0] + 2))
+                              : static_cast<size_t>(brick_morton(l[0], l[1], l[2], bits));
+    return it->second[k];
+  };
+  for (int64_t z = 0; z < t && b[2] * t + z < band.nodes[2]; ++z)
+    for (int64_t y = 0; y < t && b[1] * t + y < band.nodes[1]; ++y)
+      for (int64_t x = 0; x < t && b[0] * t + x < band.nodes[0]; ++x) {
+        const Box3 g{b[0] * t + x, b[1] * t + y, b[2] * t + z};
+        Box3 q;
+        for (int a = 0; a < 3; ++a) q[a] = std::min(2 * g[a], finer.nodes[a] - 1);
+        const float expected = finer_value(q);
+        if (!same_bits(&mine[brick_morton(x, y, z, bits)], &expected, sizeof(float)))
+          return "value at node " + std::to_string(g[0]) + " " + std::to_string(g[1]) + " " + std::to_string(g[2]) +
+                 " differs from band " + std::to_string(j - 1);
+      }
+  return {};
+}
+
 }  // namespace
 
 VerifyStats verify_store(const std::string& path, const ProgressCallback& progress) {
@@ -210,7 +295,9 @@ VerifyStats verify_store(const std::string& path, const ProgressCallback& progre
     if (failed.load(std::memory_order_relaxed)) return;
     try {
       const BrickContents c = store.read_brick(i);
-      const std::string problem = check_brick(store, i, c);
+      std::string problem = check_brick(store, i, c);
+      if (problem.empty())
+        problem = store.locate_brick(i).first == 0 ? check_halos(store, i) : check_values_against_finer_band(store, i);
       if (!problem.empty()) throw IoError(store.describe_brick(i) + ": " + problem);
       if (store.locate_brick(i).first == 0) {
         std::lock_guard<std::mutex> lock(range_mutex);

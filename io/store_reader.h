@@ -28,6 +28,9 @@ class StoreReader {
 
   // Brick `index` of the directory, checked and decoded. Throws IoError naming the brick.
   BrickContents read_brick(int64_t index) const;
+  // Only the values the brick stores (band 0: the (T+4)^3 box with its halo, x fastest; other
+  // bands: T^3 in Morton order), without rebuilding band 0's records.
+  std::vector<float> read_stored_values(int64_t index) const;
   // "FILE: brick 12 (band 0, brick 1 0 0)"
   std::string describe_brick(int64_t index) const;
   // Band and brick coordinates of a directory index.
@@ -37,6 +40,8 @@ class StoreReader {
   MultiresVolume load(const ProgressCallback& progress = {}) const;
 
  private:
+  std::vector<uint8_t> read_compressed(int64_t index) const;
+
   std::string path_;
   int fd_ = -1;
   uint64_t file_bytes_ = 0;

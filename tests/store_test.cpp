@@ -20,6 +20,7 @@
 #include "engine/record_builder.h"
 #include "io/box_reader.h"
 #include "io/io_error.h"
+#include "io/store_brick.h"
 #include "io/store_reader.h"
 #include "io/store_writer.h"
 #include "tbb/global_control.h"
@@ -323,6 +324,70 @@ TEST_F(StoreCorruption, TruncationWrongMagicAndVersion) {
   auto longer = good_;
   longer.push_back(0);
   EXPECT_CONTAINS(verify_message(longer), "unexpected bytes");
+}
+
+// A store whose checksums are all right but whose bricks contradict each other: brick `index`
+// re-encoded with `edit` applied to its stored values, every offset and checksum redone.
+void rewrite_brick(const std::string& path, int64_t index, const std::function<void(std::vector<float>&)>& edit) {
+  const StoreReader store(path);
+  const testing::Bytes file = read_bytes(path);
+  std::vector<BrickEntry> dir = store.directory();
+  std::vector<float> values = store.read_stored_values(index);
+  edit(values);
+  std::vector<Record> records;
+  if (store.locate_brick(index).first != 0) records = store.read_brick(index).records;
+  BrickEntry fresh = dir[static_cast<size_t>(index)];
+  const std::vector<uint8_t> brick = encode_brick(values, records, store.header().zstd_level, fresh);
+  const auto [band, brick_coords] = store.locate_brick(index);
+  if (band == 0) {  // the summary the reader will derive, so that only the contradiction is left
+    BandTile tile = tile_for_brick(store.layout(), 0, brick_coords);
+    fill_from_halo(tile, values);
+    CriticalCounts counts = {{0, 0, 0}, {0, 0, 0}};
+    tile.build(counts);
+    fresh.summary = summarize_brick(contents_of(tile, tile.core_lo()));
+  } else {
+    fresh.summary = summarize_brick({values, records});
+  }
+  std::vector<int64_t> order(dir.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int64_t>(i);
+  std::sort(order.begin(), order.end(), [&](int64_t a, int64_t b) { return dir[static_cast<size_t>(a)].offset < dir[static_cast<size_t>(b)].offset; });
+  testing::Bytes out(file.begin(), file.begin() + kHeaderBytes);
+  for (int64_t i : order) {
+    BrickEntry& e = dir[static_cast<size_t>(i)];
+    const auto first = file.begin() + static_cast<std::ptrdiff_t>(e.offset);
+    const testing::Bytes old(first, first + e.compressed_bytes);
+    if (i == index) e = fresh;
+    e.offset = out.size();
+    if (i == index) out.insert(out.end(), brick.begin(), brick.end());
+    else out.insert(out.end(), old.begin(), old.end());
+  }
+  StoreHeader h = store.header();
+  const std::vector<uint8_t> directory = encode_directory(dir);
+  h.directory_offset = out.size();
+  h.directory_checksum = store_checksum(directory.data(), directory.size());
+  out.insert(out.end(), directory.begin(), directory.end());
+  const auto header = encode_header(h);
+  std::copy(header.begin(), header.end(), out.begin());
+  testing::write_file(path, "", out);
+}
+
+// verify also checks what no checksum can: that band 0's halos agree with their neighbours, and
+// that coarser bands repeat the finer bands' values.
+TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
+  testing::write_file(bad_, "", good_);
+  const StoreLayout layout = StoreReader(bad_).layout();
+  ASSERT_GT(layout.band(0).bricks[0], 1);
+  // A halo node of band-0 brick (0, 0, 0) that brick (1, 0, 0) owns: local x = T + 1.
+  const int64_t t = layout.brick_width(), w = t + 4;
+  rewrite_brick(bad_, layout.brick_index(0, {0, 0, 0}),
+                [&](std::vector<float>& v) { v[static_cast<size_t>((3 * w + 3) * w + (t + 1 + 2))] += 1; });
+  EXPECT_EQ(message_of([&] { StoreReader(bad_).read_brick(0); }), "") << "the edit must keep the brick readable";
+  EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "halo disagrees with brick");
+
+  testing::write_file(bad_, "", good_);
+  // Node (2, 0, 0) of band 1: Morton 8, all-even, so no record of its own bounds it in this band.
+  rewrite_brick(bad_, layout.brick_index(1, {0, 0, 0}), [](std::vector<float>& v) { v[8] += 1; });
+  EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "differs from band 0");
 }
 
 // Randomized: flips, overwrites, truncations and insertions anywhere. Each one must be caught
