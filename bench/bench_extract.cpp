@@ -107,9 +107,11 @@ void set_triangle_counters(benchmark::State& state, int64_t total_triangles) {
 // ---- Benchmarks -------------------------------------------------------------------------------
 
 // extract(): the adaptive traversal of the hierarchy, stopping rule, marching tetrahedra, welding.
-void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mode) {
+void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mode, int threads) {
   const MultiresVolume* mv = nullptr;
   if (!prepare(state, [&] { mv = &multires_of(d); })) return;
+  std::optional<tbb::global_control> cap;
+  if (threads > 0) cap.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
   ExtractOptions options;
   options.iso = dataset_iso(d);
   options.eps = eps;
@@ -202,7 +204,7 @@ std::string format_eps(double eps) {
   return buffer;
 }
 
-// Registration in one table, so names read BM_Extract/<dataset>/eps:<eps>/mode:<mode>.
+// Registration in one table, so names read BM_Extract/<dataset>/eps:<eps>/mode:<mode>/threads:<1|all>.
 void register_benchmarks() {
   struct ExtractCase {
     Dataset dataset;
@@ -214,13 +216,14 @@ void register_benchmarks() {
   };
   for (const auto& c : extract_cases) {
     for (const double eps : c.eps) {
-      for (const TopologyMode mode : {TopologyMode::none, TopologyMode::preserve}) {
-        const std::string name = std::string("BM_Extract/") + dataset_name(c.dataset) +
-                                 "/eps:" + format_eps(eps) + "/mode:" +
-                                 std::string(isotope::to_string(mode));
-        auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Extract, c.dataset, eps, mode);
-        b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);
-      }
+      for (const TopologyMode mode : {TopologyMode::none, TopologyMode::preserve})
+        for (const int threads : {1, 0}) {
+          const std::string name = std::string("BM_Extract/") + dataset_name(c.dataset) + "/eps:" + format_eps(eps) +
+                                   "/mode:" + std::string(isotope::to_string(mode)) +
+                                   (threads == 1 ? "/threads:1" : "/threads:all");
+          auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Extract, c.dataset, eps, mode, threads);
+          b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);
+        }
     }
     benchmark::RegisterBenchmark(
         (std::string("BM_FullResolutionBaseline/") + dataset_name(c.dataset)).c_str(),

@@ -5,9 +5,11 @@
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 #include "engine/kuhn.h"
 #include "engine/marching_tetrahedra.h"
+#include "engine/parallel.h"
 
 namespace isotope {
 namespace {
@@ -33,6 +35,14 @@ int64_t orientation(const Tet& c) {
   return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx);
 }
 
+// A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
+struct Piece {
+  PackedTet tet{};
+  int level = 0;
+  bool positive = false;
+  bool emit_only = false;
+};
+
 // Depth-first over the bisection tree (paper Sec. 3.2): cull by range, stop by the rule of
 // design.md, emit at stopping tetrahedra and at the leaves.
 class Traversal {
@@ -46,12 +56,26 @@ class Traversal {
     }
   }
 
-  void run() {
+  // The traversal cut at `level` into pieces, in depth-first order: the subtrees rooted there and
+  // the tetrahedra emitted above it. Running the pieces in this order is the whole traversal.
+  std::vector<Piece> split(int level) {
+    std::vector<Piece> pieces;
+    pieces_ = &pieces;
+    split_level_ = level;
     const int64_t n = lattice_.n;
     for (const Tet& root : kuhn_tetrahedra({0, 0, 0}, {n, n, n}))
       visit({pack(root[0]), pack(root[1]), pack(root[2]), pack(root[3])}, 0, orientation(root) > 0);
+    pieces_ = nullptr;
+    return pieces;
   }
 
+  void run(const Piece& p) {
+    if (p.emit_only) emit(p.tet, p.positive);
+    else visit(p.tet, p.level, p.positive);
+  }
+
+  void keep_keys() { builder_.keep_keys(); }
+  std::vector<uint64_t> take_keys() { return builder_.take_keys(); }
   Mesh take() { return builder_.take(); }
   const ExtractStats& stats() const { return stats_; }
 
@@ -60,6 +84,7 @@ class Traversal {
   // keeps it for the first child and, at l mod 3 == 0, for the second; otherwise the second
   // child is mirrored (its corners are an odd permutation of the parent's, up to the midpoint).
   void visit(const PackedTet& t, int level, bool positive) {
+    if (pieces_ && level == split_level_) return pieces_->push_back({t, level, positive, false});
     ++stats_.tets_visited;
     if (clip_ && outside_box(t)) return;
     if (level == lattice_.max_level()) return emit(t, positive);
@@ -105,6 +130,7 @@ class Traversal {
   }
 
   void emit(const PackedTet& t, bool positive) {
+    if (pieces_) return pieces_->push_back({t, 0, positive, true});
     ++stats_.tets_emitted;
     const Tet c{unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])};
     builder_.add_tet(c, {mv_.value(c[0]), mv_.value(c[1]), mv_.value(c[2]), mv_.value(c[3])}, positive);
@@ -117,7 +143,47 @@ class Traversal {
   Coord box_max_{};
   bool clip_ = false;  // the data box is smaller than the lattice
   ExtractStats stats_;
+  std::vector<Piece>* pieces_ = nullptr;  // while splitting
+  int split_level_ = 0;
 };
+
+// What one piece produced: its own welded mesh and the edge key of each of its vertices.
+struct PartMesh {
+  Mesh mesh;
+  std::vector<uint64_t> keys;
+  ExtractStats stats;
+};
+
+// Welds the pieces' meshes in piece order. A vertex takes the next index the first time its
+// edge appears, exactly as in one depth-first pass, so the result is the same, bit for bit,
+// whatever the number of threads that built the pieces.
+Mesh weld(std::vector<PartMesh>& parts, ExtractStats& stats) {
+  size_t vertices = 0, triangles = 0;
+  for (const PartMesh& p : parts) vertices += p.mesh.positions.size(), triangles += p.mesh.triangles.size();
+  Mesh out;
+  out.positions.reserve(vertices);
+  out.triangles.reserve(triangles);
+  EdgeVertexMap map(vertices);
+  std::vector<uint32_t> remap;
+  for (PartMesh& p : parts) {
+    remap.resize(p.keys.size());
+    for (size_t i = 0; i < p.keys.size(); ++i) {
+      const auto fresh = static_cast<uint32_t>(out.positions.size());
+      const uint32_t found = map.find_or_insert(p.keys[i], fresh);
+      remap[i] = found == EdgeVertexMap::kAbsent ? fresh : found;
+      if (found == EdgeVertexMap::kAbsent) out.positions.push_back(p.mesh.positions[i]);
+    }
+    for (const auto& t : p.mesh.triangles) out.triangles.push_back({remap[t[0]], remap[t[1]], remap[t[2]]});
+    stats.tets_visited += p.stats.tets_visited;
+    stats.tets_emitted += p.stats.tets_emitted;
+    p = PartMesh{};  // free as we go
+  }
+  return out;
+}
+
+// Deep enough for a few hundred pieces (6 roots, two children per level), shallow enough that
+// each is worth a task. Fixed, so the pieces do not depend on the thread count.
+constexpr int kSplitLevel = 6;
 
 void validate(const ExtractOptions& o) {
   if (!std::isfinite(o.iso)) throw std::invalid_argument("the isovalue must be a finite number");
@@ -136,13 +202,26 @@ Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractSta
     in_codes.eps = options.eps / mv.value_scale();
     in_codes.delta = options.delta / mv.value_scale();
   }
-  Traversal traversal(mv, in_codes);
-  traversal.run();
+  // Cut into pieces, traverse them in parallel, weld in order.
+  Traversal top(mv, in_codes);
+  const std::vector<Piece> pieces = top.split(std::min(kSplitLevel, mv.lattice().max_level()));
+  std::vector<PartMesh> parts(pieces.size());
+  parallel_for(int64_t{0}, static_cast<int64_t>(pieces.size()), [&](int64_t i) {
+    Traversal t(mv, in_codes);
+    t.keep_keys();
+    t.run(pieces[static_cast<size_t>(i)]);
+    PartMesh& part = parts[static_cast<size_t>(i)];
+    part.stats = t.stats();
+    part.keys = t.take_keys();
+    part.mesh = t.take();
+  });
+  ExtractStats total = top.stats();
+  Mesh mesh = weld(parts, total);
   if (stats) {
-    *stats = traversal.stats();
+    *stats = total;
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
-  return traversal.take();
+  return mesh;
 }
 
 Mesh extract_full_resolution(const Volume& volume, float iso) {

@@ -91,6 +91,7 @@ uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coor
   for (int a = 0; a < 3; ++a)
     pos[a] = static_cast<float>(origin_[a] + spacing_[a] * (static_cast<double>(p[a]) + t * static_cast<double>(q[a] - p[a])));
   mesh_.positions.push_back(pos);
+  if (keep_keys_) keys_.push_back(key);
   return fresh;
 }
 

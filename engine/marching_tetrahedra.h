@@ -4,6 +4,7 @@
 // coordinates) is unique to that edge, so it is the vertex's key (design.md, "Extraction").
 #include <array>
 #include <cstdint>
+#include <vector>
 
 #include "engine/edge_vertex_map.h"
 #include "engine/lattice.h"
@@ -23,6 +24,10 @@ class MeshBuilder {
   void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive);
 
   Mesh take() { return std::move(mesh_); }
+  // The edge key of every vertex, in vertex order (kept only when asked for, by keep_keys()):
+  // what welds the meshes of separately built parts into one (engine/extract.cpp).
+  void keep_keys() { keep_keys_ = true; }
+  std::vector<uint64_t> take_keys() { return std::move(keys_); }
 
  private:
   uint64_t edge_key(const Coord& p, const Coord& q) const;
@@ -33,6 +38,8 @@ class MeshBuilder {
   std::array<double, 3> origin_, spacing_;
   EdgeVertexMap map_;
   Mesh mesh_;
+  bool keep_keys_ = false;
+  std::vector<uint64_t> keys_;
 };
 
 }  // namespace isotope
