@@ -5,16 +5,14 @@
 namespace isotope {
 namespace {
 
-constexpr Record kAbsent{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, 0}};
+}  // namespace
+
+int64_t halo_width(const StoreLayout& layout) { return layout.brick_width() + 4; }
 
 int64_t halo_index(const StoreLayout& layout, const Box3& origin, const Box3& g) {
   const int64_t w = halo_width(layout);
   return ((g[2] - origin[2] + 2) * w + (g[1] - origin[1] + 2)) * w + (g[0] - origin[0] + 2);
 }
-
-}  // namespace
-
-int64_t halo_width(const StoreLayout& layout) { return layout.brick_width() + 4; }
 
 BandTile tile_for_brick(const StoreLayout& layout, int j, const Box3& b) {
   const Band& band = layout.band(j);
@@ -33,7 +31,7 @@ BrickContents contents_of(const BandTile& tile, const Box3& origin, float error_
   const bool records = tile.band() < layout.lattice().k;  // the corners have none: all absent
   BrickContents b;
   b.values.assign(static_cast<size_t>(layout.brick_nodes()), 0.0f);
-  b.records.assign(static_cast<size_t>(layout.brick_records()), kAbsent);
+  b.records.assign(static_cast<size_t>(layout.brick_records()), kAbsentRecord);
   const Box3& o = origin;
   for (int64_t z = 0; z < t && o[2] + z < band.nodes[2]; ++z)
     for (int64_t y = 0; y < t && o[1] + y < band.nodes[1]; ++y)

@@ -25,5 +25,7 @@ std::vector<float> halo_values_of(const BandTile& tile, const Box3& origin);
 // The inverse: fills the window of a band-0 tile of one brick (tile_for_brick) from its halo values.
 void fill_from_halo(BandTile& tile, const std::vector<float>& halo);
 int64_t halo_width(const StoreLayout& layout);
+// Position of band-0 node g in the halo values of the brick whose first node is `origin`.
+int64_t halo_index(const StoreLayout& layout, const Box3& origin, const Box3& g);
 
 }  // namespace isotope

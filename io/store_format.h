@@ -55,6 +55,8 @@ struct BrickEntry {
 // A brick's contents: the values of its T^3 nodes in Morton order, then the records of its nodes
 // of scale exactly j (Morton code not a multiple of 8) in Morton order. Nodes beyond the band's
 // grid, and records beyond record_extent, are zero.
+inline constexpr Record kAbsentRecord{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, 0}};
+
 struct BrickContents {
   std::vector<float> values;
   std::vector<Record> records;

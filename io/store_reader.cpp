@@ -109,25 +109,20 @@ std::vector<float> StoreReader::read_stored_values(int64_t index) const {
 }
 
 BrickContents StoreReader::read_brick(int64_t index) const {
-  const BrickEntry& e = directory_.at(static_cast<size_t>(index));
-  const std::string where = describe_brick(index);
-  const std::vector<uint8_t> bytes = read_compressed(index);
   const auto [j, b] = locate_brick(index);
   if (j == 0) {  // values with a halo; the records are rebuilt from them (io/store_brick.h)
-    const int64_t w = halo_width(layout_);
-    std::vector<float> halo(static_cast<size_t>(w * w * w));
-    std::vector<Record> none;
-    decode_brick(bytes.data(), e, halo, none, where);
     BandTile tile = tile_for_brick(layout_, 0, b);
-    fill_from_halo(tile, halo);
+    fill_from_halo(tile, read_stored_values(index));
     CriticalCounts counts = {{0, 0, 0}, {0, 0, 0}};
     tile.build(counts);
     return contents_of(tile, tile.core_lo(), header_.quantize_bits != 0 ? kQuantizationError : 0.0f);
   }
+  const BrickEntry& e = directory_.at(static_cast<size_t>(index));
+  const std::vector<uint8_t> bytes = read_compressed(index);
   BrickContents c;
   c.values.resize(static_cast<size_t>(layout_.brick_nodes()));
   c.records.resize(static_cast<size_t>(layout_.brick_records()));
-  decode_brick(bytes.data(), e, c.values, c.records, where);
+  decode_brick(bytes.data(), e, c.values, c.records, describe_brick(index));
   return c;
 }
 
@@ -179,7 +174,6 @@ std::string check_brick(const StoreReader& store, int64_t index, const BrickCont
   const BrickSummary s = summarize_brick(c);
   if (!same_bits(&s, &store.directory()[static_cast<size_t>(index)].summary, sizeof s))
     return "directory summary does not match the brick";
-  const Record absent{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, 0}};
   for (int64_t z = 0; z < t; ++z)
     for (int64_t y = 0; y < t; ++y)
       for (int64_t x = 0; x < t; ++x) {
@@ -193,7 +187,7 @@ std::string check_brick(const StoreReader& store, int64_t index, const BrickCont
         if ((m & 7) == 0) continue;
         const Record& r = c.records[brick_record_index(m)];
         if (!in_grid || j == layout.lattice().k) {
-          if (!same_bits(&r, &absent, sizeof r)) return node + "a record outside the grid is not zero";
+          if (!same_bits(&r, &kAbsentRecord, sizeof r)) return node + "a record outside the grid is not zero";
           continue;
         }
         if (!(r.bounds.lo <= v && v <= r.bounds.hi)) return node + "value outside its record's range";
@@ -212,7 +206,7 @@ std::string check_halos(const StoreReader& store, int64_t index) {
   const StoreLayout& layout = store.layout();
   const auto [j, b] = store.locate_brick(index);
   const Band& band = layout.band(0);
-  const int64_t t = layout.brick_width(), w = halo_width(layout);
+  const int64_t t = layout.brick_width();
   const std::vector<float> mine = store.read_stored_values(index);
   for (int d = 1; d < 8; ++d) {
     const Box3 nb{b[0] + (d & 1), b[1] + (d >> 1 & 1), b[2] + (d >> 2)};
@@ -226,7 +220,7 @@ std::string check_halos(const StoreReader& store, int64_t index) {
       for (int64_t y = lo[1]; y < hi[1]; ++y)
         for (int64_t x = lo[0]; x < hi[0]; ++x) {
           auto at = [&](const Box3& brick) {
-            return static_cast<size_t>(((z - brick[2] * t + 2) * w + (y - brick[1] * t + 2)) * w + (x - brick[0] * t + 2));
+            return static_cast<size_t>(halo_index(layout, {brick[0] * t, brick[1] * t, brick[2] * t}, {x, y, z}));
           };
           if (!same_bits(&mine[at(b)], &other[at(nb)], sizeof(float)))
             return "its halo disagrees with brick " + std::to_string(other_index) + " at node " + std::to_string(x) +
@@ -242,7 +236,7 @@ std::string check_values_against_finer_band(const StoreReader& store, int64_t in
   const auto [j, b] = store.locate_brick(index);
   const Band &band = layout.band(j), &finer = layout.band(j - 1);
   const int bits = layout.brick_bits();
-  const int64_t t = layout.brick_width(), w = halo_width(layout);
+  const int64_t t = layout.brick_width();
   const std::vector<float> mine = store.read_stored_values(index);
   std::vector<std::pair<int64_t, std::vector<float>>> cache;  // the few finer bricks below this one
   auto finer_value = [&](const Box3& q) {
@@ -251,7 +245,7 @@ std::string check_values_against_finer_band(const StoreReader& store, int64_t in
     auto it = std::find_if(cache.begin(), cache.end(), [&](const auto& c) { return c.first == fi; });
     if (it == cache.end()) it = cache.insert(cache.end(), {fi, store.read_stored_values(fi)});
     const Box3 l{q[0] - fb[0] * t, q[1] - fb[1] * t, q[2] - fb[2] * t};
-    const auto k = j - 1 == 0 ? static_cast<size_t>(((l[2] + 2) * w + (l[1] + 2)) * w + (l[0] + 2))
+    const auto k = j - 1 == 0 ? static_cast<size_t>(halo_index(layout, {0, 0, 0}, l))
                               : static_cast<size_t>(brick_morton(l[0], l[1], l[2], bits));
     return it->second[k];
   };

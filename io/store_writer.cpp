@@ -8,7 +8,6 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <vector>
 
 #include "engine/band_tile.h"
@@ -112,12 +111,13 @@ void write_next(const BandTile& tile, const BandScratch& next) {
     }
 }
 
-// Bricks of a band in Morton order of their coordinates: the file order (traversal order).
-std::vector<Box3> bricks_in_morton_order(const Band& band) {
+// The cells of a grid of `count` per axis in Morton order of their coordinates: bricks of a band
+// in file (traversal) order, tiles of bricks, bricks in a tile.
+std::vector<Box3> in_morton_order(const Box3& count) {
   std::vector<std::pair<uint64_t, Box3>> order;
-  for (int64_t z = 0; z < band.bricks[2]; ++z)
-    for (int64_t y = 0; y < band.bricks[1]; ++y)
-      for (int64_t x = 0; x < band.bricks[0]; ++x)
+  for (int64_t z = 0; z < count[2]; ++z)
+    for (int64_t y = 0; y < count[1]; ++y)
+      for (int64_t x = 0; x < count[0]; ++x)
         order.push_back({morton_encode(static_cast<uint64_t>(x), static_cast<uint64_t>(y), static_cast<uint64_t>(z)), {x, y, z}});
   std::sort(order.begin(), order.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Box3> out;
@@ -246,9 +246,8 @@ class Converter {
  private:
   void run_band(const Band& band, const BandScratch* in, const BandScratch* next, ProgressReporter& progress) {
     const int64_t c = tile_bricks_;
-    const Band tiles_band{band.scale, band.nodes, {(band.bricks[0] + c - 1) / c, (band.bricks[1] + c - 1) / c,
-                                                   (band.bricks[2] + c - 1) / c}, 0};
-    const std::vector<Box3> tiles = bricks_in_morton_order(tiles_band);
+    const std::vector<Box3> tiles =
+        in_morton_order({(band.bricks[0] + c - 1) / c, (band.bricks[1] + c - 1) / c, (band.bricks[2] + c - 1) / c});
     std::vector<TileResult> results(static_cast<size_t>(in_flight_));
     if (buffers_.empty()) presize_buffers(band);
     for (size_t first = 0; first < tiles.size(); first += results.size()) {
@@ -296,8 +295,7 @@ class Converter {
     if (band.scale == 0) value_range(tile, r);
     // The tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
     // the file holds the band's bricks in Morton order whatever the tile size.
-    const Band local{band.scale, band.nodes, {c, c, c}, 0};
-    for (const Box3& l : bricks_in_morton_order(local)) {
+    for (const Box3& l : in_morton_order({c, c, c})) {
       const Box3 b{tile_coords[0] * c + l[0], tile_coords[1] * c + l[1], tile_coords[2] * c + l[2]};
       if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
       BrickResult& out = r.bricks.emplace_back();
