@@ -125,6 +125,20 @@ TEST_F(Store, RoundTripIsExactOnRealVolumes) {
   }
 }
 
+// The size target: a store of uint8/uint16 data is at most 1.5x its raw input.
+TEST_F(Store, IntegerStoresAreAtMostOneAndAHalfTimesTheirInput) {
+  for (const char* name : {"bolt_70x123x66_uint8.raw", "ironProt_68x68x68_uint8.raw", "neghip_66x66x66_uint8.raw"}) {
+    const std::string raw = std::string(ISOTOPE_TEST_DATA) + "/" + name, store = path("s.isotope");
+    const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir_.string());
+    convert_to_store(*input, store, {});
+    const double ratio = static_cast<double>(std::filesystem::file_size(store)) /
+                         static_cast<double>(std::filesystem::file_size(raw));
+    RecordProperty(name, std::to_string(ratio));
+    EXPECT_LE(ratio, 1.5) << name;
+    EXPECT_EQ(StoreReader(store).header().source_type, "uint8");
+  }
+}
+
 TEST_F(Store, ExtractionFromStoreEqualsInMemory) {
   struct Case {
     Volume volume;
