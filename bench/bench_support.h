@@ -1,8 +1,12 @@
 #pragma once
 // What the benchmark files share.
 #include <benchmark/benchmark.h>
+#include <unistd.h>
 
 #include <exception>
+#include <filesystem>
+#include <string>
+#include <system_error>
 
 namespace isotope::bench {
 
@@ -18,5 +22,25 @@ bool prepare(benchmark::State& state, Setup setup) {
     return false;
   }
 }
+
+// A temporary folder $TMPDIR/isotope_bench_<NAME>.<pid>, removed with everything in it when
+// destroyed: held in a function-local static, it lasts until the process exits.
+class ProcessTempDir {
+ public:
+  explicit ProcessTempDir(const std::string& name)
+      : path_(std::filesystem::temp_directory_path() / ("isotope_bench_" + name + "." + std::to_string(::getpid()))) {
+    std::filesystem::create_directories(path_);
+  }
+  ~ProcessTempDir() {
+    std::error_code ignored;
+    std::filesystem::remove_all(path_, ignored);
+  }
+  ProcessTempDir(const ProcessTempDir&) = delete;
+  ProcessTempDir& operator=(const ProcessTempDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
 
 }  // namespace isotope::bench

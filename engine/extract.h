@@ -14,9 +14,16 @@ struct ExtractStats {
   int64_t tets_visited = 0;
   int64_t tets_emitted = 0;  // stopping tetrahedra that were handed to marching tetrahedra
   double seconds = 0;
+  // With max_triangles: the eps chosen (in data units), and the next finer eps step and the
+  // triangles it would give (next_triangles = 0 when the chosen mesh is already full resolution).
+  double chosen_eps = 0;
+  double next_eps = 0;
+  int64_t next_triangles = 0;
+  int64_t budget_steps = 0;  // distinct eps values the budget search went through
 };
 
-// Throws std::invalid_argument for a non-finite iso, eps < 0 or delta < 0.
+// Throws std::invalid_argument for a non-finite iso, eps < 0, delta < 0, a focus radius <= 0,
+// and std::runtime_error when max_triangles is below the coarsest mesh the topology mode allows.
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
 // Marching tetrahedra over every finest Kuhn tetrahedron of the data's cells, no hierarchy.

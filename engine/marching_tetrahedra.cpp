@@ -76,6 +76,14 @@ uint64_t MeshBuilder::edge_key(const Coord& p, const Coord& q) const {
   return static_cast<uint64_t>(brick << 12 | (z & 15) << 8 | (y & 15) << 4 | (x & 15));
 }
 
+Coord edge_key_sum(uint64_t key, int64_t side) {
+  const int64_t bricks = (2 * side - 1 + 15) / 16;
+  const auto brick = static_cast<int64_t>(key >> 12);
+  const int64_t bx = brick % bricks, by = brick / bricks % bricks, bz = brick / (bricks * bricks);
+  return {bx << 4 | static_cast<int64_t>(key & 15), by << 4 | static_cast<int64_t>(key >> 4 & 15),
+          bz << 4 | static_cast<int64_t>(key >> 8 & 15)};
+}
+
 uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coord& q0, float f1) {
   const uint32_t fresh = static_cast<uint32_t>(mesh_.positions.size());
   const uint32_t found = map_.find_or_insert(key, fresh);

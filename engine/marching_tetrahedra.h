@@ -12,6 +12,9 @@
 
 namespace isotope {
 
+// p + q of the edge whose vertex has this key (MeshBuilder, for a grid of `side` nodes per axis).
+Coord edge_key_sum(uint64_t key, int64_t side);
+
 class MeshBuilder {
  public:
   // side: nodes per axis of the grid whose coordinates are passed in.

@@ -1,7 +1,9 @@
 #pragma once
 // What a user chooses for one extraction.
-#include <string_view>
+#include <array>
+#include <cstdint>
 #include <optional>
+#include <string_view>
 
 namespace isotope {
 
@@ -17,12 +19,23 @@ enum class TopologyMode {
   preserve,  // the exact local rule of design.md: keeps components and Euler characteristic
 };
 
+// Finer near a point of interest: eps is scaled by min(1, distance / radius), so the mesh is as
+// fine as the data at the point and as coarse as eps from `radius` on (distances in the
+// output's coordinates, i.e. origin + spacing * index).
+struct Focus {
+  std::array<double, 3> point{0, 0, 0};
+  double radius = 1;
+};
+
 struct ExtractOptions {
   float iso = 0.0f;           // inside means value > iso
   double eps = 0.0;           // refine while the chosen error is >= eps; 0 gives full resolution
   ErrorIndicator error = ErrorIndicator::bound;
   TopologyMode topology = TopologyMode::preserve;
   double delta = 0.0;         // critical points of weight < delta may be dropped (issue 5)
+  std::optional<Focus> focus;
+  // > 0: ignore eps and take the finest eps whose mesh has at most this many triangles.
+  int64_t max_triangles = 0;
 };
 
 std::string_view to_string(ErrorIndicator e);

@@ -5,6 +5,7 @@
 // any of ours. Both honour tbb::global_control's max_allowed_parallelism, so one thread runs
 // the same body serially.
 #include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <exception>
 #include <mutex>
@@ -44,6 +45,20 @@ void parallel_for(int64_t begin, int64_t end, const Body& body) {
 #else
   tbb::parallel_for(begin, end, body);
 #endif
+}
+
+// Calls body(i) for every i in [begin, end), possibly concurrently, handing the indices out one
+// at a time in increasing order: the bodies running at any moment have neighbouring indices.
+// For work items in a spatial order (the traversal's pieces) that share data with their
+// neighbours, e.g. bricks in a cache of bounded size.
+template <class Body>
+void parallel_for_in_order(int64_t begin, int64_t end, const Body& body) {
+  const auto threads = static_cast<int64_t>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  std::atomic<int64_t> next{begin};
+  parallel_for(int64_t{0}, std::min(threads, std::max<int64_t>(end - begin, 1)), [&](int64_t) {
+    for (int64_t i = next++; i < end; i = next++) body(i);
+  });
 }
 
 }  // namespace isotope

@@ -14,39 +14,40 @@ int64_t halo_index(const StoreLayout& layout, const Box3& origin, const Box3& g)
   return ((g[2] - origin[2] + 2) * w + (g[1] - origin[1] + 2)) * w + (g[0] - origin[0] + 2);
 }
 
-BandTile tile_for_brick(const StoreLayout& layout, int j, const Box3& b) {
+BandTile tile_for_brick(const StoreLayout& layout, int j, const Box3& b, BandTile::Buffers buffers) {
   const Band& band = layout.band(j);
   const int64_t t = layout.brick_width();
   const Box3 lo{b[0] * t, b[1] * t, b[2] * t};
   const Box3 hi{std::min(lo[0] + t, band.nodes[0]), std::min(lo[1] + t, band.nodes[1]),
                 std::min(lo[2] + t, band.nodes[2])};
-  return BandTile(layout, j, lo, hi);
+  return BandTile(layout, j, lo, hi, std::move(buffers));
 }
 
 BrickContents contents_of(const BandTile& tile, const Box3& origin, float error_fold) {
   const StoreLayout& layout = tile.layout();
   const Band& band = layout.band(tile.band());
-  const int bits = layout.brick_bits();
-  const int64_t t = layout.brick_width();
   const bool records = tile.band() < layout.lattice().k;  // the corners have none: all absent
   BrickContents b;
-  b.values.assign(static_cast<size_t>(layout.brick_nodes()), 0.0f);
-  b.records.assign(static_cast<size_t>(layout.brick_records()), kAbsentRecord);
-  const Box3& o = origin;
-  for (int64_t z = 0; z < t && o[2] + z < band.nodes[2]; ++z)
-    for (int64_t y = 0; y < t && o[1] + y < band.nodes[1]; ++y)
-      for (int64_t x = 0; x < t && o[0] + x < band.nodes[0]; ++x) {
-        const Box3 g{o[0] + x, o[1] + y, o[2] + z};
-        const uint32_t m = brick_morton(x, y, z, bits);
-        b.values[m] = tile.node_value(g);
-        if (!records || (m & 7) == 0) continue;
-        Record& r = b.records[brick_record_index(m)];
-        r = tile.node_record(g);
-        if (error_fold != 0) {
-          r.bounds.error_bound = round_up(static_cast<double>(r.bounds.error_bound) + error_fold);
-          r.bounds.error_surplus = round_up(static_cast<double>(r.bounds.error_surplus) + error_fold);
-        }
-      }
+  b.values.reserve(static_cast<size_t>(layout.brick_nodes()));
+  b.records.reserve(static_cast<size_t>(layout.brick_records()));
+  // In Morton order, so each array is written once, front to back (a paged extraction decodes
+  // bricks all the time; clearing them first cost as much as filling them).
+  for (uint32_t m = 0; m < static_cast<uint32_t>(layout.brick_nodes()); ++m) {
+    const Box3 g{origin[0] + compact_bits_3(m), origin[1] + compact_bits_3(m >> 1), origin[2] + compact_bits_3(m >> 2)};
+    const bool in_grid = g[0] < band.nodes[0] && g[1] < band.nodes[1] && g[2] < band.nodes[2];
+    b.values.push_back(in_grid ? tile.node_value(g) : 0.0f);
+    if ((m & 7) == 0) continue;
+    if (!in_grid || !records) {
+      b.records.push_back(kAbsentRecord);
+      continue;
+    }
+    Record r = tile.node_record(g);
+    if (error_fold != 0) {
+      r.bounds.error_bound = round_up(static_cast<double>(r.bounds.error_bound) + error_fold);
+      r.bounds.error_surplus = round_up(static_cast<double>(r.bounds.error_surplus) + error_fold);
+    }
+    b.records.push_back(r);
+  }
   return b;
 }
 

@@ -12,7 +12,7 @@
 namespace isotope {
 
 // The brick of band `j` at brick coordinates b, as a tile core (G_j nodes).
-BandTile tile_for_brick(const StoreLayout& layout, int j, const Box3& b);
+BandTile tile_for_brick(const StoreLayout& layout, int j, const Box3& b, BandTile::Buffers buffers = {});
 
 // The uniform in-memory form of the brick whose first node is `origin` (G_j units; inside the
 // tile's core), values in Morton order and records, from a built tile. `error_fold` is added to

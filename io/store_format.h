@@ -97,6 +97,15 @@ inline uint32_t spread_bits_3(int64_t v) {
   x = (x | x << 2) & 0x9249249u;
   return x;
 }
+// The inverse: every third bit of m, from bit 0, packed.
+inline int64_t compact_bits_3(uint32_t m) {
+  uint32_t x = m & 0x9249249u;
+  x = (x | x >> 2) & 0x30c30c3u;
+  x = (x | x >> 4) & 0x300f00fu;
+  x = (x | x >> 8) & 0x30000ffu;
+  x = (x | x >> 16) & 0x3ffu;
+  return x;
+}
 inline uint32_t brick_morton(int64_t x, int64_t y, int64_t z, [[maybe_unused]] int bits) {
   return spread_bits_3(x) | spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
 }

@@ -85,6 +85,13 @@ std::string StoreReader::describe_brick(int64_t index) const {
          std::to_string(b[0]) + " " + std::to_string(b[1]) + " " + std::to_string(b[2]) + ")";
 }
 
+void StoreReader::prefetch_after(int64_t index, int bricks) const {
+  const BrickEntry& e = directory_.at(static_cast<size_t>(index));
+  const uint64_t begin = e.offset + e.compressed_bytes;
+  const uint64_t end = std::min(header_.directory_offset, begin + static_cast<uint64_t>(bricks) * e.compressed_bytes);
+  if (end > begin) ::posix_fadvise(fd_, static_cast<off_t>(begin), static_cast<off_t>(end - begin), POSIX_FADV_WILLNEED);
+}
+
 std::vector<uint8_t> StoreReader::read_compressed(int64_t index) const {
   const BrickEntry& e = directory_.at(static_cast<size_t>(index));
   std::vector<uint8_t> bytes(e.compressed_bytes);
@@ -111,11 +118,16 @@ std::vector<float> StoreReader::read_stored_values(int64_t index) const {
 BrickContents StoreReader::read_brick(int64_t index) const {
   const auto [j, b] = locate_brick(index);
   if (j == 0) {  // values with a halo; the records are rebuilt from them (io/store_brick.h)
-    BandTile tile = tile_for_brick(layout_, 0, b);
+    // The tile's arrays are the same size for every brick: each thread keeps one set, rather
+    // than faulting in fresh pages for every brick a paged extraction decodes.
+    thread_local BandTile::Buffers spare;
+    BandTile tile = tile_for_brick(layout_, 0, b, std::move(spare));
     fill_from_halo(tile, read_stored_values(index));
     CriticalCounts counts = {{0, 0, 0}, {0, 0, 0}};
     tile.build(counts);
-    return contents_of(tile, tile.core_lo(), header_.quantize_bits != 0 ? kQuantizationError : 0.0f);
+    BrickContents c = contents_of(tile, tile.core_lo(), header_.quantize_bits != 0 ? kQuantizationError : 0.0f);
+    spare = tile.release();
+    return c;
   }
   const BrickEntry& e = directory_.at(static_cast<size_t>(index));
   const std::vector<uint8_t> bytes = read_compressed(index);

@@ -31,6 +31,10 @@ class StoreReader {
   // Only the values the brick stores (band 0: the (T+4)^3 box with its halo, x fastest; other
   // bands: T^3 in Morton order), without rebuilding band 0's records.
   std::vector<float> read_stored_values(int64_t index) const;
+  // Asks the kernel to start reading what follows brick `index` in the file (the next bricks of
+  // its band in Morton order, i.e. traversal order), about `bricks` bricks' worth, in the
+  // background: a hint that costs no thread and pays when the file is not in the page cache.
+  void prefetch_after(int64_t index, int bricks) const;
   // "FILE: brick 12 (band 0, brick 1 0 0)"
   std::string describe_brick(int64_t index) const;
   // Band and brick coordinates of a directory index.

@@ -29,9 +29,9 @@ run_ctest --test-dir build-asan --output-on-failure -j2 -LE slow
 echo "== RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF
-cmake --build build-tsan --target test_determinism test_store -j "$jobs"
+cmake --build build-tsan --target test_determinism test_store test_paged_extract -j "$jobs"
 TSAN_OPTIONS="halt_on_error=1" run_ctest --test-dir build-tsan --output-on-failure \
-  -R 'Determinism|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)'
+  -R 'Determinism|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.'
 
 # One closing line over the three runs (each ctest above has already failed the script on error).
 total=0

@@ -2,6 +2,9 @@
 // Steps: read, preprocess (MultiresVolume::build), extract, measure topology, write.
 // Nothing is written before the mesh exists, and the writers are atomic, so a failure
 // leaves no output file behind.
+#include <malloc.h>
+#include <sys/resource.h>
+
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
@@ -18,6 +21,8 @@
 #include "engine/mesh_topology.h"
 #include "engine/multires_volume.h"
 #include "io/atomic_file.h"
+#include "io/brick_cache.h"
+#include "io/paged_volume.h"
 #include "io/io_error.h"
 #include "io/ply_writer.h"
 #include "io/store_reader.h"
@@ -39,6 +44,10 @@ struct ExtractArgs {
   std::string output;
   std::string report;
   int threads = 0;
+  int64_t cache_mb = 512;
+  std::string focus;
+  std::string radius;
+  int64_t max_triangles = 0;
   bool quiet = false;
 };
 
@@ -58,20 +67,44 @@ CLI::Validator real_validator(bool non_negative) {
       "");
 }
 
-// The volume ready for extraction: a store is loaded as it is; any other input is read and
-// preprocessed in memory (the same records, see tests/store_test.cpp).
-MultiresVolume prepare(const ExtractArgs& a, ExtractionRun& run, bool progress) {
+// Peak resident memory of this process so far (getrusage), in MB.
+double peak_rss_mb() {
+  struct rusage u {};
+  ::getrusage(RUSAGE_SELF, &u);
+  return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux reports KiB
+}
+
+// A store is paged through a brick cache: only the bricks the traversal reaches are read.
+Mesh extract_from_store(const ExtractArgs& a, ExtractionRun& run) {
+  if (!a.dims.empty() || !a.type.empty()) throw CLI::ValidationError("--dims/--type", "do not apply to a store");
+  // The cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
+  // return each to the kernel and fault fresh zeroed pages in for the next. Kept, they are reused.
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 128 << 20);
   auto start = std::chrono::steady_clock::now();
-  if (is_store_file(a.input)) {
-    if (!a.dims.empty() || !a.type.empty()) throw CLI::ValidationError("--dims/--type", "do not apply to a store");
-    const StoreReader store(a.input);
-    MultiresVolume mv = store.load(progress ? progress_bar("loading store") : ProgressCallback{});
-    run.read_seconds = seconds_since(start);
-    run.data_dims = mv.data_dims();
-    run.preprocess = mv.stats();
-    run.lattice_k = mv.lattice().k;
-    return mv;
+  const StoreReader store(a.input);
+  BrickCache cache(store, static_cast<uint64_t>(a.cache_mb) << 20);
+  const PagedVolume volume(cache);
+  run.read_seconds = seconds_since(start);
+  run.data_dims = store.header().dims;
+  for (int t = 0; t < 3; ++t) {
+    run.preprocess.critical_paper[t] = store.header().critical_paper[t];
+    run.preprocess.critical_exact[t] = store.header().critical_exact[t];
   }
+  run.lattice_k = volume.lattice().k;
+  start = std::chrono::steady_clock::now();
+  Mesh mesh = extract(volume, run.options, &run.extract);
+  run.extract_seconds = seconds_since(start);
+  run.cache = cache.stats();
+  run.cache_mb = a.cache_mb;
+  run.cache_budget_bytes = cache.budget_bytes();
+  run.store_bytes = store.file_bytes();
+  return mesh;
+}
+
+// Any other input is read and preprocessed in memory (the same records, tests/store_test.cpp).
+Mesh extract_from_volume(const ExtractArgs& a, ExtractionRun& run, bool progress) {
+  auto start = std::chrono::steady_clock::now();
   VolumeSource source;
   source.spec = a.input;
   if (!a.dims.empty()) source.dims = parse_dims(a.dims);
@@ -79,12 +112,13 @@ MultiresVolume prepare(const ExtractArgs& a, ExtractionRun& run, bool progress) 
   const Volume volume = read_volume(source);
   run.read_seconds = seconds_since(start);
   run.data_dims = volume.dims;
+  run.input_bytes = volume.values.size() * sizeof(float);
   if (progress) {
     std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(volume.dims[0]),
                  static_cast<long long>(volume.dims[1]), static_cast<long long>(volume.dims[2]), run.read_seconds);
   }
   start = std::chrono::steady_clock::now();
-  MultiresVolume mv = MultiresVolume::build(volume, progress ? progress_bar("preprocessing") : ProgressCallback{});
+  const MultiresVolume mv = MultiresVolume::build(volume, progress ? progress_bar("preprocessing") : ProgressCallback{});
   run.preprocess_seconds = seconds_since(start);
   run.preprocess = mv.stats();
   run.lattice_k = mv.lattice().k;
@@ -92,7 +126,24 @@ MultiresVolume prepare(const ExtractArgs& a, ExtractionRun& run, bool progress) 
     std::fprintf(stderr, "isotope: preprocessed (lattice %lld^3) in %.3f s\n",
                  static_cast<long long>(mv.lattice().side), run.preprocess_seconds);
   }
-  return mv;
+  start = std::chrono::steady_clock::now();
+  Mesh mesh = extract(mv, run.options, &run.extract);
+  run.extract_seconds = seconds_since(start);
+  return mesh;
+}
+
+std::array<double, 3> parse_point(const std::string& s) {
+  std::array<double, 3> p{};
+  size_t at = 0;
+  for (size_t a = 0; a < 3; ++a) {
+    const size_t end = a < 2 ? s.find(',', at) : s.size();
+    const auto v = end == std::string::npos ? std::nullopt : parse_real(s.substr(at, end - at));
+    if (!v || !std::isfinite(*v) || (a == 2 && s.find(',', at) != std::string::npos))
+      throw CLI::ValidationError("--focus", "must be three finite numbers X,Y,Z, got '" + s + "'");
+    p[a] = *v;
+    at = end + 1;
+  }
+  return p;
 }
 
 int run_extract(const ExtractArgs& a) {
@@ -115,19 +166,30 @@ int run_extract(const ExtractArgs& a) {
     }
   }
 
+  if (a.focus.empty() != a.radius.empty())
+    throw CLI::ValidationError("--focus/--radius", "give both a focus point and a radius");
+  if (!a.focus.empty()) {
+    Focus f;
+    f.point = parse_point(a.focus);
+    f.radius = *parse_real(a.radius);
+    if (!(f.radius > 0) || !std::isfinite(f.radius))
+      throw CLI::ValidationError("--radius", "must be a finite number > 0, got '" + a.radius + "'");
+    run.options.focus = f;
+  }
+  run.options.max_triangles = a.max_triangles;
+
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) {
     threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
   }
+  run.threads = static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 
-  const MultiresVolume mv = prepare(a, run, progress);
-  auto start = std::chrono::steady_clock::now();
-  const Mesh mesh = extract(mv, run.options, &run.extract);
-  run.extract_seconds = seconds_since(start);
-  start = std::chrono::steady_clock::now();
+  const Mesh mesh = is_store_file(a.input) ? extract_from_store(a, run) : extract_from_volume(a, run, progress);
+  if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
+  const auto start = std::chrono::steady_clock::now();
   run.topology = measure_topology(mesh);
   run.measure_seconds = seconds_since(start);
-  if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
+  run.peak_rss_mb = peak_rss_mb();
 
   // The report's temporary file is opened first (it checks its directory), the mesh is then
   // renamed into place, and if the report cannot be completed the mesh is removed again.
@@ -190,7 +252,22 @@ Command add_extract_command(CLI::App& app) {
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_option("--cache-mb", a->cache_mb,
+                  "Store input: memory for decoded bricks, in MB, at least 8 bricks (~9 MB); the store may be far larger")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
+      ->capture_default_str();
+  cmd->add_option("--focus", a->focus,
+                  "Point of interest X,Y,Z (output coordinates): full resolution there, coarsening to eps at --radius")
+      ->type_name("X,Y,Z");
+  cmd->add_option("--radius", a->radius, "With --focus: the distance at which the error threshold reaches eps")
+      ->check(real_validator(true))
+      ->type_name("R");
+  cmd->add_option("--max-triangles", a->max_triangles,
+                  "Instead of --eps: the finest eps whose mesh has at most T triangles (0 = off)")
+      ->check(CLI::NonNegativeNumber)
+      ->type_name("T");
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");
+
   return [a] { return run_extract(*a); };
 }
 

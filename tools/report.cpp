@@ -20,6 +20,11 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["boundary_edges"] = t.boundary_edges;
   j["nonmanifold_edges"] = t.nonmanifold_edges;
   j["seconds"] = run.total_seconds();
+  j["threads"] = run.threads;
+  j["peak_rss_mb"] = run.peak_rss_mb;
+  j["bytes_read"] = run.cache_mb > 0 ? run.cache.bytes_read : run.input_bytes;
+  j["bricks_read"] = run.cache.bricks_read;
+  j["cache_hits"] = run.cache.hits;
 
   j["input"] = run.input;
   j["output"] = run.output;
@@ -27,6 +32,16 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["eps"] = run.options.eps;
   j["error"] = std::string(to_string(run.options.error));
   j["topology"] = std::string(to_string(run.options.topology));
+  if (run.options.focus) {
+    j["focus"] = run.options.focus->point;
+    j["radius"] = run.options.focus->radius;
+  }
+  if (run.options.max_triangles > 0) {
+    j["max_triangles"] = run.options.max_triangles;
+    j["chosen_eps"] = run.extract.chosen_eps;
+    j["next_eps"] = run.extract.next_eps;
+    j["next_triangles"] = run.extract.next_triangles;
+  }
   j["data_dims"] = run.data_dims;
   j["lattice_k"] = run.lattice_k;
   j["lattice_side"] = (int64_t{1} << run.lattice_k) + 1;
@@ -47,19 +62,26 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
       {"tets_visited", run.extract.tets_visited},
       {"tets_emitted", run.extract.tets_emitted},
   };
+  if (run.cache_mb > 0)
+    j["cache"] = {{"budget_mb", run.cache_mb},
+                  {"effective_budget_mb", static_cast<double>(run.cache_budget_bytes) / (1 << 20)},
+                  {"peak_decoded_mb", static_cast<double>(run.cache.peak_bytes) / (1 << 20)},
+                  {"store_bytes", run.store_bytes}};
   return j;
 }
 
 std::string summary_line(const ExtractionRun& run) {
   const MeshTopology& t = run.topology;
-  char buf[512];
+  const std::string chosen = run.options.max_triangles > 0 ? "; eps " + std::to_string(run.extract.chosen_eps) : "";
+  char buf[640];
   std::snprintf(buf, sizeof buf,
                 "%s: %lld triangles, %lld vertices, %lld component%s, chi %lld, %lld boundary / %lld "
-                "non-manifold edges; preprocess %.3f s, extract %.3f s",
+                "non-manifold edges; preprocess %.3f s, extract %.3f s%s",
                 run.output.c_str(), static_cast<long long>(t.triangles), static_cast<long long>(t.vertices),
                 static_cast<long long>(t.components), t.components == 1 ? "" : "s",
                 static_cast<long long>(t.euler_characteristic), static_cast<long long>(t.boundary_edges),
-                static_cast<long long>(t.nonmanifold_edges), run.preprocess_seconds, run.extract_seconds);
+                static_cast<long long>(t.nonmanifold_edges), run.preprocess_seconds, run.extract_seconds,
+                chosen.c_str());
   return buf;
 }
 

@@ -9,6 +9,7 @@
 #include "engine/mesh_topology.h"
 #include "engine/multires_volume.h"
 #include "engine/options.h"
+#include "io/brick_cache.h"
 
 namespace isotope::tools {
 
@@ -21,6 +22,13 @@ struct ExtractionRun {
   PreprocessStats preprocess;
   ExtractStats extract;
   MeshTopology topology;
+  int threads = 1;
+  double peak_rss_mb = 0;
+  BrickCacheStats cache;        // store input: what the brick cache read and served
+  int64_t cache_mb = 0;         // store input: its budget (0: not a store)
+  uint64_t cache_budget_bytes = 0;  // store input: the budget in effect (BrickCache::kMinBricks)
+  uint64_t store_bytes = 0;     // store input: the file's size
+  uint64_t input_bytes = 0;     // other input: the values read (as float)
   double read_seconds = 0, preprocess_seconds = 0, extract_seconds = 0, measure_seconds = 0;
   double total_seconds() const { return read_seconds + preprocess_seconds + extract_seconds + measure_seconds; }
 };

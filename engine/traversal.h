@@ -1,0 +1,254 @@
+#pragma once
+// The adaptive traversal (paper Sec. 3.2 with the stopping rule of design.md), generic over where
+// values and records come from: a MultiresVolume in memory, or a store paged through a brick
+// cache (io/paged_volume.h). A Source offers the shape of the grid and, per thread, a Reader:
+//
+//   const Lattice& lattice(); data_dims(); origin(); spacing(); value_offset(); value_scale();
+//   Source::Reader reader() const;          // one per task, used by one thread at a time
+//   float Reader::value(const Coord& c, int j);  // as MultiresVolume::value; c lies on G_j (the
+//                                                // multiples of 2^j), a hint for paged sources
+//   Reader::record(const Coord& v) -> R     // R::bounds(), R::topology() of v's diamond
+#include <algorithm>
+#include <array>
+#include <cassert>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "engine/kuhn.h"
+#include "engine/lattice.h"
+#include "engine/marching_tetrahedra.h"
+#include "engine/options.h"
+#include "engine/record.h"
+
+namespace isotope {
+
+struct ExtractStats;
+
+namespace traversal {
+
+// A lattice node packed as x | y << 21 | z << 42: a tetrahedron is 32 bytes, and the midpoint
+// of an edge is (p + q) >> 1, since each component of p + q is even and no carry crosses a field.
+using Packed = uint64_t;
+constexpr int kFieldBits = 21;
+constexpr Packed kFieldMask = (Packed{1} << kFieldBits) - 1;
+inline Packed pack(const Coord& c) {
+  return static_cast<Packed>(c[0]) | static_cast<Packed>(c[1]) << kFieldBits |
+         static_cast<Packed>(c[2]) << (2 * kFieldBits);
+}
+inline Coord unpack(Packed p) {
+  return {static_cast<int64_t>(p & kFieldMask), static_cast<int64_t>((p >> kFieldBits) & kFieldMask),
+          static_cast<int64_t>(p >> (2 * kFieldBits))};
+}
+using PackedTet = std::array<Packed, 4>;
+
+inline int64_t orientation(const Tet& c) {
+  const int64_t ax = c[1][0] - c[0][0], ay = c[1][1] - c[0][1], az = c[1][2] - c[0][2];
+  const int64_t bx = c[2][0] - c[0][0], by = c[2][1] - c[0][1], bz = c[2][2] - c[0][2];
+  const int64_t cx = c[3][0] - c[0][0], cy = c[3][1] - c[0][1], cz = c[3][2] - c[0][2];
+  return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx);
+}
+
+// Bisecting t at level `level` (`positive`: its corners in this order span a positively oriented
+// tetrahedron). The first child keeps the orientation; the second too at level mod 3 == 0, and is
+// mirrored otherwise (its corners are an odd permutation of the parent's, up to the midpoint).
+struct Child {
+  PackedTet tet;
+  bool positive;
+};
+inline std::array<Child, 2> bisect(const PackedTet& t, int level, bool positive) {
+  const Packed v = (t[0] + t[1]) >> 1;
+  if (level % 3 == 0) return {{{{t[0], t[2], t[3], v}, positive}, {{t[1], t[3], t[2], v}, positive}}};
+  return {{{{t[0], t[2], t[3], v}, positive}, {{t[1], t[2], t[3], v}, !positive}}};
+}
+
+// Triangles marching tetrahedra makes of one tetrahedron (engine/marching_tetrahedra.cpp).
+inline int triangles_of(const std::array<float, 4>& f, float iso) {
+  const int above = (f[0] > iso) + (f[1] > iso) + (f[2] > iso) + (f[3] > iso);
+  return above == 2 ? 2 : (above == 1 || above == 3) ? 1 : 0;
+}
+
+// When a diamond is refined. Each diamond v gets a split key: +inf when its topology forbids
+// stopping there, else its error divided by the focus factor g(v) in [0, 1]; a tetrahedron
+// bisected at v is refined iff key >= eps. Keys never grow from a diamond to its children
+// (errors and critical flags are saturated, g never shrinks), which keeps the mesh conforming
+// (crack-free) for any eps and makes "refine everything with key >= eps" a cut of the tree that
+// moves down monotonically as eps falls (find_eps_for_budget relies on this).
+class SplitRule {
+ public:
+  SplitRule(const ExtractOptions& o, const Lattice& lattice, const std::array<double, 3>& origin,
+            const std::array<double, 3>& spacing)
+      : options_(o), origin_(origin), spacing_(spacing) {
+    if (!o.focus) return;
+    // Focus: g(v) = clamp(d(v) / R, 0, 1), d(v) = |v - focus| - reach(level). reach(l) is the sum
+    // of the longest edges of all finer levels, so d(child) >= d(parent) by the triangle
+    // inequality (a child diamond's centre lies within one such edge of its parent's centre).
+    const double h = std::max({spacing[0], spacing[1], spacing[2]});
+    reach_.assign(static_cast<size_t>(lattice.max_level() + 1), 0.0);
+    for (int l = lattice.max_level() - 1; l >= 0; --l)
+      reach_[static_cast<size_t>(l)] = reach_[static_cast<size_t>(l) + 1] + longest_edge(l + 1, lattice, h);
+  }
+
+  double key(const DiamondBounds& b, const DiamondTopology& t, Packed v, int level) const {
+    if (critical(t)) return std::numeric_limits<double>::infinity();
+    const double err = options_.error == ErrorIndicator::bound ? b.error_bound : b.error_surplus;
+    if (reach_.empty()) return err;
+    const double g = focus_factor(v, level);
+    return g > 0 ? err / g : std::numeric_limits<double>::infinity();
+  }
+  bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
+  const ExtractOptions& options() const { return options_; }
+
+ private:
+  // Of a level-l tetrahedron: its refinement edge, a diagonal of a cube, of a face, or an edge.
+  static double longest_edge(int l, const Lattice& lattice, double h) {
+    const double longest[3] = {std::sqrt(3.0), std::sqrt(2.0), 1.0};
+    return std::ldexp(h, lattice.k - l / 3) * longest[l % 3];
+  }
+  bool critical(const DiamondTopology& t) const {
+    const float iso = options_.iso;
+    switch (options_.topology) {
+      case TopologyMode::none: return false;
+      case TopologyMode::paper: return t.paper_lo <= iso && iso < t.paper_hi;
+      case TopologyMode::preserve:
+        return t.exact_lo <= iso && iso < t.exact_hi && static_cast<double>(t.weight) >= options_.delta;
+    }
+    return false;
+  }
+  double focus_factor(Packed v, int level) const {
+    const Coord c = unpack(v);
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double x = origin_[a] + spacing_[a] * static_cast<double>(c[a]) - options_.focus->point[a];
+      d2 += x * x;
+    }
+    const double d = std::sqrt(d2) - reach_[static_cast<size_t>(level)];
+    return std::clamp(d / options_.focus->radius, 0.0, 1.0);
+  }
+
+  ExtractOptions options_;
+  std::array<double, 3> origin_, spacing_;
+  std::vector<double> reach_;  // per level; empty without a focus
+};
+
+// A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
+struct Piece {
+  PackedTet tet{};
+  int level = 0;
+  bool positive = false;
+  bool emit_only = false;
+};
+
+// Depth-first over the bisection tree: cull by range, stop by the split rule, emit at stopping
+// tetrahedra and at the leaves.
+template <class Source>
+class Traversal {
+ public:
+  Traversal(const Source& source, const SplitRule& rule)
+      : reader_(source.reader()), lattice_(source.lattice()), rule_(rule),
+        builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing()) {
+    for (int i = 0; i < 3; ++i) {
+      box_max_[i] = source.data_dims()[i] - 1;
+      clip_ = clip_ || box_max_[i] < lattice_.n;
+    }
+  }
+
+  // The traversal cut at `level` into pieces, in depth-first order: the subtrees rooted there and
+  // the tetrahedra emitted above it. Running the pieces in this order is the whole traversal.
+  std::vector<Piece> split(int level) {
+    std::vector<Piece> pieces;
+    pieces_ = &pieces;
+    split_level_ = level;
+    for (const auto& [root, positive] : roots()) visit(root, 0, positive);
+    pieces_ = nullptr;
+    return pieces;
+  }
+
+  std::vector<Child> roots() const {
+    std::vector<Child> out;
+    const int64_t n = lattice_.n;
+    for (const Tet& r : kuhn_tetrahedra({0, 0, 0}, {n, n, n}))
+      out.push_back({{pack(r[0]), pack(r[1]), pack(r[2]), pack(r[3])}, orientation(r) > 0});
+    return out;
+  }
+
+  void run(const Piece& p) {
+    if (p.emit_only) emit(p.tet, p.level, p.positive);
+    else visit(p.tet, p.level, p.positive);
+  }
+
+  // What the traversal decides about one tetrahedron, without descending: used by the budget
+  // search, which walks the same tree in another order.
+  enum class Fate { culled, leaf, split_key };
+  Fate judge(const PackedTet& t, int level, double* key) {
+    if (clip_ && outside_box(t)) return Fate::culled;
+    if (level == lattice_.max_level()) return Fate::leaf;
+    const Packed v = (t[0] + t[1]) >> 1;
+    const auto r = reader_.record(unpack(v));
+    if (!rule_.in_range(r.bounds())) return Fate::culled;
+    *key = rule_.key(r.bounds(), r.topology(), v, level);
+    return Fate::split_key;
+  }
+  int triangles(const PackedTet& t, int level) {
+    const int j = band_of(level);
+    return triangles_of({value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)}, rule_.options().iso);
+  }
+
+  void keep_keys() { builder_.keep_keys(); }
+  std::vector<uint64_t> take_keys() { return builder_.take_keys(); }
+  Mesh take() { return builder_.take(); }
+  int64_t tets_visited() const { return tets_visited_; }
+  int64_t tets_emitted() const { return tets_emitted_; }
+
+ private:
+  void visit(const PackedTet& t, int level, bool positive) {
+    if (pieces_ && level == split_level_) return pieces_->push_back({t, level, positive, false});
+    ++tets_visited_;
+    if (clip_ && outside_box(t)) return;
+    if (level == lattice_.max_level()) return emit(t, level, positive);
+    const Packed v = (t[0] + t[1]) >> 1;
+    const auto r = reader_.record(unpack(v));
+    if (!rule_.in_range(r.bounds())) return;  // no value on each side
+    if (!(rule_.key(r.bounds(), r.topology(), v, level) >= rule_.options().eps)) return emit(t, level, positive);
+    for (const Child& c : bisect(t, level, positive)) visit(c.tet, level + 1, c.positive);
+  }
+
+  // The tetrahedron lies in a half-space beyond a face of the data box: it meets the box in a
+  // face at most. Leaves are unit-cell Kuhn tetrahedra, wholly inside or caught here.
+  bool outside_box(const PackedTet& t) const {
+    for (int a = 0; a < 3; ++a) {
+      const int shift = a * kFieldBits;
+      Packed lo = kFieldMask;
+      for (Packed p : t) lo = std::min(lo, (p >> shift) & kFieldMask);
+      if (static_cast<int64_t>(lo) >= box_max_[a]) return true;
+    }
+    return false;
+  }
+
+  float value(Packed p, int j) { return reader_.value(unpack(p), j); }
+  // The corners of a level-l tetrahedron lie on G_j for this j (its refinement vertex has scale j).
+  int band_of(int level) const { return std::max(0, lattice_.k - 1 - level / 3); }
+
+  void emit(const PackedTet& t, int level, bool positive) {
+    if (pieces_) return pieces_->push_back({t, level, positive, true});
+    ++tets_emitted_;
+    const Tet c{unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])};
+    const int j = band_of(level);
+    builder_.add_tet(c, {reader_.value(c[0], j), reader_.value(c[1], j), reader_.value(c[2], j), reader_.value(c[3], j)},
+                     positive);
+  }
+
+  typename Source::Reader reader_;
+  const Lattice& lattice_;
+  const SplitRule& rule_;
+  MeshBuilder builder_;
+  Coord box_max_{};
+  bool clip_ = false;  // the data box is smaller than the lattice
+  int64_t tets_visited_ = 0, tets_emitted_ = 0;
+  std::vector<Piece>* pieces_ = nullptr;  // while splitting
+  int split_level_ = 0;
+};
+
+}  // namespace traversal
+}  // namespace isotope

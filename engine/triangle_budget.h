@@ -1,0 +1,87 @@
+#pragma once
+// The finest uniform eps whose mesh stays within a triangle budget, in one walk of the tree.
+//
+// A tetrahedron bisected at diamond v is refined iff key(v) >= eps (engine/traversal.h), and keys
+// never grow downwards, so the mesh for eps is the cut "every tetrahedron with key >= eps split".
+// Starting from the roots, the walk keeps the current cut (its front) in a max-heap by key and
+// splits the front in decreasing key order, one group of equal keys at a time; after a group of
+// key x the front is exactly the mesh for eps = x, and its triangle count is kept as a running
+// sum. It stops at the first group that would exceed the budget. Cost: one traversal down to the
+// answer's cut, memory proportional to that cut, instead of one extraction per trial eps.
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <queue>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "engine/traversal.h"
+
+namespace isotope {
+
+struct BudgetChoice {
+  double eps = 0;             // in the source's value units (codes, for a quantized store)
+  int64_t triangles = 0;
+  double next_eps = 0;        // the next finer step, and its triangles (0: eps is full resolution)
+  int64_t next_triangles = 0;
+  int64_t steps = 0;
+};
+
+template <class Source>
+BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
+  using namespace traversal;
+  struct Item {
+    double key;
+    PackedTet tet;
+    int level;
+    bool positive;
+    int triangles;
+    bool operator<(const Item& o) const { return key < o.key; }
+  };
+  Traversal<Source> walk(source, rule);
+  std::priority_queue<Item> front;
+  int64_t count = 0;
+  auto add = [&](const PackedTet& t, int level, bool positive) {
+    double key = 0;
+    const auto fate = walk.judge(t, level, &key);
+    if (fate == Traversal<Source>::Fate::culled) return;
+    const int tris = walk.triangles(t, level);
+    count += tris;
+    if (fate == Traversal<Source>::Fate::split_key) front.push({key, t, level, positive, tris});
+  };
+  auto split_group = [&](double key) {
+    while (!front.empty() && front.top().key == key) {
+      const Item it = front.top();
+      front.pop();
+      count -= it.triangles;
+      for (const Child& c : bisect(it.tet, it.level, it.positive)) add(c.tet, it.level + 1, c.positive);
+    }
+  };
+  for (const Child& r : walk.roots()) add(r.tet, 0, r.positive);
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  split_group(kInf);  // what the topology mode refines whatever eps is
+  if (count > max_triangles)
+    throw std::runtime_error("a budget of " + std::to_string(max_triangles) +
+                             " triangles is below the coarsest mesh this topology mode allows (" +
+                             std::to_string(count) + " triangles)");
+  BudgetChoice choice;
+  choice.triangles = count;
+  choice.eps = front.empty() ? 0 : std::nextafter(front.top().key, kInf);
+  while (!front.empty()) {
+    const double key = front.top().key;
+    split_group(key);
+    ++choice.steps;
+    if (count > max_triangles) {
+      choice.next_eps = key;
+      choice.next_triangles = count;
+      return choice;
+    }
+    choice.eps = key;
+    choice.triangles = count;
+  }
+  choice.eps = 0;  // everything refined: the full-resolution mesh
+  return choice;
+}
+
+}  // namespace isotope

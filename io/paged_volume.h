@@ -1,0 +1,98 @@
+#pragma once
+// A store as a traversal source (engine/traversal.h): values and records are looked up in the
+// bricks that hold them, through a shared BrickCache, so extraction reads only the bricks its
+// traversal reaches. A node's value is read from the coarsest band that holds it, and a
+// diamond's record from its own band, so a coarse extraction never touches the finer bands.
+#include <array>
+#include <cstdint>
+#include <memory>
+
+#include "engine/extract.h"
+#include "engine/lattice.h"
+#include "engine/record.h"
+#include "io/brick_cache.h"
+
+namespace isotope {
+
+class PagedVolume {
+ public:
+  explicit PagedVolume(BrickCache& cache);
+
+  const Lattice& lattice() const { return layout_.lattice(); }
+  const std::array<int64_t, 3>& data_dims() const { return layout_.dims(); }
+  const std::array<double, 3>& origin() const { return header_.origin; }
+  const std::array<double, 3>& spacing() const { return header_.spacing; }
+  double value_offset() const { return header_.value_offset; }
+  double value_scale() const { return header_.value_scale; }
+
+  class RecordView {
+   public:
+    explicit RecordView(const Record* r) : r_(r) {}
+    const DiamondBounds& bounds() const { return r_->bounds; }
+    const DiamondTopology& topology() const { return r_->topology; }
+
+   private:
+    const Record* r_;
+  };
+
+  // One per task. Keeps the last few bricks it used (direct-mapped by brick index), so most
+  // lookups touch no shared state at all.
+  class Reader {
+   public:
+    explicit Reader(const PagedVolume& volume) : volume_(&volume) {}
+    // Band j's nodes beyond the data box hold the value of the nearest data node, like
+    // MultiresVolume::value; a node beyond band j's grid is clamped and read where it lies.
+    float value(const Coord& c, int j) {
+      const StoreLayout& layout = volume_->layout_;
+      const Band& band = layout.band(j);
+      Coord q = c;
+      if ((c[0] >> j) >= band.nodes[0] || (c[1] >> j) >= band.nodes[1] || (c[2] >> j) >= band.nodes[2]) {
+        for (int a = 0; a < 3; ++a) q[a] = std::min(c[a], layout.dims()[a] - 1);
+        j = scale_of(q, layout.lattice());
+      }
+      uint32_t m = 0;
+      const DecodedBrick& b = brick(locate(j, q, &m));
+      return b.values[m];
+    }
+    RecordView record(const Coord& v) {
+      const int j = scale_of(v, volume_->layout_.lattice());
+      uint32_t m = 0;
+      const DecodedBrick& b = brick(locate(j, v, &m));
+      return RecordView(&b.records[brick_record_index(m)]);
+    }
+
+   private:
+    int64_t locate(int j, const Coord& c, uint32_t* morton) const {
+      const int bits = volume_->layout_.brick_bits();
+      const int64_t mask = volume_->layout_.brick_width() - 1;
+      const int64_t x = c[0] >> j, y = c[1] >> j, z = c[2] >> j;
+      *morton = brick_morton(x & mask, y & mask, z & mask, bits);
+      return volume_->layout_.brick_index(j, {x >> bits, y >> bits, z >> bits});
+    }
+    const DecodedBrick& brick(int64_t index) {
+      Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
+      if (p.index != index) {
+        p.brick = volume_->cache_.get(index);
+        p.index = index;
+      }
+      return *p.brick;
+    }
+    struct Pinned {
+      int64_t index = -1;
+      std::shared_ptr<const DecodedBrick> brick;
+    };
+    const PagedVolume* volume_;
+    std::array<Pinned, 16> pinned_;
+  };
+  Reader reader() const { return Reader(*this); }
+
+ private:
+  BrickCache& cache_;
+  const StoreLayout& layout_;
+  const StoreHeader& header_;
+};
+
+// extract() (engine/extract.h) over a store, paged through the volume's cache.
+Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+}  // namespace isotope

@@ -1,0 +1,215 @@
+// `isotope extract` from a store keeps its decoded bricks within --cache-mb whatever the store's
+// size: a store over 4 times the budget (and whose decoded bricks are ~100 times it) extracts with
+// a peak resident set under the budget plus what the output mesh needs plus a constant measured
+// here (a tiny store's extraction), and the mesh does not depend on the budget.
+// Each isotope run is a child process, so that its peak RSS is its own (wait4's rusage): not the
+// generator's, nor this test's.
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <iterator>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "tests/child_process.h"
+#include "tests/temp_dir_test.h"
+
+namespace isotope {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr int64_t kBudgetMb = 8;
+constexpr int64_t kHugeBudgetMb = 4096;  // holds every brick an extraction reaches: nothing evicted
+// 385^3 uint16: a 114 MB raw volume, a 53 MiB store (6.6x the budget) whose bricks reached at eps 0
+// decode to 750 MiB. Generate, convert and the ten extractions take about a minute on 2 cores.
+constexpr int64_t kSize = 385;
+// In the store's codes (uint16: the field's range over 0..65535). About 1/60 of the eps-0
+// triangles, while the traversal still reaches a few hundred bricks: the run where the mesh is
+// negligible and the cache's own memory shows.
+constexpr double kCoarseEps = 256;
+
+// What a paged extraction may hold beyond the budget, in decoded bricks (io/brick_cache.h: "the
+// memory in use stays within the budget plus those few bricks per thread"):
+//  - every PagedVolume::Reader pins its last 16 bricks (io/paged_volume.h, Reader::pinned_),
+//    evicted or not; one reader per running piece (plus, counted here to be safe, the top-level
+//    traversal's, which lets go before the pieces run). Keep this equal to the size of pinned_: raising it raises what a
+//    paged extraction may hold beyond --cache-mb, and this test is where that should show;
+constexpr int64_t kPinnedPerReader = 16;
+//  - per thread, the brick being decoded before its admission, and the thread's band-0 tile
+//    scratch kept for reuse (StoreReader::read_brick's thread_local BandTile::Buffers: a 37^3
+//    window of a 4-byte value and two 36-byte records per node, 3.9 MB, i.e. 3.5 brick sizes).
+constexpr int64_t kDecodePerThread = 5;
+// The output mesh is 12 bytes per vertex and 12 per triangle (mesh_bytes), but the peak is at the
+// weld (engine/piece_weld.cpp), which holds at once: the pieces' meshes and their 8-byte edge key
+// per vertex (vertices on piece boundaries repeated, ~15% here; vectors grown by doubling), the
+// welding map (EdgeVertexMap, since then for the vertices on piece boundaries only; it was 2 to 4
+// slots of 12 bytes per vertex, 48 MB here) and the output mesh filling up while the pieces are
+// freed. With T ~ 2V that was up to ~4.8 x mesh_bytes; heaptrack at 385^3, eps 0, measured a live
+// heap peak of 4.6-4.9 x mesh_bytes (176 "M" for a 36 MiB mesh) with the map over all vertices,
+// the same with 1 and 2 threads. With 2 threads the RSS was ~60 MB above the 1-thread run for the
+// same live peak (memory freed by the weld that malloc does not give back), up to 5.6 x mesh_bytes
+// above the budget and the baseline. measure_topology's edge list (24 bytes per triangle) comes
+// after the weld has freed its map, and stays below that.
+constexpr double kMeshFactor = 6.0;
+// Slack above all that: allocator arenas and page-granular growth that vary run to run.
+constexpr int64_t kMarginMb = 8;
+
+using testing::Child;
+using testing::report;
+using testing::run_isotope;
+using testing::same_bytes;
+using testing::slurp;
+
+double mb_of_kb(int64_t kb) { return static_cast<double>(kb) / 1024; }
+
+// One `isotope extract` run: the child's own measurements and its JSON report.
+struct Extraction {
+  Child child;
+  json report;
+  std::string mesh;
+  int64_t vertices() const { return report.at("vertices").get<int64_t>(); }
+  int64_t triangles() const { return report.at("triangles").get<int64_t>(); }
+  int64_t bricks_read() const { return report.at("bricks_read").get<int64_t>(); }
+  // What the output mesh takes in memory (engine/mesh.h): 3 floats per vertex, 3 indices per triangle.
+  int64_t mesh_bytes() const { return 12 * vertices() + 12 * triangles(); }
+};
+
+class ExtractMemory : public testing::TempDirTest {
+ protected:
+  // Runs isotope ARGS into LOG and expects exit 0, showing its output otherwise.
+  Child expect_ok(const std::vector<std::string>& args, const std::string& log_name = "log.txt") {
+    const std::string log = path(log_name);
+    const Child c = run_isotope(args, log);
+    EXPECT_EQ(c.code, 0) << args.front() << ": " << slurp(log);
+    return c;
+  }
+
+  Extraction extract(const std::string& store, const std::string& iso, double eps, int threads, int64_t cache_mb) {
+    char eps_text[32];
+    std::snprintf(eps_text, sizeof eps_text, "%g", eps);
+    const std::string name = fs::path(store).stem().string() + "_eps" + eps_text + "_t" + std::to_string(threads) +
+                             "_c" + std::to_string(cache_mb);
+    Extraction e;
+    e.mesh = path(name + ".ply");
+    const std::string report_path = path(name + ".json");
+    e.child = expect_ok({"extract", store, "--iso", iso, "--eps", eps_text, "--threads", std::to_string(threads),
+                         "--cache-mb", std::to_string(cache_mb), "-o", e.mesh, "--report", report_path, "-q"});
+    e.report = json::parse(slurp(report_path), nullptr, /*allow_exceptions=*/false);
+    if (e.report.is_discarded() || !e.report.contains("triangles")) {
+      ADD_FAILURE() << name << ": no report";
+      e.report = json{{"vertices", 0}, {"triangles", 0}, {"bricks_read", 0}, {"bytes_read", 0},
+                      {"peak_rss_mb", 0}, {"cache", {{"peak_decoded_mb", 0}}}};
+    }
+    return e;
+  }
+};
+
+// The isovalue of the field's zero set in the generator's uint16 codes, from its printed mapping
+// ("...; iso 0 -> 42594.855").
+std::string iso_zero_code(const std::string& generate_log) {
+  const std::string key = "iso 0 -> ";
+  const size_t at = generate_log.find(key);
+  if (at == std::string::npos) return {};
+  size_t end = at + key.size();
+  while (end < generate_log.size() && generate_log[end] != '\n' && generate_log[end] != ' ') ++end;
+  return generate_log.substr(at + key.size(), end - at - key.size());
+}
+
+TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresTheBudget) {
+  const std::string side = std::to_string(kSize);
+  const std::string raw = path("alg_" + side + "x" + side + "x" + side + "_uint16.raw");
+  const std::string big = path("big.isotope"), tiny = path("tiny.isotope");
+  // The algebraic field: smooth away from its singular point, fast to sample, and its zero set
+  // crosses the whole volume, so an eps-0 extraction reaches a third of the band-0 bricks.
+  expect_ok({"generate", "algebraic", "--size", side, "--type", "uint16", "-o", raw}, "generate.txt");
+  const std::string iso = iso_zero_code(slurp(path("generate.txt")));
+  ASSERT_FALSE(iso.empty()) << "no 'iso 0 -> CODE' in: " << slurp(path("generate.txt"));
+  expect_ok({"generate", "sphere", "--size", "9", "--type", "uint16", "-q", "-o", path("sphere_9x9x9_uint16.raw")});
+  const Child convert = expect_ok({"convert", raw, big, "-q"});
+  expect_ok({"convert", path("sphere_9x9x9_uint16.raw"), tiny, "-q"});
+  fs::remove(raw);
+  ASSERT_FALSE(HasFailure());
+  const auto store_bytes = static_cast<int64_t>(fs::file_size(big));
+  report("budget_mb", static_cast<double>(kBudgetMb));
+  report("store_mb", static_cast<double>(store_bytes) / (1 << 20));
+  report("convert_seconds", convert.seconds);
+  ASSERT_GE(store_bytes, 4 * (kBudgetMb << 20)) << "the store must be at least 4 times the cache budget";
+
+  // What the process needs whatever the store: binary, libraries, thread pool and stacks, per
+  // thread count. The tiny store's 3 bricks are a few KB.
+  std::map<int, int64_t> baseline_kb;
+  for (const int threads : {1, 2}) {
+    const Extraction t = extract(tiny, "32767.5", 0, threads, kBudgetMb);
+    baseline_kb[threads] = t.child.max_rss_kb;
+    report("baseline_rss_mb_threads" + std::to_string(threads), mb_of_kb(t.child.max_rss_kb));
+  }
+
+  for (const double eps : {0.0, kCoarseEps}) {
+    const std::string tag = eps == 0 ? "eps0" : "coarse";
+    // Every brick the traversal reaches, decoded once and never evicted: the reference mesh and
+    // the decoded size the budget is measured against.
+    const Extraction huge = extract(big, iso, eps, 2, kHugeBudgetMb);
+    const double decoded_mb = huge.report.at("cache").at("peak_decoded_mb").get<double>();
+    ASSERT_GT(huge.bricks_read(), 0);
+    const double brick_mb = decoded_mb / static_cast<double>(huge.bricks_read());  // decoded bytes per brick
+    report(tag + "_decoded_mb", decoded_mb);
+    report(tag + "_brick_mb", brick_mb);
+    report(tag + "_huge_cache_rss_mb", mb_of_kb(huge.child.max_rss_kb));
+    report(tag + "_huge_cache_bricks_read", static_cast<double>(huge.bricks_read()));
+    report(tag + "_huge_cache_seconds", huge.child.seconds);
+    report(tag + "_triangles", static_cast<double>(huge.triangles()));
+    report(tag + "_mesh_mb", static_cast<double>(huge.mesh_bytes()) / (1 << 20));
+    // Far more decoded data than the budget, so holding it all would show.
+    EXPECT_GE(decoded_mb, 16.0 * kBudgetMb);
+
+    for (const int threads : {1, 2}) {
+      const std::string key = tag + "_threads" + std::to_string(threads);
+      const Extraction small = extract(big, iso, eps, threads, kBudgetMb);
+      // Peak RSS <= the tiny store's (the constant) + the budget + the bricks held beyond it
+      // (pinned by the readers, being decoded, decode scratch) + kMeshFactor x the mesh + margin.
+      const int64_t extra_bricks = kPinnedPerReader * (threads + 1) + kDecodePerThread * threads;
+      const double limit_mb = mb_of_kb(baseline_kb[threads]) + static_cast<double>(kBudgetMb) +
+                              static_cast<double>(extra_bricks) * brick_mb +
+                              kMeshFactor * static_cast<double>(small.mesh_bytes()) / (1 << 20) +
+                              static_cast<double>(kMarginMb);
+      const double rss_mb = mb_of_kb(small.child.max_rss_kb);
+      report(key + "_rss_mb", rss_mb);
+      report(key + "_report_peak_rss_mb", small.report.at("peak_rss_mb").get<double>());
+      report(key + "_limit_mb", limit_mb);
+      report(key + "_rss_over_baseline_mb", rss_mb - mb_of_kb(baseline_kb[threads]));
+      report(key + "_bricks_read", static_cast<double>(small.bricks_read()));
+      report(key + "_bytes_read_mb", small.report.at("bytes_read").get<double>() / (1 << 20));
+      report(key + "_peak_decoded_mb", small.report.at("cache").at("peak_decoded_mb").get<double>());
+      report(key + "_seconds", small.child.seconds);
+      EXPECT_LE(rss_mb, limit_mb) << key;
+      EXPECT_LT(small.child.max_rss_kb, huge.child.max_rss_kb) << key;
+      // It really paged: bricks were evicted and read again.
+      EXPECT_GT(small.bricks_read(), huge.bricks_read()) << key;
+      EXPECT_LE(small.report.at("cache").at("peak_decoded_mb").get<double>(),
+                static_cast<double>(kBudgetMb) + 2 * brick_mb)
+          << key;
+      EXPECT_TRUE(same_bytes(small.mesh, huge.mesh))
+          << key << ": the mesh extracted with --cache-mb " << kBudgetMb << " differs from the one with "
+          << kHugeBudgetMb;
+      fs::remove(small.mesh);
+    }
+    fs::remove(huge.mesh);
+  }
+}
+
+}  // namespace
+}  // namespace isotope

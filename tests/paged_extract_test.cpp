@@ -1,0 +1,704 @@
+// Out-of-core extraction (io/paged_volume.h, io/brick_cache.h): a store paged through a brick
+// cache gives the in-memory mesh bit for bit, whatever the threads and the cache budget; closed
+// surfaces stay closed and keep their topology through the paged, parallel path; a focus is full
+// resolution at its point; a triangle budget takes the finest eps that fits; the cache reads each
+// brick at most once when the store fits and stays near its budget when it does not; a corrupt
+// brick is named, never a crash. The PagedParallel tests, small versions of the parallel ones,
+// also run under ThreadSanitizer (scripts/test.sh).
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "engine/extract.h"
+#include "engine/fields.h"
+#include "engine/mesh_topology.h"
+#include "engine/multires_volume.h"
+#include "io/box_reader.h"
+#include "io/brick_cache.h"
+#include "io/io_error.h"
+#include "io/paged_volume.h"
+#include "io/store_reader.h"
+#include "io/store_writer.h"
+#include "tests/byte_files.h"
+#include "tests/temp_dir_test.h"
+#include "tests/test_support.h"
+
+namespace isotope {
+namespace {
+
+// The smallest budget there is. BrickCache raises it to its floor (BrickCache::budget_bytes), a
+// few bricks, so with it the cache holds as little as it ever does and evicts on every store here
+// whose extraction touches more bricks than that.
+constexpr uint64_t kTinyBudget = 1;
+constexpr uint64_t kHugeBudget = uint64_t{1} << 30;  // every store here fits many times over
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+std::string dims_name(const Volume& v) {
+  return std::to_string(v.dims[0]) + "x" + std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
+}
+
+// What a float32 raw file carries (and so the store): unit spacing, origin 0. Output coordinates
+// are then lattice coordinates, which the focus tests rely on.
+Volume as_raw(Volume v) {
+  v.spacing = {1, 1, 1};
+  v.origin = {0, 0, 0};
+  return v;
+}
+
+std::string describe(const ExtractOptions& o) {
+  std::string s = "iso " + std::to_string(o.iso) + " eps " + std::to_string(o.eps) + " " +
+                  std::string(to_string(o.topology)) + " " + std::string(to_string(o.error));
+  if (o.focus)
+    s += " focus (" + std::to_string(o.focus->point[0]) + " " + std::to_string(o.focus->point[1]) + " " +
+         std::to_string(o.focus->point[2]) + ") r " + std::to_string(o.focus->radius);
+  if (o.max_triangles > 0) s += " max_triangles " + std::to_string(o.max_triangles);
+  return s;
+}
+
+// Equal positions and triangles, bit for bit.
+::testing::AssertionResult same_mesh(const Mesh& a, const Mesh& b) {
+  if (a.positions.size() != b.positions.size() || a.triangles.size() != b.triangles.size())
+    return ::testing::AssertionFailure() << "sizes differ: " << a.positions.size() << " vertices, "
+                                         << a.triangles.size() << " triangles vs " << b.positions.size()
+                                         << " vertices, " << b.triangles.size() << " triangles";
+  for (size_t i = 0; i < a.positions.size(); ++i)
+    if (std::memcmp(a.positions[i].data(), b.positions[i].data(), sizeof a.positions[i]) != 0)
+      return ::testing::AssertionFailure() << "vertex " << i << " differs";
+  for (size_t i = 0; i < a.triangles.size(); ++i)
+    if (a.triangles[i] != b.triangles[i]) return ::testing::AssertionFailure() << "triangle " << i << " differs";
+  return ::testing::AssertionSuccess();
+}
+
+// Every directed edge of a closed, consistently oriented surface appears once, and so does its
+// reverse (as in crack_free_test.cpp, with a sorted array for the map).
+int64_t orientation_defects(const Mesh& m) {
+  std::vector<std::pair<uint32_t, uint32_t>> directed;
+  directed.reserve(3 * m.triangles.size());
+  for (const auto& t : m.triangles)
+    for (int i = 0; i < 3; ++i) directed.push_back({t[i], t[(i + 1) % 3]});
+  std::sort(directed.begin(), directed.end());
+  auto count = [&](std::pair<uint32_t, uint32_t> e) {
+    const auto [first, last] = std::equal_range(directed.begin(), directed.end(), e);
+    return last - first;
+  };
+  int64_t bad = 0;
+  for (size_t i = 0; i < directed.size(); ++i) {
+    if (i > 0 && directed[i] == directed[i - 1]) continue;
+    if (count(directed[i]) != 1 || count({directed[i].second, directed[i].first}) != 1) ++bad;
+  }
+  return bad;
+}
+
+double distance(const std::array<float, 3>& p, const std::array<double, 3>& q) {
+  double d2 = 0;
+  for (int a = 0; a < 3; ++a) d2 += (p[a] - q[a]) * (p[a] - q[a]);
+  return std::sqrt(d2);
+}
+
+// Triangles with at least one vertex within r of q.
+int64_t triangles_near(const Mesh& m, const std::array<double, 3>& q, double r) {
+  int64_t n = 0;
+  for (const auto& t : m.triangles)
+    n += distance(m.positions[t[0]], q) <= r || distance(m.positions[t[1]], q) <= r ||
+         distance(m.positions[t[2]], q) <= r;
+  return n;
+}
+
+std::pair<float, float> value_range(const Volume& v) {
+  const auto [lo, hi] = std::minmax_element(v.values.begin(), v.values.end());
+  return {*lo, *hi};
+}
+
+struct PagedRun {
+  Mesh mesh;
+  ExtractStats stats;
+  BrickCacheStats cache;
+  uint64_t budget = 0;  // the cache's, which may raise the one asked for (BrickCache::budget_bytes)
+};
+
+// One extraction through a fresh cache of `budget` bytes (threads: as the caller limits them).
+PagedRun run_paged(const StoreReader& store, uint64_t budget, const ExtractOptions& o) {
+  BrickCache cache(store, budget);
+  const PagedVolume volume(cache);
+  PagedRun r;
+  r.mesh = extract(volume, o, &r.stats);
+  r.cache = cache.stats();
+  r.budget = cache.budget_bytes();
+  EXPECT_GE(r.budget, budget);
+  return r;
+}
+
+// Decoded sizes of a store's bricks as the cache counts them: all of them, and the largest.
+struct DecodedSizes {
+  uint64_t total = 0, largest = 0;
+};
+DecodedSizes decoded_sizes(const StoreReader& store) {
+  BrickCache cache(store, kHugeBudget);  // nothing is evicted: the peak grows by each brick's size
+  DecodedSizes d;
+  for (int64_t i = 0; i < static_cast<int64_t>(store.directory().size()); ++i) {
+    cache.get(i);
+    const uint64_t now = cache.stats().peak_bytes;
+    d.largest = std::max(d.largest, now - d.total);
+    d.total = now;
+  }
+  return d;
+}
+
+class PagedTest : public testing::TempDirTest {
+ protected:
+  // Writes `v` as float32 raw and converts it (as store_test.cpp does); returns the store's path.
+  std::string convert(const Volume& v, const std::string& name, int brick_bits = StoreLayout::kDefaultBrickBits,
+                      int quantize_bits = 0) {
+    const std::string raw = path(name + "_" + dims_name(v) + "_float32.raw");
+    std::ofstream(raw, std::ios::binary)
+        .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
+    const std::string store = path(name + ".isotope");
+    const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir_.string());
+    ConvertOptions o;
+    o.brick_bits = brick_bits;
+    o.quantize_bits = quantize_bits;
+    convert_to_store(*input, store, o);
+    std::filesystem::remove(raw);
+    return store;
+  }
+  void expect_corrupt_bricks_named(size_t stride, const std::vector<std::pair<size_t, uint64_t>>& schedule);
+};
+using PagedExtract = PagedTest;
+using PagedParallel = PagedTest;  // small enough for ThreadSanitizer (scripts/test.sh)
+
+// 1. Paged = in-memory, bit for bit, over volumes, brick sizes, isovalues, eps, modes and error
+// indicators, through a generous cache and through the smallest one (kTinyBudget).
+class PagedEqualsInMemory : public PagedTest {
+ protected:
+  struct Sweep {
+    std::vector<float> isovalues;
+    std::vector<double> relative_eps;  // of the data range
+    std::vector<TopologyMode> modes;
+    std::vector<ErrorIndicator> errors;
+  };
+  // Compares every combination of `sweep` on a store of `v` with `bits`, through `budget`'s cache
+  // (one cache for the whole sweep); returns the number of comparisons.
+  int compare(const std::string& name, const Volume& v, int bits, uint64_t budget, const Sweep& sweep) {
+    const MultiresVolume memory = MultiresVolume::build(v);
+    const auto [lo, hi] = value_range(v);
+    const StoreReader store(convert(v, name + std::to_string(bits), bits));
+    BrickCache cache(store, budget);
+    const PagedVolume paged(cache);
+    int compared = 0, nonempty = 0;
+    for (float iso : sweep.isovalues)
+      for (double rel : sweep.relative_eps)
+        for (TopologyMode mode : sweep.modes)
+          for (ErrorIndicator error : sweep.errors) {
+            ExtractOptions o;
+            o.iso = iso, o.eps = rel * (hi - lo), o.topology = mode, o.error = error;
+            const Mesh expected = extract(memory, o);
+            nonempty += !expected.triangles.empty();
+            EXPECT_TRUE(same_mesh(expected, extract(paged, o)))
+                << name << " brick bits " << bits << " cache budget " << budget << " " << describe(o);
+            ++compared;
+          }
+    EXPECT_GT(nonempty, compared * 3 / 4) << name;
+    const BrickCacheStats stats = cache.stats();
+    EXPECT_GT(stats.bricks_read, 0) << name;
+    if (budget == kHugeBudget) {
+      EXPECT_LE(stats.bricks_read, static_cast<int64_t>(store.directory().size())) << name;
+    }
+    return compared;
+  }
+  const std::vector<TopologyMode> all_modes_ = {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve};
+  const std::vector<ErrorIndicator> both_errors_ = {ErrorIndicator::bound, ErrorIndicator::surplus};
+};
+
+// Odd dimensions, brick bits 2 and 5, every combination, through a generous cache and through
+// the smallest one, and through the smallest with brick bits 3 too (the 5-bit stores of these
+// volumes fit within the cache's floor).
+TEST_F(PagedEqualsInMemory, SyntheticVolumesBitForBit) {
+  const Volume noise = as_raw(testing::crop(generate_noise(40, 11), {37, 29, 23}));
+  const Volume algebraic = as_raw(testing::crop(generate_algebraic(40, {5.0 / 32, 3.0 / 32, 0}), {33, 40, 35}));
+  const std::vector<double> eps = {0.0, 0.01, 0.2};
+  int compared = 0;
+  for (int bits : {2, 5}) {
+    compared += compare("noise", noise, bits, kHugeBudget, {{-0.3f, 0.0f, 0.25f}, eps, all_modes_, both_errors_});
+    compared += compare("algebraic", algebraic, bits, kHugeBudget, {{0.0f, 0.1f}, eps, all_modes_, both_errors_});
+  }
+  for (int bits : {2, 3, 5}) {
+    compared += compare("noise", noise, bits, kTinyBudget, {{-0.3f, 0.0f, 0.25f}, eps, all_modes_, both_errors_});
+    compared += compare("algebraic", algebraic, bits, kTinyBudget, {{0.0f, 0.1f}, eps, all_modes_, both_errors_});
+  }
+  EXPECT_EQ(compared, 2 * 18 * (3 + 2) + 3 * 18 * (3 + 2));
+}
+
+// The four shared volumes: every combination through a generous cache (default bricks); through
+// the smallest cache on brick bits 2, where pieces of the traversal decode their bricks afresh
+// (slow on these sizes), one isovalue and one error indicator.
+TEST_F(PagedEqualsInMemory, SharedVolumesBitForBit) {
+  int compared = 0;
+  for (const auto& s : testing::shared_volumes()) {
+    const Volume v = testing::load_shared(s);
+    compared += compare(s.name, v, 5, kHugeBudget,
+                        {{s.isovalues[0], s.isovalues[1], s.isovalues[2]}, {0.0, 0.01, 0.2}, all_modes_, both_errors_});
+    compared +=
+        compare(s.name, v, 2, kTinyBudget, {{s.isovalues[1]}, {0.0, 0.01, 0.2}, all_modes_, {ErrorIndicator::bound}});
+  }
+  EXPECT_EQ(compared, 4 * (54 + 9));
+}
+
+// 2. One mesh, byte for byte, for 1, 2, 4 and 8 threads and cache budgets of kTinyBudget, an
+// eighth of the decoded store and 1 GB, with plain eps, a focus and a triangle budget; the in-memory mesh
+// and statistics too; and the cache's peak within its guarantee (see test 6) on every run.
+void expect_same_bytes(const std::string& name, const Volume& v, float iso, const StoreReader& store,
+                       const std::vector<size_t>& thread_counts = {1, 2, 4, 8}) {
+  const MultiresVolume memory = MultiresVolume::build(v);
+  const auto [lo, hi] = value_range(v);
+  const DecodedSizes sizes = decoded_sizes(store);
+  ASSERT_GT(sizes.total / 8, sizes.largest) << name << ": an eighth of the store must not hold everything";
+  ExtractOptions full;
+  full.iso = iso;
+  const auto full_triangles = static_cast<int64_t>(extract(memory, full).triangles.size());
+  ASSERT_GT(full_triangles, 1000) << name;
+  ExtractOptions coarsest = full;
+  coarsest.eps = kInf;
+  const auto coarsest_triangles = static_cast<int64_t>(extract(memory, coarsest).triangles.size());
+
+  std::vector<ExtractOptions> variants(3);
+  variants[0].iso = iso, variants[0].eps = 0.05 * (hi - lo);
+  variants[1].iso = iso, variants[1].eps = 0.3 * (hi - lo), variants[1].topology = TopologyMode::paper;
+  const std::array<double, 3> dims = {static_cast<double>(v.dims[0]), static_cast<double>(v.dims[1]),
+                                      static_cast<double>(v.dims[2])};
+  variants[1].focus = Focus{{dims[0] / 2, dims[1] / 3, dims[2] / 2}, dims[0] / 4};
+  variants[2].iso = iso, variants[2].error = ErrorIndicator::surplus;
+  variants[2].max_triangles = coarsest_triangles + (full_triangles - coarsest_triangles) / 3;  // above the floor
+  for (const ExtractOptions& o : variants) {
+    ExtractStats expected_stats;
+    const Mesh expected = extract(memory, o, &expected_stats);
+    ASSERT_GT(expected.triangles.size(), 0u);
+    for (size_t threads : thread_counts) {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+      for (uint64_t budget : {kTinyBudget, sizes.total / 8, kHugeBudget}) {
+        const PagedRun r = run_paged(store, budget, o);
+        const std::string what = name + " " + describe(o) + " threads " + std::to_string(threads) + " budget " +
+                                 std::to_string(budget);
+        ASSERT_TRUE(same_mesh(expected, r.mesh)) << what;
+        EXPECT_EQ(r.stats.chosen_eps, expected_stats.chosen_eps) << what;
+        EXPECT_EQ(r.stats.next_eps, expected_stats.next_eps) << what;
+        EXPECT_EQ(r.stats.next_triangles, expected_stats.next_triangles) << what;
+        EXPECT_EQ(r.stats.budget_steps, expected_stats.budget_steps) << what;
+        EXPECT_EQ(r.stats.tets_emitted, expected_stats.tets_emitted) << what;
+        EXPECT_LE(r.cache.peak_bytes, std::max(r.budget, sizes.largest) + sizes.largest) << what;
+      }
+    }
+  }
+}
+
+TEST_F(PagedExtract, SameBytesForAnyThreadsAndCacheBudget) {
+  const Volume hydrogen = testing::load_shared(testing::shared_volumes()[2]);
+  expect_same_bytes("hydrogen", hydrogen, 0.05f, StoreReader(convert(hydrogen, "hydrogen", 4)));
+  const Volume noise = as_raw(testing::crop(generate_noise(50, 7), {47, 41, 45}));
+  expect_same_bytes("noise", noise, 0.1f, StoreReader(convert(noise, "noise", 3)));
+}
+
+// The same on a small volume with small bricks and 2 and 8 threads, so that threads contend for
+// the cache's slots and locks: the one scripts/test.sh runs under ThreadSanitizer.
+TEST_F(PagedParallel, SameBytesForAnyThreadsAndCacheBudget) {
+  const Volume noise = as_raw(testing::crop(generate_noise(40, 7), {29, 23, 27}));
+  expect_same_bytes("noise", noise, 0.1f, StoreReader(convert(noise, "noise", 3)), {2, 8});
+}
+
+// 3. Invariant 3 of design.md through the paged, parallel path: the closed shapes of
+// crack_free_test.cpp, converted to stores with small bricks and read through a cache of
+// an eighth of their decoded size on 4 threads, stay closed, manifold and oriented at every eps,
+// with a focus anywhere (inside, on the corner, outside the volume) and with a triangle budget;
+// at eps 0, and in preserve mode always, they keep their components and Euler characteristic.
+TEST_F(PagedExtract, ClosedShapesStayClosedManifoldAndKeepTheirTopology) {
+  struct Shape {
+    const char* name;
+    Volume volume;
+    int64_t components, euler;
+  };
+  const Shape shapes[] = {
+      {"sphere 33", as_raw(generate_sphere(33)), 1, 2},
+      {"torus 41", as_raw(generate_torus(41)), 1, 0},
+      {"linked tori 33", as_raw(generate_linked_tori(33)), 2, 0},
+      {"nested spheres 45", as_raw(generate_nested_spheres(45)), 3, 6},
+  };
+  const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 4);
+  int checked = 0;
+  for (const Shape& s : shapes) {
+    const StoreReader store(convert(s.volume, "shape", 3));
+    BrickCache cache(store, std::max<uint64_t>(decoded_sizes(store).total / 8, 1));
+    const PagedVolume paged(cache);
+    auto check = [&](const ExtractOptions& o, bool topology_known) {
+      const Mesh m = extract(paged, o);
+      const MeshTopology t = measure_topology(m);
+      const std::string what = std::string(s.name) + " " + describe(o);
+      EXPECT_EQ(t.boundary_edges, 0) << what;
+      EXPECT_EQ(t.nonmanifold_edges, 0) << what;
+      EXPECT_EQ(orientation_defects(m), 0) << what;
+      if (topology_known) {
+        EXPECT_EQ(t.components, s.components) << what;
+        EXPECT_EQ(t.euler_characteristic, s.euler) << what;
+      }
+      if (o.max_triangles > 0) {
+        EXPECT_LE(t.triangles, o.max_triangles) << what;
+      }
+      ++checked;
+    };
+    for (double eps : {0.0, 0.02, 0.5, 5.0})
+      for (ErrorIndicator err : {ErrorIndicator::bound, ErrorIndicator::surplus})
+        for (TopologyMode mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve}) {
+          if (eps == 0.0 && err == ErrorIndicator::surplus) continue;  // eps 0 refines everything either way
+          ExtractOptions o;
+          o.eps = eps, o.error = err, o.topology = mode;
+          check(o, eps == 0.0 || mode == TopologyMode::preserve);
+        }
+    const double n = static_cast<double>(s.volume.dims[0] - 1);
+    const std::array<double, 3> points[] = {
+        {n / 2, n / 2, n / 2}, {n / 2 + 1.3, n / 4, n / 2 - 0.7}, {0, 0, 0}, {-15, n + 20, n / 2}};
+    for (const auto& p : points)
+      for (double radius : {3.0, 12.0, 60.0})
+        for (TopologyMode mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve}) {
+          ExtractOptions o;
+          o.eps = 0.5, o.topology = mode, o.focus = Focus{p, radius};
+          check(o, mode == TopologyMode::preserve);
+        }
+    for (TopologyMode mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve}) {
+      ExtractOptions o;
+      o.topology = mode;
+      const auto full = static_cast<int64_t>(extract(paged, o).triangles.size());
+      o.eps = kInf;  // the coarsest mesh the mode allows
+      const auto coarsest = static_cast<int64_t>(extract(paged, o).triangles.size());
+      o.eps = 0;
+      for (double fraction : {0.25, 0.6}) {
+        o.max_triangles = std::max<int64_t>({coarsest, static_cast<int64_t>(fraction * static_cast<double>(full)), 1});
+        check(o, mode == TopologyMode::preserve);
+        o.focus = Focus{points[1], 8.0};  // a focus and a budget together
+        check(o, mode == TopologyMode::preserve);
+        o.focus.reset();
+      }
+    }
+  }
+  EXPECT_EQ(checked, 4 * (21 + 36 + 12));
+}
+
+// 4. A focus: full resolution at the point, finer near it than without, nothing changed by a
+// focus far away, and the mesh always between the plain eps mesh and the eps 0 one.
+TEST_F(PagedExtract, FocusIsFullResolutionAtItsPoint) {
+  // 65^3: the lattice is the data box, so no tetrahedron is clipped and a refinement never loses
+  // triangles (a bisection never lowers the count of marching tetrahedra's triangles).
+  const Volume v = as_raw(generate_noise(65, 3));
+  const MultiresVolume memory = MultiresVolume::build(v);
+  const StoreReader store(convert(v, "noise", 4));
+  const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+  BrickCache cache(store, decoded_sizes(store).total / 8);
+  const PagedVolume paged(cache);
+  int tried = 0;
+  for (float iso : {0.0f, 0.2f}) {
+    ExtractOptions full;
+    full.iso = iso;
+    const Mesh eps0 = extract(memory, full);
+    ASSERT_GT(eps0.triangles.size(), 1000u);
+    // Focus points on the surface: the eps 0 vertices nearest three chosen places.
+    std::vector<std::array<double, 3>> points;
+    const std::array<double, 3> targets[] = {{32, 32, 32}, {10, 50, 20}, {60, 5, 40}};
+    for (const auto& target : targets) {
+      size_t best = 0;
+      for (size_t i = 1; i < eps0.positions.size(); ++i)
+        if (distance(eps0.positions[i], target) < distance(eps0.positions[best], target)) best = i;
+      points.push_back({eps0.positions[best][0], eps0.positions[best][1], eps0.positions[best][2]});
+    }
+    for (const auto& p : points)
+      for (TopologyMode mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve})
+        for (ErrorIndicator error : {ErrorIndicator::bound, ErrorIndicator::surplus}) {
+          constexpr double kRadius = 12;
+          ExtractOptions plain = full;
+          plain.eps = 0.3, plain.topology = mode, plain.error = error;
+          ExtractOptions focused = plain;
+          focused.focus = Focus{p, kRadius};
+          const std::string what = describe(focused);
+          const Mesh coarse = extract(memory, plain), fine = extract(memory, focused);
+          ASSERT_TRUE(same_mesh(fine, extract(paged, focused))) << what << ": paged";
+
+          // Finer near the point: more triangles with a vertex within R/2.
+          EXPECT_GT(triangles_near(fine, p, kRadius / 2), triangles_near(coarse, p, kRadius / 2)) << what;
+          // Full resolution at the point. An eps 0 triangle with a vertex x within 0.25 of p lies
+          // in a leaf; each of the leaf's ancestors at level l holds x, so its refinement vertex
+          // lies within D(l) + 0.25 of p, D(l) being the farthest a point of a level-l
+          // tetrahedron is from its refinement vertex. D(l) + 0.25 < reach(l) (engine/traversal.h)
+          // at every level: at the last one above the leaves D = sqrt(2), reach = sqrt(3); higher
+          // up the margin only grows. So every ancestor has focus factor 0, an infinite key, and
+          // is refined: the triangle is in the focused mesh.
+          const auto fine_set = testing::triangle_set(fine);
+          int64_t local = 0;
+          for (const auto& t : eps0.triangles) {
+            if (distance(eps0.positions[t[0]], p) > 0.25 && distance(eps0.positions[t[1]], p) > 0.25 &&
+                distance(eps0.positions[t[2]], p) > 0.25)
+              continue;
+            Mesh one;
+            one.positions = {eps0.positions[t[0]], eps0.positions[t[1]], eps0.positions[t[2]]};
+            one.triangles = {{0, 1, 2}};
+            EXPECT_TRUE(std::binary_search(fine_set.begin(), fine_set.end(), testing::triangle_set(one)[0]))
+                << what << ": an eps 0 triangle at the point is missing";
+            ++local;
+          }
+          EXPECT_GE(local, 3) << what << ": the point is an eps 0 vertex, so its triangles are there";
+          // Keys only grow with a focus, so the focused mesh refines the plain one and is refined
+          // by eps 0's; refining never lowers the triangle count. (A far-away density bound is
+          // not guaranteed: the distance is conservative by reach(level), which for coarse levels
+          // spans the whole volume, so nothing sharper than this and the far-focus test below.)
+          EXPECT_LE(coarse.triangles.size(), fine.triangles.size()) << what;
+          EXPECT_LE(fine.triangles.size(), eps0.triangles.size()) << what;
+          EXPECT_LT(coarse.triangles.size(), eps0.triangles.size() / 4) << what << ": eps must be coarse here";
+          ++tried;
+        }
+    // A focus with eps 0 is eps 0; a focus farther than reach(0) + radius from every diamond (the
+    // whole lattice's refinement edges sum to well under 2000) changes nothing.
+    ExtractOptions o = full;
+    o.focus = Focus{points[0], 5};
+    EXPECT_TRUE(same_mesh(eps0, extract(memory, o))) << "focus with eps 0";
+    o.eps = 0.3;
+    o.focus = Focus{{-3000, 40, 4000}, 7};
+    ExtractOptions plain = o;
+    plain.focus.reset();
+    EXPECT_TRUE(same_mesh(extract(memory, plain), extract(paged, o))) << "far focus";
+  }
+  EXPECT_EQ(tried, 2 * 3 * 3 * 2);
+}
+
+// 5. A triangle budget: the mesh fits, it is exactly the plain mesh at the chosen eps, the next
+// finer eps step gives next_triangles > budget, a budget above the full mesh gives the full mesh,
+// and a budget below the coarsest mesh the mode allows (the eps = infinity mesh) throws. In memory,
+// paged, and paged from a quantized store (eps reported in data units, not codes).
+TEST_F(PagedExtract, TriangleBudgetTakesTheFinestEpsThatFits) {
+  struct Case {
+    std::string name;
+    Volume volume;
+    float iso;
+    int quantize_bits;
+  };
+  const Case cases[] = {
+      {"noise", as_raw(testing::crop(generate_noise(50, 17), {45, 50, 39})), 0.05f, 0},
+      {"neghip", testing::load_shared(testing::shared_volumes()[1]), 32.5f, 0},
+      {"hydrogen q8", testing::load_shared(testing::shared_volumes()[2]), 0.05f, 8},
+      {"sphere 33", as_raw(generate_sphere(33)), 0.0f, 0},  // 2^k + 1: nothing leaves the data box
+  };
+  int budgets_run = 0, thrown = 0;
+  for (const Case& c : cases) {
+    const MultiresVolume memory = MultiresVolume::build(c.volume);
+    const StoreReader store(convert(c.volume, "budget", 4, c.quantize_bits));
+    BrickCache cache(store, kHugeBudget);
+    const PagedVolume paged(cache);
+    // A quantized store holds other values than the volume: compare it only with itself.
+    const bool with_memory = c.quantize_bits == 0;
+    for (TopologyMode mode : {TopologyMode::none, TopologyMode::preserve}) {
+      ExtractOptions base;
+      base.iso = c.iso, base.topology = mode;
+      const Mesh full = extract(paged, base);
+      ExtractOptions coarsest_o = base;
+      coarsest_o.eps = kInf;
+      const auto coarsest = static_cast<int64_t>(extract(paged, coarsest_o).triangles.size());
+      const auto n = static_cast<int64_t>(full.triangles.size());
+      ASSERT_GT(n, 1000) << c.name;
+      RecordProperty(c.name + " " + std::string(to_string(mode)) + " coarsest", std::to_string(coarsest));
+      // Diamonds that leave the data box have infinite errors, so on a clipped lattice even mode
+      // none has a floor of many triangles (and a budget of 1 throws). On a 2^k + 1 volume mode
+      // none stops at the 6 root tetrahedra, at most 12 triangles; the sphere misses their corners.
+      if (c.name == "sphere 33" && mode == TopologyMode::none) {
+        EXPECT_LE(coarsest, 1);
+      } else {
+        EXPECT_GT(coarsest, 1) << c.name << " " << to_string(mode);
+      }
+      std::vector<int64_t> budgets = {n / 10, 3 * n / 10, 7 * n / 10, n + 100, coarsest};
+      if (coarsest > 1) budgets.push_back(coarsest - 1);
+      budgets.push_back(1);
+      for (int64_t budget : budgets) {
+        if (budget < 1) continue;  // 0 means no budget
+        ExtractOptions o = base;
+        o.max_triangles = budget;
+        const std::string what = c.name + " " + describe(o) + " (coarsest " + std::to_string(coarsest) + ")";
+        if (budget < coarsest) {
+          EXPECT_THROW(extract(paged, o), std::runtime_error) << what;
+          if (with_memory) {
+            EXPECT_THROW(extract(memory, o), std::runtime_error) << what;
+          }
+          ++thrown;
+          continue;
+        }
+        ExtractStats s;
+        Mesh m;
+        ASSERT_NO_THROW(m = extract(paged, o, &s)) << what;
+        ++budgets_run;
+        EXPECT_LE(static_cast<int64_t>(m.triangles.size()), budget) << what;
+        EXPECT_GE(s.chosen_eps, 0) << what;
+        if (with_memory) {
+          ExtractStats ms;
+          EXPECT_TRUE(same_mesh(m, extract(memory, o, &ms))) << what << ": in memory";
+          EXPECT_EQ(ms.chosen_eps, s.chosen_eps) << what;
+          EXPECT_EQ(ms.next_eps, s.next_eps) << what;
+          EXPECT_EQ(ms.next_triangles, s.next_triangles) << what;
+        }
+        // The plain mesh at the chosen eps is the budget's mesh.
+        ExtractOptions chosen = base;
+        chosen.eps = s.chosen_eps;
+        EXPECT_TRUE(same_mesh(m, extract(paged, chosen)))
+            << what << ": plain extraction at chosen eps " << s.chosen_eps;
+        if (budget >= n) {
+          EXPECT_EQ(s.next_triangles, 0) << what;
+          EXPECT_EQ(s.chosen_eps, 0) << what;
+          EXPECT_TRUE(same_mesh(m, full)) << what << ": the budget holds the full mesh";
+          continue;
+        }
+        // One step finer does not fit.
+        EXPECT_GT(s.next_triangles, budget) << what;
+        EXPECT_LT(s.next_eps, s.chosen_eps) << what;
+        ExtractOptions next = base;
+        next.eps = s.next_eps;
+        EXPECT_EQ(static_cast<int64_t>(extract(paged, next).triangles.size()), s.next_triangles)
+            << what << ": plain extraction at next eps " << s.next_eps;
+      }
+    }
+  }
+  EXPECT_GT(budgets_run, 20);
+  EXPECT_GT(thrown, 0);
+}
+
+// 6. The cache: when the store fits, each brick is read at most once and no more bytes than the
+// store's bricks hold; when it does not, the mesh is the same and the decoded bytes held at once
+// stay within what brick_cache.cpp guarantees: after each admission the resident bytes are
+// within max(budget, that brick), and the peak is taken before eviction, so
+// peak <= max(budget, largest brick) + largest brick, budget being the cache's own (its floor
+// raises a small one). Bricks evicted but still pinned by a reader are not counted in the peak.
+TEST_F(PagedExtract, CacheReadsEachBrickOnceAndStaysNearItsBudget) {
+  struct Case {
+    std::string name;
+    Volume volume;
+    float iso;
+    int bits;
+  };
+  const Case cases[] = {
+      {"noise", as_raw(testing::crop(generate_noise(50, 13), {49, 45, 39})), 0.0f, 3},
+      {"neghip", testing::load_shared(testing::shared_volumes()[1]), 128.5f, 4},
+  };
+  for (const Case& c : cases) {
+    const std::string file = convert(c.volume, c.name, c.bits);
+    const StoreReader store(file);
+    const DecodedSizes sizes = decoded_sizes(store);
+    const auto bricks = static_cast<int64_t>(store.directory().size());
+    uint64_t compressed = 0;
+    for (const BrickEntry& e : store.directory()) compressed += e.compressed_bytes;
+    ASSERT_LE(compressed, std::filesystem::file_size(file));
+    ExtractOptions o;
+    o.iso = c.iso;
+    o.topology = TopologyMode::none;  // eps 0: every brick near the surface is read
+    for (size_t threads : {1, 4}) {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+      const std::string what = c.name + " threads " + std::to_string(threads);
+      BrickCache cache(store, kHugeBudget);
+      const PagedVolume paged(cache);
+      const Mesh expected = extract(paged, o);
+      const BrickCacheStats first = cache.stats();
+      EXPECT_GT(first.bricks_read, 0) << what;
+      EXPECT_LE(first.bricks_read, bricks) << what;
+      EXPECT_LE(first.bytes_read, compressed) << what;
+      EXPECT_LE(first.peak_bytes, sizes.total) << what;
+      EXPECT_GT(first.hits, first.bricks_read) << what;
+      // Again through the same cache: all hits, nothing read.
+      ExtractOptions coarser = o;
+      coarser.eps = 0.1;
+      EXPECT_TRUE(same_mesh(expected, extract(paged, o))) << what;
+      extract(paged, coarser);
+      EXPECT_EQ(cache.stats().bricks_read, first.bricks_read) << what;
+      EXPECT_EQ(cache.stats().bytes_read, first.bytes_read) << what;
+      for (uint64_t budget : {kTinyBudget, sizes.largest, sizes.total / 8}) {
+        const PagedRun r = run_paged(store, budget, o);
+        const std::string at = what + " budget " + std::to_string(budget);
+        EXPECT_TRUE(same_mesh(expected, r.mesh)) << at;
+        EXPECT_LE(r.cache.peak_bytes, std::max(r.budget, sizes.largest) + sizes.largest) << at;
+        EXPECT_GE(r.cache.bricks_read, first.bricks_read) << at << ": it needs every brick the big cache read";
+        EXPECT_GE(r.cache.bytes_read, first.bytes_read) << at;
+      }
+    }
+  }
+}
+
+// 7. A brick with one flipped byte: a paged extraction that reads it throws an IoError naming it
+// ("brick 12 "), from any thread count and cache budget, never crashes; one that does not read it
+// gives the good mesh; the same reader threads extract the good store correctly afterwards.
+// Corrupts every `stride`-th brick in turn and extracts with each (threads, cache budget) of
+// `schedule`, with and without a triangle budget.
+void PagedTest::expect_corrupt_bricks_named(size_t stride, const std::vector<std::pair<size_t, uint64_t>>& schedule) {
+  const std::string good = convert(as_raw(testing::crop(generate_noise(40, 21), {21, 17, 19})), "good", 3);
+  const testing::Bytes good_bytes = testing::read_bytes(good);
+  const std::string bad = path("bad.isotope");
+  ExtractOptions o;
+  o.topology = TopologyMode::none;
+  ExtractOptions budgeted = o;  // the budget search reads bricks on the calling thread first
+  Mesh expected, expected_budgeted;
+  std::vector<BrickEntry> directory;
+  {
+    const StoreReader store(good);
+    directory = store.directory();
+    expected = run_paged(store, kHugeBudget, o).mesh;
+    budgeted.max_triangles = static_cast<int64_t>(expected.triangles.size()) / 2;
+    expected_budgeted = run_paged(store, kHugeBudget, budgeted).mesh;
+  }
+  ASSERT_GT(expected.triangles.size(), 100u);
+  std::mt19937 rng(5);
+  int named = 0, tried = 0;
+  for (size_t i = 0; i < directory.size(); i += stride, ++tried) {
+    const BrickEntry& e = directory[i];
+    auto bytes = good_bytes;
+    bytes[e.offset + rng() % e.compressed_bytes] ^= static_cast<uint8_t>(1 + rng() % 255);
+    testing::write_file(bad, "", bytes);
+    const StoreReader store(bad);
+    const std::string name = "brick " + std::to_string(i) + " ";
+    for (const ExtractOptions* opt : {&o, &budgeted}) {
+      int threw = 0, runs = 0;
+      for (const auto& [threads, budget] : schedule) {
+        const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        const std::string what = name + "threads " + std::to_string(threads) + " budget " + std::to_string(budget) +
+                                 (opt == &o ? "" : " with a triangle budget");
+        ++runs;
+        try {
+          const Mesh m = run_paged(store, budget, *opt).mesh;
+          EXPECT_TRUE(same_mesh(opt == &o ? expected : expected_budgeted, m)) << what << ": not read, so unchanged";
+        } catch (const IoError& err) {
+          EXPECT_CONTAINS(err.what(), name) << what;
+          ++threw;
+        }
+      }
+      // The bricks an extraction reads do not depend on threads or the cache budget.
+      EXPECT_TRUE(threw == 0 || threw == runs) << name << "threw in " << threw << " of " << runs << " runs";
+      if (opt == &o) named += threw == runs;
+    }
+  }
+  // At eps 0 in mode none every brick a surface passes through is read; coarse bricks always.
+  EXPECT_GE(named, tried / 2) << "of " << tried << " bricks";
+  const StoreReader store(good);
+  for (size_t threads : {1, 4}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    EXPECT_TRUE(same_mesh(expected, run_paged(store, kTinyBudget, o).mesh)) << "after the errors, threads " << threads;
+  }
+}
+
+// Every brick; every thread count, each with both cache budgets across the bricks' runs.
+TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
+  expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});
+}
+
+// A sample of the bricks on many threads: what scripts/test.sh runs under ThreadSanitizer.
+TEST_F(PagedParallel, CorruptBrickIsNamedFromManyThreads) {
+  expect_corrupt_bricks_named(5, {{4, kTinyBudget}, {8, kHugeBudget}});
+}
+
+}  // namespace
+}  // namespace isotope
