@@ -53,7 +53,7 @@ class InMemory {
   const MultiresVolume& mv_;
 };
 
-int64_t orientation(const Tet& t) { return traversal::orientation(t); }
+using traversal::orientation;
 
 }  // namespace
 

@@ -24,8 +24,6 @@
 
 namespace isotope {
 
-struct ExtractStats;
-
 namespace traversal {
 
 // A lattice node packed as x | y << 21 | z << 42: a tetrahedron is 32 bytes, and the midpoint
@@ -74,7 +72,7 @@ inline int triangles_of(const std::array<float, 4>& f, float iso) {
 // bisected at v is refined iff key >= eps. Keys never grow from a diamond to its children
 // (errors and critical flags are saturated, g never shrinks), which keeps the mesh conforming
 // (crack-free) for any eps and makes "refine everything with key >= eps" a cut of the tree that
-// moves down monotonically as eps falls (find_eps_for_budget relies on this).
+// moves down monotonically as eps falls (choose_eps_for_budget relies on this).
 class SplitRule {
  public:
   SplitRule(const ExtractOptions& o, const Lattice& lattice, const std::array<double, 3>& origin,
@@ -91,20 +89,15 @@ class SplitRule {
   }
 
   double key(const DiamondBounds& b, const DiamondTopology& t, Packed v, int level) const {
-    if (critical(t)) return std::numeric_limits<double>::infinity();
+    return critical(t) ? std::numeric_limits<double>::infinity() : error_key(b, v, level);
+  }
+  // The key as far as the error goes: key = error_key unless critical(). The traversal reads the
+  // topology record only when this alone would let it stop (design.md: most visits never do).
+  double error_key(const DiamondBounds& b, Packed v, int level) const {
     const double err = options_.error == ErrorIndicator::bound ? b.error_bound : b.error_surplus;
     if (reach_.empty()) return err;
     const double g = focus_factor(v, level);
     return g > 0 ? err / g : std::numeric_limits<double>::infinity();
-  }
-  bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
-  const ExtractOptions& options() const { return options_; }
-
- private:
-  // Of a level-l tetrahedron: its refinement edge, a diagonal of a cube, of a face, or an edge.
-  static double longest_edge(int l, const Lattice& lattice, double h) {
-    const double longest[3] = {std::sqrt(3.0), std::sqrt(2.0), 1.0};
-    return std::ldexp(h, lattice.k - l / 3) * longest[l % 3];
   }
   bool critical(const DiamondTopology& t) const {
     const float iso = options_.iso;
@@ -115,6 +108,15 @@ class SplitRule {
         return t.exact_lo <= iso && iso < t.exact_hi && static_cast<double>(t.weight) >= options_.delta;
     }
     return false;
+  }
+  bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
+  const ExtractOptions& options() const { return options_; }
+
+ private:
+  // Of a level-l tetrahedron: its refinement edge, a diagonal of a cube, of a face, or an edge.
+  static double longest_edge(int l, const Lattice& lattice, double h) {
+    const double longest[3] = {std::sqrt(3.0), std::sqrt(2.0), 1.0};
+    return std::ldexp(h, lattice.k - l / 3) * longest[l % 3];
   }
   double focus_factor(Packed v, int level) const {
     const Coord c = unpack(v);
@@ -210,7 +212,8 @@ class Traversal {
     const Packed v = (t[0] + t[1]) >> 1;
     const auto r = reader_.record(unpack(v));
     if (!rule_.in_range(r.bounds())) return;  // no value on each side
-    if (!(rule_.key(r.bounds(), r.topology(), v, level) >= rule_.options().eps)) return emit(t, level, positive);
+    if (!(rule_.error_key(r.bounds(), v, level) >= rule_.options().eps) && !rule_.critical(r.topology()))
+      return emit(t, level, positive);
     for (const Child& c : bisect(t, level, positive)) visit(c.tet, level + 1, c.positive);
   }
 
