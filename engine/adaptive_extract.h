@@ -33,7 +33,9 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   if (offset != 0 || scale != 1) {
     in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale);
     in_codes.eps = options.eps / scale;
-    in_codes.delta = options.delta / scale;
+    // Weights in codes: |X| scales with the values, |X| times a gradient with their square.
+    const double weight_scale[3] = {scale, scale * scale, 1.0};
+    in_codes.delta = options.delta / weight_scale[static_cast<size_t>(options.weight)];
   }
   ExtractStats total;
   if (options.max_triangles > 0) {
@@ -51,6 +53,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     Traversal<Source> top(source, rule);
     pieces = top.split(std::min(kPieceLevel, source.lattice().max_level()));
     total.tets_visited = top.tets_visited();
+    total.tets_simplified = top.tets_simplified();
   }
   std::vector<PartMesh> parts(pieces.size());
   parallel_for_in_order(int64_t{0}, static_cast<int64_t>(pieces.size()), [&](int64_t i) {
@@ -62,10 +65,15 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     part.region = {unpack(piece.tet[0]), unpack(piece.tet[1]), unpack(piece.tet[2]), unpack(piece.tet[3])};
     part.tets_visited = t.tets_visited();
     part.tets_emitted = t.tets_emitted();
+    part.tets_simplified = t.tets_simplified();
     part.keys = t.take_keys();
     part.mesh = t.take();
   });
-  for (const PartMesh& p : parts) total.tets_visited += p.tets_visited, total.tets_emitted += p.tets_emitted;
+  for (const PartMesh& p : parts) {
+    total.tets_visited += p.tets_visited;
+    total.tets_emitted += p.tets_emitted;
+    total.tets_simplified += p.tets_simplified;
+  }
   Mesh mesh = weld(parts, source.lattice().side);
   if (stats) {
     *stats = total;

@@ -98,6 +98,7 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
   const int64_t base = index(g, size_), cell_base = index(g, cells_);
   auto value_offset = [&](const Coord& p) { return index({p[0] >> j_, p[1] >> j_, p[2] >> j_}, size_) - base; };
   t.type = d.type;
+  t.shape = shape_of(d, l);
   t.ring_count = d.ring_count;
   t.a = value_offset(d.a);
   t.b = value_offset(d.b);
@@ -133,7 +134,7 @@ void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCount
   for (int i = 0; i < t.same_count; ++i) sat.add(records_[static_cast<size_t>(base + t.same[i])], range);
   const int64_t cell_base = index(g, cells_);
   for (int i = 0; i < t.cube_count; ++i) sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range);
-  records_[static_cast<size_t>(base)] = finish_record(dv, true, range, sat, counts);
+  records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts);
 }
 
 void BandTile::build(CriticalCounts& counts) {

@@ -61,6 +61,8 @@ void validate_extract_options(const ExtractOptions& o) {
   if (!std::isfinite(o.iso)) throw std::invalid_argument("the isovalue must be a finite number");
   if (!(o.eps >= 0)) throw std::invalid_argument("eps must be >= 0");
   if (!(o.delta >= 0)) throw std::invalid_argument("delta must be >= 0");
+  if (o.delta > 0 && o.topology != TopologyMode::simplify)
+    throw std::invalid_argument("delta applies to topology mode simplify only");
   if (o.max_triangles < 0) throw std::invalid_argument("the triangle budget must be >= 0");
   if (o.focus) {
     const Focus& f = *o.focus;

@@ -13,6 +13,9 @@ namespace isotope {
 struct ExtractStats {
   int64_t tets_visited = 0;
   int64_t tets_emitted = 0;  // stopping tetrahedra that were handed to marching tetrahedra
+  // Simplify mode: stopping tetrahedra that preserve would have refined (a critical point below
+  // fires at the isovalue, but its weight is under delta). 0 means the mesh is preserve's.
+  int64_t tets_simplified = 0;
   double seconds = 0;
   // With max_triangles: the eps chosen (in data units), and the next finer eps step and the
   // triangles it would give (next_triangles = 0 when the chosen mesh is already full resolution).

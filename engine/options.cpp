@@ -16,6 +16,7 @@ std::string_view to_string(TopologyMode t) {
     case TopologyMode::none: return "none";
     case TopologyMode::paper: return "paper";
     case TopologyMode::preserve: return "preserve";
+    case TopologyMode::simplify: return "simplify";
   }
   return "unknown";
 }
@@ -30,6 +31,23 @@ std::optional<TopologyMode> parse_topology_mode(std::string_view s) {
   if (s == "none") return TopologyMode::none;
   if (s == "paper") return TopologyMode::paper;
   if (s == "preserve") return TopologyMode::preserve;
+  if (s == "simplify") return TopologyMode::simplify;
+  return std::nullopt;
+}
+
+std::string_view to_string(SimplificationWeight w) {
+  switch (w) {
+    case SimplificationWeight::interval: return "interval";
+    case SimplificationWeight::gradient: return "gradient";
+    case SimplificationWeight::size: return "size";
+  }
+  return "unknown";
+}
+
+std::optional<SimplificationWeight> parse_simplification_weight(std::string_view s) {
+  if (s == "interval") return SimplificationWeight::interval;
+  if (s == "gradient") return SimplificationWeight::gradient;
+  if (s == "size") return SimplificationWeight::size;
   return std::nullopt;
 }
 

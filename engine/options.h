@@ -17,6 +17,15 @@ enum class TopologyMode {
   none,      // refine by error only (paper Sec. 3)
   paper,     // the paper's critical points and intervals (Sec. 4.2-4.4), faithfully
   preserve,  // the exact local rule of design.md: keeps components and Euler characteristic
+  simplify,  // the exact rule, but critical points of weight < delta may go (paper Sec. 5)
+};
+
+// What makes a critical point worth keeping in `simplify` mode (paper Sec. 5.1), computed by
+// convert for every vertex and saturated as a max. X is the exact rule's interval of isovalues.
+enum class SimplificationWeight {
+  interval,  // |X|: how far the isovalue may move while the feature exists (value units)
+  gradient,  // |X| times the steepest gradient of the tetrahedra around v (value^2 per voxel)
+  size,      // full-resolution tetrahedra covered by those around v that isovalues in X cut
 };
 
 // Finer near a point of interest: eps is scaled by min(1, distance / radius), so the mesh is as
@@ -32,7 +41,8 @@ struct ExtractOptions {
   double eps = 0.0;           // refine while the chosen error is >= eps; 0 gives full resolution
   ErrorIndicator error = ErrorIndicator::bound;
   TopologyMode topology = TopologyMode::preserve;
-  double delta = 0.0;         // critical points of weight < delta may be dropped (issue 5)
+  SimplificationWeight weight = SimplificationWeight::interval;  // simplify mode only
+  double delta = 0.0;         // simplify mode: critical points of weight < delta may be dropped
   std::optional<Focus> focus;
   // > 0: ignore eps and take the finest eps whose mesh has at most this many triangles.
   int64_t max_triangles = 0;
@@ -42,5 +52,7 @@ std::string_view to_string(ErrorIndicator e);
 std::string_view to_string(TopologyMode t);
 std::optional<ErrorIndicator> parse_error_indicator(std::string_view s);
 std::optional<TopologyMode> parse_topology_mode(std::string_view s);
+std::string_view to_string(SimplificationWeight w);
+std::optional<SimplificationWeight> parse_simplification_weight(std::string_view s);
 
 }  // namespace isotope

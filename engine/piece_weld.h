@@ -13,7 +13,7 @@ namespace isotope {
 struct PartMesh {
   Mesh mesh;
   std::vector<uint64_t> keys;
-  int64_t tets_visited = 0, tets_emitted = 0;
+  int64_t tets_visited = 0, tets_emitted = 0, tets_simplified = 0;
   Tet region{};
 };
 

@@ -21,7 +21,10 @@ struct DiamondBounds {
 struct DiamondTopology {
   float exact_lo = 1, exact_hi = 0;  // hull X_bar of isovalues where the exact rule fires
   float paper_lo = 1, paper_hi = 0;  // hull I_bar of the paper's critical intervals
-  float weight = 0;                  // saturated simplification weight (max of |X|)
+  // Saturated simplification weights (max over the subtree), indexed by SimplificationWeight
+  // (engine/options.h): |X|, |X| times the steepest gradient around v, and the local isosurface
+  // size (engine/record_builder.h, local_weights).
+  std::array<float, 3> weight{0, 0, 0};
 };
 
 struct Record {

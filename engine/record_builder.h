@@ -10,6 +10,7 @@
 //   bool child(const Coord&, Record&) const;    // false where no record exists
 //   void store(const Coord&, const Record&);
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -36,7 +37,7 @@ struct Saturation {
   double bound = 0;
   float surplus = 0;
   IsoInterval exact, paper;
-  float weight = 0;
+  std::array<float, 3> weight{0, 0, 0};
 
   // Folds in one child; its range widens the vertex's range `bounds`.
   void add(const Record& c, DiamondBounds& bounds) {
@@ -46,14 +47,86 @@ struct Saturation {
     bounds.hi = std::max(bounds.hi, c.bounds.hi);
     exact.hull({c.topology.exact_lo, c.topology.exact_hi});
     paper.hull({c.topology.paper_lo, c.topology.paper_hi});
-    weight = std::max(weight, c.topology.weight);
+    for (size_t w = 0; w < weight.size(); ++w) weight[w] = std::max(weight[w], c.topology.weight[w]);
   }
 };
 
-// The record from what was gathered: the polyhedron's values and range, whether every real
+// Where v's polyhedron lies, relative to v, in lattice steps: what the gradient and size weights
+// need beyond the values. The same for every vertex of one diamond shape and scale.
+struct DiamondShape {
+  std::array<std::array<int64_t, 3>, 10> offset{};  // a, b, then the ring in cycle order
+  int ring_count = 0;
+  uint32_t real_ring = 0;  // bit i: ring vertex i is a lattice node (not mirrored)
+  double child_tets = 0;   // full-resolution tetrahedra in one child tetrahedron of the diamond
+};
+
+inline DiamondShape shape_of(const Diamond& d, const Lattice& lattice) {
+  DiamondShape s;
+  auto rel = [&](const Coord& p) { return std::array<int64_t, 3>{p[0] - d.v[0], p[1] - d.v[1], p[2] - d.v[2]}; };
+  s.offset[0] = rel(d.a);
+  s.offset[1] = rel(d.b);
+  s.ring_count = d.ring_count;
+  for (int i = 0; i < d.ring_count; ++i) {
+    s.offset[static_cast<size_t>(2 + i)] = rel(d.ring[i]);
+    if (lattice.contains(d.ring[i])) s.real_ring |= 1u << i;
+  }
+  // Each level halves a tetrahedron; the finest (level 3k) are the 6 per unit cell.
+  s.child_tets = std::ldexp(1.0, lattice.max_level() - (d.level + 1));
+  return s;
+}
+
+// The gradient and size weights of a vertex whose exact interval x is not empty, over the
+// tetrahedra (end, v, r_i, r_i+1) that refining v creates: the steepest linear gradient among them
+// (value per lattice step), and how many full-resolution tetrahedra those that some isovalue in x
+// cuts cover. A count of the coarse tetrahedra themselves would hardly vary (at most 16); their
+// volume tells a feature the size of a voxel from one the size of the volume.
+struct LocalWeights {
+  double gradient = 0, size = 0;
+};
+
+inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s, IsoInterval x) {
+  LocalWeights w;
+  for (int e = 0; e < 2; ++e) {
+    const double fe = e == 0 ? dv.fa : dv.fb;
+    const auto& pe = s.offset[static_cast<size_t>(e)];
+    for (int i = 0; i < s.ring_count; ++i) {
+      const int i1 = (i + 1) % s.ring_count;
+      if ((s.real_ring >> i & 1u) == 0 || (s.real_ring >> i1 & 1u) == 0) continue;
+      const auto& p1 = s.offset[static_cast<size_t>(2 + i)];
+      const auto& p2 = s.offset[static_cast<size_t>(2 + i1)];
+      const double f1 = dv.ring[i], f2 = dv.ring[i1], fv = dv.fv;
+      // Gradient g of the linear interpolant: (p - v) . g = f(p) - f(v) at p = end, r_i, r_i+1.
+      const double m[3][3] = {{double(pe[0]), double(pe[1]), double(pe[2])},
+                              {double(p1[0]), double(p1[1]), double(p1[2])},
+                              {double(p2[0]), double(p2[1]), double(p2[2])}};
+      const double r[3] = {fe - fv, f1 - fv, f2 - fv};
+      const double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+                         m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                         m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+      if (det == 0) continue;  // degenerate: not a tetrahedron of a proper ring
+      double g2 = 0;
+      for (int c = 0; c < 3; ++c) {
+        double mc[3][3];
+        for (int row = 0; row < 3; ++row)
+          for (int col = 0; col < 3; ++col) mc[row][col] = col == c ? r[row] : m[row][col];
+        const double gc = (mc[0][0] * (mc[1][1] * mc[2][2] - mc[1][2] * mc[2][1]) -
+                           mc[0][1] * (mc[1][0] * mc[2][2] - mc[1][2] * mc[2][0]) +
+                           mc[0][2] * (mc[1][0] * mc[2][1] - mc[1][1] * mc[2][0])) / det;
+        g2 += gc * gc;
+      }
+      w.gradient = std::max(w.gradient, std::sqrt(g2));
+      // Cut by some t in [x.lo, x.hi): some corner > t and some corner <= t.
+      const double lo = std::min({fe, fv, f1, f2}), hi = std::max({fe, fv, f1, f2});
+      if (std::max(lo, double(x.lo)) < std::min(hi, double(x.hi))) w.size += s.child_tets;
+    }
+  }
+  return w;
+}
+
+// The record from what was gathered: the polyhedron's values, shape and range, whether every real
 // polyhedron vertex lies in the data box, and the children's saturation.
-inline Record finish_record(const DiamondValues& dv, bool inside_box, const DiamondBounds& range, Saturation sat,
-                            CriticalCounts& counts) {
+inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, bool inside_box,
+                            const DiamondBounds& range, Saturation sat, CriticalCounts& counts) {
   Record r;
   r.bounds = range;
   if (!inside_box) {
@@ -70,7 +143,13 @@ inline Record finish_record(const DiamondValues& dv, bool inside_box, const Diam
     counts[1][static_cast<int>(dv.type)] += exact.empty() ? 0 : 1;
     sat.exact.hull(exact);
     sat.paper.hull(paper);
-    sat.weight = std::max(sat.weight, exact.length());
+    if (!exact.empty()) {
+      const LocalWeights w = local_weights(dv, shape, exact);
+      const double length = exact.length();
+      sat.weight[0] = std::max(sat.weight[0], exact.length());
+      sat.weight[1] = std::max(sat.weight[1], round_up(length * w.gradient));
+      sat.weight[2] = std::max(sat.weight[2], round_up(w.size));
+    }
   }
   if (!sat.exact.empty()) { r.topology.exact_lo = sat.exact.lo; r.topology.exact_hi = sat.exact.hi; }
   if (!sat.paper.empty()) { r.topology.paper_lo = sat.paper.lo; r.topology.paper_hi = sat.paper.hi; }
@@ -117,7 +196,7 @@ class RecordBuilder {
       Record c;
       if (grid_.child(u, c)) sat.add(c, range);
     });
-    grid_.store(v, finish_record(dv, inside_box, range, sat, counts));
+    grid_.store(v, finish_record(dv, shape_of(d, lattice_), inside_box, range, sat, counts));
   }
 
  private:

@@ -104,10 +104,18 @@ class SplitRule {
     switch (options_.topology) {
       case TopologyMode::none: return false;
       case TopologyMode::paper: return t.paper_lo <= iso && iso < t.paper_hi;
-      case TopologyMode::preserve:
-        return t.exact_lo <= iso && iso < t.exact_hi && static_cast<double>(t.weight) >= options_.delta;
+      case TopologyMode::preserve: return t.exact_lo <= iso && iso < t.exact_hi;
+      case TopologyMode::simplify:
+        return t.exact_lo <= iso && iso < t.exact_hi &&
+               static_cast<double>(t.weight[static_cast<size_t>(options_.weight)]) >= options_.delta;
     }
     return false;
+  }
+  // Simplify mode: the exact rule fires below, but its weight is under delta.
+  bool dropped(const DiamondTopology& t) const {
+    const float iso = options_.iso;
+    return options_.topology == TopologyMode::simplify && t.exact_lo <= iso && iso < t.exact_hi &&
+           !(static_cast<double>(t.weight[static_cast<size_t>(options_.weight)]) >= options_.delta);
   }
   bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
   const ExtractOptions& options() const { return options_; }
@@ -202,6 +210,7 @@ class Traversal {
   Mesh take() { return builder_.take(); }
   int64_t tets_visited() const { return tets_visited_; }
   int64_t tets_emitted() const { return tets_emitted_; }
+  int64_t tets_simplified() const { return tets_simplified_; }
 
  private:
   void visit(const PackedTet& t, int level, bool positive) {
@@ -212,8 +221,13 @@ class Traversal {
     const Packed v = (t[0] + t[1]) >> 1;
     const auto r = reader_.record(unpack(v));
     if (!rule_.in_range(r.bounds())) return;  // no value on each side
-    if (!(rule_.error_key(r.bounds(), v, level) >= rule_.options().eps) && !rule_.critical(r.topology()))
-      return emit(t, level, positive);
+    if (!(rule_.error_key(r.bounds(), v, level) >= rule_.options().eps)) {
+      const DiamondTopology& topology = r.topology();
+      if (!rule_.critical(topology)) {
+        tets_simplified_ += rule_.dropped(topology);
+        return emit(t, level, positive);
+      }
+    }
     for (const Child& c : bisect(t, level, positive)) visit(c.tet, level + 1, c.positive);
   }
 
@@ -248,7 +262,7 @@ class Traversal {
   MeshBuilder builder_;
   Coord box_max_{};
   bool clip_ = false;  // the data box is smaller than the lattice
-  int64_t tets_visited_ = 0, tets_emitted_ = 0;
+  int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;
   std::vector<Piece>* pieces_ = nullptr;  // while splitting
   int split_level_ = 0;
 };

@@ -53,7 +53,7 @@ constexpr size_t kHeaderChecksumAt = kHeaderBytes - 8;
 
 void put_summary(Writer& w, const BrickSummary& s) {
   for (float f : {s.lo, s.hi, s.max_error_bound, s.max_error_surplus, s.exact_lo, s.exact_hi, s.paper_lo,
-                  s.paper_hi, s.max_weight})
+                  s.paper_hi, s.max_weight[0], s.max_weight[1], s.max_weight[2]})
     w.put(f);
   w.put(uint32_t{0});
 }
@@ -61,13 +61,13 @@ void put_summary(Writer& w, const BrickSummary& s) {
 BrickSummary get_summary(Reader& r) {
   BrickSummary s;
   for (float* f : {&s.lo, &s.hi, &s.max_error_bound, &s.max_error_surplus, &s.exact_lo, &s.exact_hi, &s.paper_lo,
-                   &s.paper_hi, &s.max_weight})
+                   &s.paper_hi, &s.max_weight[0], &s.max_weight[1], &s.max_weight[2]})
     *f = r.get<float>();
   (void)r.get<uint32_t>();
   return s;
 }
 
-// The nine record fields, in their order in a brick.
+// The eleven record fields, in their order in a brick.
 constexpr int kRecordFields = kBrickFields - 1;
 const float& record_field(const Record& r, int f) {
   switch (f) {
@@ -79,7 +79,9 @@ const float& record_field(const Record& r, int f) {
     case 5: return r.topology.exact_hi;
     case 6: return r.topology.paper_lo;
     case 7: return r.topology.paper_hi;
-    default: return r.topology.weight;
+    case 8: return r.topology.weight[0];
+    case 9: return r.topology.weight[1];
+    default: return r.topology.weight[2];
   }
 }
 float& record_field(Record& r, int f) { return const_cast<float&>(record_field(std::as_const(r), f)); }
@@ -99,7 +101,7 @@ BrickSummary summarize_brick(const BrickContents& b) {
     e.hull({r.topology.exact_lo, r.topology.exact_hi});
     p.hull({r.topology.paper_lo, r.topology.paper_hi});
     s.exact_lo = e.lo, s.exact_hi = e.hi, s.paper_lo = p.lo, s.paper_hi = p.hi;
-    s.max_weight = std::max(s.max_weight, r.topology.weight);
+    for (size_t w = 0; w < s.max_weight.size(); ++w) s.max_weight[w] = std::max(s.max_weight[w], r.topology.weight[w]);
   }
   for (float v : b.values) lo = std::min(lo, v), hi = std::max(hi, v);
   s.lo = lo, s.hi = hi;
@@ -149,7 +151,7 @@ StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& 
   const auto version = r.get<uint32_t>();
   if (version != kStoreVersion)
     throw IoError(file + ": store format version " + std::to_string(version) + " is not supported (this isotope reads version " +
-                  std::to_string(kStoreVersion) + ")");
+                  std::to_string(kStoreVersion) + (version < kStoreVersion ? "; convert the volume again" : "") + ")");
   uint64_t sum;
   std::memcpy(&sum, bytes + kHeaderChecksumAt, sizeof sum);
   if (sum != store_checksum(bytes, kHeaderChecksumAt)) throw IoError(file + ": header checksum mismatch (corrupt header)");

@@ -1,6 +1,6 @@
 #pragma once
-// The .isotope store, version 1 (docs/FORMAT.md): a 512-byte header, the bricks, and a directory
-// with one 64-byte entry per brick. Everything little-endian, offsets 64-bit. This file turns
+// The .isotope store, version 2 (docs/FORMAT.md): a 512-byte header, the bricks, and a directory
+// with one 72-byte entry per brick. Everything little-endian, offsets 64-bit. This file turns
 // those bytes into structs and back and checks them; it never touches a file.
 #include <array>
 #include <cstdint>
@@ -13,10 +13,10 @@
 namespace isotope {
 
 inline constexpr std::array<char, 8> kStoreMagic = {'I', 'S', 'O', 'S', 'T', 'O', 'R', 'E'};
-inline constexpr uint32_t kStoreVersion = 1;
+inline constexpr uint32_t kStoreVersion = 2;  // 2: three simplification weights per record
 inline constexpr size_t kHeaderBytes = 512;
-inline constexpr size_t kEntryBytes = 64;
-inline constexpr int kBrickFields = 10;  // values, then the nine record fields
+inline constexpr size_t kEntryBytes = 72;
+inline constexpr int kBrickFields = 12;  // values, then the eleven record fields
 
 struct StoreHeader {
   std::array<int64_t, 3> dims{0, 0, 0};
@@ -39,10 +39,11 @@ struct StoreHeader {
 inline constexpr float kQuantizationError = 0.5f;
 
 // Per brick, what lets a traversal skip it unread: hull of the value ranges of its records and
-// values, the largest errors, hulls of the critical intervals, the largest weight.
+// values, the largest errors, hulls of the critical intervals, the largest weights.
 struct BrickSummary {
   float lo = 0, hi = 0, max_error_bound = 0, max_error_surplus = 0;
-  float exact_lo = 1, exact_hi = 0, paper_lo = 1, paper_hi = 0, max_weight = 0;
+  float exact_lo = 1, exact_hi = 0, paper_lo = 1, paper_hi = 0;
+  std::array<float, 3> max_weight{0, 0, 0};
 };
 
 struct BrickEntry {
@@ -55,7 +56,7 @@ struct BrickEntry {
 // A brick's contents: the values of its T^3 nodes in Morton order, then the records of its nodes
 // of scale exactly j (Morton code not a multiple of 8) in Morton order. Nodes beyond the band's
 // grid, and records beyond record_extent, are zero.
-inline constexpr Record kAbsentRecord{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, 0}};
+inline constexpr Record kAbsentRecord{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, {0, 0, 0}}};
 
 struct BrickContents {
   std::vector<float> values;

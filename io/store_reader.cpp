@@ -206,7 +206,8 @@ std::string check_brick(const StoreReader& store, int64_t index, const BrickCont
         if (!(r.bounds.error_surplus >= 0) || !(r.bounds.error_bound >= r.bounds.error_surplus))
           return node + "error indicators are negative, NaN, or bound < surplus";
         if (std::isnan(r.topology.exact_lo) || std::isnan(r.topology.exact_hi) || std::isnan(r.topology.paper_lo) ||
-            std::isnan(r.topology.paper_hi) || !(r.topology.weight >= 0))
+            std::isnan(r.topology.paper_hi) || !(r.topology.weight[0] >= 0) || !(r.topology.weight[1] >= 0) ||
+            !(r.topology.weight[2] >= 0))
           return node + "critical intervals or weight are NaN or negative";
       }
   return {};

@@ -8,6 +8,7 @@ packages=(
   libtbb-dev libhdf5-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libzstd-dev libxxhash-dev zlib1g-dev
+  libplplot-dev plplot-driver-cairo
 )
 
 missing=()

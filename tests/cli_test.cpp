@@ -122,11 +122,13 @@ const std::string kData = ISOTOPE_TEST_DATA;
 
 TEST_F(Cli, HelpOfEveryCommandExitsZeroAndNamesItsOptions) {
   const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
-      {"--help", {"extract", "convert", "info", "verify", "generate", "demo", "--version"}},
+      {"--help", {"extract", "convert", "info", "verify", "generate", "sweep", "demo", "--version"}},
+      {"sweep --help", {"--iso", "--eps", "--delta", "--weight", "--csv", "--plot", "--threads", "--cache-mb", "--quiet"}},
       {"convert --help", {"--memory-mb", "--threads", "--zstd-level", "--quantize", "--dims", "--type", "--quiet"}},
       {"info --help", {"STORE", "--json"}},
       {"verify --help", {"STORE", "--threads", "--quiet"}},
-      {"extract --help", {"--iso", "--eps", "--error", "--topology", "--report", "--dims", "--type", "--output", "--quiet"}},
+      {"extract --help", {"--iso", "--eps", "--error", "--topology", "simplify", "--weight", "--delta", "--report",
+                          "--compare-full", "--dims", "--type", "--output", "--quiet"}},
       {"generate --help", {"--size", "--shift", "--seed", "--output", "--type", "uint16", "algebraic", "linked-tori", "nested-spheres", "noise"}},
       {"demo --help", {"--out", "--data"}},
   };
@@ -440,4 +442,120 @@ TEST_F(Cli, FocusAndBudgetArgumentsAreChecked) {
   EXPECT_EQ(r["components"], 1);
   EXPECT_EQ(r["euler_characteristic"], 2);
   EXPECT_EQ(r["boundary_edges"], 0);
+}
+
+// Simplification from a store is the same file as from the raw volume (the weights are stored),
+// delta 0 is preserve, and delta and weight are refused outside simplify mode.
+TEST_F(Cli, SimplifyFromAStoreAndItsArguments) {
+  const std::string raw = kData + "/neghip_66x66x66_uint8.raw", store = in_work("neghip.isotope");
+  ASSERT_EQ(run("convert -q " + quote(raw) + " " + quote(store)).code, 0);
+  const auto extract = [&](const std::string& input, const std::string& options, const std::string& name) {
+    const Result r = run("extract " + quote(input) + " --iso 32.5 --eps 16 -q " + options + " -o " + quote(in_work(name)));
+    EXPECT_EQ(r.code, 0) << options << "\n" << r.err;
+    return slurp(work() / name);
+  };
+  const std::string preserve = extract(store, "", "preserve.ply");
+  EXPECT_EQ(extract(store, "--topology simplify", "zero.ply"), preserve);
+  EXPECT_EQ(extract(store, "--topology simplify --weight size --delta 0", "zero_size.ply"), preserve);
+  for (const std::string w : {"interval --delta 8", "gradient --delta 40", "size --delta 20000"}) {
+    const std::string from_store = extract(store, "--topology simplify --weight " + w, "s.ply");
+    EXPECT_EQ(extract(raw, "--topology simplify --weight " + w, "r.ply"), from_store) << w;
+    EXPECT_LT(from_store.size(), preserve.size()) << w;
+  }
+  // info names the largest weights; a delta above one gives the none mesh.
+  const Result info = run("info --json " + quote(store));
+  ASSERT_EQ(info.code, 0) << info.err;
+  const double top = nlohmann::json::parse(info.out)["largest_weights"]["interval"].get<double>();
+  EXPECT_GT(top, 0);
+  const std::string none = extract(store, "--topology none", "none.ply");
+  EXPECT_NE(none, preserve);
+  EXPECT_EQ(extract(store, "--topology simplify --delta " + std::to_string(top * 1.01), "above.ply"), none);
+  const nlohmann::json r = extract_report(quote(store) + " --iso 32.5 --eps 16 --topology simplify --weight gradient --delta 40");
+  EXPECT_EQ(r["topology"], "simplify");
+  EXPECT_EQ(r["weight"], "gradient");
+  EXPECT_EQ(r["delta"], 40.0);
+  EXPECT_GT(r["extract"]["tets_simplified"].get<int64_t>(), 0);
+  const std::string vol = quote(raw);
+  expect_failure("extract " + vol + " --iso 32.5 --delta 1" + outputs(), 2, "simplify");
+  expect_failure("extract " + vol + " --iso 32.5 --topology none --weight size" + outputs(), 2, "simplify");
+  expect_failure("extract " + vol + " --iso 32.5 --topology simplify --weight volume" + outputs(), 2, "--weight");
+  expect_failure("extract " + vol + " --iso 32.5 --topology simplify --delta -1" + outputs(), 2, "--delta");
+  expect_failure("extract " + vol + " --iso 32.5 --compare-full -o " + quote(in_work("x.ply")), 2, "--report");
+}
+
+// --report lists every component; --compare-full adds the full-resolution surface and names what
+// the coarse mesh changed.
+TEST_F(Cli, ReportPerComponentAndCompareFull) {
+  const std::string tori = quote(generate("linked-tori", 33, "t_33x33x33_float32.raw"));
+  nlohmann::json r = extract_report(tori + " --iso 0 --compare-full");
+  ASSERT_EQ(r["per_component"].size(), 2u);
+  int64_t triangles = 0;
+  for (const auto& c : r["per_component"]) {
+    EXPECT_EQ(c["genus"], 1);
+    EXPECT_EQ(c["euler_characteristic"], 0);
+    EXPECT_TRUE(c["closed"].get<bool>());
+    EXPECT_GT(c["area"].get<double>(), 0);
+    EXPECT_GT(c["volume"].get<double>(), 0);
+    EXPECT_EQ(c["encloses"], "inside");
+    for (int a = 0; a < 3; ++a) EXPECT_LT(c["bbox_min"][a].get<double>(), c["bbox_max"][a].get<double>());
+    triangles += c["triangles"].get<int64_t>();
+  }
+  EXPECT_EQ(triangles, r["triangles"].get<int64_t>());
+  // eps 0 is full resolution: nothing changed.
+  EXPECT_EQ(r["compare_full"]["full"]["triangles"], r["triangles"]);
+  EXPECT_EQ(r["compare_full"]["changes"].size(), 0u);
+  EXPECT_EQ(r["compare_full"]["summary"]["unchanged"], 2);
+  // Without topology control at a coarse eps the tori lose their handles or fall apart; the
+  // comparison names it, and preserve changes nothing.
+  r = extract_report(tori + " --iso 0 --eps 0.5 --topology none --compare-full");
+  ASSERT_GT(r["compare_full"]["changes"].size(), 0u) << r["compare_full"].dump();
+  EXPECT_EQ(r["compare_full"]["full"]["components"], 2);
+  r = extract_report(tori + " --iso 0 --eps 0.5 --topology preserve --compare-full");
+  EXPECT_EQ(r["compare_full"]["changes"].size(), 0u) << r["compare_full"].dump();
+  // The summary line on stdout.
+  const Result out = run("extract " + tori + " --iso 0 --eps 0.5 --topology none --compare-full" + outputs());
+  EXPECT_EQ(out.code, 0) << out.err;
+  EXPECT_NE(out.out.find("against full resolution (2 components)"), std::string::npos) << out.out;
+}
+
+TEST_F(Cli, SweepTablesCsvAndPlot) {
+  const std::string store = in_work("neghip.isotope");
+  ASSERT_EQ(run("convert -q " + quote(kData + "/neghip_66x66x66_uint8.raw") + " " + quote(store)).code, 0);
+  const std::string csv = in_work("sweep.csv"), png = in_work("sweep.png");
+  const Result r = run("sweep " + quote(store) + " --iso 32.5 --eps 0,16,64 --delta 2,8 --csv " + quote(csv) +
+                       " --plot " + quote(png));
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("simplify delta=8"), std::string::npos) << r.out;
+  std::istringstream lines(slurp(csv));
+  std::string line;
+  std::getline(lines, line);
+  EXPECT_EQ(line, "mode,weight,delta,eps,triangles,components,euler_characteristic,seconds");
+  std::vector<std::vector<std::string>> rows;
+  while (std::getline(lines, line)) {
+    std::vector<std::string> cells;
+    std::istringstream in(line);
+    for (std::string cell; std::getline(in, cell, ',');) cells.push_back(cell);
+    ASSERT_EQ(cells.size(), 8u) << line;
+    rows.push_back(cells);
+  }
+  ASSERT_EQ(rows.size(), 12u);  // 3 eps x (none, preserve, 2 deltas)
+  // Every row is what extract gives for the same parameters.
+  for (const auto& row : {rows[1], rows[5], rows[11]}) {
+    std::string options = " --eps " + row[3] + " --topology " + row[0];
+    if (row[0] == "simplify") options += " --weight " + row[1] + " --delta " + row[2];
+    const nlohmann::json j = extract_report(quote(store) + " --iso 32.5" + options);
+    EXPECT_EQ(std::to_string(j["triangles"].get<int64_t>()), row[4]) << options;
+    EXPECT_EQ(std::to_string(j["components"].get<int64_t>()), row[5]) << options;
+    EXPECT_EQ(std::to_string(j["euler_characteristic"].get<int64_t>()), row[6]) << options;
+  }
+  // At eps 0 every mode is the full-resolution mesh.
+  EXPECT_EQ(rows[0][4], rows[3][4]);
+  EXPECT_EQ(rows[0][4], rows[9][4]);
+  const std::string bytes = slurp(png);
+  ASSERT_GT(bytes.size(), 1000u);
+  EXPECT_EQ(bytes.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
+  expect_failure("sweep " + quote(store) + " --iso 32.5 --eps 0,x", 2, "--eps");
+  expect_failure("sweep " + quote(store) + " --iso 32.5 --delta -1", 2, "--delta");
+  expect_failure("sweep " + quote(store) + " --iso 32.5 --weight volume", 2, "--weight");
+  expect_failure("sweep " + quote(store) + " --iso 32.5 --plot " + quote(in_work("missing/p.png")), 1, "missing");
 }

@@ -201,6 +201,10 @@ class PagedEqualsInMemory : public PagedTest {
           for (ErrorIndicator error : sweep.errors) {
             ExtractOptions o;
             o.iso = iso, o.eps = rel * (hi - lo), o.topology = mode, o.error = error;
+            if (mode == TopologyMode::simplify) {  // a weight per indicator, a delta that drops some points
+              o.weight = error == ErrorIndicator::bound ? SimplificationWeight::interval : SimplificationWeight::size;
+              o.delta = error == ErrorIndicator::bound ? 0.02 * (hi - lo) : 512;
+            }
             const Mesh expected = extract(memory, o);
             nonempty += !expected.triangles.empty();
             EXPECT_TRUE(same_mesh(expected, extract(paged, o)))
@@ -216,10 +220,12 @@ class PagedEqualsInMemory : public PagedTest {
     return compared;
   }
   const std::vector<TopologyMode> all_modes_ = {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve};
+  const std::vector<TopologyMode> with_simplify_ = {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve,
+                                                    TopologyMode::simplify};
   const std::vector<ErrorIndicator> both_errors_ = {ErrorIndicator::bound, ErrorIndicator::surplus};
 };
 
-// Odd dimensions, brick bits 2 and 5, every combination, through a generous cache and through
+// Odd dimensions, brick bits 2 and 5, every combination (simplify too), through a generous cache and through
 // the smallest one, and through the smallest with brick bits 3 too (the 5-bit stores of these
 // volumes fit within the cache's floor).
 TEST_F(PagedEqualsInMemory, SyntheticVolumesBitForBit) {
@@ -228,14 +234,14 @@ TEST_F(PagedEqualsInMemory, SyntheticVolumesBitForBit) {
   const std::vector<double> eps = {0.0, 0.01, 0.2};
   int compared = 0;
   for (int bits : {2, 5}) {
-    compared += compare("noise", noise, bits, kHugeBudget, {{-0.3f, 0.0f, 0.25f}, eps, all_modes_, both_errors_});
-    compared += compare("algebraic", algebraic, bits, kHugeBudget, {{0.0f, 0.1f}, eps, all_modes_, both_errors_});
+    compared += compare("noise", noise, bits, kHugeBudget, {{-0.3f, 0.0f, 0.25f}, eps, with_simplify_, both_errors_});
+    compared += compare("algebraic", algebraic, bits, kHugeBudget, {{0.0f, 0.1f}, eps, with_simplify_, both_errors_});
   }
   for (int bits : {2, 3, 5}) {
     compared += compare("noise", noise, bits, kTinyBudget, {{-0.3f, 0.0f, 0.25f}, eps, all_modes_, both_errors_});
     compared += compare("algebraic", algebraic, bits, kTinyBudget, {{0.0f, 0.1f}, eps, all_modes_, both_errors_});
   }
-  EXPECT_EQ(compared, 2 * 18 * (3 + 2) + 3 * 18 * (3 + 2));
+  EXPECT_EQ(compared, 2 * 24 * (3 + 2) + 3 * 18 * (3 + 2));
 }
 
 // The four shared volumes: every combination through a generous cache (default bricks); through
@@ -254,7 +260,7 @@ TEST_F(PagedEqualsInMemory, SharedVolumesBitForBit) {
 }
 
 // 2. One mesh, byte for byte, for 1, 2, 4 and 8 threads and cache budgets of kTinyBudget, an
-// eighth of the decoded store and 1 GB, with plain eps, a focus and a triangle budget; the in-memory mesh
+// eighth of the decoded store and 1 GB, with simplification, a focus and a triangle budget; the in-memory mesh
 // and statistics too; and the cache's peak within its guarantee (see test 6) on every run.
 void expect_same_bytes(const std::string& name, const Volume& v, float iso, const StoreReader& store,
                        const std::vector<size_t>& thread_counts = {1, 2, 4, 8}) {
@@ -272,6 +278,7 @@ void expect_same_bytes(const std::string& name, const Volume& v, float iso, cons
 
   std::vector<ExtractOptions> variants(3);
   variants[0].iso = iso, variants[0].eps = 0.05 * (hi - lo);
+  variants[0].topology = TopologyMode::simplify, variants[0].delta = 0.01 * (hi - lo);
   variants[1].iso = iso, variants[1].eps = 0.3 * (hi - lo), variants[1].topology = TopologyMode::paper;
   const std::array<double, 3> dims = {static_cast<double>(v.dims[0]), static_cast<double>(v.dims[1]),
                                       static_cast<double>(v.dims[2])};
@@ -292,6 +299,7 @@ void expect_same_bytes(const std::string& name, const Volume& v, float iso, cons
         EXPECT_EQ(r.stats.chosen_eps, expected_stats.chosen_eps) << what;
         EXPECT_EQ(r.stats.next_eps, expected_stats.next_eps) << what;
         EXPECT_EQ(r.stats.next_triangles, expected_stats.next_triangles) << what;
+        EXPECT_EQ(r.stats.tets_simplified, expected_stats.tets_simplified) << what;
         EXPECT_EQ(r.stats.budget_steps, expected_stats.budget_steps) << what;
         EXPECT_EQ(r.stats.tets_emitted, expected_stats.tets_emitted) << what;
         EXPECT_LE(r.cache.peak_bytes, std::max(r.budget, sizes.largest) + sizes.largest) << what;

@@ -156,10 +156,14 @@ TEST_F(Store, ExtractionFromStoreEqualsInMemory) {
     const MultiresVolume stored = StoreReader(convert(c.volume, "case" + std::to_string(compared))).load();
     for (float iso : c.isovalues)
       for (double eps : {0.0, 0.01, 0.1, 1.0, 16.0})
-        for (auto mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve})
+        for (auto mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve, TopologyMode::simplify})
           for (auto error : {ErrorIndicator::bound, ErrorIndicator::surplus}) {
             ExtractOptions o;
             o.iso = iso, o.eps = eps, o.topology = mode, o.error = error;
+            if (mode == TopologyMode::simplify) {  // one weight per error indicator, deltas that drop some
+              o.weight = error == ErrorIndicator::bound ? SimplificationWeight::interval : SimplificationWeight::size;
+              o.delta = error == ErrorIndicator::bound ? 0.05 * eps + 0.01 : 64;
+            }
             const Mesh a = extract(memory, o), b = extract(stored, o);
             ASSERT_EQ(a.positions, b.positions) << "iso " << iso << " eps " << eps;
             ASSERT_EQ(a.triangles, b.triangles) << "iso " << iso << " eps " << eps;
@@ -259,6 +263,20 @@ TEST_F(Store, QuantizedStoreIsExactForTheQuantizedField) {
         const Mesh a = extract(stored, physical), b = extract(memory, in_codes);
         EXPECT_EQ(a.triangles, b.triangles) << bits << " bits, iso " << iso << " eps " << eps;
         EXPECT_EQ(a.positions, b.positions);
+        // Weights in codes: |X| scales with the values, |X| times a gradient with their square.
+        const double scale = h.value_scale;
+        for (auto [weight, delta, per_code] : {std::tuple{SimplificationWeight::interval, 0.01, scale},
+                                               std::tuple{SimplificationWeight::gradient, 1e-4, scale * scale},
+                                               std::tuple{SimplificationWeight::size, 100.0, 1.0}}) {
+          physical.topology = in_codes.topology = TopologyMode::simplify;
+          physical.weight = in_codes.weight = weight;
+          physical.delta = delta;
+          in_codes.delta = delta / per_code;
+          EXPECT_EQ(extract(stored, physical).triangles, extract(memory, in_codes).triangles)
+              << bits << " bits, iso " << iso << " eps " << eps << " weight " << to_string(weight);
+        }
+        physical.topology = in_codes.topology = TopologyMode::preserve;
+        physical.delta = in_codes.delta = 0;
       }
   }
   // Smaller than lossless: 8 bits well below, 16 bits below.
@@ -327,8 +345,11 @@ TEST_F(StoreCorruption, TruncationWrongMagicAndVersion) {
   magic[0] = 'X';
   EXPECT_CONTAINS(verify_message(magic), "not an isotope store");
   auto version = good_;
-  version[8] = 2;
-  EXPECT_CONTAINS(verify_message(version), "version 2 is not supported");
+  version[8] = 3;
+  EXPECT_CONTAINS(verify_message(version), "version 3 is not supported");
+  version[8] = 1;  // before the simplification weights: says what to do
+  EXPECT_CONTAINS(verify_message(version), "version 1 is not supported");
+  EXPECT_CONTAINS(verify_message(version), "convert the volume again");
   auto header = good_;
   header[40] ^= 1;
   EXPECT_CONTAINS(verify_message(header), "header checksum");

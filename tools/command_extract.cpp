@@ -6,6 +6,7 @@
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -17,6 +18,7 @@
 #include <oneapi/tbb/global_control.h>
 #include <string>
 
+#include "engine/component_report.h"
 #include "engine/extract.h"
 #include "engine/mesh_topology.h"
 #include "engine/multires_volume.h"
@@ -33,12 +35,19 @@
 namespace isotope::tools {
 namespace {
 
+// --compare-full relates components whose surfaces lie within this many voxel spacings: a
+// coarse mesh moves the surface by up to a few voxels (engine/component_report.h).
+constexpr double kCompareVoxels = 3;
+
 struct ExtractArgs {
   std::string input;
   std::string iso;
   std::string eps = "0";
   std::string error = "bound";
   std::string topology = "preserve";
+  std::string weight;
+  std::string delta;
+  bool compare_full = false;
   std::string dims;
   std::string type;
   std::string output;
@@ -74,8 +83,18 @@ double peak_rss_mb() {
   return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux reports KiB
 }
 
+// --compare-full: the same isovalue at full resolution (eps = 0 equals marching tetrahedra on
+// every cell), from the same source, so a store is read out of core again.
+ExtractOptions full_resolution(const ExtractOptions& o) {
+  ExtractOptions full;
+  full.iso = o.iso;
+  full.eps = 0;
+  full.topology = TopologyMode::none;
+  return full;
+}
+
 // A store is paged through a brick cache: only the bricks the traversal reaches are read.
-Mesh extract_from_store(const ExtractArgs& a, ExtractionRun& run) {
+Mesh extract_from_store(const ExtractArgs& a, ExtractionRun& run, Mesh* full) {
   if (!a.dims.empty() || !a.type.empty()) throw CLI::ValidationError("--dims/--type", "do not apply to a store");
   // The cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
   // return each to the kernel and fault fresh zeroed pages in for the next. Kept, they are reused.
@@ -87,6 +106,7 @@ Mesh extract_from_store(const ExtractArgs& a, ExtractionRun& run) {
   const PagedVolume volume(cache);
   run.read_seconds = seconds_since(start);
   run.data_dims = store.header().dims;
+  run.spacing = store.header().spacing;
   for (int t = 0; t < 3; ++t) {
     run.preprocess.critical_paper[t] = store.header().critical_paper[t];
     run.preprocess.critical_exact[t] = store.header().critical_exact[t];
@@ -95,6 +115,7 @@ Mesh extract_from_store(const ExtractArgs& a, ExtractionRun& run) {
   start = std::chrono::steady_clock::now();
   Mesh mesh = extract(volume, run.options, &run.extract);
   run.extract_seconds = seconds_since(start);
+  if (full) *full = extract(volume, full_resolution(run.options));
   run.cache = cache.stats();
   run.cache_mb = a.cache_mb;
   run.cache_budget_bytes = cache.budget_bytes();
@@ -103,7 +124,7 @@ Mesh extract_from_store(const ExtractArgs& a, ExtractionRun& run) {
 }
 
 // Any other input is read and preprocessed in memory (the same records, tests/store_test.cpp).
-Mesh extract_from_volume(const ExtractArgs& a, ExtractionRun& run, bool progress) {
+Mesh extract_from_volume(const ExtractArgs& a, ExtractionRun& run, bool progress, Mesh* full) {
   auto start = std::chrono::steady_clock::now();
   VolumeSource source;
   source.spec = a.input;
@@ -112,6 +133,7 @@ Mesh extract_from_volume(const ExtractArgs& a, ExtractionRun& run, bool progress
   const Volume volume = read_volume(source);
   run.read_seconds = seconds_since(start);
   run.data_dims = volume.dims;
+  run.spacing = volume.spacing;
   run.input_bytes = volume.values.size() * sizeof(float);
   if (progress) {
     std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(volume.dims[0]),
@@ -129,6 +151,7 @@ Mesh extract_from_volume(const ExtractArgs& a, ExtractionRun& run, bool progress
   start = std::chrono::steady_clock::now();
   Mesh mesh = extract(mv, run.options, &run.extract);
   run.extract_seconds = seconds_since(start);
+  if (full) *full = extract(mv, full_resolution(run.options));
   return mesh;
 }
 
@@ -156,6 +179,11 @@ int run_extract(const ExtractArgs& a) {
   run.options.eps = *parse_real(a.eps);
   run.options.error = *parse_error_indicator(a.error);
   run.options.topology = *parse_topology_mode(a.topology);
+  if (run.options.topology != TopologyMode::simplify && (!a.weight.empty() || !a.delta.empty()))
+    throw CLI::ValidationError("--weight/--delta", "apply to --topology simplify only");
+  if (!a.weight.empty()) run.options.weight = *parse_simplification_weight(a.weight);
+  if (!a.delta.empty()) run.options.delta = *parse_real(a.delta);
+  if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
 
   // Fail before the (possibly long) extraction when the outputs cannot be written; creates nothing.
   for (const std::string* path : {&a.output, &a.report}) {
@@ -184,10 +212,21 @@ int run_extract(const ExtractArgs& a) {
   }
   run.threads = static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 
-  const Mesh mesh = is_store_file(a.input) ? extract_from_store(a, run) : extract_from_volume(a, run, progress);
+  Mesh full;
+  Mesh* want_full = a.compare_full ? &full : nullptr;
+  const Mesh mesh = is_store_file(a.input) ? extract_from_store(a, run, want_full)
+                                           : extract_from_volume(a, run, progress, want_full);
   if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
   const auto start = std::chrono::steady_clock::now();
   run.topology = measure_topology(mesh);
+  if (!a.report.empty()) {
+    const MeshComponents components = label_components(mesh);
+    if (a.compare_full) {
+      run.compare_tolerance = kCompareVoxels * std::max({run.spacing[0], run.spacing[1], run.spacing[2]});
+      run.comparison = compare_components(full, label_components(full), mesh, components, run.compare_tolerance);
+    }
+    run.components = components.components;
+  }
   run.measure_seconds = seconds_since(start);
   run.peak_rss_mb = peak_rss_mb();
 
@@ -208,6 +247,7 @@ int run_extract(const ExtractArgs& a) {
     }
   }
   if (!a.quiet) std::cout << summary_line(run) << std::endl;
+  if (!a.quiet && run.comparison) std::cout << comparison_line(*run.comparison) << std::endl;
   return 0;
 }
 
@@ -233,9 +273,21 @@ Command add_extract_command(CLI::App& app) {
       ->check(CLI::IsMember({"bound", "surplus"}))
       ->capture_default_str();
   cmd->add_option("--topology", a->topology,
-                  "Topology control: none, paper (the paper's critical intervals) or preserve (exact local rule)")
-      ->check(CLI::IsMember({"none", "paper", "preserve"}))
+                  "Topology control: none, paper (the paper's critical intervals), preserve (exact local rule) or "
+                  "simplify (preserve, but drop critical points whose --weight is below --delta)")
+      ->check(CLI::IsMember({"none", "paper", "preserve", "simplify"}))
       ->capture_default_str();
+  cmd->add_option("--weight", a->weight,
+                  "With --topology simplify: interval (|X|, value units, the default), gradient (|X| times the "
+                  "steepest gradient around the critical point, value^2 per voxel) or size (full-resolution "
+                  "tetrahedra the feature's isosurfaces cut)")
+      ->check(CLI::IsMember({"interval", "gradient", "size"}))
+      ->type_name("W");
+  cmd->add_option("--delta", a->delta,
+                  "With --topology simplify: keep critical points of weight >= D; 0 = preserve, larger = simpler "
+                  "(isotope info STORE prints the largest weights)")
+      ->check(real_validator(true))
+      ->type_name("D");
   cmd->add_option("--dims", a->dims, "Raw input: nodes per axis, e.g. 301x324x56 (overrides the file name)")
       ->check(CLI::Validator(
           [](std::string& s) -> std::string {
@@ -248,7 +300,13 @@ Command add_extract_command(CLI::App& app) {
   cmd->add_option("--type", a->type, "Raw input: value type (overrides the file name)")
       ->check(CLI::IsMember({"uint8", "uint16", "int16", "float32", "float64"}));
   cmd->add_option("-o,--output", a->output, "Output mesh (binary PLY)")->required()->type_name("MESH.ply");
-  cmd->add_option("--report", a->report, "Write a JSON report (counts, topology, timings)")->type_name("REPORT.json");
+  cmd->add_option("--report", a->report,
+                  "Write a JSON report: counts, timings, and per connected component its triangles, Euler "
+                  "characteristic, genus, bounding box, area and volume")
+      ->type_name("REPORT.json");
+  cmd->add_flag("--compare-full", a->compare_full,
+                "With --report: also extract the full-resolution surface (out of core for a store) and name what "
+                "differs per component: lost, merged, split, handles closed");
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();

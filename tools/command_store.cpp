@@ -2,6 +2,8 @@
 #include <malloc.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <array>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -116,6 +118,13 @@ nlohmann::ordered_json info_json(const StoreReader& store) {
   if (h.quantize_bits != 0) j["quantization_step"] = h.value_scale;
   j["critical_paper"] = {{"cube", h.critical_paper[0]}, {"octahedron", h.critical_paper[1]}, {"diamond", h.critical_paper[2]}};
   j["critical_exact"] = {{"cube", h.critical_exact[0]}, {"octahedron", h.critical_exact[1]}, {"diamond", h.critical_exact[2]}};
+  // The largest simplification weights, in data units: a delta above one drops every critical
+  // point (the none mesh), so they bound what --delta is worth trying.
+  std::array<float, 3> weights{0, 0, 0};
+  for (const BrickEntry& e : store.directory())
+    for (size_t w = 0; w < 3; ++w) weights[w] = std::max(weights[w], e.summary.max_weight[w]);
+  const double code = h.quantize_bits != 0 ? h.value_scale : 1.0;
+  j["largest_weights"] = {{"interval", weights[0] * code}, {"gradient", weights[1] * code * code}, {"size", weights[2]}};
   nlohmann::ordered_json bands = nlohmann::ordered_json::array();
   for (const Band& b : layout.bands()) {
     uint64_t bytes = 0;
@@ -150,6 +159,9 @@ void print_info(const nlohmann::ordered_json& j) {
   for (const char* rule : {"critical_paper", "critical_exact"})
     std::printf("%-12s cube %lld, octahedron %lld, diamond %lld\n", rule, j[rule]["cube"].get<long long>(),
                 j[rule]["octahedron"].get<long long>(), j[rule]["diamond"].get<long long>());
+  const auto& w = j["largest_weights"];
+  std::printf("weights      largest interval %g, gradient %g, size %g (simplify: --delta above drops all)\n",
+              w["interval"].get<double>(), w["gradient"].get<double>(), w["size"].get<double>());
 }
 
 }  // namespace

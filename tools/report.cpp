@@ -1,6 +1,7 @@
 // The extraction report and summary line (tools/report.h).
 #include "tools/report.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <string_view>
@@ -8,6 +9,76 @@
 #include "io/atomic_file.h"
 
 namespace isotope::tools {
+
+namespace {
+
+nlohmann::ordered_json component_json(const ComponentStats& c) {
+  nlohmann::ordered_json j;
+  j["triangles"] = c.triangles;
+  j["vertices"] = c.vertices;
+  j["euler_characteristic"] = c.euler_characteristic;
+  j["closed"] = c.closed;
+  j["genus"] = c.genus ? nlohmann::ordered_json(*c.genus) : nlohmann::ordered_json(nullptr);
+  j["bbox_min"] = c.bbox_min;
+  j["bbox_max"] = c.bbox_max;
+  j["area"] = c.area;
+  j["volume"] = c.volume ? nlohmann::ordered_json(*c.volume) : nlohmann::ordered_json(nullptr);
+  if (c.closed) j["encloses"] = c.encloses_inside ? "inside" : "outside";
+  return j;
+}
+
+nlohmann::ordered_json components_json(const std::vector<ComponentStats>& components) {
+  nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  for (const ComponentStats& c : components) list.push_back(component_json(c));
+  return list;
+}
+
+// What the adaptive mesh did to the full-resolution surface, group by group.
+nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tolerance) {
+  nlohmann::ordered_json j;
+  int64_t triangles = 0, euler = 0;
+  for (const ComponentStats& s : c.full_components) triangles += s.triangles, euler += s.euler_characteristic;
+  j["full"] = {{"triangles", triangles},
+               {"components", c.full_components.size()},
+               {"euler_characteristic", euler}};
+  nlohmann::ordered_json counts;
+  for (ChangeKind k : {ChangeKind::lost, ChangeKind::appeared, ChangeKind::merged, ChangeKind::split,
+                       ChangeKind::rearranged, ChangeKind::handles_closed, ChangeKind::handles_opened,
+                       ChangeKind::euler_changed})
+    counts[std::string(to_string(k))] = std::count_if(c.changes.begin(), c.changes.end(),
+                                                      [k](const ComponentChange& ch) { return ch.kind == k; });
+  counts["unchanged"] = c.matched_unchanged.size();
+  j["summary"] = counts;
+  nlohmann::ordered_json changes = nlohmann::ordered_json::array();
+  for (const ComponentChange& ch : c.changes)
+    changes.push_back({{"kind", std::string(to_string(ch.kind))},
+                       {"full", ch.full},
+                       {"adaptive", ch.adaptive},
+                       {"genus_change", ch.genus_change},
+                       {"euler_change", ch.euler_change}});
+  j["changes"] = changes;
+  j["match_tolerance"] = tolerance;
+  j["samples_matched"] = {{"full", c.full_samples_matched}, {"full_of", c.full_samples},
+                          {"adaptive", c.adaptive_samples_matched}, {"adaptive_of", c.adaptive_samples}};
+  j["full_components"] = components_json(c.full_components);
+  return j;
+}
+
+}  // namespace
+
+std::string comparison_line(const ComponentComparison& c) {
+  std::string line = "against full resolution (" + std::to_string(c.full_components.size()) + " components): ";
+  bool any = false;
+  for (ChangeKind k : {ChangeKind::lost, ChangeKind::appeared, ChangeKind::merged, ChangeKind::split,
+                       ChangeKind::rearranged, ChangeKind::handles_closed, ChangeKind::handles_opened,
+                       ChangeKind::euler_changed}) {
+    const auto n = std::count_if(c.changes.begin(), c.changes.end(), [k](const ComponentChange& ch) { return ch.kind == k; });
+    if (n == 0) continue;
+    line += (any ? ", " : "") + std::to_string(n) + " " + std::string(to_string(k));
+    any = true;
+  }
+  return line + (any ? "" : "no change") + "; " + std::to_string(c.matched_unchanged.size()) + " unchanged";
+}
 
 nlohmann::ordered_json report_json(const ExtractionRun& run) {
   const MeshTopology& t = run.topology;
@@ -32,6 +103,10 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["eps"] = run.options.eps;
   j["error"] = std::string(to_string(run.options.error));
   j["topology"] = std::string(to_string(run.options.topology));
+  if (run.options.topology == TopologyMode::simplify) {
+    j["weight"] = std::string(to_string(run.options.weight));
+    j["delta"] = run.options.delta;
+  }
   if (run.options.focus) {
     j["focus"] = run.options.focus->point;
     j["radius"] = run.options.focus->radius;
@@ -61,7 +136,10 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
       {"seconds", run.extract.seconds},
       {"tets_visited", run.extract.tets_visited},
       {"tets_emitted", run.extract.tets_emitted},
+      {"tets_simplified", run.extract.tets_simplified},
   };
+  j["per_component"] = components_json(run.components);
+  if (run.comparison) j["compare_full"] = comparison_json(*run.comparison, run.compare_tolerance);
   if (run.cache_mb > 0)
     j["cache"] = {{"budget_mb", run.cache_mb},
                   {"effective_budget_mb", static_cast<double>(run.cache_budget_bytes) / (1 << 20)},

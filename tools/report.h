@@ -2,9 +2,12 @@
 // What one extraction produced, as a JSON report (extract --report) and a one-line summary.
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <nlohmann/json_fwd.hpp>
 #include <string>
+#include <vector>
 
+#include "engine/component_report.h"
 #include "engine/extract.h"
 #include "engine/mesh_topology.h"
 #include "engine/multires_volume.h"
@@ -18,10 +21,14 @@ struct ExtractionRun {
   std::string output;
   ExtractOptions options;
   std::array<int64_t, 3> data_dims{0, 0, 0};
+  std::array<double, 3> spacing{1, 1, 1};
   int lattice_k = 0;
   PreprocessStats preprocess;
   ExtractStats extract;
   MeshTopology topology;
+  std::vector<ComponentStats> components;        // with --report
+  std::optional<ComponentComparison> comparison;  // with --compare-full
+  double compare_tolerance = 0;
   int threads = 1;
   double peak_rss_mb = 0;
   BrickCacheStats cache;        // store input: what the brick cache read and served
@@ -37,6 +44,8 @@ struct ExtractionRun {
 nlohmann::ordered_json report_json(const ExtractionRun& run);
 // "MESH.ply: 1234 triangles, 620 vertices, 1 component, chi 2, ..." for stdout.
 std::string summary_line(const ExtractionRun& run);
+// "against full resolution (12 components): 3 lost, 1 merged; 8 unchanged" for stdout.
+std::string comparison_line(const ComponentComparison& c);
 // Pretty-printed, atomically (temporary file + rename); throws IoError.
 void write_json_file(const nlohmann::ordered_json& json, const std::string& path);
 
