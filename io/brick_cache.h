@@ -39,7 +39,7 @@ class BrickCache {
  public:
   // Below kMinBricks bricks a traversal's working set (its region's bricks in a few bands) does
   // not fit and every step decodes again (bolt, eps 0, 2 threads: 7.9 s with room for one brick,
-  // 0.28 s with seven), so the budget is at least that many bricks (about 9 MB for 32^3 bricks).
+  // 0.28 s with seven), so the budget is at least that many bricks (about 11 MB for 32^3 bricks: 1.33 MB each).
   static constexpr uint64_t kMinBricks = 8;
   BrickCache(const StoreReader& store, uint64_t budget_bytes);
   BrickCache(const BrickCache&) = delete;
