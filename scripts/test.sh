@@ -23,9 +23,11 @@ cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_REL
 cmake --build build-asan -j "$jobs"
 # The bounded-memory tests (label "slow") measure the Release binary's RSS; under ASan they would
 # take most of the CI budget and measure the sanitizer's shadow memory instead. The paged = in-memory
-# sweep over the four shared volumes (two minutes under ASan) runs in Release only; the same code
-# paths run under ASan through the synthetic sweep, the closed shapes and the threads x budgets test.
-run_ctest --test-dir build-asan --output-on-failure -j2 -LE slow -E 'PagedEqualsInMemory\.SharedVolumes'
+# sweep over the four shared volumes (two minutes under ASan) and the store = in-memory sweep over
+# every volume, mode and indicator (70 s) run in Release only; the same code paths run under ASan through the
+# synthetic sweep, the round trips, the closed shapes and the threads x budgets test.
+run_ctest --test-dir build-asan --output-on-failure -j2 -LE slow \
+  -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory'
 
 # The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there).
 echo "== RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"

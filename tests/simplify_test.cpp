@@ -174,13 +174,14 @@ TEST(Simplify, DeltaAboveEveryWeightIsNone) {
 
 // Growing delta drops critical points, so the set of refined tetrahedra shrinks; refining a
 // tetrahedron never lowers its triangle count (a cut tetrahedron's two children hold at least its
-// triangles), so the count cannot grow. Checked over deltas from 2^-12 of the largest weight up.
+// triangles), so the count cannot grow. Checked over deltas from 2^-12 of the largest weight to
+// 4 times it, in factors of 4.
 TEST(Simplify, TrianglesFallAsDeltaGrows) {
   int steps = 0, falls = 0;
   for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double top,
                        float iso, double eps) {
     size_t previous = extract(mv, options(iso, eps, TopologyMode::preserve)).triangles.size();
-    for (int k = 12; k >= -1; --k) {
+    for (int k = 12; k >= -2; k -= 2) {
       const double delta = std::ldexp(top, -k);
       const size_t t = extract(mv, options(iso, eps, TopologyMode::simplify, delta, w)).triangles.size();
       EXPECT_LE(t, previous) << what << " " << to_string(w) << " delta " << delta;
@@ -191,7 +192,7 @@ TEST(Simplify, TrianglesFallAsDeltaGrows) {
     EXPECT_EQ(previous, extract(mv, options(iso, eps, TopologyMode::none)).triangles.size()) << what;
   });
   EXPECT_GT(falls, 20);
-  EXPECT_GT(steps, 1000);
+  EXPECT_GT(steps, 700);
 }
 
 // Every difference from preserve is explained by dropped critical points: a simplify mesh in which
