@@ -470,6 +470,13 @@ TEST_F(Cli, SimplifyFromAStoreAndItsArguments) {
   const std::string none = extract(store, "--topology none", "none.ply");
   EXPECT_NE(none, preserve);
   EXPECT_EQ(extract(store, "--topology simplify --delta " + std::to_string(top * 1.01), "above.ply"), none);
+  // --compare-full reads the store again for the full-resolution surface; bytes_read stays the
+  // extraction's own.
+  const nlohmann::json plain = extract_report(quote(store) + " --iso 32.5 --eps 16");
+  const nlohmann::json compared = extract_report(quote(store) + " --iso 32.5 --eps 16 --compare-full");
+  EXPECT_EQ(plain["bytes_read"], compared["bytes_read"]);
+  EXPECT_GT(compared["compare_full"]["seconds"].get<double>(), 0);
+  EXPECT_EQ(compared["compare_full"]["full"]["triangles"], extract_report(quote(store) + " --iso 32.5")["triangles"]);
   const nlohmann::json r = extract_report(quote(store) + " --iso 32.5 --eps 16 --topology simplify --weight gradient --delta 40");
   EXPECT_EQ(r["topology"], "simplify");
   EXPECT_EQ(r["weight"], "gradient");

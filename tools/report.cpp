@@ -34,7 +34,7 @@ nlohmann::ordered_json components_json(const std::vector<ComponentStats>& compon
 }
 
 // What the adaptive mesh did to the full-resolution surface, group by group.
-nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tolerance) {
+nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tolerance, double seconds) {
   nlohmann::ordered_json j;
   int64_t triangles = 0, euler = 0;
   for (const ComponentStats& s : c.full_components) triangles += s.triangles, euler += s.euler_characteristic;
@@ -58,6 +58,7 @@ nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tole
                        {"euler_change", ch.euler_change}});
   j["changes"] = changes;
   j["match_tolerance"] = tolerance;
+  j["seconds"] = seconds;
   j["samples_matched"] = {{"full", c.full_samples_matched}, {"full_of", c.full_samples},
                           {"adaptive", c.adaptive_samples_matched}, {"adaptive_of", c.adaptive_samples}};
   j["full_components"] = components_json(c.full_components);
@@ -139,7 +140,7 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
       {"tets_simplified", run.extract.tets_simplified},
   };
   j["per_component"] = components_json(run.components);
-  if (run.comparison) j["compare_full"] = comparison_json(*run.comparison, run.compare_tolerance);
+  if (run.comparison) j["compare_full"] = comparison_json(*run.comparison, run.compare_tolerance, run.compare_seconds);
   if (run.cache_mb > 0)
     j["cache"] = {{"budget_mb", run.cache_mb},
                   {"effective_budget_mb", static_cast<double>(run.cache_budget_bytes) / (1 << 20)},

@@ -29,6 +29,7 @@ struct ExtractionRun {
   std::vector<ComponentStats> components;        // with --report
   std::optional<ComponentComparison> comparison;  // with --compare-full
   double compare_tolerance = 0;
+  double compare_seconds = 0;  // --compare-full: the full-resolution extraction and the matching
   int threads = 1;
   double peak_rss_mb = 0;
   BrickCacheStats cache;        // store input: what the brick cache read and served
