@@ -12,6 +12,14 @@ namespace isotope::tools {
 
 namespace {
 
+constexpr ChangeKind kChangeKinds[] = {ChangeKind::lost,           ChangeKind::appeared,       ChangeKind::merged,
+                                       ChangeKind::split,          ChangeKind::rearranged,     ChangeKind::handles_closed,
+                                       ChangeKind::handles_opened, ChangeKind::euler_changed};
+
+int64_t count_of(const ComponentComparison& c, ChangeKind k) {
+  return std::count_if(c.changes.begin(), c.changes.end(), [k](const ComponentChange& ch) { return ch.kind == k; });
+}
+
 nlohmann::ordered_json component_json(const ComponentStats& c) {
   nlohmann::ordered_json j;
   j["triangles"] = c.triangles;
@@ -42,11 +50,7 @@ nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tole
                {"components", c.full_components.size()},
                {"euler_characteristic", euler}};
   nlohmann::ordered_json counts;
-  for (ChangeKind k : {ChangeKind::lost, ChangeKind::appeared, ChangeKind::merged, ChangeKind::split,
-                       ChangeKind::rearranged, ChangeKind::handles_closed, ChangeKind::handles_opened,
-                       ChangeKind::euler_changed})
-    counts[std::string(to_string(k))] = std::count_if(c.changes.begin(), c.changes.end(),
-                                                      [k](const ComponentChange& ch) { return ch.kind == k; });
+  for (ChangeKind k : kChangeKinds) counts[std::string(to_string(k))] = count_of(c, k);
   counts["unchanged"] = c.matched_unchanged.size();
   j["summary"] = counts;
   nlohmann::ordered_json changes = nlohmann::ordered_json::array();
@@ -70,10 +74,8 @@ nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tole
 std::string comparison_line(const ComponentComparison& c) {
   std::string line = "against full resolution (" + std::to_string(c.full_components.size()) + " components): ";
   bool any = false;
-  for (ChangeKind k : {ChangeKind::lost, ChangeKind::appeared, ChangeKind::merged, ChangeKind::split,
-                       ChangeKind::rearranged, ChangeKind::handles_closed, ChangeKind::handles_opened,
-                       ChangeKind::euler_changed}) {
-    const auto n = std::count_if(c.changes.begin(), c.changes.end(), [k](const ComponentChange& ch) { return ch.kind == k; });
+  for (ChangeKind k : kChangeKinds) {
+    const int64_t n = count_of(c, k);
     if (n == 0) continue;
     line += (any ? ", " : "") + std::to_string(n) + " " + std::string(to_string(k));
     any = true;
