@@ -519,6 +519,19 @@ TEST_F(Cli, ReportPerComponentAndCompareFull) {
   EXPECT_EQ(r["compare_full"]["full"]["components"], 2);
   r = extract_report(tori + " --iso 0 --eps 0.5 --topology preserve --compare-full");
   EXPECT_EQ(r["compare_full"]["changes"].size(), 0u) << r["compare_full"].dump();
+  // The matching tolerance is a number of voxel spacings (a raw file: spacing 1); the smaller it
+  // is, the fewer of the coarse surface's samples find the full surface near them.
+  const auto matched_share = [](const nlohmann::json& report) {
+    const auto& m = report["compare_full"]["samples_matched"];
+    return m["adaptive"].get<double>() / m["adaptive_of"].get<double>();
+  };
+  EXPECT_EQ(r["compare_full"]["match_tolerance"], 3.0);
+  const nlohmann::json tight =
+      extract_report(tori + " --iso 0 --eps 0.5 --topology preserve --compare-full --compare-voxels 0.1");
+  EXPECT_NEAR(tight["compare_full"]["match_tolerance"].get<double>(), 0.1, 1e-12);
+  EXPECT_LT(matched_share(tight), 0.5 * matched_share(r));
+  expect_failure("extract " + tori + " --iso 0 --compare-full --compare-voxels 0" + outputs(), 2, "--compare-voxels");
+  expect_failure("extract " + tori + " --iso 0 --compare-full --compare-voxels x" + outputs(), 2, "--compare-voxels");
   // The summary line on stdout.
   const Result out = run("extract " + tori + " --iso 0 --eps 0.5 --topology none --compare-full" + outputs());
   EXPECT_EQ(out.code, 0) << out.err;

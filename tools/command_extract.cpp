@@ -35,10 +35,6 @@
 namespace isotope::tools {
 namespace {
 
-// --compare-full relates components whose surfaces lie within this many voxel spacings: a
-// coarse mesh moves the surface by up to a few voxels (engine/component_report.h).
-constexpr double kCompareVoxels = 3;
-
 struct ExtractArgs {
   std::string input;
   std::string iso;
@@ -48,6 +44,9 @@ struct ExtractArgs {
   std::string weight;
   std::string delta;
   bool compare_full = false;
+  // --compare-full relates components whose surfaces lie within this many voxel spacings: a
+  // coarse mesh moves the surface by up to a few voxels (engine/component_report.h).
+  double compare_voxels = 3;
   std::string dims;
   std::string type;
   std::string output;
@@ -192,6 +191,8 @@ int run_extract(const ExtractArgs& a) {
   if (!a.weight.empty()) run.options.weight = *parse_simplification_weight(a.weight);
   if (!a.delta.empty()) run.options.delta = *parse_real(a.delta);
   if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
+  if (!(a.compare_voxels > 0) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6)
+    throw CLI::ValidationError("--compare-voxels", "must be a number of voxel spacings in (0, 1e6]");
 
   // Fail before the (possibly long) extraction when the outputs cannot be written; creates nothing.
   for (const std::string* path : {&a.output, &a.report}) {
@@ -232,7 +233,7 @@ int run_extract(const ExtractArgs& a) {
   run.measure_seconds = seconds_since(start);
   if (a.compare_full) {
     const auto compare_start = std::chrono::steady_clock::now();
-    run.compare_tolerance = kCompareVoxels * std::max({run.spacing[0], run.spacing[1], run.spacing[2]});
+    run.compare_tolerance = a.compare_voxels * std::max({run.spacing[0], run.spacing[1], run.spacing[2]});
     run.comparison = compare_components(full, label_components(full), mesh, components, run.compare_tolerance);
     run.compare_seconds += seconds_since(compare_start);
   }
@@ -315,6 +316,11 @@ Command add_extract_command(CLI::App& app) {
   cmd->add_flag("--compare-full", a->compare_full,
                 "With --report: also extract the full-resolution surface (out of core for a store) and name what "
                 "differs per component: lost, merged, split, handles closed");
+  cmd->add_option("--compare-voxels", a->compare_voxels,
+                  "With --compare-full: how far apart (in voxel spacings) surfaces of the same component may lie; "
+                  "raise it for very coarse meshes (the report's samples_matched tells)")
+      ->capture_default_str()
+      ->type_name("V");
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
