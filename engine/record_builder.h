@@ -145,9 +145,8 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     sat.paper.hull(paper);
     if (!exact.empty()) {
       const LocalWeights w = local_weights(dv, shape, exact);
-      const double length = exact.length();
       sat.weight[0] = std::max(sat.weight[0], exact.length());
-      sat.weight[1] = std::max(sat.weight[1], round_up(length * w.gradient));
+      sat.weight[1] = std::max(sat.weight[1], round_up(exact.length() * w.gradient));
       sat.weight[2] = std::max(sat.weight[2], round_up(w.size));
     }
   }

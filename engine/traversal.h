@@ -104,23 +104,23 @@ class SplitRule {
     switch (options_.topology) {
       case TopologyMode::none: return false;
       case TopologyMode::paper: return t.paper_lo <= iso && iso < t.paper_hi;
-      case TopologyMode::preserve: return t.exact_lo <= iso && iso < t.exact_hi;
-      case TopologyMode::simplify:
-        return t.exact_lo <= iso && iso < t.exact_hi &&
-               static_cast<double>(t.weight[static_cast<size_t>(options_.weight)]) >= options_.delta;
+      case TopologyMode::preserve: return exact_fires(t);
+      case TopologyMode::simplify: return exact_fires(t) && heavy(t);
     }
     return false;
   }
   // Simplify mode: the exact rule fires below, but its weight is under delta.
   bool dropped(const DiamondTopology& t) const {
-    const float iso = options_.iso;
-    return options_.topology == TopologyMode::simplify && t.exact_lo <= iso && iso < t.exact_hi &&
-           !(static_cast<double>(t.weight[static_cast<size_t>(options_.weight)]) >= options_.delta);
+    return options_.topology == TopologyMode::simplify && exact_fires(t) && !heavy(t);
   }
   bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
   const ExtractOptions& options() const { return options_; }
 
  private:
+  bool exact_fires(const DiamondTopology& t) const { return t.exact_lo <= options_.iso && options_.iso < t.exact_hi; }
+  bool heavy(const DiamondTopology& t) const {
+    return static_cast<double>(t.weight[static_cast<size_t>(options_.weight)]) >= options_.delta;
+  }
   // Of a level-l tetrahedron: its refinement edge, a diagonal of a cube, of a face, or an edge.
   static double longest_edge(int l, const Lattice& lattice, double h) {
     const double longest[3] = {std::sqrt(3.0), std::sqrt(2.0), 1.0};

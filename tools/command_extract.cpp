@@ -2,7 +2,6 @@
 // Steps: read, preprocess (MultiresVolume::build), extract, measure topology, write.
 // Nothing is written before the mesh exists, and the writers are atomic, so a failure
 // leaves no output file behind.
-#include <malloc.h>
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
@@ -21,15 +20,12 @@
 #include "engine/component_report.h"
 #include "engine/extract.h"
 #include "engine/mesh_topology.h"
-#include "engine/multires_volume.h"
 #include "io/atomic_file.h"
-#include "io/brick_cache.h"
-#include "io/paged_volume.h"
 #include "io/io_error.h"
 #include "io/ply_writer.h"
-#include "io/store_reader.h"
 #include "io/volume_reader.h"
 #include "tools/commands.h"
+#include "tools/extraction_input.h"
 #include "tools/report.h"
 
 namespace isotope::tools {
@@ -92,76 +88,6 @@ ExtractOptions full_resolution(const ExtractOptions& o) {
   return full;
 }
 
-// A store is paged through a brick cache: only the bricks the traversal reaches are read.
-Mesh extract_from_store(const ExtractArgs& a, ExtractionRun& run, Mesh* full) {
-  if (!a.dims.empty() || !a.type.empty()) throw CLI::ValidationError("--dims/--type", "do not apply to a store");
-  // The cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
-  // return each to the kernel and fault fresh zeroed pages in for the next. Kept, they are reused.
-  mallopt(M_MMAP_THRESHOLD, 64 << 20);
-  mallopt(M_TRIM_THRESHOLD, 128 << 20);
-  auto start = std::chrono::steady_clock::now();
-  const StoreReader store(a.input);
-  BrickCache cache(store, static_cast<uint64_t>(a.cache_mb) << 20);
-  const PagedVolume volume(cache);
-  run.read_seconds = seconds_since(start);
-  run.data_dims = store.header().dims;
-  run.spacing = store.header().spacing;
-  for (int t = 0; t < 3; ++t) {
-    run.preprocess.critical_paper[t] = store.header().critical_paper[t];
-    run.preprocess.critical_exact[t] = store.header().critical_exact[t];
-  }
-  run.lattice_k = volume.lattice().k;
-  start = std::chrono::steady_clock::now();
-  Mesh mesh = extract(volume, run.options, &run.extract);
-  run.extract_seconds = seconds_since(start);
-  run.cache = cache.stats();  // what the extraction read, not the comparison
-  run.cache_mb = a.cache_mb;
-  run.cache_budget_bytes = cache.budget_bytes();
-  run.store_bytes = store.file_bytes();
-  if (full) {
-    start = std::chrono::steady_clock::now();
-    *full = extract(volume, full_resolution(run.options));
-    run.compare_seconds = seconds_since(start);
-  }
-  return mesh;
-}
-
-// Any other input is read and preprocessed in memory (the same records, tests/store_test.cpp).
-Mesh extract_from_volume(const ExtractArgs& a, ExtractionRun& run, bool progress, Mesh* full) {
-  auto start = std::chrono::steady_clock::now();
-  VolumeSource source;
-  source.spec = a.input;
-  if (!a.dims.empty()) source.dims = parse_dims(a.dims);
-  if (!a.type.empty()) source.type = parse_scalar_type(a.type);
-  const Volume volume = read_volume(source);
-  run.read_seconds = seconds_since(start);
-  run.data_dims = volume.dims;
-  run.spacing = volume.spacing;
-  run.input_bytes = volume.values.size() * sizeof(float);
-  if (progress) {
-    std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(volume.dims[0]),
-                 static_cast<long long>(volume.dims[1]), static_cast<long long>(volume.dims[2]), run.read_seconds);
-  }
-  start = std::chrono::steady_clock::now();
-  const MultiresVolume mv = MultiresVolume::build(volume, progress ? progress_bar("preprocessing") : ProgressCallback{});
-  run.preprocess_seconds = seconds_since(start);
-  run.preprocess = mv.stats();
-  run.lattice_k = mv.lattice().k;
-  if (progress) {
-    std::fprintf(stderr, "isotope: preprocessed (lattice %lld^3) in %.3f s\n",
-                 static_cast<long long>(mv.lattice().side), run.preprocess_seconds);
-  }
-  start = std::chrono::steady_clock::now();
-  Mesh mesh = extract(mv, run.options, &run.extract);
-  run.extract_seconds = seconds_since(start);
-  if (full) {
-    start = std::chrono::steady_clock::now();
-    *full = extract(mv, full_resolution(run.options));
-    run.compare_seconds = seconds_since(start);
-  }
-  return mesh;
-}
-
 std::array<double, 3> parse_point(const std::string& s) {
   std::array<double, 3> p{};
   size_t at = 0;
@@ -221,11 +147,20 @@ int run_extract(const ExtractArgs& a) {
   }
   run.threads = static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 
-  Mesh full;
-  Mesh* want_full = a.compare_full ? &full : nullptr;
-  const Mesh mesh = is_store_file(a.input) ? extract_from_store(a, run, want_full)
-                                           : extract_from_volume(a, run, progress, want_full);
-  if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
+  Mesh mesh, full;
+  {  // scoped: the input's memory (volume or brick cache) is given back before measuring and writing
+    const ExtractionInput input({a.input, a.dims, a.type, a.cache_mb, progress});
+    const auto start = std::chrono::steady_clock::now();
+    mesh = input.extract(run.options, &run.extract);
+    run.extract_seconds = seconds_since(start);
+    input.describe(run);  // before --compare-full: the cache's reads are the extraction's own
+    if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
+    if (a.compare_full) {
+      const auto compare_start = std::chrono::steady_clock::now();
+      full = input.extract(full_resolution(run.options));
+      run.compare_seconds = seconds_since(compare_start);
+    }
+  }
   const auto start = std::chrono::steady_clock::now();
   run.topology = measure_topology(mesh);
   const MeshComponents components = a.report.empty() ? MeshComponents{} : label_components(mesh);

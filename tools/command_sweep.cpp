@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
-#include <memory>
 #include <oneapi/tbb/global_control.h>
 #include <optional>
 #include <sstream>
@@ -15,14 +14,10 @@
 
 #include "engine/extract.h"
 #include "engine/mesh_topology.h"
-#include "engine/multires_volume.h"
 #include "io/atomic_file.h"
-#include "io/brick_cache.h"
 #include "io/line_plot.h"
-#include "io/paged_volume.h"
-#include "io/store_reader.h"
-#include "io/volume_reader.h"
 #include "tools/commands.h"
+#include "tools/extraction_input.h"
 
 namespace isotope::tools {
 namespace {
@@ -45,32 +40,6 @@ struct SweepRow {
   double delta = 0, eps = 0;
   MeshTopology topology;
   double seconds = 0;
-};
-
-// A store is paged through one brick cache for the whole sweep (each brick is read once); any
-// other volume is preprocessed once in memory.
-class SweepSource {
- public:
-  SweepSource(const std::string& input, int64_t cache_mb) {
-    if (is_store_file(input)) {
-      store_ = std::make_unique<StoreReader>(input);
-      cache_ = std::make_unique<BrickCache>(*store_, static_cast<uint64_t>(cache_mb) << 20);
-      paged_ = std::make_unique<PagedVolume>(*cache_);
-    } else {
-      VolumeSource source;
-      source.spec = input;
-      memory_ = std::make_unique<MultiresVolume>(MultiresVolume::build(read_volume(source)));
-    }
-  }
-  Mesh extract(const ExtractOptions& o, ExtractStats* stats) const {
-    return paged_ ? isotope::extract(*paged_, o, stats) : isotope::extract(*memory_, o, stats);
-  }
-
- private:
-  std::unique_ptr<StoreReader> store_;
-  std::unique_ptr<BrickCache> cache_;
-  std::unique_ptr<PagedVolume> paged_;
-  std::unique_ptr<MultiresVolume> memory_;
 };
 
 std::vector<double> parse_list(const std::string& text, const std::string& option) {
@@ -158,7 +127,9 @@ int run_sweep(const SweepArgs& a) {
 
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
-  const SweepSource source(a.input, a.cache_mb);
+  // A store is paged through one cache for the whole sweep (each brick is read once); any other
+  // volume is preprocessed once.
+  const ExtractionInput source({a.input, "", "", a.cache_mb, progress});
 
   std::vector<SweepRow> plan;
   auto add_mode = [&](TopologyMode mode, double delta) {

@@ -1,0 +1,95 @@
+// Opening an input for extraction (tools/extraction_input.h).
+#include "tools/extraction_input.h"
+
+#include <malloc.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cstdio>
+
+#include "io/volume_reader.h"
+#include "tools/commands.h"
+
+namespace isotope::tools {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+ExtractionInput::ExtractionInput(const Spec& spec) {
+  if (is_store_file(spec.path)) open_store(spec);
+  else open_volume(spec);
+}
+
+void ExtractionInput::open_store(const Spec& spec) {
+  if (!spec.dims.empty() || !spec.type.empty()) throw CLI::ValidationError("--dims/--type", "do not apply to a store");
+  // The cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
+  // return each to the kernel and fault fresh zeroed pages in for the next. Kept, they are reused.
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 128 << 20);
+  const auto start = std::chrono::steady_clock::now();
+  store_ = std::make_unique<StoreReader>(spec.path);
+  cache_ = std::make_unique<BrickCache>(*store_, static_cast<uint64_t>(spec.cache_mb) << 20);
+  paged_ = std::make_unique<PagedVolume>(*cache_);
+  read_seconds_ = seconds_since(start);
+  cache_mb_ = spec.cache_mb;
+  dims_ = store_->header().dims;
+  spacing_ = store_->header().spacing;
+}
+
+void ExtractionInput::open_volume(const Spec& spec) {
+  auto start = std::chrono::steady_clock::now();
+  VolumeSource source;
+  source.spec = spec.path;
+  if (!spec.dims.empty()) source.dims = parse_dims(spec.dims);
+  if (!spec.type.empty()) source.type = parse_scalar_type(spec.type);
+  const Volume volume = read_volume(source);
+  read_seconds_ = seconds_since(start);
+  dims_ = volume.dims;
+  spacing_ = volume.spacing;
+  input_bytes_ = volume.values.size() * sizeof(float);
+  if (spec.progress) {
+    std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(dims_[0]),
+                 static_cast<long long>(dims_[1]), static_cast<long long>(dims_[2]), read_seconds_);
+  }
+  start = std::chrono::steady_clock::now();
+  memory_ = std::make_unique<MultiresVolume>(
+      MultiresVolume::build(volume, spec.progress ? progress_bar("preprocessing") : ProgressCallback{}));
+  preprocess_seconds_ = seconds_since(start);
+  if (spec.progress) {
+    std::fprintf(stderr, "isotope: preprocessed (lattice %lld^3) in %.3f s\n",
+                 static_cast<long long>(memory_->lattice().side), preprocess_seconds_);
+  }
+}
+
+Mesh ExtractionInput::extract(const ExtractOptions& options, ExtractStats* stats) const {
+  return paged_ ? isotope::extract(*paged_, options, stats) : isotope::extract(*memory_, options, stats);
+}
+
+void ExtractionInput::describe(ExtractionRun& run) const {
+  run.data_dims = dims_;
+  run.spacing = spacing_;
+  run.read_seconds = read_seconds_;
+  run.preprocess_seconds = preprocess_seconds_;
+  run.input_bytes = input_bytes_;
+  if (memory_) {
+    run.preprocess = memory_->stats();
+    run.lattice_k = memory_->lattice().k;
+    return;
+  }
+  // A store was preprocessed by convert; its header keeps the critical-point counts.
+  for (int t = 0; t < 3; ++t) {
+    run.preprocess.critical_paper[t] = store_->header().critical_paper[t];
+    run.preprocess.critical_exact[t] = store_->header().critical_exact[t];
+  }
+  run.lattice_k = paged_->lattice().k;
+  run.cache = cache_->stats();
+  run.cache_mb = cache_mb_;
+  run.cache_budget_bytes = cache_->budget_bytes();
+  run.store_bytes = store_->file_bytes();
+}
+
+}  // namespace isotope::tools

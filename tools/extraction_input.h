@@ -1,0 +1,49 @@
+#pragma once
+// An input opened for extraction (`extract`, `sweep`): a store is paged through a brick cache, so
+// that only the bricks a traversal reaches are read; any other volume is read and preprocessed in
+// memory (the same records, tests/store_test.cpp). Either way extract() can run many times.
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "engine/extract.h"
+#include "engine/multires_volume.h"
+#include "io/brick_cache.h"
+#include "io/paged_volume.h"
+#include "io/store_reader.h"
+#include "tools/report.h"
+
+namespace isotope::tools {
+
+class ExtractionInput {
+ public:
+  struct Spec {
+    std::string path;
+    std::string dims, type;  // raw input only: --dims, --type as typed ("" = from the file name)
+    int64_t cache_mb = 512;  // store input only
+    bool progress = false;   // read and preprocessing lines on stderr
+  };
+  // Throws CLI::ValidationError for --dims/--type on a store, IoError for unreadable input.
+  explicit ExtractionInput(const Spec& spec);
+
+  Mesh extract(const ExtractOptions& options, ExtractStats* stats = nullptr) const;
+  // What the run's report says of the input: dimensions, spacing, lattice, preprocessing and its
+  // timings, and for a store the cache's budget and what it has read so far.
+  void describe(ExtractionRun& run) const;
+
+ private:
+  void open_store(const Spec& spec);
+  void open_volume(const Spec& spec);
+
+  std::unique_ptr<StoreReader> store_;
+  std::unique_ptr<BrickCache> cache_;
+  std::unique_ptr<PagedVolume> paged_;
+  std::unique_ptr<MultiresVolume> memory_;
+  int64_t cache_mb_ = 0;
+  std::array<int64_t, 3> dims_{0, 0, 0};
+  std::array<double, 3> spacing_{1, 1, 1};
+  uint64_t input_bytes_ = 0;
+  double read_seconds_ = 0, preprocess_seconds_ = 0;
+};
+
+}  // namespace isotope::tools
