@@ -1,7 +1,8 @@
 // Google Benchmark suite: adaptive extraction against the full-resolution baseline, the same
-// extraction paged out of a store through a brick cache, preprocessing on one core and on all
-// cores, and the critical-pattern table.
-// How to build, run and compare: bench/README.md.
+// extraction paged out of a store through a brick cache, the decoding of one brick, preprocessing,
+// and the critical-pattern table. Every threaded benchmark runs at each cap of thread_counts().
+// How to build, run and compare: bench/README.md (bench/ratios.py turns the JSON output into
+// ratios against the baseline).
 //
 // Every input (volume, preprocessed hierarchy, store) is built once per process in a
 // function-local static, outside any timed loop. Times are wall-clock (UseRealTime) because preprocessing runs
@@ -9,6 +10,7 @@
 #include <benchmark/benchmark.h>
 #include <tbb/global_control.h>
 
+#include <array>
 #include <cstdint>
 #include <cstdio>
 #include <exception>
@@ -30,11 +32,13 @@
 #include "engine/mesh.h"
 #include "engine/multires_volume.h"
 #include "engine/options.h"
+#include "engine/record.h"
 #include "engine/volume.h"
 #include "io/box_reader.h"
 #include "io/brick_cache.h"
 #include "io/paged_volume.h"
 #include "io/raw_reader.h"
+#include "io/store_format.h"
 #include "io/store_reader.h"
 #include "io/store_writer.h"
 
@@ -47,6 +51,11 @@ using isotope::Mesh;
 using isotope::MultiresVolume;
 using isotope::TopologyMode;
 using isotope::Volume;
+
+// Minimum wall time of each timed benchmark. The heavy cases (257^3 at eps 0, preprocessing) run
+// one or two iterations either way; the light ones still get hundreds. Kept short so the whole
+// suite stays near a minute and a half on 2 cores; --benchmark_repetitions tightens estimates.
+constexpr double kMinSeconds = 0.3;
 
 // ---- Inputs, each built once per process ----------------------------------------------------
 
@@ -64,6 +73,27 @@ const char* dataset_name(Dataset d) {
 // The isovalue each dataset is extracted at: the algebraic function's surface of the paper's
 // Table 1, and the bolt's outer envelope (data/README.md: 20754 crossed cells).
 float dataset_iso(Dataset d) { return d == Dataset::bolt ? 64.5f : 0.0f; }
+
+// Coarse eps (data units) whose meshes have about 10% of the eps-0 triangles, measured: algebraic257
+// 93424 of 938672 (9.95%), bolt 12694 of 133480 (9.5%; its plateaus keep the error bound high).
+constexpr double kCoarseEpsAlgebraic = 0.0012;
+constexpr double kCoarseEpsBolt = 330.0;
+// Measured: at the eps above (and up to 0.5 and 700) preserve gives none's very triangles and
+// simplify drops nothing whatever its delta (tets_simplified = 0), so the topology modes differ
+// only at a very coarse eps, where preserve keeps more than the error alone would.
+constexpr double kTopologyEpsAlgebraic = 2.0;
+constexpr double kTopologyEpsBolt = 1500.0;
+
+// Simplify mode's delta (interval weight |X|, data units): critical points whose isovalue interval
+// is shorter may go. Measured (bench/README.md, "Simplify"): the critical points that matter at
+// the topology eps above fall into two groups of weights, and each delta lies in the gap, so
+// simplify drops the small group and keeps the other. algebraic257 at eps 2: weights in
+// 1e-6..1e-4 and 0.2..0.3; preserve 136 triangles, simplify 100, none 60. bolt at eps 1500:
+// weights in 40..48 and 128..256; preserve 1066, simplify 1030, none 370.
+constexpr double kSimplifyDeltaAlgebraic = 0.05;
+constexpr double kSimplifyDeltaBolt = 64.0;
+
+double simplify_delta(Dataset d) { return d == Dataset::bolt ? kSimplifyDeltaBolt : kSimplifyDeltaAlgebraic; }
 
 const Volume& bolt_volume() {
   static const Volume v = [] {
@@ -174,31 +204,61 @@ void set_triangle_counters(benchmark::State& state, int64_t total_triangles) {
   state.counters["triangles_per_second"] = benchmark::Counter(t, benchmark::Counter::kIsRate);
 }
 
+// The data's voxels per wall-clock second, whatever the extraction touched: a coarse eps
+// "processes" the same volume faster, which is the point of adaptivity.
+void set_voxel_rate(benchmark::State& state, const std::array<int64_t, 3>& dims) {
+  state.counters["voxels_per_second"] = benchmark::Counter(
+      static_cast<double>(dims[0] * dims[1] * dims[2]) * static_cast<double>(state.iterations()),
+      benchmark::Counter::kIsRate);
+}
+
+// oneTBB capped at THREADS for as long as the result lives: the whole timed loop.
+tbb::global_control thread_cap(int threads) {
+  return tbb::global_control(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+}
+
+void set_thread_counter(benchmark::State& state) {
+  state.counters["threads"] = static_cast<double>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
 // ---- Benchmarks -------------------------------------------------------------------------------
 
 // extract(): the adaptive traversal of the hierarchy, stopping rule, marching tetrahedra, welding.
+// Simplify mode drops the critical points whose interval weight is under simplify_delta(d).
 void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mode, int threads) {
   const MultiresVolume* mv = nullptr;
   if (!prepare(state, [&] { mv = &multires_of(d); })) return;
-  std::optional<tbb::global_control> cap;
-  if (threads > 0) cap.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+  const tbb::global_control cap = thread_cap(threads);
   ExtractOptions options;
   options.iso = dataset_iso(d);
   options.eps = eps;
   options.error = isotope::ErrorIndicator::bound;
   options.topology = mode;
+  if (mode == TopologyMode::simplify) {
+    options.weight = isotope::SimplificationWeight::interval;
+    options.delta = simplify_delta(d);
+  }
 
-  int64_t triangles = 0, tets_visited = 0;
+  int64_t triangles = 0, tets_visited = 0, tets_simplified = 0;
   for (auto _ : state) {
     ExtractStats stats;
     Mesh mesh = isotope::extract(*mv, options, &stats);
     triangles += static_cast<int64_t>(mesh.triangles.size());
     tets_visited += stats.tets_visited;
+    tets_simplified += stats.tets_simplified;
     benchmark::DoNotOptimize(mesh.triangles.data());
   }
   set_triangle_counters(state, triangles);
+  set_voxel_rate(state, mv->data_dims());
   state.counters["tets_visited"] =
       benchmark::Counter(static_cast<double>(tets_visited), benchmark::Counter::kAvgIterations);
+  if (mode == TopologyMode::simplify) {  // > 0: the mesh is not preserve's
+    state.counters["tets_simplified"] =
+        benchmark::Counter(static_cast<double>(tets_simplified), benchmark::Counter::kAvgIterations);
+    state.counters["delta"] = options.delta;
+  }
+  set_thread_counter(state);
 }
 
 // extract() over a store: the same traversal, with values and records looked up in bricks read
@@ -224,8 +284,7 @@ void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget
         decoded = decoded_bytes_of(d, eps);
       }))
     return;
-  std::optional<tbb::global_control> cap;
-  if (threads > 0) cap.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+  const tbb::global_control cap = thread_cap(threads);
   const ExtractOptions options = paged_options(d, eps);
   const uint64_t budget = which == PagedBudget::full     ? decoded
                           : which == PagedBudget::eighth ? store_decoded_bytes(*store) / 8
@@ -249,10 +308,7 @@ void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget
     }
   }
   set_triangle_counters(state, triangles);
-  const auto& dims = store->header().dims;
-  state.counters["voxels_per_second"] = benchmark::Counter(
-      static_cast<double>(dims[0] * dims[1] * dims[2]) * static_cast<double>(state.iterations()),
-      benchmark::Counter::kIsRate);
+  set_voxel_rate(state, store->header().dims);
   // Per iteration: compressed bytes and bricks read from the store (misses, re-reads included).
   state.counters["bricks_read"] =
       benchmark::Counter(static_cast<double>(bricks_read), benchmark::Counter::kAvgIterations);
@@ -261,15 +317,16 @@ void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget
   state.counters["budget_MiB"] = static_cast<double>(budget) / (1 << 20);
   state.counters["decoded_MiB"] = static_cast<double>(decoded) / (1 << 20);
   state.counters["store_decoded_MiB"] = static_cast<double>(store_decoded_bytes(*store)) / (1 << 20);
-  state.counters["threads"] = static_cast<double>(
-      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  set_thread_counter(state);
 }
 
-// extract_full_resolution(): marching tetrahedra over every finest tetrahedron, no hierarchy.
-// Its triangles_per_second is the yardstick for BM_Extract's at eps = 0.
-void BM_FullResolutionBaseline(benchmark::State& state, Dataset d) {
+// extract_full_resolution(): marching tetrahedra over every finest tetrahedron of the raw array,
+// no hierarchy, no store; parallel over oneTBB, so it runs under the same cap as BM_Extract. Every
+// extraction row is read as a ratio to the row of the same dataset and threads (bench/ratios.py).
+void BM_FullResolutionBaseline(benchmark::State& state, Dataset d, int threads) {
   const Volume* volume = nullptr;
   if (!prepare(state, [&] { volume = &volume_of(d); })) return;
+  const tbb::global_control cap = thread_cap(threads);
   const float iso = dataset_iso(d);
 
   int64_t triangles = 0;
@@ -279,15 +336,51 @@ void BM_FullResolutionBaseline(benchmark::State& state, Dataset d) {
     benchmark::DoNotOptimize(mesh.triangles.data());
   }
   set_triangle_counters(state, triangles);
+  set_voxel_rate(state, volume->dims);
+  set_thread_counter(state);
 }
 
-// MultiresVolume::build(): embedding plus saturation of every per-vertex record. THREADS = 0
-// leaves oneTBB its default parallelism; otherwise it is capped for the whole timed loop.
+// StoreReader::read_brick(), which is what a BrickCache miss runs (io/brick_cache.cpp, decode):
+// pread, checksum, zstd decompression and field decoding, and for band 0 the rebuilding of the
+// records from the values and their halo. Not timed: the cache's copy into its pool block and
+// its bookkeeping. One iteration decodes every brick of the store once, in directory order, so
+// the mix of bands is the store's own whatever the iteration count. The file stays in the OS
+// page cache: CPU cost, not disk.
+void BM_BrickDecode(benchmark::State& state, Dataset d) {
+  const isotope::StoreReader* store = nullptr;
+  if (!prepare(state, [&] { store = &store_of(d); })) return;
+  const auto bricks = static_cast<int64_t>(store->directory().size());
+  uint64_t compressed = 0;
+  for (const isotope::BrickEntry& e : store->directory()) compressed += e.compressed_bytes;
+  const uint64_t decoded = store_decoded_bytes(*store);
+
+  for (auto _ : state) {
+    try {
+      for (int64_t i = 0; i < bricks; ++i) {
+        const isotope::BrickContents c = store->read_brick(i);
+        benchmark::DoNotOptimize(c.records.data());
+      }
+    } catch (const std::exception& e) {
+      state.SkipWithError(e.what());
+      break;
+    }
+  }
+  const auto passes = static_cast<double>(state.iterations());
+  state.SetBytesProcessed(static_cast<int64_t>(compressed) * state.iterations());  // bytes_per_second
+  state.counters["decoded_bytes_per_second"] = benchmark::Counter(
+      static_cast<double>(decoded) * passes, benchmark::Counter::kIsRate, benchmark::Counter::OneK::kIs1024);
+  state.counters["bricks_per_second"] =
+      benchmark::Counter(static_cast<double>(bricks) * passes, benchmark::Counter::kIsRate);
+  state.counters["bricks"] = static_cast<double>(bricks);
+  state.counters["compressed_MiB"] = static_cast<double>(compressed) / (1 << 20);
+  state.counters["decoded_MiB"] = static_cast<double>(decoded) / (1 << 20);
+}
+
+// MultiresVolume::build(): embedding plus saturation of every per-vertex record, in parallel.
 void BM_Preprocess(benchmark::State& state, Dataset d, int threads) {
   const Volume* volume = nullptr;
   if (!prepare(state, [&] { volume = &volume_of(d); })) return;
-  std::optional<tbb::global_control> cap;
-  if (threads > 0) cap.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+  const tbb::global_control cap = thread_cap(threads);
 
   int64_t lattice_nodes = 0;
   for (auto _ : state) {
@@ -303,8 +396,7 @@ void BM_Preprocess(benchmark::State& state, Dataset d, int threads) {
       static_cast<double>(volume->node_count()) * static_cast<double>(state.iterations()),
       benchmark::Counter::kIsRate);
   state.counters["lattice_nodes"] = static_cast<double>(lattice_nodes);
-  state.counters["threads"] = static_cast<double>(
-      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  set_thread_counter(state);
 }
 
 // is_critical_pattern() over every pattern of the three polyhedron types (2^8 + 2^6 + 2^10).
@@ -338,71 +430,81 @@ std::string format_eps(double eps) {
   return buffer;
 }
 
-// Coarse eps (data units) whose meshes have about 10% of the eps-0 triangles, measured: algebraic257
-// 93424 of 938672 (9.95%), bolt 12694 of 133480 (9.5%; its plateaus keep the error bound high).
-constexpr double kCoarseEpsAlgebraic = 0.0012;
-constexpr double kCoarseEpsBolt = 330.0;
+std::string threads_suffix(int threads) { return "/threads:" + std::to_string(threads); }
 
-// Registration in one table, so names read BM_Extract/<dataset>/eps:<eps>/mode:<mode>/threads:<1|all>.
-void register_benchmarks() {
+// Registration in one table per benchmark, so that names read
+// BM_Extract/<dataset>/eps:<eps>/mode:<mode>/threads:<n> and so on (bench/README.md).
+void register_extract(const std::vector<int>& threads_list) {
   struct ExtractCase {
     Dataset dataset;
     std::vector<double> eps;  // in data units
   };
-  // The second eps of each is the coarse one of BM_ExtractPaged (about 10% of the eps-0 triangles).
-  const ExtractCase extract_cases[] = {
-      {Dataset::algebraic257, {0.0, kCoarseEpsAlgebraic, 0.01, 0.1}},
-      {Dataset::bolt, {0.0, kCoarseEpsBolt, 8.0, 32.0}},
+  // The second eps of each is the coarse one of BM_ExtractPaged (about 10% of the eps-0 triangles),
+  // the last the one where the three topology modes differ.
+  const ExtractCase cases[] = {
+      {Dataset::algebraic257, {0.0, kCoarseEpsAlgebraic, 0.01, 0.1, kTopologyEpsAlgebraic}},
+      {Dataset::bolt, {0.0, kCoarseEpsBolt, 8.0, 32.0, kTopologyEpsBolt}},
   };
-  for (const auto& c : extract_cases) {
-    for (const double eps : c.eps) {
-      for (const TopologyMode mode : {TopologyMode::none, TopologyMode::preserve})
-        for (const int threads : {1, 0}) {
+  for (const auto& c : cases) {
+    for (const double eps : c.eps)
+      for (const TopologyMode mode : {TopologyMode::none, TopologyMode::preserve, TopologyMode::simplify})
+        for (const int threads : threads_list) {
           const std::string name = std::string("BM_Extract/") + dataset_name(c.dataset) + "/eps:" + format_eps(eps) +
-                                   "/mode:" + std::string(isotope::to_string(mode)) +
-                                   (threads == 1 ? "/threads:1" : "/threads:all");
-          auto* b = benchmark::RegisterBenchmark(name.c_str(), BM_Extract, c.dataset, eps, mode, threads);
-          b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);
+                                   "/mode:" + std::string(isotope::to_string(mode)) + threads_suffix(threads);
+          benchmark::RegisterBenchmark(name.c_str(), BM_Extract, c.dataset, eps, mode, threads)
+              ->Unit(benchmark::kMillisecond)
+              ->UseRealTime()
+              ->MinTime(kMinSeconds);
         }
-    }
-    benchmark::RegisterBenchmark(
-        (std::string("BM_FullResolutionBaseline/") + dataset_name(c.dataset)).c_str(),
-        BM_FullResolutionBaseline, c.dataset)
-        ->Unit(benchmark::kMillisecond)
-        ->UseRealTime()
-        ->MinTime(0.5);
+    for (const int threads : threads_list)
+      benchmark::RegisterBenchmark(
+          (std::string("BM_FullResolutionBaseline/") + dataset_name(c.dataset) + threads_suffix(threads)).c_str(),
+          BM_FullResolutionBaseline, c.dataset, threads)
+          ->Unit(benchmark::kMillisecond)
+          ->UseRealTime()
+          ->MinTime(kMinSeconds);
   }
+}
 
-  // BM_ExtractPaged/<dataset>/eps:<eps>/cache:<full|eighth|eighth_reached>/threads:<1|all>
-  const std::pair<Dataset, double> paged_cases[] = {{Dataset::algebraic257, kCoarseEpsAlgebraic},
-                                                    {Dataset::bolt, kCoarseEpsBolt}};
-  for (const auto& [d, coarse] : paged_cases) {
+// BM_ExtractPaged/<dataset>/eps:<eps>/cache:<full|eighth|eighth_reached>/threads:<n>, then
+// BM_BrickDecode/<dataset>: what each of the paged extraction's misses costs.
+void register_paged(const std::vector<int>& threads_list) {
+  const std::pair<Dataset, double> cases[] = {{Dataset::algebraic257, kCoarseEpsAlgebraic},
+                                              {Dataset::bolt, kCoarseEpsBolt}};
+  for (const auto& [d, coarse] : cases) {
     for (const double eps : {0.0, coarse})
       for (const PagedBudget which : {PagedBudget::full, PagedBudget::eighth, PagedBudget::eighth_reached})
-        for (const int threads : {1, 0}) {
+        for (const int threads : threads_list) {
           const char* cache = which == PagedBudget::full     ? "/cache:full"
                               : which == PagedBudget::eighth ? "/cache:eighth"
                                                              : "/cache:eighth_reached";
           const std::string name = std::string("BM_ExtractPaged/") + dataset_name(d) + "/eps:" + format_eps(eps) +
-                                   cache + (threads == 1 ? "/threads:1" : "/threads:all");
+                                   cache + threads_suffix(threads);
           benchmark::RegisterBenchmark(name.c_str(), BM_ExtractPaged, d, eps, which, threads)
               ->Unit(benchmark::kMillisecond)
               ->UseRealTime()
-              ->MinTime(0.5);
+              ->MinTime(kMinSeconds);
         }
   }
+  for (const auto& c : cases)
+    benchmark::RegisterBenchmark((std::string("BM_BrickDecode/") + dataset_name(c.first)).c_str(), BM_BrickDecode,
+                                 c.first)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime()
+        ->MinTime(kMinSeconds);
+}
 
-  for (const Dataset d : {Dataset::algebraic129, Dataset::algebraic257, Dataset::bolt}) {
-    for (const int threads : {1, 0}) {
-      const std::string name = std::string("BM_Preprocess/") + dataset_name(d) +
-                               (threads == 1 ? "/threads:1" : "/threads:all");
-      benchmark::RegisterBenchmark(name.c_str(), BM_Preprocess, d, threads)
+void register_benchmarks() {
+  const std::vector<int> threads_list = isotope::bench::thread_counts();
+  register_extract(threads_list);
+  register_paged(threads_list);
+  for (const Dataset d : {Dataset::algebraic129, Dataset::algebraic257, Dataset::bolt})
+    for (const int threads : threads_list)
+      benchmark::RegisterBenchmark((std::string("BM_Preprocess/") + dataset_name(d) + threads_suffix(threads)).c_str(),
+                                   BM_Preprocess, d, threads)
           ->Unit(benchmark::kMillisecond)
           ->UseRealTime()
-          ->MinTime(0.5);
-    }
-  }
-
+          ->MinTime(kMinSeconds);
   benchmark::RegisterBenchmark("BM_CriticalTableLookup", BM_CriticalTableLookup)
       ->Unit(benchmark::kMicrosecond);
 }

@@ -1,6 +1,5 @@
 #include "engine/extract.h"
 
-#include <algorithm>
 #include <cassert>
 #include <chrono>
 #include <cmath>
@@ -8,8 +7,6 @@
 #include <vector>
 
 #include "engine/adaptive_extract.h"
-#include "engine/kuhn.h"
-#include "engine/marching_tetrahedra.h"
 
 namespace isotope {
 namespace {
@@ -53,8 +50,6 @@ class InMemory {
   const MultiresVolume& mv_;
 };
 
-using traversal::orientation;
-
 }  // namespace
 
 void validate_extract_options(const ExtractOptions& o) {
@@ -74,24 +69,6 @@ void validate_extract_options(const ExtractOptions& o) {
 
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats) {
   return extract_adaptive(InMemory(mv), options, stats);
-}
-
-Mesh extract_full_resolution(const Volume& volume, float iso) {
-  if (!std::isfinite(iso)) throw std::invalid_argument("the isovalue must be a finite number");
-  const auto& d = volume.dims;
-  MeshBuilder builder(iso, std::max({d[0], d[1], d[2]}), volume.origin, volume.spacing);
-  for (int64_t z = 0; z + 1 < d[2]; ++z)
-    for (int64_t y = 0; y + 1 < d[1]; ++y)
-      for (int64_t x = 0; x + 1 < d[0]; ++x) {
-        int above = 0;
-        for (int c = 0; c < 8; ++c) above += volume.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)) > iso;
-        if (above == 0 || above == 8) continue;
-        for (const Tet& t : cell_tetrahedra({x, y, z}))
-          builder.add_tet(t, {volume.at(t[0][0], t[0][1], t[0][2]), volume.at(t[1][0], t[1][1], t[1][2]),
-                              volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])},
-                          orientation(t) > 0);
-      }
-  return builder.take();
 }
 
 }  // namespace isotope

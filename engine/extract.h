@@ -1,8 +1,9 @@
 #pragma once
 // Adaptive isosurface extraction over the bisection hierarchy (paper Sec. 3.2 with the stopping
-// rule of design.md) and the full-resolution baseline it must equal at eps = 0.
+// rule of design.md), and the full-resolution baseline it must equal at eps = 0.
 #include <cstdint>
 
+#include "engine/full_resolution.h"  // the baseline, offered with the extraction it checks
 #include "engine/mesh.h"
 #include "engine/multires_volume.h"
 #include "engine/options.h"
@@ -28,8 +29,5 @@ struct ExtractStats {
 // Throws std::invalid_argument for a non-finite iso, eps < 0, delta < 0, a focus radius <= 0,
 // and std::runtime_error when max_triangles is below the coarsest mesh the topology mode allows.
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
-
-// Marching tetrahedra over every finest Kuhn tetrahedron of the data's cells, no hierarchy.
-Mesh extract_full_resolution(const Volume& volume, float iso);
 
 }  // namespace isotope

@@ -28,7 +28,8 @@ class MeshBuilder {
 
   Mesh take() { return std::move(mesh_); }
   // The edge key of every vertex, in vertex order (kept only when asked for, by keep_keys()):
-  // what welds the meshes of separately built parts into one (engine/extract.cpp).
+  // what welds the meshes of separately built parts into one (engine/piece_weld.cpp,
+  // engine/full_resolution.cpp).
   void keep_keys() { keep_keys_ = true; }
   std::vector<uint64_t> take_keys() { return std::move(keys_); }
 

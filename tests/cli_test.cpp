@@ -12,6 +12,7 @@
 #include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <set>
 #include <sstream>
 #include <string>
@@ -122,7 +123,8 @@ const std::string kData = ISOTOPE_TEST_DATA;
 
 TEST_F(Cli, HelpOfEveryCommandExitsZeroAndNamesItsOptions) {
   const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
-      {"--help", {"extract", "convert", "info", "verify", "generate", "sweep", "demo", "--version"}},
+      {"--help", {"extract", "convert", "info", "verify", "generate", "sweep", "bench", "demo", "--version"}},
+      {"bench --help", {"--quick", "--json", "--threads", "--dataset", "--data", "--work-dir", "--cache-mb", "--quiet"}},
       {"sweep --help", {"--iso", "--eps", "--delta", "--weight", "--csv", "--plot", "--threads", "--cache-mb", "--quiet"}},
       {"convert --help", {"--memory-mb", "--threads", "--zstd-level", "--quantize", "--dims", "--type", "--quiet"}},
       {"info --help", {"STORE", "--json"}},
@@ -578,4 +580,102 @@ TEST_F(Cli, SweepTablesCsvAndPlot) {
   expect_failure("sweep " + quote(store) + " --iso 32.5 --delta -1", 2, "--delta");
   expect_failure("sweep " + quote(store) + " --iso 32.5 --weight volume", 2, "--weight");
   expect_failure("sweep " + quote(store) + " --iso 32.5 --plot " + quote(in_work("missing/p.png")), 1, "missing");
+}
+
+// isotope bench on two small datasets: every row is a ratio against the baseline of the same run,
+// eps 0 gives the baseline's mesh, the coarse eps keeps at most 10% of it, and the paper's Table 1
+// is printed beside its numbers.
+TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
+  const std::string json = in_work("bench.json");
+  const Result r = run("bench -q --quick --dataset algebraic65 --dataset neghip --threads 2 --data " + quote(kData) +
+                       " --json " + quote(json) + " --work-dir " + quote(work().string()));
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(r.err.empty()) << r.err;
+  for (const char* part : {"vs base", "Paper's Table 1", "Flying Edges", "not run: no embryo volume", "Targets"})
+    EXPECT_NE(r.out.find(part), std::string::npos) << part << "\n" << r.out;
+  EXPECT_EQ(listing(), std::set<std::string>{json}) << "the temporary stores must be gone";
+
+  const nlohmann::json j = nlohmann::json::parse(slurp(json));
+  ASSERT_EQ(j["datasets"].size(), 2u);
+  std::map<std::string, nlohmann::json> dataset;
+  for (const auto& d : j["datasets"]) dataset[d["name"]] = d;
+  EXPECT_EQ(dataset["algebraic65"]["full_triangles"], 58772);  // tests/exact_full_resolution_test.cpp
+  std::map<std::pair<std::string, int>, double> baseline;
+  for (const auto& row : j["rows"])
+    if (row["mode"] == "baseline") baseline[{row["dataset"], row["threads"].get<int>()}] = row["seconds"];
+  ASSERT_EQ(baseline.size(), 4u) << "one and two threads per dataset";
+  std::map<std::string, int> inputs;
+  for (const auto& row : j["rows"]) {
+    const std::string name = row["dataset"];
+    const auto full = dataset[name]["full_triangles"].get<int64_t>();
+    const auto triangles = row["triangles"].get<int64_t>();
+    const double seconds = row["seconds"];
+    ++inputs[row["input"]];
+    EXPECT_GE(row["runs"].get<int>(), 3);
+    EXPECT_GT(row["peak_rss_bytes"].get<uint64_t>(), 0u);
+    EXPECT_NEAR(row["speedup_vs_baseline"].get<double>(), baseline.at({name, row["threads"].get<int>()}) / seconds, 1e-9);
+    EXPECT_NEAR(row["share_of_full"].get<double>(), static_cast<double>(triangles) / static_cast<double>(full), 1e-12);
+    if (row["eps"] == 0) {
+      EXPECT_EQ(triangles, full) << row;
+    } else {
+      EXPECT_EQ(row["eps"], dataset[name]["coarse_eps"]);
+      if (row["mode"] == "none") {
+        EXPECT_LE(triangles, full / 10) << row;
+      }
+      EXPECT_LT(triangles, full);
+    }
+    if (row["mode"] == "simplify") {
+      const auto range = dataset[name]["value_range"];
+      EXPECT_NEAR(row["delta"].get<double>(), 0.02 * (range[1].get<double>() - range[0].get<double>()), 1e-6);
+    }
+    // A cold cache reads the store; a warm one, the raw array and the hierarchy read nothing.
+    EXPECT_EQ(row["bytes_read"].get<uint64_t>() > 0, row["input"] == "store") << row;
+  }
+  EXPECT_EQ(inputs["raw"], 4);
+  EXPECT_EQ(inputs["memory"], 12);
+  EXPECT_EQ(inputs["store"], 4);
+  EXPECT_EQ(inputs["store-warm"], 2);
+
+  // The paper's Table 1 beside ours: its numbers, our eps-0 count, fewer triangles as eps grows.
+  const auto& t1 = j["paper_table1"];
+  ASSERT_EQ(t1.size(), 5u);
+  EXPECT_EQ(t1[0]["paper"]["without"], 59290);
+  EXPECT_EQ(t1[4]["paper"]["with"], 3095);
+  EXPECT_EQ(t1[0]["without"]["triangles"], 58772);
+  for (size_t i = 1; i < t1.size(); ++i)
+    for (const char* mode : {"without", "with"})
+      EXPECT_LT(t1[i][mode]["triangles"].get<int64_t>(), t1[i - 1][mode]["triangles"].get<int64_t>());
+  ASSERT_EQ(j["flying_edges"].size(), 4u);
+  for (const auto& ref : j["flying_edges"]) EXPECT_TRUE(ref["ours"].is_null()) << "neither volume ran";
+
+  expect_failure("bench --dataset nope", 2, "algebraic257");
+  expect_failure("bench --quick --json " + quote(in_work("missing/b.json")), 1, "missing");
+}
+
+// Ctrl-C while bench converts its store (or, if that was quick, at its next run): exit 1, and
+// neither the store nor its folder is left.
+TEST_F(Cli, InterruptedBenchLeavesNothing) {
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int null = open("/dev/null", O_WRONLY);
+    dup2(null, STDOUT_FILENO);
+    dup2(null, STDERR_FILENO);
+    execl(ISOTOPE_BINARY, ISOTOPE_BINARY, "bench", "--dataset", "algebraic65", "--work-dir", work().c_str(),
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Wait for a file inside bench's folder: the store being written.
+  bool converting = false;
+  for (int i = 0; i < 12000 && !converting; ++i) {
+    for (const auto& e : fs::recursive_directory_iterator(work())) converting = converting || e.is_regular_file();
+    if (!converting) usleep(10 * 1000);
+  }
+  kill(pid, SIGINT);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(converting) << "no store appeared within 120 s";
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_TRUE(listing().empty());
 }

@@ -1,9 +1,20 @@
 // Invariant 2 of design.md: at eps = 0 the adaptive extraction is exactly marching tetrahedra
 // over every finest tetrahedron (same triangles), whatever the mode, indicator or dimensions.
+// And the baseline itself, built in slabs on several threads, is the one-walk mesh bit for bit.
 #include <gtest/gtest.h>
+
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <string>
 
 #include "engine/extract.h"
 #include "engine/fields.h"
+#include "engine/kuhn.h"
+#include "engine/marching_tetrahedra.h"
 #include "engine/multires_volume.h"
 #include "tests/test_support.h"
 
@@ -57,6 +68,99 @@ TEST(ExactAtEpsZero, MeshIsWeldedOneVertexPerCutGridEdge) {
   EXPECT_EQ(t.vertices, static_cast<int64_t>(m.positions.size()));
   EXPECT_EQ(t.euler_characteristic, 2);
   EXPECT_EQ(t.components, 1);
+}
+
+// The definition the slabs must reproduce: one welding builder fed every cell, z slowest.
+Mesh one_walk(const Volume& volume, float iso) {
+  const auto& d = volume.dims;
+  MeshBuilder builder(iso, std::max({d[0], d[1], d[2]}), volume.origin, volume.spacing);
+  for (int64_t z = 0; z + 1 < d[2]; ++z)
+    for (int64_t y = 0; y + 1 < d[1]; ++y)
+      for (int64_t x = 0; x + 1 < d[0]; ++x)
+        for (const Tet& t : cell_tetrahedra({x, y, z})) {
+          std::array<float, 4> f;
+          for (int i = 0; i < 4; ++i) f[i] = volume.at(t[i][0], t[i][1], t[i][2]);
+          int64_t e[3][3];
+          for (int i = 0; i < 3; ++i)
+            for (int a = 0; a < 3; ++a) e[i][a] = t[i + 1][a] - t[0][a];
+          const int64_t det = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) -
+                              e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0]) +
+                              e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);
+          builder.add_tet(t, f, det > 0);
+        }
+  return builder.take();
+}
+
+int64_t slab_count(const Volume& v) {
+  return (v.dims[2] - 1 + full_resolution_slab_layers(v.dims) - 1) / full_resolution_slab_layers(v.dims);
+}
+
+// The one-walk mesh, and extract_full_resolution() on 1, 2, 3 and 8 threads, equal bit for bit.
+void expect_same_mesh_on_any_threads(const Volume& volume, float iso, const std::string& what) {
+  const Mesh reference = one_walk(volume, iso);
+  ASSERT_GT(reference.triangles.size(), 0u) << what;
+  for (size_t threads : {1, 2, 3, 8}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    const Mesh m = extract_full_resolution(volume, iso);
+    ASSERT_EQ(m.positions.size(), reference.positions.size()) << what << ", " << threads << " threads";
+    EXPECT_TRUE(m.positions == reference.positions) << what << ", " << threads << " threads";
+    EXPECT_TRUE(m.triangles == reference.triangles) << what << ", " << threads << " threads";
+  }
+}
+
+TEST(FullResolutionSlabs, SlabsDependOnDimensionsOnlyAndSmallVolumesAreOne) {
+  EXPECT_EQ(slab_count(generate_algebraic(65)), 1) << "nothing to merge for a 64^3-cell volume";
+  EXPECT_GT(slab_count(generate_algebraic(129)), 1);
+  for (size_t threads : {1, 8}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    EXPECT_EQ(full_resolution_slab_layers({257, 257, 257}), 4) << "a 2^18-cell grain";
+    EXPECT_EQ(full_resolution_slab_layers({2, 2, 2}), 1 << 18);
+  }
+}
+
+TEST(FullResolutionSlabs, AnyThreadCountGivesTheOneWalkMeshBitForBit) {
+  const Volume algebraic = generate_algebraic(129);
+  ASSERT_GT(slab_count(algebraic), 1) << "the merge must be exercised";
+  expect_same_mesh_on_any_threads(algebraic, 0.0f, "algebraic 129");
+  expect_same_mesh_on_any_threads(generate_algebraic(65), 0.0f, "algebraic 65, one slab");
+  // Odd, non-cubic, several slabs of which the last is short; then one that is a single slab.
+  const Volume noise = testing::crop(generate_noise(97, 11), {97, 90, 75});
+  ASSERT_GT(slab_count(noise), 1);
+  for (float iso : {-0.3f, 0.2f}) expect_same_mesh_on_any_threads(noise, iso, "noise 97x90x75");
+  expect_same_mesh_on_any_threads(testing::crop(generate_noise(70, 4), {37, 70, 23}), 0.0f, "noise 37x70x23");
+}
+
+TEST(FullResolutionSlabs, RealVolumeWithAOneLayerLastSlabGivesTheOneWalkMesh) {
+  const testing::SharedVolume& bolt = testing::shared_volumes()[3];
+  const Volume v = testing::load_shared(bolt);
+  ASSERT_EQ(slab_count(v), 3);
+  ASSERT_EQ((v.dims[2] - 1) % full_resolution_slab_layers(v.dims), 1) << "the last slab is one layer";
+  for (float iso : bolt.isovalues) expect_same_mesh_on_any_threads(v, iso, bolt.name);
+}
+
+TEST(FullResolutionSlabs, VolumeTwoNodesThickGivesTheOneWalkMesh) {
+  const Volume v = testing::make_volume({400, 300, 2}, [](int64_t x, int64_t y, int64_t z) {
+    return std::sin(0.05 * static_cast<double>(x)) * std::cos(0.07 * static_cast<double>(y)) + 0.3 * static_cast<double>(z) - 0.1;
+  });
+  expect_same_mesh_on_any_threads(v, 0.0f, "400x300x2");
+}
+
+// Surfaces in and next to the plane two slabs share: ties at the isovalue on it, and a layer of
+// alternating signs in it, which cuts the in-plane edges each slab welds on its own.
+TEST(FullResolutionSlabs, SurfaceInTheSharedPlaneGivesTheOneWalkMesh) {
+  const std::array<int64_t, 3> dims{65, 48, 129};
+  const int64_t z0 = full_resolution_slab_layers(dims);
+  ASSERT_LT(z0, dims[2] - 1);
+  const Volume ramp = testing::make_volume(dims, [&](int64_t, int64_t, int64_t z) { return static_cast<double>(z - z0); });
+  for (float iso : {0.0f, -0.5f, 0.5f}) expect_same_mesh_on_any_threads(ramp, iso, "ramp z - z0");
+  const Volume holes = testing::make_volume(dims, [&](int64_t x, int64_t y, int64_t z) {
+    return z == z0 && (x + 2 * y) % 3 != 0 ? -1.0 : 1.0;
+  });
+  expect_same_mesh_on_any_threads(holes, 0.0f, "plane of holes");
+  const Volume ties = testing::make_volume(dims, [&](int64_t x, int64_t y, int64_t z) {
+    return z == z0 ? ((x * 7 + y * 3) % 5 == 0 ? 1.0 : 0.0) : std::abs(z - z0) == 1 ? -1.0 : 0.5;
+  });
+  expect_same_mesh_on_any_threads(ties, 0.0f, "ties in the plane");
 }
 
 }  // namespace

@@ -18,6 +18,7 @@
 #include "io/ply_writer.h"
 #include "io/volume_reader.h"
 #include "tools/commands.h"
+#include "tools/paper_table1.h"
 #include "tools/report.h"
 
 #ifndef ISOTOPE_SHARED_DATA
@@ -36,17 +37,7 @@ struct DemoArgs {
 constexpr TopologyMode kModes[3] = {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve};
 constexpr ErrorIndicator kIndicators[2] = {ErrorIndicator::bound, ErrorIndicator::surplus};
 
-struct Eps {
-  const char* label;  // as printed, and (with '/' -> '-') in file names
-  double value;
-};
-
-// The paper's Table 1: eps, triangles without / with topology preservation.
-struct PaperRow {
-  int without, with;
-};
-constexpr Eps kTable1Eps[5] = {{"0", 0.0}, {"1/64", 1.0 / 64}, {"1/16", 1.0 / 16}, {"1/4", 0.25}, {"1", 1.0}};
-constexpr PaperRow kTable1Paper[5] = {{59290, 59290}, {25456, 25464}, {7124, 7528}, {1936, 3503}, {374, 3095}};
+using Eps = Table1Eps;  // label as printed, and (with '/' -> '-') in file names
 // 8-bit data: the same eps ladder times 64 (the algebraic function spans about 5.5, uint8 data 255).
 constexpr Eps kByteEps[5] = {{"0", 0.0}, {"1", 1.0}, {"4", 4.0}, {"16", 16.0}, {"64", 64.0}};
 

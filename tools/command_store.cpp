@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -20,31 +19,10 @@
 #include "io/store_reader.h"
 #include "io/store_writer.h"
 #include "tools/commands.h"
+#include "tools/interrupt_guard.h"
 
 namespace isotope::tools {
 namespace {
-
-std::atomic<bool> g_interrupted{false};
-extern "C" void on_interrupt(int) { g_interrupted.store(true); }
-
-// SIGINT/SIGTERM only raise a flag while installed, so the convert stops between tiles and
-// unwinds: its temporary output is removed, its scratch files were never named.
-class InterruptGuard {
- public:
-  InterruptGuard() {
-    g_interrupted = false;
-    int_ = std::signal(SIGINT, on_interrupt);
-    term_ = std::signal(SIGTERM, on_interrupt);
-  }
-  ~InterruptGuard() {
-    std::signal(SIGINT, int_);
-    std::signal(SIGTERM, term_);
-  }
-
- private:
-  void (*int_)(int);
-  void (*term_)(int);
-};
 
 struct ConvertArgs {
   std::string input, output, dims, type;
@@ -75,8 +53,8 @@ int run_convert(const ConvertArgs& a) {
   options.zstd_level = a.zstd_level;
   options.quantize_bits = a.quantize;
   if (progress_enabled(a.quiet)) options.progress = progress_bar("converting");
-  options.cancel = &g_interrupted;
-  InterruptGuard guard;
+  const InterruptGuard guard;  // stops the convert between tiles; its temporary output is removed
+  options.cancel = &InterruptGuard::flag();
   const ConvertStats s = convert_to_store(*input, a.output, options);
   if (!a.quiet) {
     const auto& d = input->info().dims;

@@ -19,6 +19,11 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 
 }  // namespace
 
+void keep_freed_brick_memory() {
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 128 << 20);
+}
+
 ExtractionInput::ExtractionInput(const Spec& spec) {
   if (is_store_file(spec.path)) open_store(spec);
   else open_volume(spec);
@@ -26,10 +31,7 @@ ExtractionInput::ExtractionInput(const Spec& spec) {
 
 void ExtractionInput::open_store(const Spec& spec) {
   if (!spec.dims.empty() || !spec.type.empty()) throw CLI::ValidationError("--dims/--type", "do not apply to a store");
-  // The cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
-  // return each to the kernel and fault fresh zeroed pages in for the next. Kept, they are reused.
-  mallopt(M_MMAP_THRESHOLD, 64 << 20);
-  mallopt(M_TRIM_THRESHOLD, 128 << 20);
+  keep_freed_brick_memory();
   const auto start = std::chrono::steady_clock::now();
   store_ = std::make_unique<StoreReader>(spec.path);
   cache_ = std::make_unique<BrickCache>(*store_, static_cast<uint64_t>(spec.cache_mb) << 20);

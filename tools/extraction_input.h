@@ -15,6 +15,11 @@
 
 namespace isotope::tools {
 
+// The brick cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
+// return each to the kernel and fault fresh zeroed pages in for the next. This keeps them for
+// reuse. Call before paging a store (process-wide).
+void keep_freed_brick_memory();
+
 class ExtractionInput {
  public:
   struct Spec {

@@ -69,6 +69,7 @@ int main(int argc, char** argv) {
   const Command info = add_info_command(app);
   const Command verify = add_verify_command(app);
   const Command sweep = add_sweep_command(app);
+  const Command bench = add_bench_command(app);
   const Command demo = add_demo_command(app);
   app.footer("Run 'isotope COMMAND --help' for the options of a command.");
   app.failure_message([](const CLI::App*, const CLI::Error& e) {
@@ -83,6 +84,7 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("info")) return info();
     if (app.got_subcommand("verify")) return verify();
     if (app.got_subcommand("sweep")) return sweep();
+    if (app.got_subcommand("bench")) return bench();
     if (app.got_subcommand("demo")) return demo();
     return 2;  // unreachable: require_subcommand(1)
   } catch (const CLI::ParseError& e) {
