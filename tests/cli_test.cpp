@@ -591,7 +591,7 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
                        " --json " + quote(json) + " --work-dir " + quote(work().string()));
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(r.err.empty()) << r.err;
-  for (const char* part : {"vs base", "Paper's Table 1", "Flying Edges", "not run: no embryo volume", "Targets"})
+  for (const char* part : {"vs base", "Paper's Table 1", "Flying Edges", "not run: no such volume in the shared data", "Targets"})
     EXPECT_NE(r.out.find(part), std::string::npos) << part << "\n" << r.out;
   EXPECT_EQ(listing(), std::set<std::string>{json}) << "the temporary stores must be gone";
 
