@@ -631,6 +631,8 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
     // A cold cache reads the store; a warm one, the raw array and the hierarchy read nothing.
     EXPECT_EQ(row["bytes_read"].get<uint64_t>() > 0, row["input"] == "store") << row;
   }
+  EXPECT_EQ(j["targets"]["eps0_exact"], j["targets"]["eps0_rows"]);
+  EXPECT_EQ(j["targets"]["eps0_rows"], 6) << "per dataset: memory on 1 and 2 threads, a cold store";
   EXPECT_EQ(inputs["raw"], 4);
   EXPECT_EQ(inputs["memory"], 12);
   EXPECT_EQ(inputs["store"], 4);
