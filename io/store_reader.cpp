@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <mutex>
 
 #include "engine/parallel.h"
@@ -294,12 +295,14 @@ VerifyStats verify_store(const std::string& path, const ProgressCallback& progre
   if (at != store.header().directory_offset) throw IoError(path + ": bricks do not end where the directory starts");
 
   std::vector<std::string> problems(dir.size());
-  std::atomic<bool> failed{false};
+  // The brick reported is the first in directory order that has a problem, whatever the threads
+  // did: bricks after the first problem found so far are skipped, those before it still checked.
+  std::atomic<int64_t> first_problem{std::numeric_limits<int64_t>::max()};
   std::mutex range_mutex;
   float lo = INFINITY, hi = -INFINITY;
   ProgressReporter reporter(progress, static_cast<int64_t>(dir.size()));
   parallel_for(int64_t{0}, static_cast<int64_t>(dir.size()), [&](int64_t i) {
-    if (failed.load(std::memory_order_relaxed)) return;
+    if (i > first_problem.load(std::memory_order_relaxed)) return;
     try {
       const BrickContents c = store.read_brick(i);
       std::string problem = check_brick(store, i, c);
@@ -313,7 +316,9 @@ VerifyStats verify_store(const std::string& path, const ProgressCallback& progre
       }
     } catch (const IoError& e) {
       problems[static_cast<size_t>(i)] = e.what();
-      failed = true;
+      int64_t seen = first_problem.load();
+      while (i < seen && !first_problem.compare_exchange_weak(seen, i)) {
+      }
     }
     reporter.advance(1);
   });

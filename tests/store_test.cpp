@@ -334,6 +334,24 @@ TEST_F(StoreCorruption, FlippedByteInEveryBrickIsNamed) {
   }
 }
 
+// With several bad bricks, verify names the first in directory order, on any number of threads:
+// the same store gives the same message every time.
+TEST_F(StoreCorruption, FirstBadBrickIsNamedWhateverTheThreads) {
+  testing::write_file(bad_, "", good_);
+  const std::vector<BrickEntry> dir = StoreReader(bad_).directory();
+  ASSERT_GT(dir.size(), 8u);
+  auto bytes = good_;
+  // The first at the end of the first half, which a second thread starting on the second half
+  // would pass last.
+  const size_t first = dir.size() / 2 - 1;
+  for (const size_t i : {first, first + 1, dir.size() - 1}) bytes[dir[i].offset + dir[i].compressed_bytes / 2] ^= 0x5a;
+  for (const size_t threads : {size_t{1}, size_t{2}, size_t{8}}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    for (int run = 0; run < 10; ++run)
+      EXPECT_CONTAINS(verify_message(bytes), "brick " + std::to_string(first) + " ") << threads << " threads";
+  }
+}
+
 TEST_F(StoreCorruption, TruncationWrongMagicAndVersion) {
   for (size_t size : {size_t{0}, size_t{7}, size_t{100}, kHeaderBytes, kHeaderBytes + 1, good_.size() / 2, good_.size() - 1}) {
     auto bytes = good_;

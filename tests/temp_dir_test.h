@@ -9,10 +9,15 @@
 #include <string>
 #include <vector>
 
-#define EXPECT_CONTAINS(text, part) \
-  EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
+// TEXT is evaluated once (it may run something, like a verify); more can be streamed after it.
+#define EXPECT_CONTAINS(text, part) EXPECT_TRUE(::isotope::testing::contains_text((text), (part)))
 
 namespace isotope::testing {
+
+inline ::testing::AssertionResult contains_text(const std::string& text, const std::string& part) {
+  if (text.find(part) != std::string::npos) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << "'" << part << "' is not in the message: " << text;
+}
 
 class TempDirTest : public ::testing::Test {
  protected:
