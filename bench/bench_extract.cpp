@@ -142,7 +142,7 @@ const MultiresVolume& multires_of(Dataset d) {
 // ---- Stores, each converted once per process -------------------------------------------------
 
 const std::filesystem::path& store_dir() {
-  static const isotope::bench::ProcessTempDir dir("extract");
+  static const isotope::TempDir dir(isotope::bench::process_temp_path("extract"));
   return dir.path();
 }
 

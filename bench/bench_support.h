@@ -11,6 +11,8 @@
 #include <thread>
 #include <vector>
 
+#include "io/temp_dir.h"
+
 namespace isotope::bench {
 
 // Runs SETUP, reporting a failure (missing data file, engine or I/O error) as a skipped
@@ -37,24 +39,10 @@ inline std::vector<int> thread_counts() {
   return counts;
 }
 
-// A temporary folder $TMPDIR/isotope_bench_<NAME>.<pid>, removed with everything in it when
-// destroyed: held in a function-local static, it lasts until the process exits.
-class ProcessTempDir {
- public:
-  explicit ProcessTempDir(const std::string& name)
-      : path_(std::filesystem::temp_directory_path() / ("isotope_bench_" + name + "." + std::to_string(::getpid()))) {
-    std::filesystem::create_directories(path_);
-  }
-  ~ProcessTempDir() {
-    std::error_code ignored;
-    std::filesystem::remove_all(path_, ignored);
-  }
-  ProcessTempDir(const ProcessTempDir&) = delete;
-  ProcessTempDir& operator=(const ProcessTempDir&) = delete;
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
+// $TMPDIR/isotope_bench_<NAME>.<pid>: held as a TempDir in a function-local static, it lasts
+// until the process exits.
+inline std::filesystem::path process_temp_path(const std::string& name) {
+  return std::filesystem::temp_directory_path() / ("isotope_bench_" + name + "." + std::to_string(::getpid()));
+}
 
 }  // namespace isotope::bench

@@ -30,6 +30,7 @@
 #include "io/paged_volume.h"
 #include "io/store_reader.h"
 #include "io/store_writer.h"
+#include "io/temp_dir.h"
 #include "io/volume_box_reader.h"
 #include "io/volume_reader.h"
 #include "tools/commands.h"
@@ -133,10 +134,6 @@ struct Row {
   double speedup = 0;  // baseline's median at the same thread count over ours
   double share = 0;    // triangles over the full-resolution mesh's
 };
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 class ThreadCap {
  public:
@@ -658,31 +655,14 @@ std::vector<const DatasetSpec*> selected(const BenchArgs& a) {
   return out;
 }
 
-// A folder for the stores, removed with them when the command ends, however it ends.
-class WorkDir {
- public:
-  explicit WorkDir(const std::string& parent)
-      : path_(std::filesystem::path(parent.empty() ? std::filesystem::temp_directory_path().string() : parent) /
-              ("isotope-bench-" + std::to_string(::getpid()))) {
-    std::filesystem::create_directories(path_);
-  }
-  ~WorkDir() {
-    std::error_code ignored;
-    std::filesystem::remove_all(path_, ignored);
-  }
-  WorkDir(const WorkDir&) = delete;
-  WorkDir& operator=(const WorkDir&) = delete;
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
-
 int run_bench(const BenchArgs& a) {
   const std::vector<const DatasetSpec*> specs = selected(a);
   if (!a.json.empty()) AtomicFile check(a.json);  // a bad --json directory fails now, not after the suite
   const bool progress = progress_enabled(a.quiet);
-  const WorkDir work(a.work_dir);
+  // The stores' folder, removed with them when the command ends, however it ends.
+  const TempDir work(std::filesystem::path(a.work_dir.empty() ? std::filesystem::temp_directory_path().string()
+                                                               : a.work_dir) /
+                     ("isotope-bench-" + std::to_string(::getpid())));
   keep_freed_brick_memory();  // as isotope extract does for a store
   const InterruptGuard guard;  // Ctrl-C stops between runs, and the work directory is removed
   Suite suite(a, work.path(), progress);

@@ -66,9 +66,6 @@ struct Case {
   bool paper_columns = false;
 };
 
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 std::string file_label(const char* label) {
   std::string s = label;

@@ -2,7 +2,6 @@
 // Steps: read, preprocess (MultiresVolume::build), extract, measure topology, write.
 // Nothing is written before the mesh exists, and the writers are atomic, so a failure
 // leaves no output file behind.
-#include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -26,6 +25,7 @@
 #include "io/volume_reader.h"
 #include "tools/commands.h"
 #include "tools/extraction_input.h"
+#include "tools/peak_memory.h"
 #include "tools/report.h"
 
 namespace isotope::tools {
@@ -55,10 +55,6 @@ struct ExtractArgs {
   bool quiet = false;
 };
 
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 CLI::Validator real_validator(bool non_negative) {
   return CLI::Validator(
       [non_negative](std::string& s) -> std::string {
@@ -69,13 +65,6 @@ CLI::Validator real_validator(bool non_negative) {
         return {};
       },
       "");
-}
-
-// Peak resident memory of this process so far (getrusage), in MB.
-double peak_rss_mb() {
-  struct rusage u {};
-  ::getrusage(RUSAGE_SELF, &u);
-  return static_cast<double>(u.ru_maxrss) / 1024.0;  // Linux reports KiB
 }
 
 // --compare-full: the same isovalue at full resolution (eps = 0 equals marching tetrahedra on
@@ -172,7 +161,7 @@ int run_extract(const ExtractArgs& a) {
     run.comparison = compare_components(full, label_components(full), mesh, components, run.compare_tolerance);
     run.compare_seconds += seconds_since(compare_start);
   }
-  run.peak_rss_mb = peak_rss_mb();
+  run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);  // this process so far
 
   // The report's temporary file is opened first (it checks its directory), the mesh is then
   // renamed into place, and if the report cannot be completed the mesh is removed again.

@@ -2,6 +2,7 @@
 // The subcommands of the isotope tool. Each one registers its options on the application and
 // returns the function that runs it after a successful parse; main() maps what it throws to
 // exit codes (CLI::ParseError: usage, 2; anything else: runtime failure, 1).
+#include <chrono>
 #include <functional>
 #include <optional>
 #include <string>
@@ -25,6 +26,11 @@ Command add_bench_command(CLI::App& app);     // isotope bench [--quick] [--json
 
 // A real number as typed by a user: "0.25", "-3e-2" or a fraction "1/64"; nullopt otherwise.
 std::optional<double> parse_real(const std::string& text);
+
+// Wall time since START.
+inline double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
 
 // Progress and timing lines go to stderr only when it is a terminal and --quiet is not given.
 bool progress_enabled(bool quiet);
