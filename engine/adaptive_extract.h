@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "engine/extract.h"
+#include "engine/finest_extract.h"
 #include "engine/parallel.h"
 #include "engine/piece_weld.h"
 #include "engine/traversal.h"
@@ -48,6 +49,14 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     total.budget_steps = c.steps;
   }
   const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing());
+  if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) {
+    Mesh mesh = extract_finest(source, rule, &total);
+    if (stats) {
+      *stats = total;
+      stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
+    return mesh;
+  }
   std::vector<Piece> pieces;
   {  // scoped: a paged source's reader lets its bricks go before the pieces run
     Traversal<Source> top(source, rule);

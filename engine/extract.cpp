@@ -36,6 +36,7 @@ class InMemory {
    public:
     explicit Reader(const MultiresVolume& mv) : mv_(mv) {}
     float value(const Coord& c, int /*band*/) const { return mv_.value(c); }
+    void value_row(const Coord& c, int64_t count, float* out) const { mv_.value_row(c[0], c[1], c[2], count, out); }
     RecordView record(const Coord& v) const {
       assert(mv_.has_record(v) && "the outside test keeps the traversal near the data box");
       return {mv_, mv_.record_slot(v)};

@@ -103,17 +103,26 @@ uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coor
   return fresh;
 }
 
-void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive) {
+void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
+                          EdgeMemo* memo) {
   int c = 0;
   for (int i = 0; i < 4; ++i) c |= (values[i] > iso_ ? 1 : 0) << i;
   const Case& k = table()[static_cast<size_t>(c)];
   if (k.count == 0) return;
   uint32_t v[4];
-  uint64_t keys[4];
   for (int i = 0; i < k.count; ++i) {
     const int a = k.edges[i][0], b = k.edges[i][1];
-    keys[i] = edge_key(corners[a], corners[b]);
-    v[i] = vertex(keys[i], corners[a], values[a], corners[b], values[b]);
+    if (!memo) {
+      v[i] = vertex(edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
+      continue;
+    }
+    uint64_t& slot = memo->slot(corners[a], corners[b]);
+    if (slot >> 32 == memo->stamp()) {
+      v[i] = static_cast<uint32_t>(slot);
+    } else {
+      v[i] = vertex(edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
+      slot = memo->stamp() << 32 | v[i];
+    }
   }
   const bool flip = !positive;
   auto emit = [&](uint32_t x, uint32_t y, uint32_t z) {
@@ -126,6 +135,8 @@ void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<
   }
   // Split along the diagonal through the smallest edge key: it depends on the grid edges only,
   // not on the corner order or on which tetrahedron welded a vertex first.
+  uint64_t keys[4];
+  for (int i = 0; i < 4; ++i) keys[i] = edge_key(corners[k.edges[i][0]], corners[k.edges[i][1]]);
   int m = 0;
   for (int i = 1; i < 4; ++i)
     if (keys[i] < keys[m]) m = i;

@@ -58,6 +58,17 @@ class MultiresVolume {
     return values_[static_cast<size_t>(layout_.slot(x, y, z))];
   }
 
+  // Values of nodes (x, y, z) .. (x + count - 1, y, z), all in the data box, into out: a brick's
+  // row at a time.
+  void value_row(int64_t x, int64_t y, int64_t z, int64_t count, float* out) const {
+    while (count > 0) {
+      const int64_t run = std::min(count, BrickLayout::kMask + 1 - (x & BrickLayout::kMask));
+      const float* row = values_.data() + layout_.slot(x, y, z);
+      std::copy(row, row + run, out);
+      x += run, out += run, count -= run;
+    }
+  }
+
   // Records of scale j (engine/record.h) have their own bricked array over the multiples of 2^j:
   // the coarse levels take little memory and stay in cache, and the records of one subtree lie
   // together. Each array stops at record_extent.

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <string>
+#include <vector>
 
 #include "engine/extract.h"
 #include "engine/fields.h"
@@ -59,6 +60,72 @@ TEST(ExactAtEpsZero, RealVolumesAtTheirIsovaluesAndAtIntegerTies) {
     const Volume v = testing::load_shared(s);
     for (float iso : s.isovalues) expect_exact_at_eps0(v, iso, s.name);
     if (s.name != "hydrogen") expect_exact_at_eps0(v, 128.0f, s.name + " integer iso");
+  }
+}
+
+// At eps 0 cells are marched block by block (engine/finest_extract.h): blocks of 2, 4 and 8
+// cells, cut by the data box on any side, and lattices too small for a block at all.
+TEST(ExactAtEpsZero, BlocksOfAnySizeAndBlocksCutByTheDataBox) {
+  const Volume noise = generate_noise(21, 5);
+  for (const std::array<int64_t, 3>& dims : std::vector<std::array<int64_t, 3>>{
+           {2, 2, 2}, {3, 3, 3}, {3, 2, 3}, {5, 4, 3}, {9, 9, 9}, {10, 17, 9}, {21, 13, 18}}) {
+    const Volume v = testing::crop(noise, dims);
+    for (float iso : {-0.2f, 0.0f, 0.3f})
+      expect_exact_at_eps0(v, iso, "noise " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                                       std::to_string(dims[2]));
+  }
+}
+
+// Range culling: a block of 8^3 cells is marched iff the isovalue lies in the range of its nodes
+// (min <= iso < max, as the tree's culling), counted here straight from the volume; an
+// isovalue above every value marches nothing.
+int64_t cells_in_blocks_the_isovalue_cuts(const Volume& v, float iso) {
+  const auto& d = v.dims;
+  int64_t cells = 0;
+  for (int64_t z0 = 0; z0 + 1 < d[2]; z0 += 8)
+    for (int64_t y0 = 0; y0 + 1 < d[1]; y0 += 8)
+      for (int64_t x0 = 0; x0 + 1 < d[0]; x0 += 8) {
+        const int64_t x1 = std::min(x0 + 8, d[0] - 1), y1 = std::min(y0 + 8, d[1] - 1), z1 = std::min(z0 + 8, d[2] - 1);
+        float lo = v.at(x0, y0, z0), hi = lo;
+        for (int64_t z = z0; z <= z1; ++z)
+          for (int64_t y = y0; y <= y1; ++y)
+            for (int64_t x = x0; x <= x1; ++x) lo = std::min(lo, v.at(x, y, z)), hi = std::max(hi, v.at(x, y, z));
+        if (lo <= iso && iso < hi) cells += (x1 - x0) * (y1 - y0) * (z1 - z0);
+      }
+  return cells;
+}
+
+TEST(ExactAtEpsZero, BlocksTheIsovalueMissesAreNotMarched) {
+  const Volume volumes[] = {generate_sphere(65), testing::crop(generate_noise(50, 9), {50, 37, 44})};
+  for (const Volume& v : volumes) {
+    const MultiresVolume mv = MultiresVolume::build(v);
+    ExtractOptions o;
+    ExtractStats stats;
+    const Mesh m = extract(mv, o, &stats);
+    EXPECT_EQ(testing::triangle_set(m), testing::triangle_set(extract_full_resolution(v, 0.0f)));
+    const int64_t cut = cells_in_blocks_the_isovalue_cuts(v, 0.0f);
+    EXPECT_LT(cut, (v.dims[0] - 1) * (v.dims[1] - 1) * (v.dims[2] - 1)) << "some block is culled";
+    EXPECT_EQ(stats.tets_emitted, 6 * cut);
+    o.iso = 1e9f;
+    EXPECT_TRUE(extract(mv, o, &stats).triangles.empty());
+    EXPECT_EQ(stats.tets_emitted, 0);
+  }
+}
+
+// The blocks are marched in slabs on all threads; the mesh is the same bit for bit.
+TEST(ExactAtEpsZero, AnyThreadCountGivesTheSameMeshBitForBit) {
+  const MultiresVolume mv = MultiresVolume::build(generate_algebraic(65));
+  ExtractOptions o;
+  const Mesh reference = [&] {
+    const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    return extract(mv, o);
+  }();
+  ASSERT_GT(reference.triangles.size(), 0u);
+  for (size_t threads : {2, 3, 8}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    const Mesh m = extract(mv, o);
+    EXPECT_TRUE(m.positions == reference.positions) << threads << " threads";
+    EXPECT_TRUE(m.triangles == reference.triangles) << threads << " threads";
   }
 }
 
