@@ -36,7 +36,11 @@ class InMemory {
    public:
     explicit Reader(const MultiresVolume& mv) : mv_(mv) {}
     float value(const Coord& c, int /*band*/) const { return mv_.value(c); }
-    void value_row(const Coord& c, int64_t count, float* out) const { mv_.value_row(c[0], c[1], c[2], count, out); }
+    bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
+      for (int64_t z = 0; z <= n[2]; ++z)
+        for (int64_t y = 0; y <= n[1]; ++y) mv_.value_row(lo[0], lo[1] + y, lo[2] + z, n[0] + 1, f + (z * stride + y) * stride);
+      return true;
+    }
     RecordView record(const Coord& v) const {
       assert(mv_.has_record(v) && "the outside test keeps the traversal near the data box");
       return {mv_, mv_.record_slot(v)};

@@ -61,16 +61,15 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
         const Coord centre{x0 + side / 2, y0 + side / 2, z0 + side / 2};
         if (!rule.in_range(reader.record(centre).bounds())) continue;
         const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
-        for (int64_t z = 0; z <= n[2]; ++z)
-          for (int64_t y = 0; y <= n[1]; ++y) {
-            float* row = f.data() + (z * stride + y) * stride;
-            const Coord start{x0, y0 + y, z0 + z};
-            if constexpr (requires { reader.value_row(start, n[0] + 1, row); }) {
-              reader.value_row(start, n[0] + 1, row);  // a source that holds rows together
-            } else {
-              for (int64_t x = 0; x <= n[0]; ++x) row[x] = reader.value({x0 + x, start[1], start[2]}, 0);
-            }
-          }
+        const Coord lo{x0, y0, z0};
+        bool read = false;
+        if constexpr (requires { reader.block_values(lo, n, f.data(), stride); })
+          read = reader.block_values(lo, n, f.data(), stride);  // a source that holds blocks together
+        if (!read)
+          for (int64_t z = 0; z <= n[2]; ++z)
+            for (int64_t y = 0; y <= n[1]; ++y)
+              for (int64_t x = 0; x <= n[0]; ++x)
+                f[static_cast<size_t>((z * stride + y) * stride + x)] = reader.value({x0 + x, y0 + y, z0 + z}, 0);
         // The record's range is saturated over the diamonds below, which reach into the
         // neighbouring blocks: the block's own range culls most of what it lets through.
         if (!cut_by(f.data(), stride, n, plan.iso)) continue;

@@ -28,6 +28,13 @@ struct DecodedBrick {
   const Record* records;
 };
 
+// Band 0's values of a brick with their halo, as stored (io/store_brick.h, halo_index): every
+// node a block of finest cells inside the brick needs, without rebuilding the brick's records
+// (most of a band-0 decode). What an eps-0 extraction reads (engine/finest_extract.h).
+struct HaloValues {
+  const float* values;
+};
+
 struct BrickCacheStats {
   int64_t bricks_read = 0;   // misses: bricks read, checked and decoded
   uint64_t bytes_read = 0;   // compressed bytes read for them
@@ -48,9 +55,13 @@ class BrickCache {
   // Brick `index` of the store's directory, decoded. Thread-safe. Throws IoError naming the
   // brick when it cannot be read or is corrupt.
   std::shared_ptr<const DecodedBrick> get(int64_t index);
+  // Band-0 brick `index`'s values with their halo. Thread-safe; throws as get(). Held apart from
+  // get()'s bricks, under the same budget.
+  std::shared_ptr<const HaloValues> get_halo_values(int64_t index);
 
   const StoreReader& store() const { return store_; }
   uint64_t budget_bytes() const { return budget_; }  // as given, raised to kMinBricks bricks
+  uint64_t brick_bytes() const { return pool_->block_bytes(); }  // a brick decoded whole, the largest entry
   BrickCacheStats stats() const;
 
  private:
@@ -58,25 +69,31 @@ class BrickCache {
   // (std::atomic<std::shared_ptr> would do without them, but GCC 12's is not race-free by the
   // memory model: its load releases its internal lock with a relaxed store; ThreadSanitizer
   // reports it, google/sanitizers#1558.)
+  // Slot i < directory size holds brick i decoded whole (DecodedBrick), slot directory size + i
+  // its halo values (HaloValues).
   struct Slot {
-    std::shared_ptr<const DecodedBrick> brick;
+    std::shared_ptr<const void> brick;
     // After eviction: still alive while some reader holds it, and then taken back, not decoded
     // again (readers keep their recent bricks, so a small budget does not thrash on those).
-    std::weak_ptr<const DecodedBrick> evicted;
+    std::weak_ptr<const void> evicted;
     std::atomic<bool> referenced{false};
   };
   struct Resident {
-    int64_t index;
+    int64_t slot;
     uint64_t bytes;
   };
-  void admit(int64_t index, uint64_t bytes);
+  template <class Decode>
+  std::shared_ptr<const void> get_slot(int64_t slot, int64_t index, BrickPool& pool, const Decode& decode);
+  void admit(int64_t slot, uint64_t bytes);
   std::shared_ptr<const DecodedBrick> decode(int64_t index);
-  std::shared_ptr<const DecodedBrick> resident(int64_t index);
-  void publish(int64_t index, const std::shared_ptr<const DecodedBrick>& brick);
+  std::shared_ptr<const HaloValues> decode_halo(int64_t index);
+  std::shared_ptr<const void> resident(int64_t slot);
+  void publish(int64_t slot, const std::shared_ptr<const void>& brick, uint64_t bytes);
 
   const StoreReader& store_;
   const uint64_t budget_;
-  std::shared_ptr<BrickPool> pool_;  // shared with the bricks' deleters
+  std::shared_ptr<BrickPool> pool_;       // shared with the bricks' deleters
+  std::shared_ptr<BrickPool> halo_pool_;  // for the HaloValues
   std::unique_ptr<Slot[]> slots_;
   static constexpr size_t kStripes = 64;
   std::mutex slot_locks_[kStripes];  // short: a pointer copy

@@ -3,6 +3,7 @@
 // bricks that hold them, through a shared BrickCache, so extraction reads only the bricks its
 // traversal reaches. A node's value is read from the coarsest band that holds it, and a
 // diamond's record from its own band, so a coarse extraction never touches the finer bands.
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -11,6 +12,7 @@
 #include "engine/lattice.h"
 #include "engine/record.h"
 #include "io/brick_cache.h"
+#include "io/store_brick.h"
 
 namespace isotope {
 
@@ -54,6 +56,23 @@ class PagedVolume {
       const DecodedBrick& b = brick(locate(j, q, &m));
       return b.values[m];
     }
+    // The values of nodes lo .. lo + n (inclusive) into f (x fastest, rows `stride` apart) when
+    // they lie in one band-0 brick and its halo; false, touching nothing, when they do not.
+    bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) {
+      const StoreLayout& layout = volume_->layout_;
+      const int bits = layout.brick_bits();
+      const Coord b{lo[0] >> bits, lo[1] >> bits, lo[2] >> bits};
+      for (int a = 0; a < 3; ++a)
+        if (lo[a] + n[a] > ((b[a] + 1) << bits) + 1) return false;  // the halo reaches 2 beyond, the block 1
+      const float* halo = halo_values(layout.brick_index(0, {b[0], b[1], b[2]}));
+      const Coord origin{b[0] << bits, b[1] << bits, b[2] << bits};
+      for (int64_t z = 0; z <= n[2]; ++z)
+        for (int64_t y = 0; y <= n[1]; ++y) {
+          const float* row = halo + halo_index(layout, origin, {lo[0], lo[1] + y, lo[2] + z});
+          std::copy(row, row + n[0] + 1, f + (z * stride + y) * stride);
+        }
+      return true;
+    }
     RecordView record(const Coord& v) {
       const int j = scale_of(v, volume_->layout_.lattice());
       uint32_t m = 0;
@@ -77,12 +96,25 @@ class PagedVolume {
       }
       return *p.brick;
     }
+    const float* halo_values(int64_t index) {
+      PinnedHalo& p = pinned_halos_[static_cast<size_t>(index) % pinned_halos_.size()];
+      if (p.index != index) {
+        p.halo = volume_->cache_.get_halo_values(index);
+        p.index = index;
+      }
+      return p.halo->values;
+    }
     struct Pinned {
       int64_t index = -1;
       std::shared_ptr<const DecodedBrick> brick;
     };
+    struct PinnedHalo {
+      int64_t index = -1;
+      std::shared_ptr<const HaloValues> halo;
+    };
     const PagedVolume* volume_;
     std::array<Pinned, 16> pinned_;
+    std::array<PinnedHalo, 4> pinned_halos_;
   };
   Reader reader() const { return Reader(*this); }
 

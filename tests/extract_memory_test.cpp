@@ -165,7 +165,9 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
     const Extraction huge = extract(big, iso, eps, 2, kHugeBudgetMb);
     const double decoded_mb = huge.report.at("cache").at("peak_decoded_mb").get<double>();
     ASSERT_GT(huge.bricks_read(), 0);
-    const double brick_mb = decoded_mb / static_cast<double>(huge.bricks_read());  // decoded bytes per brick
+    // A brick decoded whole; eps 0 decodes band 0 as halo values only, about an eighth of that.
+    const double brick_mb = huge.report.at("cache").at("brick_mb").get<double>();
+    ASSERT_GT(brick_mb, 0.0);
     report(tag + "_decoded_mb", decoded_mb);
     report(tag + "_brick_mb", brick_mb);
     report(tag + "_huge_cache_rss_mb", mb_of_kb(huge.child.max_rss_kb));
@@ -174,7 +176,7 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
     report(tag + "_triangles", static_cast<double>(huge.triangles()));
     report(tag + "_mesh_mb", static_cast<double>(huge.mesh_bytes()) / (1 << 20));
     // Far more decoded data than the budget, so holding it all would show.
-    EXPECT_GE(decoded_mb, 16.0 * kBudgetMb);
+    EXPECT_GE(decoded_mb, 10.0 * kBudgetMb);
 
     for (const int threads : {1, 2}) {
       const std::string key = tag + "_threads" + std::to_string(threads);

@@ -88,6 +88,7 @@ void ExtractionInput::describe(ExtractionRun& run) const {
   run.cache = cache_->stats();
   run.cache_mb = cache_mb_;
   run.cache_budget_bytes = cache_->budget_bytes();
+  run.cache_brick_bytes = cache_->brick_bytes();
   run.store_bytes = store_->file_bytes();
 }
 

@@ -146,6 +146,7 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   if (run.cache_mb > 0)
     j["cache"] = {{"budget_mb", run.cache_mb},
                   {"effective_budget_mb", static_cast<double>(run.cache_budget_bytes) / (1 << 20)},
+                  {"brick_mb", static_cast<double>(run.cache_brick_bytes) / (1 << 20)},
                   {"peak_decoded_mb", static_cast<double>(run.cache.peak_bytes) / (1 << 20)},
                   {"store_bytes", run.store_bytes}};
   return j;

@@ -35,6 +35,7 @@ struct ExtractionRun {
   BrickCacheStats cache;        // store input: what the brick cache read and served
   int64_t cache_mb = 0;         // store input: its budget (0: not a store)
   uint64_t cache_budget_bytes = 0;  // store input: the budget in effect (BrickCache::kMinBricks)
+  uint64_t cache_brick_bytes = 0;   // store input: a brick decoded whole, the cache's largest entry
   uint64_t store_bytes = 0;     // store input: the file's size
   uint64_t input_bytes = 0;     // other input: the values read (as float)
   double read_seconds = 0, preprocess_seconds = 0, extract_seconds = 0, measure_seconds = 0;
