@@ -41,6 +41,7 @@ class InMemory {
         for (int64_t y = 0; y <= n[1]; ++y) mv_.value_row(lo[0], lo[1] + y, lo[2] + z, n[0] + 1, f + (z * stride + y) * stride);
       return true;
     }
+    void prefetch(const Coord& v) const { __builtin_prefetch(&mv_.bounds(mv_.record_slot(v))); }
     RecordView record(const Coord& v) const {
       assert(mv_.has_record(v) && "the outside test keeps the traversal near the data box");
       return {mv_, mv_.record_slot(v)};

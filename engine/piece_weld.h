@@ -18,7 +18,7 @@ struct PartMesh {
 };
 
 // Welds the pieces' meshes in piece order, freeing each as it goes. A vertex takes the next index
-// the first time its edge appears, exactly as in one depth-first pass, so the result is the same,
+// the first time its edge appears, exactly as in one pass over the pieces in order, so the result is the same,
 // bit for bit, whatever the number of threads that built the pieces. Only vertices on a face of
 // their piece's tetrahedron can appear in another piece, so only those go through a welding
 // table. `side`: nodes per lattice axis.

@@ -150,8 +150,8 @@ struct Piece {
   bool emit_only = false;
 };
 
-// Depth-first over the bisection tree: cull by range, stop by the split rule, emit at stopping
-// tetrahedra and at the leaves.
+// Over the bisection tree (depth first down to the pieces, level by level within each): cull by
+// range, stop by the split rule, emit at stopping tetrahedra and at the leaves.
 template <class Source>
 class Traversal {
  public:
@@ -185,7 +185,7 @@ class Traversal {
 
   void run(const Piece& p) {
     if (p.emit_only) emit(p.tet, p.level, p.positive);
-    else visit(p.tet, p.level, p.positive);
+    else visit_by_levels(p.tet, p.level, p.positive);
   }
 
   // What the traversal decides about one tetrahedron, without descending: used by the budget
@@ -213,22 +213,54 @@ class Traversal {
   int64_t tets_simplified() const { return tets_simplified_; }
 
  private:
-  void visit(const PackedTet& t, int level, bool positive) {
-    if (pieces_ && level == split_level_) return pieces_->push_back({t, level, positive, false});
+  enum class Step { cull, stop, refine };
+  // What the traversal does at t: cull it (no value on each side, or beyond the data box), stop
+  // and emit it, or refine it.
+  Step step(const PackedTet& t, int level) {
     ++tets_visited_;
-    if (clip_ && outside_box(t)) return;
-    if (level == lattice_.max_level()) return emit(t, level, positive);
+    if (clip_ && outside_box(t)) return Step::cull;
+    if (level == lattice_.max_level()) return Step::stop;
     const Packed v = (t[0] + t[1]) >> 1;
     const auto r = reader_.record(unpack(v));
-    if (!rule_.in_range(r.bounds())) return;  // no value on each side
+    if (!rule_.in_range(r.bounds())) return Step::cull;
     if (!(rule_.error_key(r.bounds(), v, level) >= rule_.options().eps)) {
       const DiamondTopology& topology = r.topology();
       if (!rule_.critical(topology)) {
         tets_simplified_ += rule_.dropped(topology);
-        return emit(t, level, positive);
+        return Step::stop;
       }
     }
-    for (const Child& c : bisect(t, level, positive)) visit(c.tet, level + 1, c.positive);
+    return Step::refine;
+  }
+
+  void visit(const PackedTet& t, int level, bool positive) {
+    if (pieces_ && level == split_level_) return pieces_->push_back({t, level, positive, false});
+    switch (step(t, level)) {
+      case Step::cull: return;
+      case Step::stop: return emit(t, level, positive);
+      case Step::refine:
+        for (const Child& c : bisect(t, level, positive)) visit(c.tet, level + 1, c.positive);
+    }
+  }
+
+  // The subtree of t level by level, not depth first: a whole level's records are asked for
+  // before any is read, so their cache misses overlap instead of queuing one behind the other.
+  // The same tetrahedra stop and are emitted as in visit(), in another order.
+  void visit_by_levels(const PackedTet& t, int level, bool positive) {
+    frontier_.assign(1, Child{t, positive});
+    for (int l = level; !frontier_.empty(); ++l) {
+      next_.clear();
+      if constexpr (requires { reader_.prefetch(Coord{}); })
+        if (l < lattice_.max_level())
+          for (const Child& c : frontier_) reader_.prefetch(unpack((c.tet[0] + c.tet[1]) >> 1));
+      for (const Child& c : frontier_) switch (step(c.tet, l)) {
+          case Step::cull: break;
+          case Step::stop: emit(c.tet, l, c.positive); break;
+          case Step::refine:
+            for (const Child& child : bisect(c.tet, l, c.positive)) next_.push_back(child);
+        }
+      frontier_.swap(next_);
+    }
   }
 
   // The tetrahedron lies in a half-space beyond a face of the data box: it meets the box in a
@@ -264,6 +296,7 @@ class Traversal {
   bool clip_ = false;  // the data box is smaller than the lattice
   int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;
   std::vector<Piece>* pieces_ = nullptr;  // while splitting
+  std::vector<Child> frontier_, next_;     // visit_by_levels
   int split_level_ = 0;
 };
 
