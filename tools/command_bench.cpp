@@ -538,9 +538,10 @@ nlohmann::ordered_json flying_edges(const std::vector<Row>& rows, int threads, b
     std::printf("\nAgainst VTK 9.1 Flying Edges (one thread, full resolution, wall time without loading, measured on\n"
                 "the development machine; issue 6). Targets: eps 0 within 2x of it (faster on the sphere), a coarse\n"
                 "eps with at most %.0f%% of the triangles at least 10x faster.\n", kCoarseShare * 100);
-    std::printf("%-24s %8s %13s %13s %13s %8s %14s %14s %8s\n", "volume", "VTK ms", "baseline 1t", "eps 0, 1t",
-                ("eps 0, " + std::to_string(threads) + "t").c_str(), "target", "coarse, 1t",
-                ("coarse, " + std::to_string(threads) + "t").c_str(), "target");
+    const std::string n = std::to_string(threads) + "t";
+    std::printf("%-24s %8s %13s %13s %13s %13s %14s %14s %13s\n", "volume", "VTK ms", "baseline 1t", "eps 0, 1t",
+                ("eps 0, " + n).c_str(), ("target 1t/" + n).c_str(), "coarse, 1t", ("coarse, " + n).c_str(),
+                ("target 1t/" + n).c_str());
   }
   nlohmann::ordered_json out = nlohmann::ordered_json::array();
   for (const Reference& ref : kFlyingEdges) {
@@ -565,18 +566,23 @@ nlohmann::ordered_json flying_edges(const std::vector<Row>& rows, int threads, b
     const Row* c1 = find_row(rows, ref.dataset, "preserve", true, 1);
     const Row* cn = find_row(rows, ref.dataset, "preserve", true, threads);
     const double eps0_limit = std::string(ref.dataset) == "sphere512" ? ref.ms : 2 * ref.ms;
-    const double best_eps0 = std::min(e1 ? e1->seconds : 1e9, en ? en->seconds : 1e9) * 1e3;
-    const double best_coarse = std::min(c1 ? c1->seconds : 1e9, cn ? cn->seconds : 1e9) * 1e3;
-    const bool eps0_met = best_eps0 <= eps0_limit, coarse_met = best_coarse <= ref.ms / 10;
+    // Flying Edges ran on one thread: the verdict on one thread first, then on all of ours.
+    auto within = [](const Row* r, double limit_ms) { return r && r->seconds * 1e3 <= limit_ms; };
+    const bool eps0_met_1 = within(e1, eps0_limit), eps0_met_n = within(en, eps0_limit);
+    const bool coarse_met_1 = within(c1, ref.ms / 10), coarse_met_n = within(cn, ref.ms / 10);
+    auto verdict = [](bool one, bool all) { return std::string(one ? "met" : "missed") + "/" + (all ? "met" : "missed"); };
     auto cell = [](const Row* r) { return r ? ms(r->seconds) + " (" + si(static_cast<double>(r->triangles)) + ")" : std::string("-"); };
+    auto row_ms = [](const Row* r) { return r ? nlohmann::ordered_json(r->seconds * 1e3) : nlohmann::ordered_json(); };
     if (print)
-      std::printf("%-24s %8.0f %13s %13s %13s %8s %14s %14s %8s\n", ref.what, ref.ms, ms(base->seconds).c_str(),
-                  cell(e1).c_str(), cell(en).c_str(), eps0_met ? "met" : "missed", cell(c1).c_str(), cell(cn).c_str(),
-                  coarse_met ? "met" : "missed");
+      std::printf("%-24s %8.0f %13s %13s %13s %13s %14s %14s %13s\n", ref.what, ref.ms, ms(base->seconds).c_str(),
+                  cell(e1).c_str(), cell(en).c_str(), verdict(eps0_met_1, eps0_met_n).c_str(), cell(c1).c_str(),
+                  cell(cn).c_str(), verdict(coarse_met_1, coarse_met_n).c_str());
     j["ours"] = {{"baseline_1_thread_ms", base->seconds * 1e3}, {"triangles", base->triangles},
-                 {"eps0_ms", best_eps0}, {"eps0_target_ms", eps0_limit}, {"eps0_met", eps0_met},
-                 {"coarse_ms", best_coarse}, {"coarse_triangles", c1 ? c1->triangles : 0},
-                 {"coarse_target_ms", ref.ms / 10}, {"coarse_met", coarse_met}};
+                 {"eps0_1_thread_ms", row_ms(e1)}, {"eps0_all_threads_ms", row_ms(en)}, {"eps0_target_ms", eps0_limit},
+                 {"eps0_met_1_thread", eps0_met_1}, {"eps0_met_all_threads", eps0_met_n},
+                 {"coarse_1_thread_ms", row_ms(c1)}, {"coarse_all_threads_ms", row_ms(cn)},
+                 {"coarse_triangles", c1 ? c1->triangles : 0}, {"coarse_target_ms", ref.ms / 10},
+                 {"coarse_met_1_thread", coarse_met_1}, {"coarse_met_all_threads", coarse_met_n}};
     out.push_back(j);
   }
   if (print) std::printf("(ms (triangles); our meshes are marching tetrahedra: about twice Flying Edges' triangles)\n");
