@@ -43,13 +43,17 @@ int64_t march_block(const float* f, int64_t stride, const Coord& base, const std
     for (int64_t y = 0; y < cells[1]; ++y)
       for (int64_t x = 0; x < cells[0]; ++x) {
         const float* c = f + (z * stride + y) * stride + x;
-        int above = 0;
-        for (int i = 0; i < 8; ++i) above += c[offset[i]] > iso;
-        if (above == 0 || above == 8) continue;
+        unsigned above = 0;  // bit i: corner i (dx | dy << 1 | dz << 2) is inside
+        for (int i = 0; i < 8; ++i) above |= static_cast<unsigned>(c[offset[i]] > iso) << i;
+        if (above == 0 || above == 0xff) continue;
         ++cut;
         const Coord o{base[0] + x, base[1] + y, base[2] + z};
         const ParityTets& p = kTets[static_cast<size_t>((o[0] & 1) | (o[1] & 1) << 1 | (o[2] & 1) << 2)];
         for (size_t t = 0; t < 6; ++t) {
+          // Most of a cut cell's tetrahedra are not cut: skip them before building their corners.
+          unsigned in = 0;
+          for (size_t i = 0; i < 4; ++i) in += (above >> p.corner[t][i]) & 1;
+          if (in == 0 || in == 4) continue;
           Tet corners;
           std::array<float, 4> values;
           for (size_t i = 0; i < 4; ++i) {

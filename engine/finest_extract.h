@@ -2,8 +2,8 @@
 // Extraction at eps = 0. No error is below 0, so no tetrahedron stops above the finest level
 // whatever the mode, indicator or focus: the mesh is marching tetrahedra over every finest cell
 // the isosurface cuts (design.md, invariant 2). Rather than walk the bisection tree down to each
-// leaf, the cells are marched block by block, and the range record of a block's cube diamond
-// culls it when the isovalue misses it, which is all the tree would have decided there.
+// leaf, the cells are marched block by block: the range record of a block's cube diamond culls
+// it when the isovalue misses it, then the range of the block's own nodes (docs/METHOD.md).
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -34,8 +34,9 @@ inline bool cut_by(const float* f, int64_t stride, const std::array<int64_t, 3>&
   return below && above;
 }
 
-// Blocks are cubes of 8 cells a side (4 or 2 on tiny lattices), whose centres are the cube
-// diamonds of scale 2: their records hold the range of every node of the closed cube.
+// Blocks are cubes of 8 cells a side (4 or 2 on lattices of side 5 or 3), whose centres are the
+// cube diamonds of scale 2 (1 or 0): their records hold the range of every node of the closed
+// cube, and more. The mesh is the same bit for bit on any number of threads, paged or not.
 template <class Source>
 Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, ExtractStats* stats) {
   const Lattice& lattice = source.lattice();
