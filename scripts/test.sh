@@ -35,9 +35,11 @@ phase "ASan+UBSan tests"
 #   one runs the same cache contention (and under TSan below);
 # - the topology sweep over every volume, isovalue and eps (42 s), the delta sweeps of simplify (22 s,
 #   18 s) and the budget search sweep (15 s): the preserve, simplify and budget paths run in the
-#   topology, simplify and paged tests that stay.
+#   topology, simplify and paged tests that stay;
+# - the crack sweeps over the shared volumes at their isovalues and at integer ties (30 s, 34 s):
+#   the same traversal runs in the closed-shape crack test and every other extraction test.
 run_ctest --test-dir build-asan --output-on-failure -j2 -LE slow \
-  -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)'
+  -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)'
 
 # The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there).
 phase "RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
