@@ -9,7 +9,9 @@
 // bit it finds clear until the decoded bytes are within the budget. A brick evicted while a
 // reader still holds it lives on until that reader lets go (io/paged_volume.h keeps a few per
 // thread), so the memory in use stays within the budget plus those few bricks per thread; and
-// a miss on such a brick takes it back instead of decoding it again.
+// a miss on such a brick takes it back instead of decoding it again. A band-0 brick's values with
+// their halo (get_halo_values: no records rebuilt) are an entry of their own, under the same
+// budget and hand.
 #include <atomic>
 #include <cstdint>
 #include <memory>
