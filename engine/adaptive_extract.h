@@ -49,14 +49,14 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     total.budget_steps = c.steps;
   }
   const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing());
-  if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) {
-    Mesh mesh = extract_finest(source, rule, &total);
+  auto finish = [&](Mesh mesh) {
     if (stats) {
       *stats = total;
       stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     }
     return mesh;
-  }
+  };
+  if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) return finish(extract_finest(source, rule, &total));
   std::vector<Piece> pieces;
   {  // scoped: a paged source's reader lets its bricks go before the pieces run
     Traversal<Source> top(source, rule);
@@ -83,12 +83,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     total.tets_emitted += p.tets_emitted;
     total.tets_simplified += p.tets_simplified;
   }
-  Mesh mesh = weld(parts, source.lattice().side);
-  if (stats) {
-    *stats = total;
-    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  }
-  return mesh;
+  return finish(weld(parts, source.lattice().side));
 }
 
 }  // namespace isotope

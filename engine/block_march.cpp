@@ -32,12 +32,11 @@ std::array<ParityTets, 8> make_parity_tets() {
 
 }  // namespace
 
-int64_t march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells,
-                    float iso, EdgeMemo& memo, MeshBuilder& builder) {
+void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells,
+                 float iso, EdgeMemo& memo, MeshBuilder& builder) {
   static const std::array<ParityTets, 8> kTets = make_parity_tets();
   const int64_t offset[8] = {0, 1, stride, stride + 1, stride * stride, stride * stride + 1,
                              stride * stride + stride, stride * stride + stride + 1};
-  int64_t cut = 0;
   memo.start(base);
   for (int64_t z = 0; z < cells[2]; ++z)
     for (int64_t y = 0; y < cells[1]; ++y)
@@ -46,7 +45,6 @@ int64_t march_block(const float* f, int64_t stride, const Coord& base, const std
         unsigned above = 0;  // bit i: corner i (dx | dy << 1 | dz << 2) is inside
         for (int i = 0; i < 8; ++i) above |= static_cast<unsigned>(c[offset[i]] > iso) << i;
         if (above == 0 || above == 0xff) continue;
-        ++cut;
         const Coord o{base[0] + x, base[1] + y, base[2] + z};
         const ParityTets& p = kTets[static_cast<size_t>((o[0] & 1) | (o[1] & 1) << 1 | (o[2] & 1) << 2)];
         for (size_t t = 0; t < 6; ++t) {
@@ -64,7 +62,6 @@ int64_t march_block(const float* f, int64_t stride, const Coord& base, const std
           builder.add_tet(corners, values, p.positive[t], &memo);
         }
       }
-  return cut;
 }
 
 }  // namespace isotope
