@@ -66,6 +66,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   }
   std::vector<PartMesh> parts(pieces.size());
   parallel_for_in_order(int64_t{0}, static_cast<int64_t>(pieces.size()), [&](int64_t i) {
+    throw_if_cancelled(rule.options());
     Traversal<Source> t(source, rule);
     t.keep_keys();
     t.run(pieces[static_cast<size_t>(i)]);

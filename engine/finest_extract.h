@@ -52,6 +52,7 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
   plan.spacing = source.spacing();
   std::atomic<int64_t> blocks{0}, cells{0};
   Mesh mesh = march_in_slabs(plan, [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
+    throw_if_cancelled(rule.options());
     auto reader = source.reader();
     std::vector<float> f(static_cast<size_t>(stride * stride * stride));
     EdgeMemo memo(side);

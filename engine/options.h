@@ -1,7 +1,9 @@
 #pragma once
 // What a user chooses for one extraction.
 #include <array>
+#include <atomic>
 #include <cstdint>
+#include <exception>
 #include <optional>
 #include <string_view>
 
@@ -46,7 +48,19 @@ struct ExtractOptions {
   std::optional<Focus> focus;
   // > 0: ignore eps and take the finest eps whose mesh has at most this many triangles.
   int64_t max_triangles = 0;
+  // Set (by another thread) to stop: the extraction then throws ExtractionCancelled at its next
+  // piece or slab. For a server whose client asked for something newer; nullptr: never.
+  const std::atomic<bool>* cancel = nullptr;
 };
+
+// What an extraction throws when its ExtractOptions::cancel was set.
+struct ExtractionCancelled : std::exception {
+  const char* what() const noexcept override { return "extraction cancelled"; }
+};
+// Throws ExtractionCancelled when `options` asks to stop; cheap enough for every piece or slab.
+inline void throw_if_cancelled(const ExtractOptions& options) {
+  if (options.cancel && options.cancel->load(std::memory_order_relaxed)) throw ExtractionCancelled{};
+}
 
 std::string_view to_string(ErrorIndicator e);
 std::string_view to_string(TopologyMode t);

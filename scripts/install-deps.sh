@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Installs what building isotope needs on Debian/Ubuntu. Does nothing (and needs no network)
-# when every package is already installed.
+# Installs what building isotope needs on Debian/Ubuntu, and the viewer's npm packages
+# (viewer/package-lock.json). With --tests, also what the tests need: Chromium, for the viewer's
+# end-to-end test. Does nothing (and needs no network) when everything is already installed.
 set -euo pipefail
+cd "$(dirname "$0")/.."
 
 packages=(
   g++ cmake make pkg-config
@@ -9,7 +11,12 @@ packages=(
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libzstd-dev libxxhash-dev zlib1g-dev
   libplplot-dev plplot-driver-cairo
+  libcpp-httplib-dev
 )
+# Node.js bundles the viewer (esbuild) and drives the browser test; a machine that has node and
+# npm already (e.g. from NodeSource) keeps them.
+if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+=(nodejs npm); fi
+if [ "${1:-}" = "--tests" ]; then packages+=(chromium); fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -19,11 +26,18 @@ for p in "${packages[@]}"; do
 done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#packages[@]} packages present"
-  exit 0
+else
+  sudo=()
+  if [ "$(id -u)" -ne 0 ]; then sudo=(sudo); fi
+  echo "install-deps: installing ${missing[*]}"
+  "${sudo[@]}" apt-get update
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
 fi
 
-sudo=()
-if [ "$(id -u)" -ne 0 ]; then sudo=(sudo); fi
-echo "install-deps: installing ${missing[*]}"
-"${sudo[@]}" apt-get update
-"${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
+# The exact versions of the lock file; skipped when the lock file has not changed since.
+stamp=viewer/node_modules/.isotope-lock-stamp
+if ! cmp -s viewer/package-lock.json "$stamp" 2>/dev/null; then
+  echo "install-deps: npm ci (viewer)"
+  npm ci --prefix viewer --no-audit --no-fund --loglevel=error
+  cp viewer/package-lock.json "$stamp"
+fi

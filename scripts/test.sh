@@ -6,7 +6,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 jobs=$(nproc)
-bash scripts/install-deps.sh
+bash scripts/install-deps.sh --tests
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 run_ctest() { ctest "$@" | tee -a "$log"; }
@@ -38,7 +38,8 @@ phase "ASan+UBSan tests"
 #   topology, simplify and paged tests that stay;
 # - the crack sweeps over the shared volumes at their isovalues and at integer ties (30 s, 34 s):
 #   the same traversal runs in the closed-shape crack test and every other extraction test.
-run_ctest --test-dir build-asan --output-on-failure -j2 -LE slow \
+# - the viewer's browser test (label e2e, 20 s in Release): test_serve runs the server's code here.
+run_ctest --test-dir build-asan --output-on-failure -j2 -LE "slow|e2e" \
   -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)'
 
 # The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there).

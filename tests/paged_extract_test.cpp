@@ -43,10 +43,6 @@ constexpr uint64_t kTinyBudget = 1;
 constexpr uint64_t kHugeBudget = uint64_t{1} << 30;  // every store here fits many times over
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::string dims_name(const Volume& v) {
-  return std::to_string(v.dims[0]) + "x" + std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
-}
-
 // What a float32 raw file carries (and so the store): unit spacing, origin 0. Output coordinates
 // are then lattice coordinates, which the focus tests rely on.
 Volume as_raw(Volume v) {
@@ -159,17 +155,10 @@ class PagedTest : public testing::TempDirTest {
   // Writes `v` as float32 raw and converts it (as store_test.cpp does); returns the store's path.
   std::string convert(const Volume& v, const std::string& name, int brick_bits = StoreLayout::kDefaultBrickBits,
                       int quantize_bits = 0) {
-    const std::string raw = path(name + "_" + dims_name(v) + "_float32.raw");
-    std::ofstream(raw, std::ios::binary)
-        .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
-    const std::string store = path(name + ".isotope");
-    const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir_.string());
     ConvertOptions o;
     o.brick_bits = brick_bits;
     o.quantize_bits = quantize_bits;
-    convert_to_store(*input, store, o);
-    std::filesystem::remove(raw);
-    return store;
+    return testing::write_store(v, dir_.string(), name, o);
   }
   void expect_corrupt_bricks_named(size_t stride, const std::vector<std::pair<size_t, uint64_t>>& schedule);
 };

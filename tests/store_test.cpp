@@ -65,13 +65,7 @@ class Store : public TempDirTest {
  protected:
   // Writes `v` as float32 raw and converts it; returns the store's path.
   std::string convert(const Volume& v, const std::string& name, ConvertOptions options = {}) {
-    const std::string raw = path(name + "_" + dims_name(v) + "_float32.raw");
-    std::ofstream(raw, std::ios::binary)
-        .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
-    const std::string store = path(name + ".isotope");
-    const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir_.string());
-    convert_to_store(*input, store, options);
-    return store;
+    return testing::write_store(v, dir_.string(), name, options);
   }
 
   // Every value and record of the loaded store equals the in-memory build's, bit for bit.

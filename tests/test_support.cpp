@@ -1,8 +1,11 @@
 #include "tests/test_support.h"
 
 #include <algorithm>
+#include <filesystem>
+#include <fstream>
 #include <cmath>
 
+#include "io/box_reader.h"
 #include "io/raw_reader.h"
 
 namespace isotope::testing {
@@ -90,6 +93,19 @@ Volume crop(const Volume& v, std::array<int64_t, 3> dims) {
     for (int64_t y = 0; y < dims[1]; ++y)
       for (int64_t x = 0; x < dims[0]; ++x) c.values[c.index(x, y, z)] = v.at(x, y, z);
   return c;
+}
+
+std::string write_store(const Volume& v, const std::string& dir, const std::string& name,
+                        const ConvertOptions& options) {
+  const std::string dims = std::to_string(v.dims[0]) + "x" + std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
+  const std::string raw = dir + "/" + name + "_" + dims + "_float32.raw";
+  std::ofstream(raw, std::ios::binary)
+      .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
+  const std::string store = dir + "/" + name + ".isotope";
+  const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir);
+  convert_to_store(*input, store, options);
+  std::filesystem::remove(raw);
+  return store;
 }
 
 }  // namespace isotope::testing

@@ -8,6 +8,7 @@
 #include "engine/mesh.h"
 #include "engine/mesh_topology.h"
 #include "engine/volume.h"
+#include "io/store_writer.h"
 
 namespace isotope::testing {
 
@@ -39,6 +40,11 @@ Volume make_volume(std::array<int64_t, 3> dims, F f) {
       for (int64_t x = 0; x < dims[0]; ++x) v.values[v.index(x, y, z)] = static_cast<float>(f(x, y, z));
   return v;
 }
+
+// Writes `v` into DIR as a float32 raw file, converts it to DIR/NAME.isotope (removing the raw
+// file) and returns the store's path. A float32 raw carries unit spacing and origin 0.
+std::string write_store(const Volume& v, const std::string& dir, const std::string& name,
+                        const ConvertOptions& options = {});
 
 // Cuts a sub-box out of a volume (for dimensions that are not 2^k + 1).
 Volume crop(const Volume& v, std::array<int64_t, 3> dims);

@@ -23,6 +23,7 @@ Command add_info_command(CLI::App& app);      // isotope info STORE
 Command add_verify_command(CLI::App& app);    // isotope verify STORE
 Command add_sweep_command(CLI::App& app);     // isotope sweep INPUT --iso V --eps LIST --delta LIST
 Command add_bench_command(CLI::App& app);     // isotope bench [--quick] [--json F]
+Command add_serve_command(CLI::App& app);     // isotope serve STORE [--port P] [--host H]
 
 // A real number as typed by a user: "0.25", "-3e-2" or a fraction "1/64"; nullopt otherwise.
 std::optional<double> parse_real(const std::string& text);

@@ -1,12 +1,8 @@
 // isotope: multiresolution isosurfaces on a tetrahedral bisection hierarchy
 // (Gerstner & Pajarola, IEEE Visualization 2000). Entry point and exit-code policy:
 // 0 success (and --help, --version), 1 runtime failure, 2 usage error.
-#include <unistd.h>
-
 #include <CLI/CLI.hpp>
-#include <charconv>
 #include <cstdio>
-#include <cmath>
 #include <exception>
 #include <iostream>
 #include <new>
@@ -17,37 +13,6 @@
 #ifndef ISOTOPE_VERSION
 #define ISOTOPE_VERSION "unknown"
 #endif
-
-namespace isotope::tools {
-
-std::optional<double> parse_real(const std::string& text) {
-  auto parse_one = [](std::string_view s) -> std::optional<double> {
-    if (s.empty()) return std::nullopt;
-    if (s.front() == '+') s.remove_prefix(1);
-    double v = 0;
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec != std::errc() || end != s.data() + s.size()) return std::nullopt;
-    return v;
-  };
-  const size_t slash = text.find('/');
-  if (slash == std::string::npos) return parse_one(text);
-  const auto num = parse_one(std::string_view(text).substr(0, slash));
-  const auto den = parse_one(std::string_view(text).substr(slash + 1));
-  if (!num || !den || *den == 0) return std::nullopt;
-  return *num / *den;
-}
-
-bool progress_enabled(bool quiet) { return !quiet && isatty(STDERR_FILENO) == 1; }
-
-std::function<void(double)> progress_bar(std::string label) {
-  return [label = std::move(label)](double fraction) {
-    std::fprintf(stderr, "\risotope: %s %3d%%%s", label.c_str(), static_cast<int>(100 * fraction + 0.5),
-                 fraction >= 1.0 ? "\n" : "");
-    std::fflush(stderr);
-  };
-}
-
-}  // namespace isotope::tools
 
 // Under AddressSanitizer (CI): fontconfig, which PLplot's cairo driver reaches through pango
 // for `sweep --plot`, keeps a process-lifetime cache that LeakSanitizer reports as leaked. It
@@ -71,6 +36,7 @@ int main(int argc, char** argv) {
   const Command sweep = add_sweep_command(app);
   const Command bench = add_bench_command(app);
   const Command demo = add_demo_command(app);
+  const Command serve = add_serve_command(app);
   app.footer("Run 'isotope COMMAND --help' for the options of a command.");
   app.failure_message([](const CLI::App*, const CLI::Error& e) {
     return std::string("isotope: usage error: ") + e.what() + "\nRun 'isotope --help' or 'isotope COMMAND --help'.\n";
@@ -86,6 +52,7 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("sweep")) return sweep();
     if (app.got_subcommand("bench")) return bench();
     if (app.got_subcommand("demo")) return demo();
+    if (app.got_subcommand("serve")) return serve();
     return 2;  // unreachable: require_subcommand(1)
   } catch (const CLI::ParseError& e) {
     const int code = app.exit(e);  // prints help, version or the usage message

@@ -1,0 +1,410 @@
+// isotope serve (docs/SERVE.md): the request checks, supersession, the wire format, and the server
+// itself, run in process on a free loopback port and asked with an HTTP client. What it answers must
+// be exactly the mesh that extraction gives for the same options, however many ask at once.
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <future>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "engine/extract.h"
+#include "engine/fields.h"
+#include "engine/mesh_topology.h"
+#include "engine/vertex_normals.h"
+#include "io/io_error.h"
+#include "io/mesh_wire.h"
+#include "tests/temp_dir_test.h"
+#include "tests/test_support.h"
+#include "tools/extraction_input.h"
+#include "tools/serve_request.h"
+#include "tools/supersession.h"
+#include "tools/viewer_server.h"
+
+namespace isotope {
+namespace {
+
+using tools::BadRequest;
+using tools::parse_extract_request;
+
+std::multimap<std::string, std::string> query(std::initializer_list<std::pair<const std::string, std::string>> q) {
+  return {q};
+}
+
+std::string bad_request_message(const std::multimap<std::string, std::string>& q) {
+  try {
+    parse_extract_request(q);
+  } catch (const BadRequest& e) {
+    return e.what();
+  }
+  return "(accepted)";
+}
+
+TEST(ServeRequest, TakesWhatExtractTakes) {
+  const auto r = parse_extract_request(query({{"iso", "0.25"}, {"eps", "1/64"}, {"topology", "simplify"},
+                                              {"delta", "0.5"}, {"weight", "gradient"}, {"error", "surplus"},
+                                              {"focus", "1,2.5,-3"}, {"radius", "4"}, {"client", "a-Z_9"},
+                                              {"seq", "17"}}));
+  EXPECT_EQ(r.options.iso, 0.25f);
+  EXPECT_EQ(r.options.eps, 1.0 / 64);
+  EXPECT_EQ(r.options.topology, TopologyMode::simplify);
+  EXPECT_EQ(r.options.delta, 0.5);
+  EXPECT_EQ(r.options.weight, SimplificationWeight::gradient);
+  EXPECT_EQ(r.options.error, ErrorIndicator::surplus);
+  ASSERT_TRUE(r.options.focus);
+  EXPECT_EQ(r.options.focus->point, (std::array<double, 3>{1, 2.5, -3}));
+  EXPECT_EQ(r.options.focus->radius, 4);
+  EXPECT_EQ(r.client, "a-Z_9");
+  EXPECT_EQ(r.seq, 17);
+
+  const auto d = parse_extract_request(query({{"iso", "-2"}}));  // extract's defaults
+  EXPECT_EQ(d.options.eps, 0);
+  EXPECT_EQ(d.options.topology, TopologyMode::preserve);
+  EXPECT_FALSE(d.options.focus);
+  EXPECT_FALSE(d.seq);
+}
+
+TEST(ServeRequest, RefusesWhatIsNotAnExtractionWithAMessage) {
+  const std::vector<std::pair<std::multimap<std::string, std::string>, std::string>> cases = {
+      {query({}), "iso is required"},
+      {query({{"iso", "abc"}}), "iso must be a finite number, got 'abc'"},
+      {query({{"iso", "nan"}}), "iso must be a finite number"},
+      {query({{"iso", "inf"}}), "iso must be a finite number"},
+      {query({{"iso", "1e39"}}), "out of the float range"},
+      {query({{"iso", ""}}), "iso must be a finite number"},
+      {query({{"iso", "1"}, {"eps", "-1"}}), "eps must be >= 0, got '-1'"},
+      {query({{"iso", "1"}, {"eps", "1e400"}}), "eps must be a finite number"},
+      {query({{"iso", "1"}, {"topology", "bogus"}}), "topology must be none, paper, preserve or simplify"},
+      {query({{"iso", "1"}, {"delta", "1"}}), "apply to topology=simplify only"},
+      {query({{"iso", "1"}, {"topology", "simplify"}, {"delta", "-1"}}), "delta must be >= 0"},
+      {query({{"iso", "1"}, {"topology", "simplify"}, {"weight", "mass"}}), "weight must be interval"},
+      {query({{"iso", "1"}, {"error", "max"}}), "error must be bound or surplus"},
+      {query({{"iso", "1"}, {"focus", "1,2,3"}}), "focus and radius go together"},
+      {query({{"iso", "1"}, {"focus", "1,2"}, {"radius", "1"}}), "focus must be three numbers"},
+      {query({{"iso", "1"}, {"focus", "1,2,3,4"}, {"radius", "1"}}), "focus must be three numbers"},
+      {query({{"iso", "1"}, {"focus", "1,x,3"}, {"radius", "1"}}), "focus must be a finite number"},
+      {query({{"iso", "1"}, {"focus", "1,2,3"}, {"radius", "0"}}), "radius must be > 0"},
+      {query({{"iso", "1"}, {"foo", "2"}}), "unknown parameter 'foo'"},
+      {query({{"iso", "1"}, {"iso", "2"}}), "iso is given twice"},
+      {query({{"iso", std::string(200, '1')}}), "iso is too long"},
+      {query({{"iso", "1"}, {"client", "../etc"}}), "client must be 1-64 characters"},
+      {query({{"iso", "1"}, {"client", std::string(65, 'a')}}), "client must be 1-64 characters"},
+      {query({{"iso", "1"}, {"seq", "1"}}), "seq needs client"},
+      {query({{"iso", "1"}, {"client", "a"}, {"seq", "-1"}}), "seq must be an integer >= 0"},
+      {query({{"iso", "1"}, {"client", "a"}, {"seq", "1.5"}}), "seq must be an integer >= 0"},
+  };
+  for (const auto& [q, message] : cases) {
+    const std::string got = bad_request_message(q);
+    EXPECT_NE(got.find(message), std::string::npos) << "expected '" << message << "', got '" << got << "'";
+  }
+}
+
+TEST(Supersession, ALargerNumberOfTheSameClientRaisesTheOldersFlags) {
+  tools::Supersession s;
+  auto one = s.enter("page", 1);
+  auto other = s.enter("other page", 1);
+  EXPECT_FALSE(one.superseded());
+  auto two = s.enter("page", 2);
+  EXPECT_TRUE(one.superseded());
+  EXPECT_FALSE(two.superseded());
+  EXPECT_FALSE(other.superseded());  // another page is another client
+  auto late = s.enter("page", 0);    // arrived after 2 though numbered before: stale at once
+  EXPECT_TRUE(late.superseded());
+  EXPECT_FALSE(two.superseded());
+  ASSERT_NE(one.cancel(), nullptr);
+  EXPECT_TRUE(one.cancel()->load());
+  EXPECT_EQ(s.clients(), 2u);
+}
+
+TEST(MeshWire, RoundTripsWithEveryArrayOnA4ByteBoundary) {
+  const Mesh mesh = extract(MultiresVolume::build(generate_sphere(17)), {});
+  ASSERT_GT(mesh.triangles.size(), 100u);
+  const auto normals = vertex_normals(mesh);
+  for (const std::string report : {"{}", "{\"a\":1}", "{\"ab\":1}", "{\"abc\":1}"}) {
+    const std::string bytes = encode_mesh_wire(mesh, normals, report);
+    EXPECT_EQ(bytes.size() % 4, 0u);
+    const MeshWire w = decode_mesh_wire(bytes);
+    EXPECT_EQ(w.report_json, report);
+    EXPECT_TRUE(w.mesh.positions == mesh.positions);
+    EXPECT_TRUE(w.mesh.triangles == mesh.triangles);
+    EXPECT_TRUE(w.normals == normals);
+    EXPECT_THROW(decode_mesh_wire(bytes.substr(0, bytes.size() - 4)), std::runtime_error);
+  }
+}
+
+TEST(VertexNormals, AreUnitAndPointOutOfASphere) {
+  const Volume v = generate_sphere(33);
+  const Mesh mesh = extract(MultiresVolume::build(v), {});
+  const auto normals = vertex_normals(mesh);
+  ASSERT_EQ(normals.size(), mesh.positions.size());
+  // The sphere's centre, as the mean of its vertices.
+  std::array<double, 3> c{0, 0, 0};
+  for (const auto& p : mesh.positions)
+    for (int a = 0; a < 3; ++a) c[a] += p[a] / static_cast<double>(mesh.positions.size());
+  int64_t inward = 0;
+  for (size_t i = 0; i < normals.size(); ++i) {
+    const auto& n = normals[i];
+    EXPECT_NEAR(std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]), 1.0, 1e-5);
+    double dot = 0;
+    for (int a = 0; a < 3; ++a) dot += n[a] * (mesh.positions[i][a] - c[a]);
+    inward += dot <= 0;
+  }
+  EXPECT_EQ(inward, 0);
+}
+
+TEST(ExtractionCancelled, AFlagSetBeforehandStopsBothPaths) {
+  const MultiresVolume mv = MultiresVolume::build(generate_sphere(33));
+  const std::atomic<bool> cancel{true};
+  for (const double eps : {0.0, 0.05}) {
+    ExtractOptions o;
+    o.iso = 0;
+    o.eps = eps;
+    o.cancel = &cancel;
+    EXPECT_THROW(extract(mv, o), ExtractionCancelled) << "eps " << eps;
+  }
+  const std::atomic<bool> go{false};
+  ExtractOptions o;
+  o.cancel = &go;
+  EXPECT_EQ(extract(mv, o).triangles.size(), extract(mv, {}).triangles.size());
+}
+
+// The server on a real store, on a free loopback port, for one test.
+class Serve : public testing::TempDirTest {
+ protected:
+  void SetUp() override {
+    TempDirTest::SetUp();
+    const testing::SharedVolume& hydrogen = testing::shared_volumes()[2];
+    volume_ = testing::load_shared(hydrogen);
+    iso_ = hydrogen.isovalues[0];
+    store_ = testing::write_store(volume_, dir_.string(), "hydrogen");
+    server_ = std::make_unique<tools::ViewerServer>(tools::ViewerServer::Settings{store_, 64, false});
+    port_ = server_->bind("127.0.0.1", 0);
+    thread_ = std::thread([this] { server_->listen(); });
+  }
+  void TearDown() override {
+    server_->stop();
+    thread_.join();
+    TempDirTest::TearDown();
+  }
+  httplib::Result get(const std::string& target) const {
+    httplib::Client client("127.0.0.1", port_);
+    client.set_read_timeout(60, 0);
+    client.set_url_encode(false);  // the crafted paths go out byte for byte
+    return client.Get(target);
+  }
+  // What `isotope extract` gives for the same options, from the same store.
+  Mesh expected(const ExtractOptions& o) const {
+    return tools::ExtractionInput({store_, "", "", 64, false}).extract(o);
+  }
+  // Numbers with all their digits, so that the server extracts at exactly these options.
+  static std::string exact(double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.17g", v);
+    return text;
+  }
+  static std::string url(const ExtractOptions& o) {
+    std::string u = "/api/extract?iso=" + exact(o.iso) + "&eps=" + exact(o.eps) +
+                    "&topology=" + std::string(to_string(o.topology));
+    if (o.topology == TopologyMode::simplify) u += "&delta=" + exact(o.delta);
+    return u;
+  }
+
+  Volume volume_;
+  float iso_ = 0;
+  std::string store_;
+  std::unique_ptr<tools::ViewerServer> server_;
+  int port_ = 0;
+  std::thread thread_;
+};
+
+void expect_same_mesh(const Mesh& got, const Mesh& want) {
+  EXPECT_EQ(got.triangles.size(), want.triangles.size());
+  EXPECT_TRUE(got.positions == want.positions);
+  EXPECT_TRUE(got.triangles == want.triangles);
+}
+
+TEST_F(Serve, InfoDescribesTheStoreWithAHistogramOfItsValues) {
+  const auto res = get("/api/info");
+  ASSERT_TRUE(res);
+  ASSERT_EQ(res->status, 200);
+  const auto j = nlohmann::json::parse(res->body);
+  EXPECT_EQ(j["dims"], nlohmann::json({64, 64, 64}));
+  EXPECT_EQ(j["store"], "hydrogen.isotope");
+  const auto [lo, hi] = std::minmax_element(volume_.values.begin(), volume_.values.end());
+  EXPECT_EQ(j["value_range"][0].get<double>(), *lo);
+  EXPECT_EQ(j["value_range"][1].get<double>(), *hi);
+  // 64^3 nodes are few enough to count them all.
+  EXPECT_EQ(j["histogram"]["sampled"], 64 * 64 * 64);
+  EXPECT_EQ(j["histogram"]["counts"].size(), 128u);
+  int64_t sum = 0, above_half = 0;
+  for (const auto& c : j["histogram"]["counts"]) sum += c.get<int64_t>();
+  for (size_t b = 64; b < 128; ++b) above_half += j["histogram"]["counts"][b].get<int64_t>();
+  EXPECT_EQ(sum, 64 * 64 * 64);
+  const double mid = 0.5 * (*lo + *hi);
+  EXPECT_EQ(above_half, std::count_if(volume_.values.begin(), volume_.values.end(), [&](float v) { return v >= mid; }));
+}
+
+TEST_F(Serve, ExtractAnswersTheMeshExtractGivesWithItsReport) {
+  std::vector<ExtractOptions> cases(4);
+  cases[0].iso = iso_;  // eps 0, preserve: full resolution
+  cases[1].iso = iso_;
+  cases[1].eps = 0.02;
+  cases[2].iso = iso_;
+  cases[2].eps = 0.05;
+  cases[2].topology = TopologyMode::none;
+  cases[3].iso = iso_;
+  cases[3].eps = 0.02;
+  cases[3].topology = TopologyMode::simplify;
+  cases[3].delta = 0.1;
+  for (const ExtractOptions& o : cases) {
+    SCOPED_TRACE(url(o));
+    const auto res = get(url(o) + "&client=test&seq=1");
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 200) << res->body;
+    EXPECT_EQ(res->get_header_value("Content-Type"), "application/octet-stream");
+    const MeshWire w = decode_mesh_wire(res->body);
+    expect_same_mesh(w.mesh, expected(o));
+    const auto report = nlohmann::json::parse(w.report_json);
+    const MeshTopology t = measure_topology(w.mesh);
+    EXPECT_EQ(report["triangles"], t.triangles);
+    EXPECT_EQ(report["components"], t.components);
+    EXPECT_EQ(report["euler_characteristic"], t.euler_characteristic);
+    EXPECT_EQ(report["topology"], std::string(to_string(o.topology)));
+    EXPECT_EQ(report["seq"], 1);
+    EXPECT_GT(report["server_seconds"].get<double>(), 0);
+    EXPECT_TRUE(w.normals == vertex_normals(w.mesh));
+  }
+}
+
+TEST_F(Serve, ConcurrentRequestsEachGetTheirOwnMesh) {
+  constexpr int kRequests = 12;
+  std::vector<ExtractOptions> options(kRequests);
+  for (int i = 0; i < kRequests; ++i) {
+    options[i].iso = iso_ * (0.5f + 0.1f * static_cast<float>(i % 6));
+    options[i].eps = i % 2 ? 0.0 : 0.01;
+  }
+  std::vector<std::future<httplib::Result>> answers;
+  for (int i = 0; i < kRequests; ++i)
+    answers.push_back(std::async(std::launch::async, [&, i] { return get(url(options[i])); }));
+  for (int i = 0; i < kRequests; ++i) {
+    SCOPED_TRACE(url(options[i]));
+    const auto res = answers[i].get();
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 200) << res->body;
+    expect_same_mesh(decode_mesh_wire(res->body).mesh, expected(options[i]));
+  }
+}
+
+TEST_F(Serve, AnOlderRequestOfTheSameClientIsSuperseded) {
+  const std::string base = "/api/extract?iso=" + exact(iso_) + "&eps=0.02&client=page";
+  const auto newer = get(base + "&seq=5");
+  ASSERT_TRUE(newer);
+  EXPECT_EQ(newer->status, 200);
+  const auto older = get(base + "&seq=3");  // arrives after 5: its answer would be stale
+  ASSERT_TRUE(older);
+  EXPECT_EQ(older->status, 409);
+  EXPECT_NE(older->body.find("superseded"), std::string::npos);
+  const auto other = get("/api/extract?iso=" + exact(iso_) + "&eps=0.02&client=other&seq=3");
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->status, 200);
+}
+
+TEST_F(Serve, BadParametersGet400WithAMessage) {
+  for (const std::string target :
+       {"/api/extract", "/api/extract?iso=abc", "/api/extract?iso=nan", "/api/extract?iso=1&eps=-1",
+        "/api/extract?iso=1&topology=bogus", "/api/extract?iso=1&foo=2", "/api/extract?iso=%00",
+        "/api/extract?iso=1&focus=1,2,3&radius=-1", "/api/extract?iso=1&iso=2"}) {
+    SCOPED_TRACE(target);
+    const auto res = get(target);
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 400);
+    EXPECT_GT(res->body.size(), 10u) << res->body;
+  }
+  // The server still answers after all of them.
+  const auto res = get("/api/info");
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200);
+}
+
+// No file but the store can be read through the server: the viewer's files are compiled in, and
+// no route maps a path onto the file system.
+TEST_F(Serve, NoUrlReachesAFileOutsideTheStore) {
+  std::ofstream(path("secret.txt")) << "root:x:0:0:secret\n";
+  const std::string secret = path("secret.txt");
+  for (const std::string& target : std::vector<std::string>
+       {"/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/..%2f..%2fetc%2fpasswd", "//etc/passwd",
+        "/api/../../etc/passwd", "/viewer.js/../../../etc/passwd", "/%2fetc%2fpasswd", "/..%5c..%5cetc%5cpasswd",
+        "/" + secret, "/.." + secret, "/%2e%2e" + secret, "/hydrogen.isotope", "/" + store_,
+        "/api/info/../../" + secret, "/api/extract/../../etc/passwd", "/index.html%00.txt"}) {
+    SCOPED_TRACE(target);
+    const auto res = get(target);
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 404);
+    EXPECT_EQ(res->body.find("root:"), std::string::npos);
+    EXPECT_EQ(res->body.find("ISOSTORE"), std::string::npos);
+  }
+  for (const std::string target : {"/", "/index.html", "/viewer.js", "/viewer.css"}) {
+    const auto res = get(target);
+    ASSERT_TRUE(res);
+    EXPECT_EQ(res->status, 200) << target;
+    EXPECT_GT(res->body.size(), 100u) << target;
+  }
+  EXPECT_NE(get("/")->body.find("/viewer.js"), std::string::npos);
+  httplib::Client client("127.0.0.1", port_);
+  const auto post = client.Post("/api/extract", "iso=1", "application/x-www-form-urlencoded");
+  ASSERT_TRUE(post);
+  EXPECT_EQ(post->status, 405);
+}
+
+TEST_F(Serve, APortInUseIsAnErrorNotASharedPort) {
+  tools::ViewerServer second({store_, 16, false});
+  try {
+    second.bind("127.0.0.1", port_);
+    FAIL() << "bound port " << port_ << " twice";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot listen on 127.0.0.1:" + std::to_string(port_)), std::string::npos);
+  }
+}
+
+// httplib's own stop() is lost when it comes before the accept loop runs; a server stopped right
+// after it was started (Ctrl-C at once, a test's teardown) must still end, as must one stopped
+// before listen() was ever called.
+TEST_F(Serve, StopEndsTheServerWhenever) {
+  for (int i = 0; i < 30; ++i) {
+    tools::ViewerServer server({store_, 16, false});
+    server.bind("127.0.0.1", 0);
+    auto listening = std::async(std::launch::async, [&] { return server.listen(); });
+    if (i % 3 == 1) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    server.stop();
+    ASSERT_EQ(listening.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "round " << i;
+  }
+  tools::ViewerServer idle({store_, 16, false});
+  idle.bind("127.0.0.1", 0);
+  idle.stop();
+  EXPECT_TRUE(idle.listen());  // at once
+}
+
+TEST_F(Serve, OnlyAStoreIsServed) {
+  const std::string raw = path("v_8x8x8_float32.raw");
+  std::ofstream(raw, std::ios::binary) << std::string(8 * 8 * 8 * 4, '\0');
+  try {
+    tools::ViewerServer server({raw, 16, false});
+    FAIL() << "served a raw volume";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("not an isotope store"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ServeHost, LoopbackIsRecognised) {
+  for (const std::string h : {"127.0.0.1", "127.1.2.3", "localhost", "::1"}) EXPECT_TRUE(tools::is_loopback_host(h)) << h;
+  for (const std::string h : {"0.0.0.0", "::", "192.168.1.2", "example.org"}) EXPECT_FALSE(tools::is_loopback_host(h)) << h;
+}
+
+}  // namespace
+}  // namespace isotope

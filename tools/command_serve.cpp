@@ -1,0 +1,84 @@
+// isotope serve: a store in the browser (docs/SERVE.md). The server runs until Ctrl-C; a watcher
+// thread turns the interrupt flag into a stop, so the listening socket is closed cleanly.
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <oneapi/tbb/global_control.h>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "io/io_error.h"
+#include "tools/commands.h"
+#include "tools/extraction_input.h"
+#include "tools/interrupt_guard.h"
+#include "tools/viewer_server.h"
+
+namespace isotope::tools {
+namespace {
+
+struct ServeArgs {
+  std::string store;
+  std::string host = "127.0.0.1";
+  int port = 8080;
+  int64_t cache_mb = 512;
+  int threads = 0;
+  bool quiet = false;
+};
+
+int run_serve(const ServeArgs& a) {
+  std::optional<tbb::global_control> threads;
+  if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
+  keep_freed_brick_memory();
+  const InterruptGuard interrupt;
+  ViewerServer server({a.store, a.cache_mb, !a.quiet});
+  const int port = server.bind(a.host, a.port);
+  if (!is_loopback_host(a.host))
+    std::fprintf(stderr, "isotope: warning: listening on %s, not loopback: anyone who reaches port %d can see this store\n",
+                 a.host.c_str(), port);
+  const std::string shown_host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
+  std::cout << "isotope: serving " << a.store << " on http://" << shown_host << ":" << port << "/" << std::endl;
+
+  std::atomic<bool> done{false};
+  std::thread watcher([&] {
+    while (!done.load() && !InterruptGuard::interrupted()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    server.stop();
+  });
+  const bool ok = server.listen();
+  done.store(true);
+  watcher.join();
+  if (InterruptGuard::interrupted()) {
+    if (!a.quiet) std::fprintf(stderr, "isotope: stopped\n");
+    return 0;
+  }
+  if (!ok) throw IoError("the server stopped on an error");
+  return 0;
+}
+
+}  // namespace
+
+Command add_serve_command(CLI::App& app) {
+  auto a = std::make_shared<ServeArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "serve", "Explore a store in a web browser: live isovalue, error and topology controls (Ctrl-C stops)");
+  cmd->add_option("STORE", a->store, "Store made by 'isotope convert'")->required();
+  cmd->add_option("--port", a->port, "TCP port (0: any free port; the first line printed names it)")
+      ->check(CLI::Range(0, 65535))
+      ->capture_default_str();
+  cmd->add_option("--host", a->host,
+                  "Address to listen on; the default lets only this machine connect (0.0.0.0: every network)")
+      ->capture_default_str();
+  cmd->add_option("--cache-mb", a->cache_mb, "Memory for decoded bricks, in MB, shared by all requests")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
+      ->capture_default_str();
+  cmd->add_option("--threads", a->threads, "Worker threads per extraction (0 = all cores)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("-q,--quiet", a->quiet, "Print only the line that names the address");
+  return [a] { return run_serve(*a); };
+}
+
+}  // namespace isotope::tools

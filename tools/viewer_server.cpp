@@ -1,0 +1,208 @@
+#include "tools/viewer_server.h"
+
+#include <httplib.h>
+#include <sys/socket.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <mutex>
+#include <thread>
+#include <atomic>
+#include <semaphore>
+#include <nlohmann/json.hpp>
+#include <oneapi/tbb/global_control.h>
+#include <oneapi/tbb/parallel_invoke.h>
+
+#include "engine/mesh_topology.h"
+#include "engine/vertex_normals.h"
+#include "io/io_error.h"
+#include "io/mesh_wire.h"
+#include "io/store_histogram.h"
+#include "io/store_reader.h"
+#include "tools/commands.h"
+#include "tools/extraction_input.h"
+#include "tools/peak_memory.h"
+#include "tools/report.h"
+#include "tools/serve_request.h"
+#include "tools/supersession.h"
+#include "tools/viewer_assets.h"
+
+namespace isotope::tools {
+namespace {
+
+constexpr int kHistogramBins = 128;
+constexpr int64_t kHistogramSamples = int64_t{4} << 20;  // a fraction of a second to read
+// Extractions at once. Each already runs on every core, so more would only hold more meshes in
+// memory; the others wait, and leave the queue as soon as a newer request supersedes them.
+constexpr std::ptrdiff_t kConcurrentExtractions = 2;
+
+void answer_text(httplib::Response& res, int status, const std::string& message) {
+  res.status = status;
+  res.set_content(message + "\n", "text/plain; charset=utf-8");
+}
+
+nlohmann::ordered_json info_json(const StoreReader& store) {
+  const StoreHeader& h = store.header();
+  const ValueHistogram hist = sample_histogram(store, kHistogramBins, kHistogramSamples);
+  nlohmann::ordered_json j;
+  j["store"] = std::filesystem::path(store.path()).filename().string();
+  j["dims"] = h.dims;
+  j["spacing"] = h.spacing;
+  j["origin"] = h.origin;
+  j["value_range"] = {h.value_min, h.value_max};
+  j["histogram"] = {{"min", hist.min}, {"max", hist.max}, {"counts", hist.counts}, {"sampled", hist.sampled},
+                    {"scale", hist.scale}};
+  j["iso"] = hist.mean;
+  j["eps"] = 0.01 * (h.value_max - h.value_min);
+  return j;
+}
+
+using ExtractionSlots = std::counting_semaphore<kConcurrentExtractions>;
+struct SlotRelease {
+  ExtractionSlots& slots;
+  ~SlotRelease() { slots.release(); }
+};
+
+}  // namespace
+
+struct ViewerServer::Impl {
+  Settings settings;
+  StoreReader store;
+  ExtractionInput input;
+  std::string info;
+  Supersession supersession;
+  ExtractionSlots slots{kConcurrentExtractions};
+  httplib::Server http;
+  std::mutex log_mutex;
+  std::mutex run_mutex;  // listen() and stop() from different threads, in either order
+  bool stop_requested = false, listening = false;
+  std::atomic<bool> finished{false};
+
+  explicit Impl(const Settings& s)
+      : settings(s), store(s.store), input({s.store, "", "", s.cache_mb, false}), info(info_json(store).dump()) {
+    http.Get("/api/info", [this](const httplib::Request&, httplib::Response& res) {
+      res.set_header("Cache-Control", "no-store");
+      res.set_content(info, "application/json");
+    });
+    http.Get("/api/extract", [this](const httplib::Request& req, httplib::Response& res) { extract(req, res); });
+    http.Get(R"(/[^?]*)", [](const httplib::Request& req, httplib::Response& res) {
+      const auto asset = viewer_asset(req.path);
+      if (!asset) return answer_text(res, 404, "not found");
+      res.set_content(asset->bytes.data(), asset->bytes.size(), asset->content_type);
+    });
+    const httplib::Server::Handler get_only = [](const httplib::Request&, httplib::Response& res) {
+      answer_text(res, 405, "method not allowed: the server answers GET only");
+    };
+    http.Post(".*", get_only).Put(".*", get_only).Delete(".*", get_only).Patch(".*", get_only);
+    http.set_error_handler([](const httplib::Request&, httplib::Response& res) {
+      if (res.body.empty()) answer_text(res, res.status, res.status == 404 ? "not found" : "bad request");
+    });
+    // httplib's default is SO_REUSEPORT, with which a second server (another user's, even) binds
+    // the same port and takes a share of the connections. SO_REUSEADDR only lets a restarted
+    // server take its port back from connections still in TIME_WAIT.
+    http.set_socket_options([](socket_t sock) {
+      const int yes = 1;
+      setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    });
+    http.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
+      answer_text(res, 500, "internal error");
+    });
+  }
+
+  void extract(const httplib::Request& req, httplib::Response& res) {
+    const auto start = std::chrono::steady_clock::now();
+    res.set_header("Cache-Control", "no-store");
+    try {
+      ServeRequest r = parse_extract_request(req.params);
+      std::optional<Supersession::Ticket> ticket;
+      if (r.seq) {
+        ticket.emplace(supersession.enter(r.client, *r.seq));
+        r.options.cancel = ticket->cancel();
+      }
+      while (!slots.try_acquire_for(std::chrono::milliseconds(20)))
+        if (ticket && ticket->superseded()) throw ExtractionCancelled{};
+      const SlotRelease slot{slots};
+      ExtractionRun run;
+      run.input = settings.store;
+      run.options = r.options;
+      run.threads = static_cast<int>(
+          tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+      const Mesh mesh = input.extract(r.options, &run.extract);
+      run.extract_seconds = seconds_since(start);
+      input.describe(run);
+      const auto measure_start = std::chrono::steady_clock::now();
+      std::vector<std::array<float, 3>> normals;  // meanwhile, on the other core
+      tbb::parallel_invoke([&] { run.topology = measure_topology(mesh); }, [&] { normals = vertex_normals(mesh); });
+      run.measure_seconds = seconds_since(measure_start);
+      run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);
+      if (ticket && ticket->superseded()) throw ExtractionCancelled{};
+      nlohmann::ordered_json report = report_json(run);
+      report["seq"] = r.seq ? nlohmann::ordered_json(*r.seq) : nlohmann::ordered_json(nullptr);
+      report["server_seconds"] = seconds_since(start);
+      res.body = encode_mesh_wire(mesh, normals, report.dump());
+      res.set_header("Content-Type", "application/octet-stream");
+      log(req, run);
+    } catch (const BadRequest& e) {
+      answer_text(res, 400, e.what());
+    } catch (const std::invalid_argument& e) {  // the engine's own checks of the options
+      answer_text(res, 400, e.what());
+    } catch (const ExtractionCancelled&) {
+      answer_text(res, 409, "superseded by a newer request of the same client");
+    } catch (const std::bad_alloc&) {
+      answer_text(res, 503, "out of memory for this extraction; try a larger eps");
+    } catch (const std::exception& e) {  // IoError: a corrupt or unreadable brick, named
+      answer_text(res, 500, e.what());
+    }
+  }
+
+  void log(const httplib::Request& req, const ExtractionRun& run) {
+    if (!settings.log) return;
+    const std::lock_guard<std::mutex> lock(log_mutex);
+    std::fprintf(stderr, "isotope: %s iso %g eps %g %s: %lld triangles in %.1f ms\n", req.path.c_str(),
+                 static_cast<double>(run.options.iso), run.options.eps,
+                 std::string(to_string(run.options.topology)).c_str(),
+                 static_cast<long long>(run.topology.triangles), 1e3 * run.extract_seconds);
+  }
+};
+
+ViewerServer::ViewerServer(const Settings& settings) : impl_(std::make_unique<Impl>(settings)) {}
+
+ViewerServer::~ViewerServer() = default;
+
+int ViewerServer::bind(const std::string& host, int port) {
+  const int bound = port == 0 ? impl_->http.bind_to_any_port(host) : (impl_->http.bind_to_port(host, port) ? port : -1);
+  if (bound <= 0) throw IoError("cannot listen on " + host + ":" + std::to_string(port) + " (in use, or not an address of this machine)");
+  return bound;
+}
+
+bool ViewerServer::listen() {
+  {
+    const std::lock_guard<std::mutex> lock(impl_->run_mutex);
+    if (impl_->stop_requested) return true;
+    impl_->listening = true;
+  }
+  const bool ok = impl_->http.listen_after_bind();
+  impl_->finished = true;
+  return ok;
+}
+
+void ViewerServer::stop() {
+  bool listening = false;
+  {
+    const std::lock_guard<std::mutex> lock(impl_->run_mutex);
+    impl_->stop_requested = true;
+    listening = impl_->listening;
+  }
+  // httplib's stop() does nothing until its accept loop runs, and a listen() just begun may not
+  // be there yet: wait for the loop (or its end) first, else the listen would never return.
+  if (!listening) return;
+  while (!impl_->http.is_running() && !impl_->finished) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  impl_->http.stop();
+}
+
+bool is_loopback_host(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
+}  // namespace isotope::tools
