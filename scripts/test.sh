@@ -21,7 +21,7 @@ run_ctest --test-dir build-ci --output-on-failure -j2
 phase "RelWithDebInfo, address,undefined sanitizers (build-asan)"
 # Assertions stay on here (no NDEBUG): they check the traversal's invariants on every test.
 cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
-  -DISOTOPE_SANITIZE=address,undefined -DISOTOPE_BUILD_BENCH=OFF
+  -DISOTOPE_SANITIZE=address,undefined -DISOTOPE_BUILD_BENCH=OFF -DISOTOPE_UNITY_TOOLS=ON
 cmake --build build-asan -j "$jobs"
 phase "ASan+UBSan tests"
 # The bounded-memory tests (label "slow") measure the Release binary's RSS; under ASan they would

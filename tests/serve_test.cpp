@@ -376,7 +376,7 @@ TEST_F(Serve, APortInUseIsAnErrorNotASharedPort) {
 // after it was started (Ctrl-C at once, a test's teardown) must still end, as must one stopped
 // before listen() was ever called.
 TEST_F(Serve, StopEndsTheServerWhenever) {
-  for (int i = 0; i < 30; ++i) {
+  for (int i = 0; i < 12; ++i) {
     tools::ViewerServer server({store_, 16, false});
     server.bind("127.0.0.1", 0);
     auto listening = std::async(std::launch::async, [&] { return server.listen(); });

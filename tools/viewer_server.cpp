@@ -42,7 +42,7 @@ void answer_text(httplib::Response& res, int status, const std::string& message)
   res.set_content(message + "\n", "text/plain; charset=utf-8");
 }
 
-nlohmann::ordered_json info_json(const StoreReader& store) {
+nlohmann::ordered_json store_info_json(const StoreReader& store) {
   const StoreHeader& h = store.header();
   const ValueHistogram hist = sample_histogram(store, kHistogramBins, kHistogramSamples);
   nlohmann::ordered_json j;
@@ -80,7 +80,7 @@ struct ViewerServer::Impl {
   std::atomic<bool> finished{false};
 
   explicit Impl(const Settings& s)
-      : settings(s), store(s.store), input({s.store, "", "", s.cache_mb, false}), info(info_json(store).dump()) {
+      : settings(s), store(s.store), input({s.store, "", "", s.cache_mb, false}), info(store_info_json(store).dump()) {
     http.Get("/api/info", [this](const httplib::Request&, httplib::Response& res) {
       res.set_header("Cache-Control", "no-store");
       res.set_content(info, "application/json");
