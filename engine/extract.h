@@ -30,4 +30,14 @@ struct ExtractStats {
 // and std::runtime_error when max_triangles is below the coarsest mesh the topology mode allows.
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
+// One shot from an array, with only the hierarchy the options need: at eps = 0 (no triangle
+// budget) none at all, since the mesh is marching tetrahedra over every cut cell
+// (engine/finest_extract.h); otherwise the hierarchy is built first. The same mesh, byte for byte,
+// as extract() of the volume's hierarchy. Throws as extract() does, and std::invalid_argument for
+// dimensions below 2 or non-finite values.
+Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+// Whether extract(volume, options) needs a hierarchy (eps > 0, or a triangle budget).
+bool needs_hierarchy(const ExtractOptions& options);
+
 }  // namespace isotope

@@ -3,7 +3,9 @@
 // whatever the mode, indicator or focus: the mesh is marching tetrahedra over every finest cell
 // the isosurface cuts (design.md, invariant 2). Rather than walk the bisection tree down to each
 // leaf, the cells are marched block by block: the range record of a block's cube diamond culls
-// it when the isovalue misses it, then the range of the block's own nodes (docs/METHOD.md).
+// it when the isovalue misses it, then the range of the block's own nodes (docs/METHOD.md). A
+// source without records (a plain array: engine/volume_source.h) is culled by the block's own
+// nodes alone, which marches the same blocks: the record's range holds every node of the block.
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -61,7 +63,8 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
       for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
         ++seen;
         const Coord centre{x0 + side / 2, y0 + side / 2, z0 + side / 2};
-        if (!rule.in_range(reader.record(centre).bounds())) continue;
+        if constexpr (requires { reader.record(centre); })
+          if (!rule.in_range(reader.record(centre).bounds())) continue;
         const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
         const Coord lo{x0, y0, z0};
         bool read = false;

@@ -185,6 +185,8 @@ TEST_F(Cli, GeneratedClosedShapesKeepTheirTopologyAtCoarseEps) {
       EXPECT_EQ(r.value("euler_characteristic", -1), s.chi) << s.name << " eps " << eps;
       EXPECT_EQ(r.value("boundary_edges", -1), 0) << s.name << " eps " << eps;
       EXPECT_EQ(r.value("nonmanifold_edges", -1), 0) << s.name << " eps " << eps;
+      // A raw input is marched as it is at eps 0; only a coarser surface builds the hierarchy.
+      EXPECT_EQ(r["preprocess"].is_null(), std::string(eps) == "0") << s.name << " eps " << eps;
     }
   }
 }

@@ -24,6 +24,8 @@ namespace {
 
 using testing::triangle_set;
 
+// Also: the one-shot extraction from the array, which builds no hierarchy at eps 0, gives the
+// hierarchy's mesh bit for bit (vertex order included).
 void expect_exact_at_eps0(const Volume& volume, float iso, const std::string& what) {
   const auto full = triangle_set(extract_full_resolution(volume, iso));
   const MultiresVolume mv = MultiresVolume::build(volume);
@@ -33,9 +35,13 @@ void expect_exact_at_eps0(const Volume& volume, float iso, const std::string& wh
       o.iso = iso;
       o.error = err;
       o.topology = mode;
-      const auto adaptive = triangle_set(extract(mv, o));
+      const Mesh m = extract(mv, o);
+      const auto adaptive = triangle_set(m);
       ASSERT_EQ(adaptive.size(), full.size()) << what << " iso " << iso << " " << to_string(err) << " " << to_string(mode);
       EXPECT_TRUE(adaptive == full) << what << " iso " << iso;
+      const Mesh one_shot = extract(volume, o);
+      EXPECT_TRUE(one_shot.positions == m.positions && one_shot.triangles == m.triangles)
+          << what << " iso " << iso << ": the array's mesh differs from the hierarchy's";
     }
 }
 
@@ -106,10 +112,43 @@ TEST(ExactAtEpsZero, BlocksTheIsovalueMissesAreNotMarched) {
     const int64_t cut = cells_in_blocks_the_isovalue_cuts(v, 0.0f);
     EXPECT_LT(cut, (v.dims[0] - 1) * (v.dims[1] - 1) * (v.dims[2] - 1)) << "some block is culled";
     EXPECT_EQ(stats.tets_emitted, 6 * cut);
+    ExtractStats one_shot;
+    extract(v, o, &one_shot);
+    EXPECT_EQ(one_shot.tets_emitted, 6 * cut) << "the array's blocks are culled by their own nodes alone";
     o.iso = 1e9f;
     EXPECT_TRUE(extract(mv, o, &stats).triangles.empty());
     EXPECT_EQ(stats.tets_emitted, 0);
+    EXPECT_TRUE(extract(v, o, &one_shot).triangles.empty());
+    EXPECT_EQ(one_shot.tets_emitted, 0);
   }
+}
+
+// The one-shot path builds a hierarchy only when the options need one, and then gives that
+// hierarchy's mesh; it refuses what the hierarchy refuses.
+TEST(OneShot, EpsAboveZeroOrABudgetGoThroughTheHierarchy) {
+  const Volume v = generate_sphere(33);
+  const MultiresVolume mv = MultiresVolume::build(v);
+  ExtractOptions o;
+  EXPECT_FALSE(needs_hierarchy(o));
+  o.eps = 0.05;
+  EXPECT_TRUE(needs_hierarchy(o));
+  Mesh a = extract(v, o), b = extract(mv, o);
+  EXPECT_TRUE(a.positions == b.positions && a.triangles == b.triangles);
+  EXPECT_LT(a.triangles.size(), extract_full_resolution(v, 0.0f).triangles.size()) << "coarser than eps 0";
+  o.eps = 0;
+  o.max_triangles = 500;
+  EXPECT_TRUE(needs_hierarchy(o));
+  a = extract(v, o), b = extract(mv, o);
+  EXPECT_TRUE(a.positions == b.positions && a.triangles == b.triangles);
+  EXPECT_LE(a.triangles.size(), 500u);
+  Volume bad = v;
+  bad.values[17] = NAN;
+  EXPECT_THROW(extract(bad, ExtractOptions{}), std::invalid_argument);
+  bad.values.pop_back();
+  EXPECT_THROW(extract(bad, ExtractOptions{}), std::invalid_argument);
+  ExtractOptions nan_iso;
+  nan_iso.iso = NAN;
+  EXPECT_THROW(extract(v, nan_iso), std::invalid_argument);
 }
 
 // The blocks are marched in slabs on all threads; the mesh is the same bit for bit.

@@ -40,32 +40,41 @@ void ExtractionInput::open_store(const Spec& spec) {
 }
 
 void ExtractionInput::open_volume(const Spec& spec) {
-  auto start = std::chrono::steady_clock::now();
+  const auto start = std::chrono::steady_clock::now();
   VolumeSource source;
   source.spec = spec.path;
   if (!spec.dims.empty()) source.dims = parse_dims(spec.dims);
   if (!spec.type.empty()) source.type = parse_scalar_type(spec.type);
-  const Volume volume = read_volume(source);
+  volume_ = std::make_unique<Volume>(read_volume(source));
   read_seconds_ = seconds_since(start);
-  dims_ = volume.dims;
-  spacing_ = volume.spacing;
-  input_bytes_ = volume.values.size() * sizeof(float);
+  dims_ = volume_->dims;
+  spacing_ = volume_->spacing;
+  input_bytes_ = volume_->values.size() * sizeof(float);
+  progress_ = spec.progress;
   if (spec.progress) {
     std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(dims_[0]),
                  static_cast<long long>(dims_[1]), static_cast<long long>(dims_[2]), read_seconds_);
   }
-  start = std::chrono::steady_clock::now();
+}
+
+const MultiresVolume& ExtractionInput::hierarchy() const {
+  const std::lock_guard<std::mutex> lock(build_mutex_);
+  if (memory_) return *memory_;
+  const auto start = std::chrono::steady_clock::now();
   memory_ = std::make_unique<MultiresVolume>(
-      MultiresVolume::build(volume, spec.progress ? progress_bar("preprocessing") : ProgressCallback{}));
+      MultiresVolume::build(*volume_, progress_ ? progress_bar("preprocessing") : ProgressCallback{}));
   preprocess_seconds_ = seconds_since(start);
-  if (spec.progress) {
+  if (progress_) {
     std::fprintf(stderr, "isotope: preprocessed (lattice %lld^3) in %.3f s\n",
                  static_cast<long long>(memory_->lattice().side), preprocess_seconds_);
   }
+  return *memory_;
 }
 
 Mesh ExtractionInput::extract(const ExtractOptions& options, ExtractStats* stats) const {
-  return paged_ ? isotope::extract(*paged_, options, stats) : isotope::extract(*memory_, options, stats);
+  if (paged_) return isotope::extract(*paged_, options, stats);
+  if (!needs_hierarchy(options)) return isotope::extract(*volume_, options, stats);
+  return isotope::extract(hierarchy(), options, stats);
 }
 
 void ExtractionInput::describe(ExtractionRun& run) const {
@@ -74,9 +83,11 @@ void ExtractionInput::describe(ExtractionRun& run) const {
   run.read_seconds = read_seconds_;
   run.preprocess_seconds = preprocess_seconds_;
   run.input_bytes = input_bytes_;
-  if (memory_) {
-    run.preprocess = memory_->stats();
-    run.lattice_k = memory_->lattice().k;
+  if (volume_) {
+    run.lattice_k = Lattice::enclosing(dims_).k;
+    const std::lock_guard<std::mutex> lock(build_mutex_);
+    if (memory_) run.preprocess = memory_->stats();
+    run.hierarchy_built = memory_ != nullptr;
     return;
   }
   // A store was preprocessed by convert; its header keeps the critical-point counts.

@@ -1,9 +1,11 @@
 #pragma once
 // An input opened for extraction (`extract`, `sweep`): a store is paged through a brick cache, so
-// that only the bricks a traversal reaches are read; any other volume is read and preprocessed in
-// memory (the same records, tests/store_test.cpp). Either way extract() can run many times.
+// that only the bricks a traversal reaches are read; any other volume is read into memory, and its
+// hierarchy is built the first time an extraction needs one (eps > 0 or a triangle budget: at eps 0
+// the array is marched as it is, engine/extract.h). Either way extract() can run many times.
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "engine/extract.h"
@@ -39,16 +41,21 @@ class ExtractionInput {
  private:
   void open_store(const Spec& spec);
   void open_volume(const Spec& spec);
+  const MultiresVolume& hierarchy() const;  // built on first use
 
   std::unique_ptr<StoreReader> store_;
   std::unique_ptr<BrickCache> cache_;
   std::unique_ptr<PagedVolume> paged_;
-  std::unique_ptr<MultiresVolume> memory_;
+  std::unique_ptr<Volume> volume_;
+  mutable std::mutex build_mutex_;
+  mutable std::unique_ptr<MultiresVolume> memory_;
+  bool progress_ = false;
   int64_t cache_mb_ = 0;
   std::array<int64_t, 3> dims_{0, 0, 0};
   std::array<double, 3> spacing_{1, 1, 1};
   uint64_t input_bytes_ = 0;
-  double read_seconds_ = 0, preprocess_seconds_ = 0;
+  double read_seconds_ = 0;
+  mutable double preprocess_seconds_ = 0;
 };
 
 }  // namespace isotope::tools

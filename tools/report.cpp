@@ -130,7 +130,8 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["measure_seconds"] = run.measure_seconds;
 
   const PreprocessStats& p = run.preprocess;
-  j["preprocess"] = {
+  if (!run.hierarchy_built) j["preprocess"] = nullptr;
+  else j["preprocess"] = {
       {"seconds", p.seconds},
       {"critical_paper", {{"cube", p.critical_paper[0]}, {"octahedron", p.critical_paper[1]}, {"diamond", p.critical_paper[2]}}},
       {"critical_exact", {{"cube", p.critical_exact[0]}, {"octahedron", p.critical_exact[1]}, {"diamond", p.critical_exact[2]}}},

@@ -24,6 +24,7 @@ struct ExtractionRun {
   std::array<double, 3> spacing{1, 1, 1};
   int lattice_k = 0;
   PreprocessStats preprocess;
+  bool hierarchy_built = true;  // raw input at eps 0 needs none (tools/extraction_input.h)
   ExtractStats extract;
   MeshTopology topology;
   std::vector<ComponentStats> components;        // with --report

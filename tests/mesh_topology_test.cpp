@@ -1,0 +1,82 @@
+// measure_topology (engine/mesh_topology.h), what every topology claim is checked with: counts on
+// small meshes worked out by hand, and the same counts on any number of threads.
+#include <gtest/gtest.h>
+
+#include <tbb/global_control.h>
+
+#include "engine/extract.h"
+#include "engine/fields.h"
+#include "engine/mesh_topology.h"
+
+namespace isotope {
+namespace {
+
+Mesh mesh_of(size_t vertices, std::vector<std::array<uint32_t, 3>> triangles) {
+  Mesh m;
+  m.positions.resize(vertices);
+  for (const auto& t : triangles) m.triangles.push_back(t);
+  return m;
+}
+
+TEST(MeshTopology, OneTriangleHasThreeBoundaryEdges) {
+  const MeshTopology t = measure_topology(mesh_of(3, {{0, 1, 2}}));
+  EXPECT_EQ(t.vertices, 3);
+  EXPECT_EQ(t.edges, 3);
+  EXPECT_EQ(t.boundary_edges, 3);
+  EXPECT_EQ(t.nonmanifold_edges, 0);
+  EXPECT_EQ(t.components, 1);
+  EXPECT_EQ(t.euler_characteristic, 1);
+}
+
+TEST(MeshTopology, TetrahedronSurfaceIsClosedWithEulerTwo) {
+  const MeshTopology t = measure_topology(mesh_of(4, {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}}));
+  EXPECT_EQ(t.edges, 6);
+  EXPECT_EQ(t.boundary_edges, 0);
+  EXPECT_EQ(t.nonmanifold_edges, 0);
+  EXPECT_EQ(t.euler_characteristic, 2);
+}
+
+TEST(MeshTopology, ThreeTrianglesOnOneEdgeMakeItNonManifold) {
+  const MeshTopology t = measure_topology(mesh_of(5, {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}}));
+  EXPECT_EQ(t.edges, 7);
+  EXPECT_EQ(t.nonmanifold_edges, 1);
+  EXPECT_EQ(t.boundary_edges, 6);
+  EXPECT_EQ(t.components, 1);
+}
+
+TEST(MeshTopology, UnusedVerticesAreNotCountedAndDisjointPiecesAreComponents) {
+  // Vertices 0 and 8 belong to no triangle; two triangles sharing an edge, and a separate third.
+  const MeshTopology t = measure_topology(mesh_of(9, {{1, 2, 3}, {3, 2, 4}, {5, 6, 7}}));
+  EXPECT_EQ(t.vertices, 7);
+  EXPECT_EQ(t.components, 2);
+  EXPECT_EQ(t.edges, 8);
+  EXPECT_EQ(t.boundary_edges, 7);
+  EXPECT_EQ(t.euler_characteristic, 7 - 8 + 3);
+}
+
+TEST(MeshTopology, AnyThreadCountGivesTheSameCounts) {
+  // Two linked tori at full resolution: over a hundred thousand triangles, many tasks.
+  ExtractOptions o;
+  const Mesh m = extract(generate_linked_tori(129), o);
+  ASSERT_GT(m.triangles.size(), 100000u);
+  const MeshTopology one = [&] {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    return measure_topology(m);
+  }();
+  EXPECT_EQ(one.components, 2);
+  EXPECT_EQ(one.euler_characteristic, 0);
+  EXPECT_EQ(one.boundary_edges, 0);
+  EXPECT_EQ(one.nonmanifold_edges, 0);
+  EXPECT_EQ(one.edges * 2, one.triangles * 3) << "closed: every edge has two triangles";
+  for (size_t threads : {2, 5}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    const MeshTopology t = measure_topology(m);
+    EXPECT_EQ(t.vertices, one.vertices);
+    EXPECT_EQ(t.edges, one.edges);
+    EXPECT_EQ(t.components, one.components);
+    EXPECT_EQ(t.euler_characteristic, one.euler_characteristic);
+  }
+}
+
+}  // namespace
+}  // namespace isotope
