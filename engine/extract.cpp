@@ -24,16 +24,6 @@ class InMemory {
   double value_offset() const { return mv_.value_offset(); }
   double value_scale() const { return mv_.value_scale(); }
 
-  class RecordView {
-   public:
-    RecordView(const MultiresVolume& mv, int64_t slot) : mv_(mv), slot_(slot) {}
-    const DiamondBounds& bounds() const { return mv_.bounds(slot_); }
-    const DiamondTopology& topology() const { return mv_.topology(slot_); }
-
-   private:
-    const MultiresVolume& mv_;
-    int64_t slot_;
-  };
   class Reader {
    public:
     explicit Reader(const MultiresVolume& mv) : mv_(mv) {}
@@ -43,11 +33,15 @@ class InMemory {
         for (int64_t y = 0; y <= n[1]; ++y) mv_.value_row(lo[0], lo[1] + y, lo[2] + z, n[0] + 1, f + (z * stride + y) * stride);
       return true;
     }
-    void prefetch(const Coord& v) const { __builtin_prefetch(&mv_.bounds(mv_.record_slot(v))); }
-    RecordView record(const Coord& v) const {
-      assert(mv_.has_record(v) && "the outside test keeps the traversal near the data box");
-      return {mv_, mv_.record_slot(v)};
+    using Handle = int64_t;  // the record's slot
+    Handle locate(traversal::Packed v) const {
+      const Coord c = traversal::unpack(v);
+      assert(mv_.has_record(c) && "the outside test keeps the traversal near the data box");
+      return mv_.record_slot(c);
     }
+    const DiamondBounds& bounds(Handle h, const RecordFields&) const { return mv_.bounds(h); }
+    const DiamondTopology& topology(Handle h, const RecordFields&) const { return mv_.topology(h); }
+    void prefetch(Handle h) const { __builtin_prefetch(&mv_.bounds(h)); }
 
    private:
     const MultiresVolume& mv_;

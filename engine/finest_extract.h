@@ -63,8 +63,9 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
       for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
         ++seen;
         const Coord centre{x0 + side / 2, y0 + side / 2, z0 + side / 2};
-        if constexpr (requires { reader.record(centre); })
-          if (!rule.in_range(reader.record(centre).bounds())) continue;
+        if constexpr (requires { reader.locate(traversal::pack(centre)); })
+          if (!rule.in_range(reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
+            continue;
         const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
         const Coord lo{x0, y0, z0};
         bool read = false;

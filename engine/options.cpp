@@ -51,4 +51,14 @@ std::optional<SimplificationWeight> parse_simplification_weight(std::string_view
   return std::nullopt;
 }
 
+RecordFields fields_for(const ExtractOptions& o) {
+  RecordFields f{false, false, false, false};
+  if (o.eps == 0 && o.max_triangles == 0) return f;
+  f.exact = o.topology == TopologyMode::preserve || o.topology == TopologyMode::simplify;
+  f.weights = o.topology == TopologyMode::simplify;
+  f.paper = o.topology == TopologyMode::paper;
+  f.surplus = o.error == ErrorIndicator::surplus;
+  return f;
+}
+
 }  // namespace isotope

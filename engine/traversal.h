@@ -1,13 +1,21 @@
 #pragma once
 // The adaptive traversal (paper Sec. 3.2 with the stopping rule of design.md), generic over where
-// values and records come from: a MultiresVolume in memory, or a store paged through a brick
-// cache (io/paged_volume.h). A Source offers the shape of the grid and, per thread, a Reader:
+// values and records come from: a hierarchy in memory (engine/hierarchy.h, or the exact reference
+// MultiresVolume), or a store paged through a brick cache (io/paged_volume.h). A Source offers the
+// shape of the grid and, per thread, a Reader:
 //
 //   const Lattice& lattice(); data_dims(); origin(); spacing(); value_offset(); value_scale();
 //   Source::Reader reader() const;          // one per task, used by one thread at a time
 //   float Reader::value(const Coord& c, int j);  // as MultiresVolume::value; c lies on G_j (the
 //                                                // multiples of 2^j), a hint for paged sources
-//   Reader::record(const Coord& v) -> R     // R::bounds(), R::topology() of v's diamond
+//   Reader::Handle Reader::locate(Packed v);     // where the record of refinement vertex v lives
+//   DiamondBounds Reader::bounds(const Handle&, const RecordFields& read);  // its range and
+//                                                // bound, and the surplus if `read` names it
+//   DiamondTopology Reader::topology(const Handle&, const RecordFields& read);  // its critical
+//                                                // intervals and weights, those `read` names
+//   void Reader::prefetch(const Handle&);        // a hint that bounds() will be asked for soon
+// A handle is located once and read twice at most, so a source can spend its address arithmetic
+// once per visit.
 #include <algorithm>
 #include <array>
 #include <cassert>
@@ -78,6 +86,10 @@ class SplitRule {
   SplitRule(const ExtractOptions& o, const Lattice& lattice, const std::array<double, 3>& origin,
             const std::array<double, 3>& spacing)
       : options_(o), origin_(origin), spacing_(spacing) {
+    fields_.exact = o.topology == TopologyMode::preserve || o.topology == TopologyMode::simplify;
+    fields_.weights = o.topology == TopologyMode::simplify;
+    fields_.paper = o.topology == TopologyMode::paper;
+    fields_.surplus = o.error == ErrorIndicator::surplus;
     if (!o.focus) return;
     // Focus: g(v) = clamp(d(v) / R, 0, 1), d(v) = |v - focus| - reach(level). reach(l) is the sum
     // of the longest edges of all finer levels, so d(child) >= d(parent) by the triangle
@@ -115,6 +127,8 @@ class SplitRule {
   }
   bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
   const ExtractOptions& options() const { return options_; }
+  // The fields error_key(), critical() and dropped() read beyond the range and the bound.
+  const RecordFields& fields() const { return fields_; }
 
  private:
   bool exact_fires(const DiamondTopology& t) const { return t.exact_lo <= options_.iso && options_.iso < t.exact_hi; }
@@ -139,6 +153,7 @@ class SplitRule {
 
   ExtractOptions options_;
   std::array<double, 3> origin_, spacing_;
+  RecordFields fields_;
   std::vector<double> reach_;  // per level; empty without a focus
 };
 
@@ -195,9 +210,10 @@ class Traversal {
     if (clip_ && outside_box(t)) return Fate::culled;
     if (level == lattice_.max_level()) return Fate::leaf;
     const Packed v = (t[0] + t[1]) >> 1;
-    const auto r = reader_.record(unpack(v));
-    if (!rule_.in_range(r.bounds())) return Fate::culled;
-    *key = rule_.key(r.bounds(), r.topology(), v, level);
+    const auto h = reader_.locate(v);
+    const DiamondBounds b = reader_.bounds(h, rule_.fields());
+    if (!rule_.in_range(b)) return Fate::culled;
+    *key = rule_.key(b, reader_.topology(h, rule_.fields()), v, level);
     return Fate::split_key;
   }
   int triangles(const PackedTet& t, int level) {
@@ -216,15 +232,17 @@ class Traversal {
   enum class Step { cull, stop, refine };
   // What the traversal does at t: cull it (no value on each side, or beyond the data box), stop
   // and emit it, or refine it.
-  Step step(const PackedTet& t, int level) {
+  using Handle = typename Source::Reader::Handle;
+  // h: where the record of t's refinement vertex lives (unused at the leaves).
+  Step step(const PackedTet& t, int level, const Handle& h) {
     ++tets_visited_;
     if (clip_ && outside_box(t)) return Step::cull;
     if (level == lattice_.max_level()) return Step::stop;
-    const Packed v = (t[0] + t[1]) >> 1;
-    const auto r = reader_.record(unpack(v));
-    if (!rule_.in_range(r.bounds())) return Step::cull;
-    if (!(rule_.error_key(r.bounds(), v, level) >= rule_.options().eps)) {
-      const DiamondTopology& topology = r.topology();
+    const DiamondBounds b = reader_.bounds(h, rule_.fields());
+    if (!rule_.in_range(b)) return Step::cull;
+    if (!(rule_.error_key(b, (t[0] + t[1]) >> 1, level) >= rule_.options().eps)) {
+      if (!rule_.fields().topology()) return Step::stop;  // topology none: nothing more to read
+      const DiamondTopology topology = reader_.topology(h, rule_.fields());
       if (!rule_.critical(topology)) {
         tets_simplified_ += rule_.dropped(topology);
         return Step::stop;
@@ -232,10 +250,13 @@ class Traversal {
     }
     return Step::refine;
   }
+  Handle locate(const PackedTet& t, int level) {
+    return level < lattice_.max_level() ? reader_.locate((t[0] + t[1]) >> 1) : Handle{};
+  }
 
   void visit(const PackedTet& t, int level, bool positive) {
     if (pieces_ && level == split_level_) return pieces_->push_back({t, level, positive, false});
-    switch (step(t, level)) {
+    switch (step(t, level, locate(t, level))) {
       case Step::cull: return;
       case Step::stop: return emit(t, level, positive);
       case Step::refine:
@@ -250,15 +271,21 @@ class Traversal {
     frontier_.assign(1, Child{t, positive});
     for (int l = level; !frontier_.empty(); ++l) {
       next_.clear();
-      if constexpr (requires { reader_.prefetch(Coord{}); })
-        if (l < lattice_.max_level())
-          for (const Child& c : frontier_) reader_.prefetch(unpack((c.tet[0] + c.tet[1]) >> 1));
-      for (const Child& c : frontier_) switch (step(c.tet, l)) {
+      handles_.resize(frontier_.size());
+      if (l < lattice_.max_level())
+        for (size_t i = 0; i < frontier_.size(); ++i) {
+          handles_[i] = reader_.locate((frontier_[i].tet[0] + frontier_[i].tet[1]) >> 1);
+          reader_.prefetch(handles_[i]);
+        }
+      for (size_t i = 0; i < frontier_.size(); ++i) {
+        const Child& c = frontier_[i];
+        switch (step(c.tet, l, handles_[i])) {
           case Step::cull: break;
           case Step::stop: emit(c.tet, l, c.positive); break;
           case Step::refine:
             for (const Child& child : bisect(c.tet, l, c.positive)) next_.push_back(child);
         }
+      }
       frontier_.swap(next_);
     }
   }
@@ -297,6 +324,7 @@ class Traversal {
   int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;
   std::vector<Piece>* pieces_ = nullptr;  // while splitting
   std::vector<Child> frontier_, next_;     // visit_by_levels
+  std::vector<Handle> handles_;            // of frontier_
   int split_level_ = 0;
 };
 

@@ -11,6 +11,7 @@
 #include "engine/extract.h"
 #include "engine/lattice.h"
 #include "engine/record.h"
+#include "engine/traversal.h"
 #include "io/brick_cache.h"
 #include "io/store_brick.h"
 
@@ -73,12 +74,22 @@ class PagedVolume {
         }
       return true;
     }
-    RecordView record(const Coord& v) {
-      const int j = scale_of(v, volume_->layout_.lattice());
+    struct Handle {
+      int64_t index = 0;
       uint32_t m = 0;
-      const DecodedBrick& b = brick(locate(j, v, &m));
-      return RecordView(&b.records[brick_record_index(m)]);
+    };
+    Handle locate(uint64_t packed) const {
+      const Coord v = traversal::unpack(packed);
+      const int j = scale_of(v, volume_->layout_.lattice());
+      Handle h;
+      h.index = locate(j, v, &h.m);
+      return h;
     }
+    DiamondBounds bounds(const Handle& h, const RecordFields&) { return brick(h.index).records[brick_record_index(h.m)].bounds; }
+    DiamondTopology topology(const Handle& h, const RecordFields&) {
+      return brick(h.index).records[brick_record_index(h.m)].topology;
+    }
+    void prefetch(const Handle&) {}
 
    private:
     int64_t locate(int j, const Coord& c, uint32_t* morton) const {

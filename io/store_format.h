@@ -87,29 +87,6 @@ std::vector<uint8_t> encode_brick(const std::vector<float>& values, const std::v
 void decode_brick(const uint8_t* compressed, const BrickEntry& entry, std::vector<float>& values,
                   std::vector<Record>& records, const std::string& where);
 
-// Position of local node (x, y, z) of a brick in the values array, and of a scale-j node in the
-// records array.
-// Spreads the low 10 bits of v to every third bit (brick coordinates have at most 8).
-inline uint32_t spread_bits_3(int64_t v) {
-  auto x = static_cast<uint32_t>(v) & 0x3ffu;
-  x = (x | x << 16) & 0x30000ffu;
-  x = (x | x << 8) & 0x300f00fu;
-  x = (x | x << 4) & 0x30c30c3u;
-  x = (x | x << 2) & 0x9249249u;
-  return x;
-}
-// The inverse: every third bit of m, from bit 0, packed.
-inline int64_t compact_bits_3(uint32_t m) {
-  uint32_t x = m & 0x9249249u;
-  x = (x | x >> 2) & 0x30c30c3u;
-  x = (x | x >> 4) & 0x300f00fu;
-  x = (x | x >> 8) & 0x30000ffu;
-  x = (x | x >> 16) & 0x3ffu;
-  return x;
-}
-inline uint32_t brick_morton(int64_t x, int64_t y, int64_t z, [[maybe_unused]] int bits) {
-  return spread_bits_3(x) | spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
-}
-inline uint32_t brick_record_index(uint32_t morton) { return (morton >> 3) * 7 + (morton & 7) - 1; }
+
 
 }  // namespace isotope
