@@ -270,10 +270,10 @@ void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mod
 // read and decode; the store file itself stays in the OS page cache.
 enum class PagedBudget { full, eighth, eighth_reached };
 
+// A brick's core decoded (io/brick_cache.h): values and the bounds word of every node.
 uint64_t store_decoded_bytes(const isotope::StoreReader& store) {
   const isotope::StoreLayout& l = store.layout();
-  return static_cast<uint64_t>(l.brick_count()) *
-         static_cast<uint64_t>(l.brick_nodes() * sizeof(float) + l.brick_records() * sizeof(isotope::Record));
+  return static_cast<uint64_t>(l.brick_count()) * static_cast<uint64_t>(l.brick_nodes() * (sizeof(float) + sizeof(uint64_t)));
 }
 
 void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget which, int threads) {
@@ -340,25 +340,27 @@ void BM_FullResolutionBaseline(benchmark::State& state, Dataset d, int threads) 
   set_thread_counter(state);
 }
 
-// StoreReader::read_brick(), which is what a BrickCache miss runs (io/brick_cache.cpp, decode):
-// pread, checksum, zstd decompression and field decoding, and for band 0 the rebuilding of the
-// records from the values and their halo. Not timed: the cache's copy into its pool block and
-// its bookkeeping. One iteration decodes every brick of the store once, in directory order, so
-// the mix of bands is the store's own whatever the iteration count. The file stays in the OS
-// page cache: CPU cost, not disk.
+// StoreReader::read_brick() of the core section, which is what a BrickCache miss runs
+// (io/brick_cache.cpp, decode): pread, checksum, zstd decompression and field decoding. Not timed:
+// the cache's bookkeeping, and band 0's records, computed when the traversal reads them. One
+// iteration decodes every brick of the store once, in directory order, so the mix of bands is the
+// store's own whatever the iteration count. The file stays in the OS page cache: CPU cost, not disk.
 void BM_BrickDecode(benchmark::State& state, Dataset d) {
   const isotope::StoreReader* store = nullptr;
   if (!prepare(state, [&] { store = &store_of(d); })) return;
-  const auto bricks = static_cast<int64_t>(store->directory().size());
+  const int64_t bricks = store->layout().brick_count();
   uint64_t compressed = 0;
-  for (const isotope::BrickEntry& e : store->directory()) compressed += e.compressed_bytes;
+  for (int64_t i = 0; i < bricks; ++i) compressed += store->entry(i).bytes[0];
   const uint64_t decoded = store_decoded_bytes(*store);
+  std::vector<float> values(static_cast<size_t>(store->layout().brick_nodes()));
+  std::vector<uint64_t> bounds(values.size());
+  const isotope::BrickView view{values.data(), bounds.data(), nullptr, nullptr, nullptr, nullptr};
 
   for (auto _ : state) {
     try {
       for (int64_t i = 0; i < bricks; ++i) {
-        const isotope::BrickContents c = store->read_brick(i);
-        benchmark::DoNotOptimize(c.records.data());
+        store->read_brick(i, {true, false, false, false}, view, values.data());
+        benchmark::DoNotOptimize(bounds.data());
       }
     } catch (const std::exception& e) {
       state.SkipWithError(e.what());

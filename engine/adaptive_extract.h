@@ -40,7 +40,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   }
   ExtractStats total;
   if (options.max_triangles > 0) {
-    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing());
+    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
     const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);
     in_codes.eps = c.eps;
     total.chosen_eps = c.eps * scale;
@@ -48,7 +48,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     total.next_triangles = c.next_triangles;
     total.budget_steps = c.steps;
   }
-  const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing());
+  const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
   auto finish = [&](Mesh mesh) {
     if (stats) {
       *stats = total;

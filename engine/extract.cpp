@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "engine/adaptive_extract.h"
+#include "engine/hierarchy.h"
 
 namespace isotope {
 namespace {
@@ -23,6 +24,7 @@ class InMemory {
   const std::array<double, 3>& spacing() const { return mv_.spacing(); }
   double value_offset() const { return mv_.value_offset(); }
   double value_scale() const { return mv_.value_scale(); }
+  double error_fold() const { return 0; }
 
   class Reader {
    public:
@@ -107,7 +109,7 @@ Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* 
   validate_volume(volume);
   const ArraySource source(volume);
   if (needs_hierarchy(options) || !finest_extract_applies(source.lattice()))
-    return extract(MultiresVolume::build(volume), options, stats);
+    return extract(Hierarchy::build(volume, fields_for(options)), options, stats);
   const auto start = std::chrono::steady_clock::now();
   const traversal::SplitRule rule(options, source.lattice(), source.origin(), source.spacing());
   ExtractStats s;

@@ -32,8 +32,9 @@ Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractSta
 
 // One shot from an array, with only the hierarchy the options need: at eps = 0 (no triangle
 // budget) none at all, since the mesh is marching tetrahedra over every cut cell
-// (engine/finest_extract.h); otherwise the hierarchy is built first. The same mesh, byte for byte,
-// as extract() of the volume's hierarchy. Throws as extract() does, and std::invalid_argument for
+// (engine/finest_extract.h); otherwise the compact hierarchy (engine/hierarchy.h) with the record
+// fields the mode reads. The same mesh, byte for byte, as extract() of the volume's hierarchy, or
+// of its store. Throws as extract() does, and std::invalid_argument for
 // dimensions below 2 or non-finite values.
 Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
 

@@ -28,7 +28,7 @@ void store_record(const BrickView& brick, uint32_t m, const Record& r) {
   if (brick.weights) brick.weights[m] = weights_word(t.weight);
 }
 
-void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, float* values, float error_fold) {
+void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, float* values) {
   const StoreLayout& layout = tile.layout();
   const Band& band = layout.band(tile.band());
   const bool records = tile.band() < layout.lattice().k;  // the corners have none: all absent
@@ -41,12 +41,7 @@ void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, 
       store_record(out, m, absent);  // coarser nodes' entries are never read; written all the same
       continue;
     }
-    Record r = tile.node_record(g);
-    if (error_fold != 0) {
-      r.bounds.error_bound = round_up(static_cast<double>(r.bounds.error_bound) + error_fold);
-      r.bounds.error_surplus = round_up(static_cast<double>(r.bounds.error_surplus) + error_fold);
-    }
-    store_record(out, m, r);
+    store_record(out, m, tile.node_record(g));
   }
 }
 
@@ -83,7 +78,7 @@ struct MemorySink {
   int process(int band, const Box3& b, const BandTile& tile) {
     const int64_t index = h.layout().brick_index(band, b);
     const int64_t t = h.layout().brick_width();
-    fill_brick(tile, {b[0] * t, b[1] * t, b[2] * t}, h.brick(index), h.values(index), 0.0f);
+    fill_brick(tile, {b[0] * t, b[1] * t, b[2] * t}, h.brick(index), h.values(index));
     return 0;
   }
   void commit(int, const Box3&, int&&) {}

@@ -59,8 +59,7 @@ void store_record(const BrickView& brick, uint32_t m, const Record& r);
 class BandTile;
 // The brick of a built tile whose first node is `origin` (G_j units): values (into `values`) and
 // records, every entry written (nodes beyond the band's grid: value 0, an all-zero record).
-// `error_fold` is added to every finite error (a quantized store's rounding, docs/FORMAT.md).
-void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, float* values, float error_fold);
+void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, float* values);
 
 // Nodes per brick and the Morton code of a node within its brick, by table.
 class BrickIndexer {
@@ -102,6 +101,7 @@ class Hierarchy {
   const std::array<double, 3>& spacing() const { return spacing_; }
   double value_offset() const { return value_offset_; }
   double value_scale() const { return value_scale_; }
+  double error_fold() const { return 0; }  // values held exactly
   const RecordFields& fields() const { return fields_; }
   const PreprocessStats& stats() const { return stats_; }
   void set_geometry(const std::array<double, 3>& origin, const std::array<double, 3>& spacing) {

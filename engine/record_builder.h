@@ -39,12 +39,14 @@ struct Saturation {
   IsoInterval exact, paper;
   std::array<float, 3> weight{0, 0, 0};
 
-  // Folds in one child; its range widens the vertex's range `bounds`.
-  void add(const Record& c, DiamondBounds& bounds) {
+  // Folds in one child; its range widens the vertex's range `bounds`. Without `topology`, only
+  // the range and errors (a store's band 0 read in mode none: io/paged_volume.h).
+  void add(const Record& c, DiamondBounds& bounds, bool topology = true) {
     bound = std::max(bound, static_cast<double>(c.bounds.error_bound));
     surplus = std::max(surplus, c.bounds.error_surplus);
     bounds.lo = std::min(bounds.lo, c.bounds.lo);
     bounds.hi = std::max(bounds.hi, c.bounds.hi);
+    if (!topology) return;
     exact.hull({c.topology.exact_lo, c.topology.exact_hi});
     paper.hull({c.topology.paper_lo, c.topology.paper_hi});
     for (size_t w = 0; w < weight.size(); ++w) weight[w] = std::max(weight[w], c.topology.weight[w]);
@@ -124,9 +126,10 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
 }
 
 // The record from what was gathered: the polyhedron's values, shape and range, whether every real
-// polyhedron vertex lies in the data box, and the children's saturation.
+// polyhedron vertex lies in the data box, and the children's saturation. Without `topology`, the
+// range and errors alone (the topology left empty), the same bits as with it.
 inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, bool inside_box,
-                            const DiamondBounds& range, Saturation sat, CriticalCounts& counts) {
+                            const DiamondBounds& range, Saturation sat, CriticalCounts& counts, bool topology = true) {
   Record r;
   r.bounds = range;
   if (!inside_box) {
@@ -137,6 +140,7 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
     r.bounds.error_bound = round_up(eta + sat.bound);
     r.bounds.error_surplus = std::max(round_up(eta), sat.surplus);
+    if (!topology) return r;
     const IsoInterval exact = exact_interval(dv);
     const IsoInterval paper = paper_interval(dv);
     counts[0][static_cast<int>(dv.type)] += paper.empty() ? 0 : 1;
@@ -178,6 +182,31 @@ void for_each_child(const Diamond& d, const Lattice& lattice, F f) {
     }
 }
 
+// Values at v's polyhedron (mirrored across the domain faces where the diamond is cut, paper
+// Sec. 4.3) and their range, from value(c) of a lattice node (clamped into the data box beyond it);
+// true when every real vertex lies in the data box.
+template <class Value>
+bool read_polyhedron(const Diamond& d, const Lattice& lattice, const std::array<int64_t, 3>& dims, Value value,
+                     DiamondValues& dv, DiamondBounds& bounds) {
+  auto in_box = [&](const Coord& c) { return c[0] < dims[0] && c[1] < dims[1] && c[2] < dims[2]; };
+  dv.type = d.type;
+  dv.fa = value(d.a);
+  dv.fb = value(d.b);
+  dv.fv = value(d.v);
+  bool inside_box = in_box(d.a) && in_box(d.b);
+  bounds.lo = std::min({dv.fa, dv.fb, dv.fv});
+  bounds.hi = std::max({dv.fa, dv.fb, dv.fv});
+  for (int i = 0; i < d.ring_count; ++i) {
+    const bool real = lattice.contains(d.ring[i]);
+    dv.ring[i] = value(real ? d.ring[i] : mirror_into(d.ring[i], lattice));
+    if (!real) continue;
+    inside_box = inside_box && in_box(d.ring[i]);
+    bounds.lo = std::min(bounds.lo, dv.ring[i]);
+    bounds.hi = std::max(bounds.hi, dv.ring[i]);
+  }
+  return inside_box;
+}
+
 template <class Grid>
 class RecordBuilder {
  public:
@@ -187,7 +216,8 @@ class RecordBuilder {
     const Diamond d = diamond_of(v, lattice_);
     DiamondValues dv;
     DiamondBounds range;
-    const bool inside_box = read_polyhedron(d, dv, range);
+    const bool inside_box =
+        read_polyhedron(d, lattice_, grid_.data_dims(), [&](const Coord& c) { return grid_.value(c); }, dv, range);
     Saturation sat;
     for_each_child(d, lattice_, [&](const Coord& u) {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node
@@ -199,32 +229,6 @@ class RecordBuilder {
   }
 
  private:
-  // Values at v's polyhedron (mirrored across the domain faces where the diamond is cut, paper
-  // Sec. 4.3) and their range; true when every real vertex lies in the data box.
-  bool read_polyhedron(const Diamond& d, DiamondValues& dv, DiamondBounds& bounds) const {
-    dv.type = d.type;
-    dv.fa = grid_.value(d.a);
-    dv.fb = grid_.value(d.b);
-    dv.fv = grid_.value(d.v);
-    bool inside_box = in_box(d.a) && in_box(d.b);
-    bounds.lo = std::min({dv.fa, dv.fb, dv.fv});
-    bounds.hi = std::max({dv.fa, dv.fb, dv.fv});
-    for (int i = 0; i < d.ring_count; ++i) {
-      const bool real = lattice_.contains(d.ring[i]);
-      dv.ring[i] = grid_.value(real ? d.ring[i] : mirror_into(d.ring[i], lattice_));
-      if (!real) continue;
-      inside_box = inside_box && in_box(d.ring[i]);
-      bounds.lo = std::min(bounds.lo, dv.ring[i]);
-      bounds.hi = std::max(bounds.hi, dv.ring[i]);
-    }
-    return inside_box;
-  }
-
-  bool in_box(const Coord& c) const {
-    const auto& dims = grid_.data_dims();
-    return c[0] < dims[0] && c[1] < dims[1] && c[2] < dims[2];
-  }
-
   Grid& grid_;
   const Lattice& lattice_;
 };

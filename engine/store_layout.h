@@ -26,7 +26,7 @@ struct Band {
 
 class StoreLayout {
  public:
-  static constexpr int kDefaultBrickBits = 5;
+  static constexpr int kDefaultBrickBits = 4;
 
   StoreLayout() = default;
   StoreLayout(const std::array<int64_t, 3>& dims, int brick_bits) : dims_(dims), brick_bits_(brick_bits) {

@@ -83,9 +83,11 @@ inline int triangles_of(const std::array<float, 4>& f, float iso) {
 // moves down monotonically as eps falls (choose_eps_for_budget relies on this).
 class SplitRule {
  public:
+  // error_fold: added to every error before it is compared (a quantized store's rounding,
+  // io/store_format.h): the records are those of the quantized field.
   SplitRule(const ExtractOptions& o, const Lattice& lattice, const std::array<double, 3>& origin,
-            const std::array<double, 3>& spacing)
-      : options_(o), origin_(origin), spacing_(spacing) {
+            const std::array<double, 3>& spacing, double error_fold = 0)
+      : options_(o), origin_(origin), spacing_(spacing), fold_(error_fold) {
     fields_.exact = o.topology == TopologyMode::preserve || o.topology == TopologyMode::simplify;
     fields_.weights = o.topology == TopologyMode::simplify;
     fields_.paper = o.topology == TopologyMode::paper;
@@ -106,7 +108,7 @@ class SplitRule {
   // The key as far as the error goes: key = error_key unless critical(). The traversal reads the
   // topology record only when this alone would let it stop (design.md: most visits never do).
   double error_key(const DiamondBounds& b, Packed v, int level) const {
-    const double err = options_.error == ErrorIndicator::bound ? b.error_bound : b.error_surplus;
+    const double err = (options_.error == ErrorIndicator::bound ? b.error_bound : b.error_surplus) + fold_;
     if (reach_.empty()) return err;
     const double g = focus_factor(v, level);
     return g > 0 ? err / g : std::numeric_limits<double>::infinity();
@@ -153,6 +155,7 @@ class SplitRule {
 
   ExtractOptions options_;
   std::array<double, 3> origin_, spacing_;
+  double fold_ = 0;
   RecordFields fields_;
   std::vector<double> reach_;  // per level; empty without a focus
 };

@@ -4,13 +4,12 @@
 #include <zstd.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <span>
-#include <utility>
 
-#include "engine/critical_rule.h"
 #include "io/field_codec.h"
 #include "io/io_error.h"
 
@@ -27,7 +26,6 @@ class Writer {
     std::memcpy(p_, &v, sizeof v);
     p_ += sizeof v;
   }
-  uint8_t* pos() const { return p_; }
 
  private:
   uint8_t* p_;
@@ -49,63 +47,77 @@ class Reader {
 };
 
 constexpr size_t kTypeChars = 16;
+constexpr size_t kBandTableAt = 256;
 constexpr size_t kHeaderChecksumAt = kHeaderBytes - 8;
+constexpr size_t kChecksumBytes = 8;  // each section starts with the XXH64 of its frame
 
-void put_summary(Writer& w, const BrickSummary& s) {
-  for (float f : {s.lo, s.hi, s.max_error_bound, s.max_error_surplus, s.exact_lo, s.exact_hi, s.paper_lo,
-                  s.paper_hi, s.max_weight[0], s.max_weight[1], s.max_weight[2]})
-    w.put(f);
-  w.put(uint32_t{0});
+// The fields of each section, in order; a bfloat16 field holds floats whose low 16 bits are zero.
+enum class Field { values, lo, hi, bound, exact_lo, exact_hi, w0, w1, w2, paper_lo, paper_hi, surplus };
+std::span<const Field> fields_of(Section s, bool records) {
+  static constexpr Field kCore[] = {Field::values, Field::lo, Field::hi, Field::bound};
+  static constexpr Field kExact[] = {Field::exact_lo, Field::exact_hi};
+  static constexpr Field kWeights[] = {Field::w0, Field::w1, Field::w2};
+  static constexpr Field kExtra[] = {Field::paper_lo, Field::paper_hi, Field::surplus};
+  switch (s) {
+    case Section::core: return records ? std::span<const Field>(kCore) : std::span<const Field>(kCore, 1);
+    case Section::exact: return records ? kExact : std::span<const Field>{};
+    case Section::weights: return records ? kWeights : std::span<const Field>{};
+    case Section::extra: return records ? kExtra : std::span<const Field>{};
+  }
+  return {};
 }
 
-BrickSummary get_summary(Reader& r) {
-  BrickSummary s;
-  for (float* f : {&s.lo, &s.hi, &s.max_error_bound, &s.max_error_surplus, &s.exact_lo, &s.exact_hi, &s.paper_lo,
-                   &s.paper_hi, &s.max_weight[0], &s.max_weight[1], &s.max_weight[2]})
-    *f = r.get<float>();
-  (void)r.get<uint32_t>();
-  return s;
-}
-
-// The eleven record fields, in their order in a brick.
-constexpr int kRecordFields = kBrickFields - 1;
-const float& record_field(const Record& r, int f) {
+// A record field of Morton code m as a float, and back (the bfloat16 ones from their bits).
+float get_field(const BrickView& b, Field f, uint32_t m) {
+  const PackedBounds p = bounds_of(b.bounds[m]);
   switch (f) {
-    case 0: return r.bounds.lo;
-    case 1: return r.bounds.hi;
-    case 2: return r.bounds.error_bound;
-    case 3: return r.bounds.error_surplus;
-    case 4: return r.topology.exact_lo;
-    case 5: return r.topology.exact_hi;
-    case 6: return r.topology.paper_lo;
-    case 7: return r.topology.paper_hi;
-    case 8: return r.topology.weight[0];
-    case 9: return r.topology.weight[1];
-    default: return r.topology.weight[2];
+    case Field::values: return b.values[m];
+    case Field::lo: return bf16_to_float(p.lo);
+    case Field::hi: return bf16_to_float(p.hi);
+    case Field::bound: return p.bound;
+    case Field::exact_lo: return bf16_to_float(static_cast<Bf16>(b.exact[m]));
+    case Field::exact_hi: return bf16_to_float(static_cast<Bf16>(b.exact[m] >> 16));
+    case Field::w0: return bf16_to_float(static_cast<Bf16>(b.weights[m]));
+    case Field::w1: return bf16_to_float(static_cast<Bf16>(b.weights[m] >> 16));
+    case Field::w2: return bf16_to_float(static_cast<Bf16>(b.weights[m] >> 32));
+    case Field::paper_lo: return bf16_to_float(static_cast<Bf16>(b.paper[m]));
+    case Field::paper_hi: return bf16_to_float(static_cast<Bf16>(b.paper[m] >> 16));
+    case Field::surplus: return bf16_to_float(b.surplus[m]);
+  }
+  return 0;
+}
+
+// Writes field f of code m; bfloat16 fields are written into their word by a read-modify-write.
+void set_field(const BrickView& b, float* values, Field f, uint32_t m, float v) {
+  const auto code = static_cast<uint64_t>(std::bit_cast<uint32_t>(v) >> 16);
+  auto put16 = [&](auto* word, int shift) {
+    using W = std::remove_pointer_t<decltype(word)>;
+    *word = static_cast<W>((*word & ~(W{0xffff} << shift)) | static_cast<W>(code) << shift);
+  };
+  switch (f) {
+    case Field::values: values[m] = v; return;
+    case Field::lo: return put16(&b.bounds[m], 0);
+    case Field::hi: return put16(&b.bounds[m], 16);
+    case Field::bound:
+      b.bounds[m] = (b.bounds[m] & 0xffffffffu) | uint64_t{std::bit_cast<uint32_t>(v)} << 32;
+      return;
+    case Field::exact_lo: return put16(&b.exact[m], 0);
+    case Field::exact_hi: return put16(&b.exact[m], 16);
+    case Field::w0: return put16(&b.weights[m], 0);
+    case Field::w1: return put16(&b.weights[m], 16);
+    case Field::w2: return put16(&b.weights[m], 32);
+    case Field::paper_lo: return put16(&b.paper[m], 0);
+    case Field::paper_hi: return put16(&b.paper[m], 16);
+    case Field::surplus: b.surplus[m] = static_cast<Bf16>(code); return;
   }
 }
-float& record_field(Record& r, int f) { return const_cast<float&>(record_field(std::as_const(r), f)); }
+
+bool is_bf16(Field f) { return f != Field::values && f != Field::bound; }
 
 }  // namespace
 
-BrickSummary summarize_brick(const BrickContents& b) {
-  BrickSummary s;
-  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
-  for (const Record& r : b.records) {
-    if (r.bounds.lo > r.bounds.hi) continue;
-    lo = std::min(lo, r.bounds.lo);
-    hi = std::max(hi, r.bounds.hi);
-    s.max_error_bound = std::max(s.max_error_bound, r.bounds.error_bound);
-    s.max_error_surplus = std::max(s.max_error_surplus, r.bounds.error_surplus);
-    IsoInterval e{s.exact_lo, s.exact_hi}, p{s.paper_lo, s.paper_hi};
-    e.hull({r.topology.exact_lo, r.topology.exact_hi});
-    p.hull({r.topology.paper_lo, r.topology.paper_hi});
-    s.exact_lo = e.lo, s.exact_hi = e.hi, s.paper_lo = p.lo, s.paper_hi = p.hi;
-    for (size_t w = 0; w < s.max_weight.size(); ++w) s.max_weight[w] = std::max(s.max_weight[w], r.topology.weight[w]);
-  }
-  for (float v : b.values) lo = std::min(lo, v), hi = std::max(hi, v);
-  s.lo = lo, s.hi = hi;
-  return s;
+std::array<bool, kSections> sections_for(const RecordFields& f) {
+  return {true, f.exact, f.weights, f.paper || f.surplus};
 }
 
 uint64_t store_checksum(const void* data, size_t bytes) { return XXH64(data, bytes, 0); }
@@ -129,14 +141,17 @@ std::array<uint8_t, kHeaderBytes> encode_header(const StoreHeader& h) {
   w.put(h.value_min);
   w.put(h.value_max);
   w.put(h.brick_count);
-  w.put(h.directory_offset);
-  w.put(h.directory_bytes);
-  w.put(h.directory_checksum);
   for (int64_t c : h.critical_paper) w.put(c);
   for (int64_t c : h.critical_exact) w.put(c);
   w.put(h.input_bytes);
   w.put(h.value_offset);
   w.put(h.value_scale);
+  Writer table(bytes.data() + kBandTableAt);
+  for (const BandDirectory& d : h.bands) {
+    table.put(d.offset);
+    table.put(d.bytes);
+    table.put(d.checksum);
+  }
   const uint64_t sum = store_checksum(bytes.data(), kHeaderChecksumAt);
   std::memcpy(bytes.data() + kHeaderChecksumAt, &sum, sizeof sum);
   return bytes;
@@ -166,32 +181,51 @@ StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& 
   h.quantize_bits = r.get<uint8_t>();
   char type[kTypeChars];
   for (char& c : type) c = r.get<char>();
-  type[kTypeChars - 1] = 0;
+  if (type[kTypeChars - 1] != 0) throw IoError(file + ": header holds an unterminated element type");
   h.source_type = type;
   h.value_min = r.get<double>();
   h.value_max = r.get<double>();
   h.brick_count = r.get<int64_t>();
-  h.directory_offset = r.get<uint64_t>();
-  h.directory_bytes = r.get<uint64_t>();
-  h.directory_checksum = r.get<uint64_t>();
   for (int64_t& c : h.critical_paper) c = r.get<int64_t>();
   for (int64_t& c : h.critical_exact) c = r.get<int64_t>();
   h.input_bytes = r.get<uint64_t>();
   h.value_offset = r.get<double>();
   h.value_scale = r.get<double>();
-  if (h.quantize_bits != 0 && h.quantize_bits != 8 && h.quantize_bits != 16)
-    throw IoError(file + ": header holds an impossible quantization");
-  if (!std::isfinite(h.value_offset) || !(h.value_scale > 0) || !std::isfinite(h.value_scale))
-    throw IoError(file + ": header holds an impossible value mapping");
-
+  Reader table(bytes + kBandTableAt);
+  for (BandDirectory& d : h.bands) {
+    d.offset = table.get<uint64_t>();
+    d.bytes = table.get<uint64_t>();
+    d.checksum = table.get<uint64_t>();
+  }
+  // Every field within the range the format allows (docs/FORMAT.md, "Header").
+  for (size_t at = 204; at < kBandTableAt; ++at)
+    if (bytes[at] != 0) throw IoError(file + ": header's reserved bytes are not zero");
+  for (size_t at = kBandTableAt + kMaxBands * 24; at < kHeaderChecksumAt; ++at)
+    if (bytes[at] != 0) throw IoError(file + ": header's reserved bytes are not zero");
   for (int64_t d : h.dims)
     if (d < 2 || d > (int64_t{1} << 19) + 1) throw IoError(file + ": header holds impossible dimensions");
-  if (h.brick_bits < 1 || h.brick_bits > 8) throw IoError(file + ": header holds an impossible brick size");
+  for (int a = 0; a < 3; ++a) {
+    if (!std::isfinite(h.spacing[a]) || !(h.spacing[a] > 0)) throw IoError(file + ": header holds a spacing that is not a positive number");
+    if (!std::isfinite(h.origin[a])) throw IoError(file + ": header holds an origin that is not finite");
+  }
+  if (h.brick_bits < kMinBrickBits || h.brick_bits > kMaxBrickBits) throw IoError(file + ": header holds an impossible brick size");
+  if (h.zstd_level < 1 || h.zstd_level > 19) throw IoError(file + ": header holds an impossible zstd level");
+  if (h.quantize_bits != 0 && h.quantize_bits != 8 && h.quantize_bits != 16)
+    throw IoError(file + ": header holds an impossible quantization");
+  if (!std::isfinite(h.value_offset) || !(h.value_scale > 0) || !std::isfinite(h.value_scale) ||
+      (h.quantize_bits == 0 && (h.value_offset != 0 || h.value_scale != 1)))
+    throw IoError(file + ": header holds an impossible value mapping");
+  if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || !(h.value_min <= h.value_max))
+    throw IoError(file + ": header holds an impossible value range");
   const StoreLayout layout(h.dims, h.brick_bits);
   if (layout.lattice().k != h.lattice_k || layout.brick_count() != h.brick_count)
     throw IoError(file + ": header contradicts itself (levels or brick count do not match the dimensions)");
-  if (h.directory_bytes != static_cast<uint64_t>(h.brick_count) * kEntryBytes)
-    throw IoError(file + ": header gives a directory size that does not match the brick count");
+  for (int j = 0; j < kMaxBands; ++j) {
+    const BandDirectory& d = h.bands[static_cast<size_t>(j)];
+    const uint64_t expected = j <= h.lattice_k ? static_cast<uint64_t>(layout.band(j).brick_count()) * kEntryBytes : 0;
+    if (d.bytes != expected || (j > h.lattice_k && (d.offset != 0 || d.checksum != 0)))
+      throw IoError(file + ": header gives band " + std::to_string(j) + " a directory that does not match its bricks");
+  }
   return h;
 }
 
@@ -200,72 +234,106 @@ std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries) {
   Writer w(bytes.data());
   for (const BrickEntry& e : entries) {
     w.put(e.offset);
-    w.put(e.compressed_bytes);
-    w.put(e.raw_bytes);
-    w.put(e.checksum);
-    put_summary(w, e.summary);
+    for (uint32_t b : e.bytes) w.put(b);
   }
   return bytes;
 }
 
-std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const StoreHeader& h,
-                                         const std::string& file) {
-  if (size != h.directory_bytes) throw IoError(file + ": directory is truncated");
-  if (store_checksum(bytes, size) != h.directory_checksum) throw IoError(file + ": directory checksum mismatch (corrupt directory)");
-  std::vector<BrickEntry> entries(static_cast<size_t>(h.brick_count));
+std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
+                                         uint64_t area_end, const std::string& file) {
+  if (size != d.bytes || size != static_cast<uint64_t>(count) * kEntryBytes) throw IoError(file + ": directory is truncated");
+  if (store_checksum(bytes, size) != d.checksum) throw IoError(file + ": directory checksum mismatch (corrupt directory)");
+  std::vector<BrickEntry> entries(static_cast<size_t>(count));
   Reader r(bytes);
   for (BrickEntry& e : entries) {
     e.offset = r.get<uint64_t>();
-    e.compressed_bytes = r.get<uint32_t>();
-    e.raw_bytes = r.get<uint32_t>();
-    e.checksum = r.get<uint64_t>();
-    e.summary = get_summary(r);
-    if (e.offset < kHeaderBytes || e.offset + e.compressed_bytes > h.directory_offset)
+    for (uint32_t& b : e.bytes) b = r.get<uint32_t>();
+    // Overflow-free: each size is below 2^32 and the offset is checked against the area first.
+    if (e.offset < kHeaderBytes || e.offset > area_end || e.total() > area_end - e.offset)
       throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " points outside the brick area");
+    for (uint32_t b : e.bytes)
+      if (b != 0 && b <= kChecksumBytes)
+        throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " gives a section no room");
   }
   return entries;
 }
 
-std::vector<uint8_t> encode_brick(const std::vector<float>& values, const std::vector<Record>& records,
-                                  int zstd_level, BrickEntry& entry) {
+std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickView& brick,
+                                                         int zstd_level) {
+  const bool records = stores_records(layout, band);
+  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  std::array<std::vector<uint8_t>, kSections> out;
+  std::vector<float> field;
   std::vector<uint8_t> raw;
-  raw.reserve(values.size() * 4 + records.size() * sizeof(Record));
-  encode_field(values, raw);
-  if (!records.empty()) {
-    std::vector<float> field(records.size());
-    for (int f = 0; f < kRecordFields; ++f) {
-      for (size_t i = 0; i < field.size(); ++i) field[i] = record_field(records[i], f);
+  for (int s = 0; s < kSections; ++s) {
+    const auto fields = fields_of(static_cast<Section>(s), records);
+    if (fields.empty()) continue;
+    raw.clear();
+    for (const Field f : fields) {
+      field.clear();
+      for (uint32_t m = 0; m < nodes; ++m)
+        if (f == Field::values || (m & 7) != 0) field.push_back(get_field(brick, f, m));
       encode_field(field, raw);
     }
+    std::vector<uint8_t>& bytes = out[static_cast<size_t>(s)];
+    bytes.resize(kChecksumBytes + ZSTD_compressBound(raw.size()));
+    const size_t n = ZSTD_compress(bytes.data() + kChecksumBytes, bytes.size() - kChecksumBytes, raw.data(), raw.size(), zstd_level);
+    if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
+    bytes.resize(kChecksumBytes + n);
+    const uint64_t sum = store_checksum(bytes.data() + kChecksumBytes, n);
+    std::memcpy(bytes.data(), &sum, sizeof sum);
   }
-  std::vector<uint8_t> out(ZSTD_compressBound(raw.size()));
-  const size_t n = ZSTD_compress(out.data(), out.size(), raw.data(), raw.size(), zstd_level);
-  if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
-  out.resize(n);
-  entry.compressed_bytes = static_cast<uint32_t>(n);
-  entry.raw_bytes = static_cast<uint32_t>(raw.size());
-  entry.checksum = store_checksum(out.data(), out.size());
   return out;
 }
 
-void decode_brick(const uint8_t* compressed, const BrickEntry& entry, std::vector<float>& values,
-                  std::vector<Record>& records, const std::string& where) {
-  if (store_checksum(compressed, entry.compressed_bytes) != entry.checksum)
-    throw IoError(where + ": checksum mismatch (corrupt brick)");
-  // Generous: a field never takes more than 4 bytes per value plus its header.
-  const size_t limit = (values.size() + records.size() * kRecordFields) * 4 + 64 * kBrickFields;
-  if (entry.raw_bytes > limit) throw IoError(where + ": impossible uncompressed size");
-  std::vector<uint8_t> raw(entry.raw_bytes);
-  const size_t n = ZSTD_decompress(raw.data(), raw.size(), compressed, entry.compressed_bytes);
+void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
+                    const BrickView& out, float* values, const std::string& where) {
+  const bool records = stores_records(layout, band);
+  const auto fields = fields_of(s, records);
+  if (fields.empty()) {
+    if (size != 0) throw IoError(where + ": a section this band does not store is not empty");
+    return;
+  }
+  if (size <= kChecksumBytes) throw IoError(where + ": a section is missing");
+  uint64_t sum;
+  std::memcpy(&sum, bytes, sizeof sum);
+  if (store_checksum(bytes + kChecksumBytes, size - kChecksumBytes) != sum) throw IoError(where + ": checksum mismatch (corrupt brick)");
+  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  const uint32_t record_count = nodes - nodes / 8;
+  // Generous: a field never takes more than 4 bytes per value plus a header.
+  const uint64_t limit = fields.size() * (uint64_t{nodes} * 4 + 64);
+  const unsigned long long declared = ZSTD_getFrameContentSize(bytes + kChecksumBytes, size - kChecksumBytes);
+  if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN || declared > limit)
+    throw IoError(where + ": impossible uncompressed size");
+  thread_local std::vector<uint8_t> raw;
+  raw.resize(declared);
+  const size_t n = ZSTD_decompress(raw.data(), raw.size(), bytes + kChecksumBytes, size - kChecksumBytes);
   if (ZSTD_isError(n)) throw IoError(where + ": cannot decompress (" + ZSTD_getErrorName(n) + ")");
-  if (n != raw.size()) throw IoError(where + ": decompressed size differs from the directory");
+  if (n != raw.size()) throw IoError(where + ": decompressed size differs from the frame's");
+  // The words the section's fields fill part by part start at zero.
+  switch (s) {
+    case Section::core: if (records) std::fill_n(out.bounds, nodes, 0); break;
+    case Section::exact: std::fill_n(out.exact, nodes, 0); break;
+    case Section::weights: std::fill_n(out.weights, nodes, 0); break;
+    case Section::extra: std::fill_n(out.paper, nodes, 0), std::fill_n(out.surplus, nodes, 0); break;
+  }
+  thread_local std::vector<float> field;
   try {
-    const uint8_t* p = decode_field(raw.data(), raw.data() + raw.size(), values);
-    if (!records.empty()) {
-      std::vector<float> field(records.size());
-      for (int f = 0; f < kRecordFields; ++f) {
-        p = decode_field(p, raw.data() + raw.size(), field);
-        for (size_t i = 0; i < field.size(); ++i) record_field(records[i], f) = field[i];
+    const uint8_t* p = raw.data();
+    for (const Field f : fields) {
+      field.resize(f == Field::values ? nodes : record_count);
+      p = decode_field(p, raw.data() + raw.size(), field);
+      if (f == Field::values) {
+        std::copy(field.begin(), field.end(), values);
+        continue;
+      }
+      size_t i = 0;
+      for (uint32_t m = 0; m < nodes; ++m) {
+        if ((m & 7) == 0) continue;
+        const float v = field[i++];
+        if (is_bf16(f) && (std::bit_cast<uint32_t>(v) & 0xffffu) != 0)
+          throw IoError("a field of bfloat16 codes holds another value");
+        set_field(out, values, f, m, v);
       }
     }
     if (p != raw.data() + raw.size()) throw IoError("trailing bytes after the last field");

@@ -30,15 +30,18 @@ ValueHistogram sample_histogram(const StoreReader& store, int bins, int64_t max_
   const double span = hist.max - hist.min;
   const double offset = h.quantize_bits > 0 ? h.value_offset : 0, scale = h.quantize_bits > 0 ? h.value_scale : 1;
   double sum = 0;
+  std::vector<float> values(static_cast<size_t>(layout.brick_nodes()));
+  std::vector<uint64_t> bounds(values.size());
   for (int64_t bz = 0; bz < band.bricks[2]; ++bz)
     for (int64_t by = 0; by < band.bricks[1]; ++by)
       for (int64_t bx = 0; bx < band.bricks[0]; ++bx) {
-        const BrickContents brick = store.read_brick(layout.brick_index(j, {bx, by, bz}));
-        for (size_t m = 0; m < brick.values.size(); ++m) {
+        const BrickView view{values.data(), bounds.data(), nullptr, nullptr, nullptr, nullptr};
+        store.read_brick(layout.brick_index(j, {bx, by, bz}), {true, false, false, false}, view, values.data());
+        for (size_t m = 0; m < values.size(); ++m) {
           const auto c = morton_decode(m);
           const std::array<int64_t, 3> node{(bx * t + c[0]) << j, (by * t + c[1]) << j, (bz * t + c[2]) << j};
           if (node[0] >= h.dims[0] || node[1] >= h.dims[1] || node[2] >= h.dims[2]) continue;
-          const double v = offset + scale * brick.values[m];
+          const double v = offset + scale * values[m];
           const double at = span > 0 ? (v - hist.min) / span * static_cast<double>(hist.counts.size()) : 0;
           const auto bin = static_cast<size_t>(std::clamp(at, 0.0, static_cast<double>(hist.counts.size() - 1)));
           ++hist.counts[bin];

@@ -1,11 +1,16 @@
 #pragma once
-// Reading a store (docs/FORMAT.md): header and directory at open, bricks on demand by pread
-// (thread-safe), the whole store into memory for extraction, and a full verification.
+// Reading a store (docs/FORMAT.md): the header at open, a band's directory the first time one of
+// its bricks is asked for (a coarse extraction never loads band 0's, nine tenths of them), bricks
+// on demand by pread, section by section (thread-safe), and a full verification.
+#include <array>
 #include <cstdint>
+#include <memory>
+#include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
-#include "engine/multires_volume.h"
+#include "engine/hierarchy.h"
 #include "engine/progress.h"
 #include "engine/store_layout.h"
 #include "io/store_format.h"
@@ -14,7 +19,7 @@ namespace isotope {
 
 class StoreReader {
  public:
-  // Reads and checks the header and the directory. Throws IoError naming the file.
+  // Reads and checks the header. Throws IoError naming the file.
   explicit StoreReader(const std::string& path);
   ~StoreReader();
   StoreReader(const StoreReader&) = delete;
@@ -23,35 +28,38 @@ class StoreReader {
   const std::string& path() const { return path_; }
   const StoreHeader& header() const { return header_; }
   const StoreLayout& layout() const { return layout_; }
-  const std::vector<BrickEntry>& directory() const { return directory_; }
   uint64_t file_bytes() const { return file_bytes_; }
+  // Where the bricks end and the directories begin.
+  uint64_t brick_area_end() const { return area_end_; }
 
-  // Brick `index` of the directory, checked and decoded. Throws IoError naming the brick.
-  BrickContents read_brick(int64_t index) const;
-  // Only the values the brick stores (band 0: the (T+4)^3 box with its halo, x fastest; other
-  // bands: T^3 in Morton order), without rebuilding band 0's records.
-  std::vector<float> read_stored_values(int64_t index) const;
-  // Asks the kernel to start reading what follows brick `index` in the file (the next bricks of
-  // its band in Morton order, i.e. traversal order), about `bricks` bricks' worth, in the
-  // background: a hint that costs no thread and pays when the file is not in the page cache.
-  void prefetch_after(int64_t index, int bricks) const;
+  // Brick `index` of the directory order (engine/store_layout.h). Loads and checks its band's
+  // directory on first use; throws IoError naming the file when that fails.
+  const BrickEntry& entry(int64_t index) const;
+  // Reads the brick's sections that `which` names with as few preads as they take, checks and
+  // decodes them into `out` (whose arrays for those sections must be present; values into
+  // `values`). Returns the bytes read. Throws IoError naming the brick.
+  uint64_t read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out, float* values) const;
+  // Asks the kernel to start reading those sections in the background: a hint that costs no
+  // thread and pays when the file is not in the page cache.
+  void prefetch(int64_t index, const std::array<bool, kSections>& which) const;
   // "FILE: brick 12 (band 0, brick 1 0 0)"
   std::string describe_brick(int64_t index) const;
   // Band and brick coordinates of a directory index.
   std::pair<int, Box3> locate_brick(int64_t index) const;
 
-  // The whole store as an in-memory volume, ready for extract(). Throws IoError.
-  MultiresVolume load(const ProgressCallback& progress = {}) const;
-
  private:
-  std::vector<uint8_t> read_compressed(int64_t index) const;
+  const std::vector<BrickEntry>& band_directory(int band) const;
 
   std::string path_;
   int fd_ = -1;
-  uint64_t file_bytes_ = 0;
+  uint64_t file_bytes_ = 0, area_end_ = 0;
   StoreHeader header_;
   StoreLayout layout_;
-  std::vector<BrickEntry> directory_;
+  struct LazyDirectory {
+    std::mutex mutex;
+    std::shared_ptr<const std::vector<BrickEntry>> entries;
+  };
+  std::unique_ptr<LazyDirectory[]> directories_;
 };
 
 // True when PATH is a readable file that starts with the store's magic number.
@@ -61,7 +69,7 @@ bool is_store_file(const std::string& path);
 // "Verification"). Throws IoError naming the first problem.
 struct VerifyStats {
   int64_t bricks = 0;
-  uint64_t compressed_bytes = 0, raw_bytes = 0;
+  uint64_t compressed_bytes = 0;
 };
 VerifyStats verify_store(const std::string& path, const ProgressCallback& progress = {});
 

@@ -32,10 +32,11 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-constexpr int64_t kBudgetMb = 8;
+constexpr int64_t kBudgetMb = 2;
 constexpr int64_t kHugeBudgetMb = 4096;  // holds every brick an extraction reaches: nothing evicted
-// 385^3 uint16: a 114 MB raw volume, a 53 MiB store (6.6x the budget) whose bricks reached at eps 0
-// decode to 750 MiB. Generate, convert and the ten extractions take about a minute on 2 cores.
+// 385^3 uint16: a 114 MB raw volume, a store many times the budget whose bricks reached decode to
+// tens (coarse) or hundreds (eps 0) of MiB. Generate, convert and the ten extractions take under a
+// minute on 2 cores.
 constexpr int64_t kSize = 385;
 // In the store's codes (uint16: the field's range over 0..65535). About 1/60 of the eps-0
 // triangles, while the traversal still reaches a few hundred bricks: the run where the mesh is
@@ -44,15 +45,14 @@ constexpr double kCoarseEps = 256;
 
 // What a paged extraction may hold beyond the budget, in decoded bricks (io/brick_cache.h: "the
 // memory in use stays within the budget plus those few bricks per thread"):
-//  - every PagedVolume::Reader pins its last 16 bricks (io/paged_volume.h, Reader::pinned_),
+//  - every PagedVolume::Pager pins its last 32 bricks (io/paged_volume.h, Pager::pinned_),
 //    evicted or not; one reader per running piece (plus, counted here to be safe, the top-level
 //    traversal's, which lets go before the pieces run). Keep this equal to the size of pinned_: raising it raises what a
 //    paged extraction may hold beyond --cache-mb, and this test is where that should show;
-constexpr int64_t kPinnedPerReader = 16;
-//  - per thread, the brick being decoded before its admission, and the thread's band-0 tile
-//    scratch kept for reuse (StoreReader::read_brick's thread_local BandTile::Buffers: a 37^3
-//    window of a 4-byte value and two 36-byte records per node, 3.9 MB, i.e. 3.5 brick sizes).
-constexpr int64_t kDecodePerThread = 5;
+constexpr int64_t kPinnedPerReader = 32;
+//  - per thread, the brick being decoded before its admission, and the thread's decode scratch
+//    kept for reuse (io/store_format.cpp, decode_section: the inflated section and one field).
+constexpr int64_t kDecodePerThread = 2;
 // The output mesh is 12 bytes per vertex and 12 per triangle (mesh_bytes), but the peak is at the
 // weld (engine/piece_weld.cpp), which holds at once: the pieces' meshes and their 8-byte edge key
 // per vertex (vertices on piece boundaries repeated, ~15% here; vectors grown by doubling), the

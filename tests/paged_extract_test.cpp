@@ -22,7 +22,7 @@
 #include "engine/extract.h"
 #include "engine/fields.h"
 #include "engine/mesh_topology.h"
-#include "engine/multires_volume.h"
+#include "engine/hierarchy.h"
 #include "io/box_reader.h"
 #include "io/brick_cache.h"
 #include "io/io_error.h"
@@ -134,15 +134,16 @@ PagedRun run_paged(const StoreReader& store, uint64_t budget, const ExtractOptio
   return r;
 }
 
-// Decoded sizes of a store's bricks as the cache counts them: all of them, and the largest.
+// Decoded sizes of a store's bricks as the cache counts them, every field decoded: all of them,
+// and the largest.
 struct DecodedSizes {
   uint64_t total = 0, largest = 0;
 };
 DecodedSizes decoded_sizes(const StoreReader& store) {
   BrickCache cache(store, kHugeBudget);  // nothing is evicted: the peak grows by each brick's size
   DecodedSizes d;
-  for (int64_t i = 0; i < static_cast<int64_t>(store.directory().size()); ++i) {
-    cache.get(i);
+  for (int64_t i = 0; i < store.layout().brick_count(); ++i) {
+    cache.require(*cache.get(i), i, RecordFields{true, true, true, true});
     const uint64_t now = cache.stats().peak_bytes;
     d.largest = std::max(d.largest, now - d.total);
     d.total = now;
@@ -178,7 +179,7 @@ class PagedEqualsInMemory : public PagedTest {
   // Compares every combination of `sweep` on a store of `v` with `bits`, through `budget`'s cache
   // (one cache for the whole sweep); returns the number of comparisons.
   int compare(const std::string& name, const Volume& v, int bits, uint64_t budget, const Sweep& sweep) {
-    const MultiresVolume memory = MultiresVolume::build(v);
+    const Hierarchy memory = Hierarchy::build(v);
     const auto [lo, hi] = value_range(v);
     const StoreReader store(convert(v, name + std::to_string(bits), bits));
     BrickCache cache(store, budget);
@@ -203,10 +204,8 @@ class PagedEqualsInMemory : public PagedTest {
     EXPECT_GT(nonempty, compared * 3 / 4) << name;
     const BrickCacheStats stats = cache.stats();
     EXPECT_GT(stats.bricks_read, 0) << name;
-    if (budget == kHugeBudget) {  // each brick read at most once whole, and band 0's once as halo values
-      int64_t band0 = 0;
-      for (size_t i = 0; i < store.directory().size(); ++i) band0 += store.locate_brick(static_cast<int64_t>(i)).first == 0;
-      EXPECT_LE(stats.bricks_read, static_cast<int64_t>(store.directory().size()) + band0) << name;
+    if (budget == kHugeBudget) {  // each brick read at most once
+      EXPECT_LE(stats.bricks_read, store.layout().brick_count()) << name;
     }
     return compared;
   }
@@ -216,19 +215,19 @@ class PagedEqualsInMemory : public PagedTest {
   const std::vector<ErrorIndicator> both_errors_ = {ErrorIndicator::bound, ErrorIndicator::surplus};
 };
 
-// Odd dimensions, brick bits 2 and 5, every combination (simplify too), through a generous cache and through
-// the smallest one, and through the smallest with brick bits 3 too (the 5-bit stores of these
+// Odd dimensions, brick bits 3 and 5, every combination (simplify too), through a generous cache and through
+// the smallest one, and through the smallest with brick bits 4 too (the 5-bit stores of these
 // volumes fit within the cache's floor).
 TEST_F(PagedEqualsInMemory, SyntheticVolumesBitForBit) {
   const Volume noise = as_raw(testing::crop(generate_noise(40, 11), {37, 29, 23}));
   const Volume algebraic = as_raw(testing::crop(generate_algebraic(40, {5.0 / 32, 3.0 / 32, 0}), {33, 40, 35}));
   const std::vector<double> eps = {0.0, 0.01, 0.2};
   int compared = 0;
-  for (int bits : {2, 5}) {
+  for (int bits : {3, 5}) {
     compared += compare("noise", noise, bits, kHugeBudget, {{-0.3f, 0.0f, 0.25f}, eps, with_simplify_, both_errors_});
     compared += compare("algebraic", algebraic, bits, kHugeBudget, {{0.0f, 0.1f}, eps, with_simplify_, both_errors_});
   }
-  for (int bits : {2, 3, 5}) {
+  for (int bits : {3, 4, 5}) {
     compared += compare("noise", noise, bits, kTinyBudget, {{-0.3f, 0.0f, 0.25f}, eps, all_modes_, both_errors_});
     compared += compare("algebraic", algebraic, bits, kTinyBudget, {{0.0f, 0.1f}, eps, all_modes_, both_errors_});
   }
@@ -236,7 +235,7 @@ TEST_F(PagedEqualsInMemory, SyntheticVolumesBitForBit) {
 }
 
 // The four shared volumes: every combination through a generous cache (default bricks); through
-// the smallest cache on brick bits 2, where pieces of the traversal decode their bricks afresh
+// the smallest cache on brick bits 3, where pieces of the traversal decode their bricks afresh
 // (slow on these sizes), one isovalue and one error indicator.
 TEST_F(PagedEqualsInMemory, SharedVolumesBitForBit) {
   int compared = 0;
@@ -245,7 +244,7 @@ TEST_F(PagedEqualsInMemory, SharedVolumesBitForBit) {
     compared += compare(s.name, v, 5, kHugeBudget,
                         {{s.isovalues[0], s.isovalues[1], s.isovalues[2]}, {0.0, 0.01, 0.2}, all_modes_, both_errors_});
     compared +=
-        compare(s.name, v, 2, kTinyBudget, {{s.isovalues[1]}, {0.0, 0.01, 0.2}, all_modes_, {ErrorIndicator::bound}});
+        compare(s.name, v, 3, kTinyBudget, {{s.isovalues[1]}, {0.0, 0.01, 0.2}, all_modes_, {ErrorIndicator::bound}});
   }
   EXPECT_EQ(compared, 4 * (54 + 9));
 }
@@ -255,7 +254,7 @@ TEST_F(PagedEqualsInMemory, SharedVolumesBitForBit) {
 // and statistics too; and the cache's peak within its guarantee (see test 6) on every run.
 void expect_same_bytes(const std::string& name, const Volume& v, float iso, const StoreReader& store,
                        const std::vector<size_t>& thread_counts = {1, 2, 4, 8}) {
-  const MultiresVolume memory = MultiresVolume::build(v);
+  const Hierarchy memory = Hierarchy::build(v);
   const auto [lo, hi] = value_range(v);
   const DecodedSizes sizes = decoded_sizes(store);
   ASSERT_GT(sizes.total / 8, sizes.largest) << name << ": an eighth of the store must not hold everything";
@@ -395,7 +394,7 @@ TEST_F(PagedExtract, FocusIsFullResolutionAtItsPoint) {
   // 65^3: the lattice is the data box, so no tetrahedron is clipped and a refinement never loses
   // triangles (a bisection never lowers the count of marching tetrahedra's triangles).
   const Volume v = as_raw(generate_noise(65, 3));
-  const MultiresVolume memory = MultiresVolume::build(v);
+  const Hierarchy memory = Hierarchy::build(v);
   const StoreReader store(convert(v, "noise", 4));
   const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
   BrickCache cache(store, decoded_sizes(store).total / 8);
@@ -492,7 +491,7 @@ TEST_F(PagedExtract, TriangleBudgetTakesTheFinestEpsThatFits) {
   };
   int budgets_run = 0, thrown = 0;
   for (const Case& c : cases) {
-    const MultiresVolume memory = MultiresVolume::build(c.volume);
+    const Hierarchy memory = Hierarchy::build(c.volume);
     const StoreReader store(convert(c.volume, "budget", 4, c.quantize_bits));
     BrickCache cache(store, kHugeBudget);
     const PagedVolume paged(cache);
@@ -591,9 +590,8 @@ TEST_F(PagedExtract, CacheReadsEachBrickOnceAndStaysNearItsBudget) {
     const std::string file = convert(c.volume, c.name, c.bits);
     const StoreReader store(file);
     const DecodedSizes sizes = decoded_sizes(store);
-    const auto bricks = static_cast<int64_t>(store.directory().size());
-    uint64_t compressed = 0;
-    for (const BrickEntry& e : store.directory()) compressed += e.compressed_bytes;
+    const int64_t bricks = store.layout().brick_count();
+    const uint64_t compressed = store.brick_area_end() - kHeaderBytes;
     ASSERT_LE(compressed, std::filesystem::file_size(file));
     ExtractOptions o;
     o.iso = c.iso;
@@ -642,7 +640,7 @@ void PagedTest::expect_corrupt_bricks_named(size_t stride, const std::vector<std
   std::vector<BrickEntry> directory;
   {
     const StoreReader store(good);
-    directory = store.directory();
+    for (int64_t i = 0; i < store.layout().brick_count(); ++i) directory.push_back(store.entry(i));
     expected = run_paged(store, kHugeBudget, o).mesh;
     budgeted.max_triangles = static_cast<int64_t>(expected.triangles.size()) / 2;
     expected_budgeted = run_paged(store, kHugeBudget, budgeted).mesh;
@@ -653,7 +651,7 @@ void PagedTest::expect_corrupt_bricks_named(size_t stride, const std::vector<std
   for (size_t i = 0; i < directory.size(); i += stride, ++tried) {
     const BrickEntry& e = directory[i];
     auto bytes = good_bytes;
-    bytes[e.offset + rng() % e.compressed_bytes] ^= static_cast<uint8_t>(1 + rng() % 255);
+    bytes[e.offset + rng() % e.bytes[0]] ^= static_cast<uint8_t>(1 + rng() % 255);  // the core, which mode none reads
     testing::write_file(bad, "", bytes);
     const StoreReader store(bad);
     const std::string name = "brick " + std::to_string(i) + " ";

@@ -249,7 +249,7 @@ Command add_extract_command(CLI::App& app) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--cache-mb", a->cache_mb,
-                  "Store input: memory for decoded bricks, in MB, at least 8 bricks (~11 MB); the store may be far larger")
+                  "Store input: memory for decoded bricks, in MB (at least 16 bricks, under 1 MB); the store may be far larger")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_option("--focus", a->focus,

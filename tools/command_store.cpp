@@ -13,7 +13,10 @@
 #include <optional>
 #include <string>
 
+#include "engine/traversal.h"
 #include "io/box_reader.h"
+#include "io/brick_cache.h"
+#include "io/paged_volume.h"
 #include "io/io_error.h"
 #include "io/raw_reader.h"
 #include "io/store_reader.h"
@@ -30,6 +33,7 @@ struct ConvertArgs {
   int threads = 0;
   int zstd_level = 3;
   int quantize = 0;
+  int brick_bits = StoreLayout::kDefaultBrickBits;
   bool quiet = false;
 };
 
@@ -52,6 +56,7 @@ int run_convert(const ConvertArgs& a) {
   options.memory_mb = a.memory_mb;
   options.zstd_level = a.zstd_level;
   options.quantize_bits = a.quantize;
+  options.brick_bits = a.brick_bits;
   if (progress_enabled(a.quiet)) options.progress = progress_bar("converting");
   const InterruptGuard guard;  // stops the convert between tiles; its temporary output is removed
   options.cancel = &InterruptGuard::flag();
@@ -87,9 +92,6 @@ nlohmann::ordered_json info_json(const StoreReader& store) {
   j["file_bytes"] = store.file_bytes();
   j["input_bytes"] = h.input_bytes;
   j["size_ratio"] = static_cast<double>(store.file_bytes()) / static_cast<double>(h.input_bytes);
-  uint64_t raw = 0;
-  for (const BrickEntry& e : store.directory()) raw += e.raw_bytes;
-  j["compression_ratio"] = static_cast<double>(raw) / static_cast<double>(store.header().directory_offset - kHeaderBytes);
   j["zstd_level"] = h.zstd_level;
   j["value_range"] = {h.value_min, h.value_max};
   j["quantize_bits"] = h.quantize_bits;
@@ -97,19 +99,30 @@ nlohmann::ordered_json info_json(const StoreReader& store) {
   j["critical_paper"] = {{"cube", h.critical_paper[0]}, {"octahedron", h.critical_paper[1]}, {"diamond", h.critical_paper[2]}};
   j["critical_exact"] = {{"cube", h.critical_exact[0]}, {"octahedron", h.critical_exact[1]}, {"diamond", h.critical_exact[2]}};
   // The largest simplification weights, in data units: a delta above one drops every critical
-  // point (the none mesh), so they bound what --delta is worth trying.
+  // point (the none mesh), so they bound what --delta is worth trying. The record of the roots'
+  // refinement vertex, the lattice's centre, is saturated over every vertex below it: all of them.
   std::array<float, 3> weights{0, 0, 0};
-  for (const BrickEntry& e : store.directory())
-    for (size_t w = 0; w < 3; ++w) weights[w] = std::max(weights[w], e.summary.max_weight[w]);
+  if (layout.lattice().k >= 1) {
+    BrickCache cache(store, 0);
+    const PagedVolume volume(cache);
+    PagedVolume::Reader reader = volume.reader();
+    const int64_t c = layout.lattice().n / 2;
+    weights = reader.topology(reader.locate(traversal::pack({c, c, c})), RecordFields{false, false, true, false}).weight;
+  }
   const double code = h.quantize_bits != 0 ? h.value_scale : 1.0;
   j["largest_weights"] = {{"interval", weights[0] * code}, {"gradient", weights[1] * code * code}, {"size", weights[2]}};
+  // Where the bytes are: per band, and per section (docs/FORMAT.md): what each mode reads.
   nlohmann::ordered_json bands = nlohmann::ordered_json::array();
+  std::array<uint64_t, kSections> sections{};
   for (const Band& b : layout.bands()) {
-    uint64_t bytes = 0;
+    std::array<uint64_t, kSections> mine{};
     for (int64_t i = b.first_brick; i < b.first_brick + b.brick_count(); ++i)
-      bytes += store.directory()[static_cast<size_t>(i)].compressed_bytes;
+      for (int k = 0; k < kSections; ++k) mine[static_cast<size_t>(k)] += store.entry(i).bytes[static_cast<size_t>(k)];
+    uint64_t bytes = 0;
+    for (int k = 0; k < kSections; ++k) bytes += mine[static_cast<size_t>(k)], sections[static_cast<size_t>(k)] += mine[static_cast<size_t>(k)];
     bands.push_back({{"scale", b.scale}, {"nodes", b.nodes}, {"bricks", b.brick_count()}, {"bytes", bytes}});
   }
+  j["section_bytes"] = {{"core", sections[0]}, {"exact", sections[1]}, {"weights", sections[2]}, {"extra", sections[3]}};
   j["band_detail"] = bands;
   return j;
 }
@@ -125,9 +138,12 @@ void print_info(const nlohmann::ordered_json& j) {
   std::printf("hierarchy    lattice %lld^3, %d levels, %zu bands\n", j["lattice_side"].get<long long>(),
               j["levels"].get<int>(), j["bands"].get<size_t>());
   std::printf("bricks       %lld of %lld^3 nodes\n", j["bricks"].get<long long>(), j["brick_nodes"].get<long long>());
-  std::printf("size         %.2f MB, %.3fx the input (%.2f MB); zstd level %d, compression %.2fx\n",
-              j["file_bytes"].get<double>() / 1e6, j["size_ratio"].get<double>(), j["input_bytes"].get<double>() / 1e6,
-              j["zstd_level"].get<int>(), j["compression_ratio"].get<double>());
+  std::printf("size         %.2f MB, %.3fx the input (%.2f MB); zstd level %d\n", j["file_bytes"].get<double>() / 1e6,
+              j["size_ratio"].get<double>(), j["input_bytes"].get<double>() / 1e6, j["zstd_level"].get<int>());
+  const auto& sb = j["section_bytes"];
+  std::printf("sections     core %.2f MB, exact intervals %.2f MB, weights %.2f MB, paper intervals and surplus %.2f MB\n",
+              sb["core"].get<double>() / 1e6, sb["exact"].get<double>() / 1e6, sb["weights"].get<double>() / 1e6,
+              sb["extra"].get<double>() / 1e6);
   std::printf("values       %g .. %g", j["value_range"][0].get<double>(), j["value_range"][1].get<double>());
   if (j["quantize_bits"].get<int>() != 0)
     std::printf(", quantized to %d bits (step %g)", j["quantize_bits"].get<int>(), j["quantization_step"].get<double>());
@@ -164,6 +180,12 @@ Command add_convert_command(CLI::App& app) {
                   "added to the error indicators (default: lossless)")
       ->check(CLI::IsMember({8, 16}))
       ->type_name("BITS");
+  cmd->add_option("--brick-bits", a->brick_bits,
+                  "Bricks of 2^B nodes per axis: smaller bricks read less around a coarse surface, larger ones make "
+                  "a smaller directory")
+      ->check(CLI::Range(kMinBrickBits, kMaxBrickBits))
+      ->capture_default_str()
+      ->type_name("B");
   cmd->add_option("--dims", a->dims, "Raw input: nodes per axis, e.g. 301x324x56 (overrides the file name)")->type_name("XxYxZ");
   cmd->add_option("--type", a->type, "Raw input: value type (overrides the file name)")
       ->check(CLI::IsMember({"uint8", "uint16", "int16", "float32", "float64"}));
@@ -202,9 +224,8 @@ Command add_verify_command(CLI::App& app) {
     if (*threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(*threads));
     const VerifyStats s = verify_store(*path, progress_enabled(*quiet) ? progress_bar("verifying") : ProgressCallback{});
     if (!*quiet)
-      std::printf("%s: ok, %lld bricks, %.2f MB compressed, %.2f MB raw\n", path->c_str(),
-                  static_cast<long long>(s.bricks), static_cast<double>(s.compressed_bytes) / 1e6,
-                  static_cast<double>(s.raw_bytes) / 1e6);
+      std::printf("%s: ok, %lld bricks, %.2f MB\n", path->c_str(), static_cast<long long>(s.bricks),
+                  static_cast<double>(s.compressed_bytes) / 1e6);
     return 0;
   };
 }

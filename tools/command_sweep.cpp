@@ -138,6 +138,14 @@ int run_sweep(const SweepArgs& a) {
   add_mode(TopologyMode::none, 0);
   add_mode(TopologyMode::preserve, 0);
   for (double d : deltas) add_mode(TopologyMode::simplify, d);
+  RecordFields fields{false, false, false, false};
+  for (const SweepRow& r : plan) {
+    ExtractOptions o = base;
+    o.topology = r.mode;
+    o.eps = r.eps;
+    fields = fields | fields_for(o);
+  }
+  source.prepare(fields);
   for (size_t i = 0; i < plan.size(); ++i) {
     SweepRow& r = plan[i];
     ExtractOptions o = base;

@@ -57,13 +57,15 @@ void ExtractionInput::open_volume(const Spec& spec) {
   }
 }
 
-const MultiresVolume& ExtractionInput::hierarchy() const {
+const Hierarchy& ExtractionInput::hierarchy(const RecordFields& fields) const {
   const std::lock_guard<std::mutex> lock(build_mutex_);
-  if (memory_) return *memory_;
+  if (memory_ && memory_->fields().covers(fields)) return *memory_;
+  const RecordFields all = memory_ ? memory_->fields() | fields : fields;
+  memory_.reset();
   const auto start = std::chrono::steady_clock::now();
-  memory_ = std::make_unique<MultiresVolume>(
-      MultiresVolume::build(*volume_, progress_ ? progress_bar("preprocessing") : ProgressCallback{}));
-  preprocess_seconds_ = seconds_since(start);
+  memory_ = std::make_unique<Hierarchy>(Hierarchy::build(*volume_, all, StoreLayout::kDefaultBrickBits,
+                                                         progress_ ? progress_bar("preprocessing") : ProgressCallback{}));
+  preprocess_seconds_ += seconds_since(start);
   if (progress_) {
     std::fprintf(stderr, "isotope: preprocessed (lattice %lld^3) in %.3f s\n",
                  static_cast<long long>(memory_->lattice().side), preprocess_seconds_);
@@ -71,10 +73,14 @@ const MultiresVolume& ExtractionInput::hierarchy() const {
   return *memory_;
 }
 
+void ExtractionInput::prepare(const RecordFields& fields) const {
+  if (volume_) hierarchy(fields);
+}
+
 Mesh ExtractionInput::extract(const ExtractOptions& options, ExtractStats* stats) const {
   if (paged_) return isotope::extract(*paged_, options, stats);
   if (!needs_hierarchy(options)) return isotope::extract(*volume_, options, stats);
-  return isotope::extract(hierarchy(), options, stats);
+  return isotope::extract(hierarchy(fields_for(options)), options, stats);
 }
 
 void ExtractionInput::describe(ExtractionRun& run) const {

@@ -9,7 +9,7 @@
 #include <string>
 
 #include "engine/extract.h"
-#include "engine/multires_volume.h"
+#include "engine/hierarchy.h"
 #include "io/brick_cache.h"
 #include "io/paged_volume.h"
 #include "io/store_reader.h"
@@ -34,6 +34,9 @@ class ExtractionInput {
   explicit ExtractionInput(const Spec& spec);
 
   Mesh extract(const ExtractOptions& options, ExtractStats* stats = nullptr) const;
+  // Builds now what extractions reading these fields will need (a volume's hierarchy), so that a
+  // series of them builds it once (a store needs nothing).
+  void prepare(const RecordFields& fields) const;
   // What the run's report says of the input: dimensions, spacing, lattice, preprocessing and its
   // timings, and for a store the cache's budget and what it has read so far.
   void describe(ExtractionRun& run) const;
@@ -41,14 +44,16 @@ class ExtractionInput {
  private:
   void open_store(const Spec& spec);
   void open_volume(const Spec& spec);
-  const MultiresVolume& hierarchy() const;  // built on first use
+  // Built on first use, with the fields asked for; built again with more when a later extraction
+  // reads more.
+  const Hierarchy& hierarchy(const RecordFields& fields) const;
 
   std::unique_ptr<StoreReader> store_;
   std::unique_ptr<BrickCache> cache_;
   std::unique_ptr<PagedVolume> paged_;
   std::unique_ptr<Volume> volume_;
   mutable std::mutex build_mutex_;
-  mutable std::unique_ptr<MultiresVolume> memory_;
+  mutable std::unique_ptr<Hierarchy> memory_;
   bool progress_ = false;
   int64_t cache_mb_ = 0;
   std::array<int64_t, 3> dims_{0, 0, 0};
