@@ -15,7 +15,8 @@ BrickIndexer::BrickIndexer(const StoreLayout& layout) : bits_(layout.brick_bits(
   mask_ = layout.brick_width() - 1;
   nodes_ = layout.brick_nodes();
   for (int64_t i = 0; i <= mask_; ++i) spread_[static_cast<size_t>(i)] = spread_bits_3(i);
-  for (const Band& b : layout.bands()) band_[static_cast<size_t>(b.scale)] = &b;
+  for (const Band& b : layout.bands())
+    band_[static_cast<size_t>(b.scale)] = {b.first_brick, b.bricks[0], b.bricks[1], b.nodes};
 }
 
 void store_record(const BrickView& brick, uint32_t m, const Record& r) {

@@ -69,16 +69,26 @@ class BrickIndexer {
   // Brick index (directory order) and Morton code of node g of band j (G_j units, inside the grid).
   int64_t locate(int j, int64_t gx, int64_t gy, int64_t gz, uint32_t* m) const {
     const int bits = bits_;
-    *m = spread_[gx & mask_] | spread_[gy & mask_] << 1 | spread_[gz & mask_] << 2;
-    const Band& b = *band_[static_cast<size_t>(j)];
-    return b.first_brick + ((gz >> bits) * b.bricks[1] + (gy >> bits)) * b.bricks[0] + (gx >> bits);
+    *m = spread_[static_cast<size_t>(gx & mask_)] | spread_[static_cast<size_t>(gy & mask_)] << 1 |
+         spread_[static_cast<size_t>(gz & mask_)] << 2;
+    const BandInfo& b = band_[static_cast<size_t>(j)];
+    return b.first_brick + ((gz >> bits) * b.bricks_y + (gy >> bits)) * b.bricks_x + (gx >> bits);
+  }
+  // Whether node g of band j lies in the band's grid.
+  bool in_grid(int j, int64_t gx, int64_t gy, int64_t gz) const {
+    const BandInfo& b = band_[static_cast<size_t>(j)];
+    return gx < b.nodes[0] && gy < b.nodes[1] && gz < b.nodes[2];
   }
 
  private:
+  struct BandInfo {
+    int64_t first_brick = 0, bricks_x = 0, bricks_y = 0;
+    std::array<int64_t, 3> nodes{};
+  };
   int bits_ = 0;
   int64_t mask_ = 0, nodes_ = 0;
   std::array<uint32_t, 256> spread_{};
-  std::array<const Band*, 24> band_{};
+  std::array<BandInfo, 24> band_{};
 };
 
 // The hierarchy built in memory, every brick present.
@@ -118,6 +128,7 @@ class Hierarchy {
             weights_ ? weights_.get() + at : nullptr};
   }
   float* values(int64_t index) { return values_.get() + index * indexer_->brick_nodes(); }
+  const float* values_data() const { return values_.get(); }
   const uint64_t* bounds_data() const { return bounds_.get(); }
   const uint16_t* surplus_data() const { return surplus_.get(); }
   const uint32_t* exact_data() const { return exact_.get(); }
@@ -161,9 +172,8 @@ class CompactLookup {
       : layout_(layout), indexer_(indexer), bricks_(std::move(bricks)) {}
 
   float value(const Coord& c, int j) {
-    const Band& band = layout_.band(j);
     Coord q = c;
-    if ((c[0] >> j) >= band.nodes[0] || (c[1] >> j) >= band.nodes[1] || (c[2] >> j) >= band.nodes[2]) {
+    if (!indexer_.in_grid(j, c[0] >> j, c[1] >> j, c[2] >> j)) [[unlikely]] {
       for (int a = 0; a < 3; ++a) q[a] = std::min(c[a], layout_.dims()[a] - 1);
       j = scale_of(q, layout_.lattice());
     }
@@ -223,7 +233,7 @@ namespace hierarchy_internal {
 struct MemoryBricks {
   const Hierarchy* h;
   int64_t brick_nodes;
-  const float* values(int64_t index) const { return h->brick(index).values; }
+  const float* values(int64_t index) const { return h->values_data() + index * brick_nodes; }
   uint64_t bounds_word(int64_t index, uint32_t m) const { return h->bounds_data()[index * brick_nodes + m]; }
   Bf16 surplus(int64_t index, uint32_t m) const { return h->surplus_data()[index * brick_nodes + m]; }
   DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read) const {

@@ -72,7 +72,9 @@ class MeshBuilder {
   float iso_;
   int64_t key_bricks_;  // bricks per axis of the doubled lattice
   std::array<double, 3> origin_, spacing_;
-  EdgeVertexMap map_;
+  // Small at first: the traversal makes a builder per piece, hundreds per extraction, most of
+  // them with a few hundred vertices; a table sized for thousands cost more to clear than to fill.
+  EdgeVertexMap map_{64};
   Mesh mesh_;
   bool keep_keys_ = false;
   std::vector<uint64_t> keys_;

@@ -22,6 +22,8 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
+#include <utility>
 #include <vector>
 
 #include "engine/kuhn.h"
@@ -271,25 +273,32 @@ class Traversal {
   // before any is read, so their cache misses overlap instead of queuing one behind the other.
   // The same tetrahedra stop and are emitted as in visit(), in another order.
   void visit_by_levels(const PackedTet& t, int level, bool positive) {
-    frontier_.assign(1, Child{t, positive});
-    for (int l = level; !frontier_.empty(); ++l) {
-      next_.clear();
-      handles_.resize(frontier_.size());
+    frontier_.reserve(1);
+    frontier_[0] = Child{t, positive};
+    size_t n = 1;
+    for (int l = level; n > 0; ++l) {
+      handles_.reserve(n);
+      next_.reserve(2 * n);  // written by index: a refined tetrahedron has two children
       if (l < lattice_.max_level())
-        for (size_t i = 0; i < frontier_.size(); ++i) {
+        for (size_t i = 0; i < n; ++i) {
           handles_[i] = reader_.locate((frontier_[i].tet[0] + frontier_[i].tet[1]) >> 1);
           reader_.prefetch(handles_[i]);
         }
-      for (size_t i = 0; i < frontier_.size(); ++i) {
+      size_t next = 0;
+      for (size_t i = 0; i < n; ++i) {
         const Child& c = frontier_[i];
         switch (step(c.tet, l, handles_[i])) {
           case Step::cull: break;
           case Step::stop: emit(c.tet, l, c.positive); break;
-          case Step::refine:
-            for (const Child& child : bisect(c.tet, l, c.positive)) next_.push_back(child);
+          case Step::refine: {
+            const auto children = bisect(c.tet, l, c.positive);
+            next_[next++] = children[0];
+            next_[next++] = children[1];
+          }
         }
       }
-      frontier_.swap(next_);
+      std::swap(frontier_, next_);
+      n = next;
     }
   }
 
@@ -312,10 +321,13 @@ class Traversal {
   void emit(const PackedTet& t, int level, bool positive) {
     if (pieces_) return pieces_->push_back({t, level, positive, true});
     ++tets_emitted_;
-    const Tet c{unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])};
     const int j = band_of(level);
-    builder_.add_tet(c, {reader_.value(c[0], j), reader_.value(c[1], j), reader_.value(c[2], j), reader_.value(c[3], j)},
-                     positive);
+    const std::array<float, 4> f{value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)};
+    // Most stopping tetrahedra lie in a diamond whose range holds the isovalue but are not cut
+    // themselves: settle that before building their corners.
+    const int cut = triangles_of(f, rule_.options().iso);
+    if (cut == 0) return;
+    builder_.add_tet({unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])}, f, positive);
   }
 
   typename Source::Reader reader_;
@@ -326,8 +338,23 @@ class Traversal {
   bool clip_ = false;  // the data box is smaller than the lattice
   int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;
   std::vector<Piece>* pieces_ = nullptr;  // while splitting
-  std::vector<Child> frontier_, next_;     // visit_by_levels
-  std::vector<Handle> handles_;            // of frontier_
+  // An array that grows without initializing: the levels' tetrahedra are written before read.
+  template <class T>
+  class Scratch {
+   public:
+    void reserve(size_t n) {
+      if (n <= capacity_) return;
+      capacity_ = std::max(n, 2 * capacity_);
+      data_ = std::make_unique_for_overwrite<T[]>(capacity_);
+    }
+    T& operator[](size_t i) { return data_[i]; }
+
+   private:
+    std::unique_ptr<T[]> data_;
+    size_t capacity_ = 0;
+  };
+  Scratch<Child> frontier_, next_;  // visit_by_levels
+  Scratch<Handle> handles_;         // of frontier_
   int split_level_ = 0;
 };
 
