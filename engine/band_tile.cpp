@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cmath>
 #include <tuple>
 
 namespace isotope {
@@ -137,25 +138,101 @@ void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCount
   records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts);
 }
 
+void BandTile::find_constant_blocks() {
+  for (int a = 0; a < 3; ++a) blocks_[a] = (size_[a] + 3) / 4;
+  const auto count = static_cast<size_t>(blocks_[0] * blocks_[1] * blocks_[2]);
+  std::vector<float> lo(count, INFINITY), hi(count, -INFINITY);
+  auto block = [&](int64_t bx, int64_t by, int64_t bz) { return static_cast<size_t>((bz * blocks_[1] + by) * blocks_[0] + bx); };
+  for (int64_t z = 0; z < size_[2]; ++z)
+    for (int64_t y = 0; y < size_[1]; ++y) {
+      const float* row = values_.data() + (z * size_[1] + y) * size_[0];
+      for (int64_t x = 0; x < size_[0]; ++x) {
+        const size_t b = block(x >> 2, y >> 2, z >> 2);
+        lo[b] = std::min(lo[b], row[x]);
+        hi[b] = std::max(hi[b], row[x]);
+      }
+    }
+  constant_.assign(count, 0);
+  for (int64_t bz = 1; bz + 1 < blocks_[2]; ++bz)
+    for (int64_t by = 1; by + 1 < blocks_[1]; ++by)
+      for (int64_t bx = 1; bx + 1 < blocks_[0]; ++bx) {
+        const float c = lo[block(bx, by, bz)];
+        bool same = true;
+        for (int64_t dz = -1; dz <= 1 && same; ++dz)
+          for (int64_t dy = -1; dy <= 1 && same; ++dy)
+            for (int64_t dx = -1; dx <= 1 && same; ++dx) {
+              const size_t n = block(bx + dx, by + dy, bz + dz);
+              same = lo[n] == c && hi[n] == c;
+            }
+        constant_[block(bx, by, bz)] = same;
+      }
+}
+
 void BandTile::build(CriticalCounts& counts) {
   const Lattice& l = layout_.lattice();
   if (j_ >= l.k) return;  // the corners: no records
   const Band& band = layout_.band(j_);
+  // Band 0 where the values around a node are all one value c: its record is range [c, c], errors
+  // 0 (every surplus is 0), no critical interval (the exact rule needs v beyond both a and b; the
+  // paper's flags v an extremum, but its interval [c, c) is empty), weights 0; and so are its
+  // children's, which lie within one node of it and reach one node further. Only inside the data
+  // box's inner part, where no descendant reaches past the box (those are refined always).
+  const bool trivial = j_ == 0;
+  if (trivial) find_constant_blocks();
+  Box3 trivial_first{}, trivial_last{};
+  for (int a = 0; a < 3; ++a) trivial_first[a] = 3, trivial_last[a] = layout_.dims()[a] - 4;
   RecordBuilder<BandTile> builder(*this);
   CriticalCounts halo_counts = {{0, 0, 0}, {0, 0, 0}};  // halo nodes belong to (and are counted by) other tiles
-  // Finest first, as in MultiresVolume::build: edge midpoints, face centres, cube centres.
+  const int64_t h = int64_t{1} << j_;
+  // Finest first, as in MultiresVolume::build: edge midpoints, face centres, cube centres; each
+  // class of parities (which coordinates are odd) walked with stride 2. Per axis, the nodes whose
+  // records this window can compute (computable()), and those in the core and inside the data
+  // box, are ranges: fixed once the class is.
   for (int m = 1; m <= 3; ++m)
-    for (int64_t z = lo_[2]; z <= std::min(hi_[2], band.nodes[2] - 1); ++z)
-      for (int64_t y = lo_[1]; y <= std::min(hi_[1], band.nodes[1] - 1); ++y)
-        for (int64_t x = lo_[0]; x <= std::min(hi_[0], band.nodes[0] - 1); ++x) {
-          const int odd = static_cast<int>((x & 1) + (y & 1) + (z & 1));
-          if (odd != m || !computable({x, y, z}, m)) continue;
-          const bool core = x >= core_lo_[0] && x < core_hi_[0] && y >= core_lo_[1] && y < core_hi_[1] &&
-                            z >= core_lo_[2] && z < core_hi_[2];
-          CriticalCounts& c = core ? counts : halo_counts;
-          if (inside_data_box({x, y, z})) build_fast({x, y, z}, template_for({x, y, z}), c);
-          else builder.build({x << j_, y << j_, z << j_}, c);
+    for (int parity = 1; parity < 8; ++parity) {
+      const std::array<int64_t, 3> odd{parity & 1, parity >> 1 & 1, parity >> 2 & 1};
+      if (odd[0] + odd[1] + odd[2] != m) continue;
+      Box3 first, last, core_first, core_last, box_first, box_last;
+      bool empty = false;
+      for (int a = 0; a < 3; ++a) {
+        // Two steps along the odd axes of face and cube centres (their children one step away,
+        // and those children's own reach), one step otherwise.
+        const int64_t reach = (m >= 2 && odd[a]) ? 2 : 1;
+        int64_t lo = lo_[a] == 0 ? 0 : lo_[a] + reach;
+        int64_t hi = std::min(hi_[a] == top_ ? hi_[a] : hi_[a] - reach, band.nodes[a] - 1);
+        if ((lo & 1) != odd[a]) ++lo;
+        first[a] = lo;
+        last[a] = hi;
+        empty = empty || lo > hi;
+        core_first[a] = core_lo_[a], core_last[a] = core_hi_[a] - 1;
+        // inside_data_box: (g << j) - h >= 0 and (g << j) + h <= dims - 1
+        box_first[a] = (h + (int64_t{1} << j_) - 1) >> j_;
+        box_last[a] = (layout_.dims()[a] - 1 - h) >> j_;
+      }
+      if (empty) continue;
+      for (int64_t z = first[2]; z <= last[2]; z += 2)
+        for (int64_t y = first[1]; y <= last[1]; y += 2) {
+          const bool core_yz = y >= core_first[1] && y <= core_last[1] && z >= core_first[2] && z <= core_last[2];
+          const bool box_yz = y >= box_first[1] && y <= box_last[1] && z >= box_first[2] && z <= box_last[2];
+          const bool trivial_yz = trivial && y >= trivial_first[1] && y <= trivial_last[1] && z >= trivial_first[2] &&
+                                  z <= trivial_last[2];
+          for (int64_t x = first[0]; x <= last[0]; x += 2) {
+            if (trivial_yz && x >= trivial_first[0] && x <= trivial_last[0] &&
+                constant_[static_cast<size_t>((((z - lo_[2]) >> 2) * blocks_[1] + ((y - lo_[1]) >> 2)) * blocks_[0] +
+                                              ((x - lo_[0]) >> 2))]) {
+              const float c = node_value({x, y, z});
+              Record& r = records_[static_cast<size_t>(index({x, y, z}, size_))];
+              r = Record{};
+              r.bounds = {c, c, 0, 0};
+              continue;
+            }
+            const bool core = core_yz && x >= core_first[0] && x <= core_last[0];
+            CriticalCounts& c = core ? counts : halo_counts;
+            if (box_yz && x >= box_first[0] && x <= box_last[0]) build_fast({x, y, z}, template_for({x, y, z}), c);
+            else builder.build({x << j_, y << j_, z << j_}, c);
+          }
         }
+    }
 }
 
 }  // namespace isotope

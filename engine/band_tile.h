@@ -101,6 +101,11 @@ class BandTile {
   bool inside_data_box(const Box3& g) const;
   void build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts);
   DiamondTemplate templates_[64];
+  // Band 0: per 4^3 block of the window, whether every value within 4 nodes of it is one and the
+  // same (most of a CT scan's background). Such a block's records are known without computing.
+  void find_constant_blocks();
+  std::vector<uint8_t> constant_;  // per block: 1 when constant around it
+  Box3 blocks_{};
 
   const StoreLayout& layout_;
   int j_;

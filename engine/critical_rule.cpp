@@ -15,6 +15,9 @@ uint32_t sign_pattern(const DiamondValues& d, float t) {
 }
 
 IsoInterval paper_interval(const DiamondValues& d) {
+  // Every critical pattern has equal signs at a and b (tests/critical_table_test.cpp): most
+  // vertices of smooth data lie between their edge's ends and are settled without the table.
+  if ((d.fa > d.fv) != (d.fb > d.fv)) return {};
   // Relative to f(v) itself: a tie counts as '-', as it does for t = f(v) in marching tetrahedra.
   if (!is_critical_pattern(d.type, sign_pattern(d, d.fv))) return {};
   const bool a_plus = d.fa > d.fv, b_plus = d.fb > d.fv;

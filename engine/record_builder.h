@@ -11,6 +11,7 @@
 //   void store(const Coord&, const Record&);
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -24,7 +25,12 @@ namespace isotope {
 // Smallest float >= d, so that stored errors never under-state the exact ones.
 inline float round_up(double d) {
   float f = static_cast<float>(d);
-  if (static_cast<double>(f) < d) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  if (static_cast<double>(f) < d) {
+    // The next float up: for the non-negative finite floats errors and weights are, the next bit
+    // pattern (std::nextafter is a library call, and this runs for every record).
+    f = f >= 0 && f < std::numeric_limits<float>::max() ? std::bit_cast<float>(std::bit_cast<uint32_t>(f) + 1)
+                                                         : std::nextafter(f, std::numeric_limits<float>::infinity());
+  }
   return f;
 }
 

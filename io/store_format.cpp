@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
+#include <new>
 #include <span>
 
 #include "io/field_codec.h"
@@ -113,6 +115,20 @@ void set_field(const BrickView& b, float* values, Field f, uint32_t m, float v) 
 }
 
 bool is_bf16(Field f) { return f != Field::values && f != Field::bound; }
+
+// zstd contexts kept per thread: ZSTD_compress and ZSTD_decompress make and initialize a context
+// per call, which for small bricks cost more than the (de)compression itself (at level 3, hundreds
+// of KB of tables cleared per brick).
+ZSTD_CCtx* compression_context() {
+  thread_local const std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  if (!context) throw std::bad_alloc();
+  return context.get();
+}
+ZSTD_DCtx* decompression_context() {
+  thread_local const std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  if (!context) throw std::bad_alloc();
+  return context.get();
+}
 
 }  // namespace
 
@@ -258,30 +274,55 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
   return entries;
 }
 
-std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickView& brick,
+BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick) {
+  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  BrickFields out;
+  out.values.assign(brick.values, brick.values + nodes);
+  if (!stores_records(layout, band)) return out;
+  static constexpr Field kOrder[BrickFields::count] = {Field::lo,      Field::hi,       Field::bound, Field::exact_lo,
+                                                        Field::exact_hi, Field::w0,      Field::w1,    Field::w2,
+                                                        Field::paper_lo, Field::paper_hi, Field::surplus};
+  for (int f = 0; f < BrickFields::count; ++f)
+    for (uint32_t m = 0; m < nodes; ++m)
+      if ((m & 7) != 0) out.records[static_cast<size_t>(f)].push_back(get_field(brick, kOrder[f], m));
+  return out;
+}
+
+std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
                                                          int zstd_level) {
   const bool records = stores_records(layout, band);
-  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  auto field_of = [&](Field f) -> const std::vector<float>& {
+    switch (f) {
+      case Field::values: return brick.values;
+      case Field::lo: return brick.records[BrickFields::lo];
+      case Field::hi: return brick.records[BrickFields::hi];
+      case Field::bound: return brick.records[BrickFields::bound];
+      case Field::exact_lo: return brick.records[BrickFields::exact_lo];
+      case Field::exact_hi: return brick.records[BrickFields::exact_hi];
+      case Field::w0: return brick.records[BrickFields::w0];
+      case Field::w1: return brick.records[BrickFields::w1];
+      case Field::w2: return brick.records[BrickFields::w2];
+      case Field::paper_lo: return brick.records[BrickFields::paper_lo];
+      case Field::paper_hi: return brick.records[BrickFields::paper_hi];
+      case Field::surplus: return brick.records[BrickFields::surplus];
+    }
+    return brick.values;
+  };
   std::array<std::vector<uint8_t>, kSections> out;
-  std::vector<float> field;
-  std::vector<uint8_t> raw;
+  thread_local std::vector<uint8_t> raw, frame;
   for (int s = 0; s < kSections; ++s) {
     const auto fields = fields_of(static_cast<Section>(s), records);
     if (fields.empty()) continue;
     raw.clear();
-    for (const Field f : fields) {
-      field.clear();
-      for (uint32_t m = 0; m < nodes; ++m)
-        if (f == Field::values || (m & 7) != 0) field.push_back(get_field(brick, f, m));
-      encode_field(field, raw);
-    }
-    std::vector<uint8_t>& bytes = out[static_cast<size_t>(s)];
-    bytes.resize(kChecksumBytes + ZSTD_compressBound(raw.size()));
-    const size_t n = ZSTD_compress(bytes.data() + kChecksumBytes, bytes.size() - kChecksumBytes, raw.data(), raw.size(), zstd_level);
+    for (const Field f : fields) encode_field(field_of(f), raw);
+    frame.resize(std::max(frame.size(), ZSTD_compressBound(raw.size())));  // grown, never cleared again
+    const size_t n = ZSTD_compressCCtx(compression_context(), frame.data(), frame.size(), raw.data(), raw.size(), zstd_level);
     if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
+    std::vector<uint8_t>& bytes = out[static_cast<size_t>(s)];
     bytes.resize(kChecksumBytes + n);
-    const uint64_t sum = store_checksum(bytes.data() + kChecksumBytes, n);
+    const uint64_t sum = store_checksum(frame.data(), n);
     std::memcpy(bytes.data(), &sum, sizeof sum);
+    std::memcpy(bytes.data() + kChecksumBytes, frame.data(), n);
   }
   return out;
 }
@@ -307,7 +348,7 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
     throw IoError(where + ": impossible uncompressed size");
   thread_local std::vector<uint8_t> raw;
   raw.resize(declared);
-  const size_t n = ZSTD_decompress(raw.data(), raw.size(), bytes + kChecksumBytes, size - kChecksumBytes);
+  const size_t n = ZSTD_decompressDCtx(decompression_context(), raw.data(), raw.size(), bytes + kChecksumBytes, size - kChecksumBytes);
   if (ZSTD_isError(n)) throw IoError(where + ": cannot decompress (" + ZSTD_getErrorName(n) + ")");
   if (n != raw.size()) throw IoError(where + ": decompressed size differs from the frame's");
   // The words the section's fields fill part by part start at zero.

@@ -83,10 +83,20 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
 // values, the corners of band k have none).
 inline bool stores_records(const StoreLayout& layout, int j) { return j >= 1 && j < layout.lattice().k; }
 
-// The sections of a filled brick (engine/hierarchy.h BrickView, every field present), each ready
-// to be written: an XXH64 of the zstd frame, then the frame. Sections the band does not store are
-// empty. `values` and the records are those of fill_brick.
-std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickView& brick,
+// A brick's fields as the encoder takes them: the values (T^3, Morton order) and, for bands that
+// store records, each record field over the record slots (7/8 T^3, Morton order), as the floats
+// their codes stand for (engine/compact_record.h).
+struct BrickFields {
+  enum Record { lo, hi, bound, exact_lo, exact_hi, w0, w1, w2, paper_lo, paper_hi, surplus, count };
+  std::vector<float> values;
+  std::array<std::vector<float>, count> records;
+};
+// The fields of a filled brick (engine/hierarchy.h BrickView, every field present).
+BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick);
+
+// The sections of a brick, each ready to be written: an XXH64 of the zstd frame, then the frame.
+// Sections the band does not store are empty.
+std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
                                                          int zstd_level);
 
 // Checks a section's checksum, inflates it and decodes its fields into the brick's arrays (those

@@ -12,7 +12,7 @@
 
 #include "engine/band_tile.h"
 #include "engine/banded_build.h"
-#include "engine/hierarchy.h"
+#include "engine/compact_record.h"
 #include "engine/parallel.h"
 #include "io/atomic_file.h"
 #include "io/io_error.h"
@@ -89,18 +89,50 @@ class QuantizingReader : public BoxReader {
 };
 
 
-// A brick's arrays for one thread, every field present (what a store holds).
-struct BrickBuffers {
-  explicit BrickBuffers(int64_t nodes)
-      : values(static_cast<size_t>(nodes)), bounds(static_cast<size_t>(nodes)), surplus(static_cast<size_t>(nodes)),
-        exact(static_cast<size_t>(nodes)), paper(static_cast<size_t>(nodes)), weights(static_cast<size_t>(nodes)) {}
-  BrickView view() { return {values.data(), bounds.data(), surplus.data(), exact.data(), paper.data(), weights.data()}; }
-  std::vector<float> values;
-  std::vector<uint64_t> bounds;
-  std::vector<uint16_t> surplus;
-  std::vector<uint32_t> exact, paper;
-  std::vector<uint64_t> weights;
-};
+// The fields of the brick whose first node is `origin` (G_j units) of a built tile, as the store
+// holds them: values, and for bands that store records each field rounded as the compact record
+// (engine/compact_record.h). Band 0 and the corners: values only.
+BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
+  const StoreLayout& layout = tile.layout();
+  const int j = tile.band();
+  const Band& band = layout.band(j);
+  const int64_t t = layout.brick_width();
+  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  BrickFields f;
+  f.values.assign(nodes, 0.0f);  // nodes beyond the band's grid: 0
+  // Walked row by row of the tile's window (x fastest), written at each node's Morton position.
+  const Box3 end{std::min(t, band.nodes[0] - origin[0]), std::min(t, band.nodes[1] - origin[1]),
+                 std::min(t, band.nodes[2] - origin[2])};
+  for (int64_t z = 0; z < end[2]; ++z)
+    for (int64_t y = 0; y < end[1]; ++y) {
+      const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
+      for (int64_t x = 0; x < end[0]; ++x)
+        f.values[yz | spread_bits_3(x)] = tile.node_value({origin[0] + x, origin[1] + y, origin[2] + z});
+    }
+  if (!stores_records(layout, j)) return f;
+  for (auto& r : f.records) r.reserve(nodes - nodes / 8);
+  for (uint32_t m = 0; m < nodes; ++m) {
+    if ((m & 7) == 0) continue;
+    const Box3 g{origin[0] + compact_bits_3(m), origin[1] + compact_bits_3(m >> 1), origin[2] + compact_bits_3(m >> 2)};
+    if (!(g[0] < band.nodes[0] && g[1] < band.nodes[1] && g[2] < band.nodes[2])) {
+      for (auto& r : f.records) r.push_back(0.0f);
+      continue;
+    }
+    const Record& r = tile.node_record(g);
+    const PackedBounds b = pack_bounds(r.bounds);
+    const PackedTopology p = pack_topology(r.topology, r.bounds.error_surplus);
+    f.records[BrickFields::lo].push_back(bf16_to_float(b.lo));
+    f.records[BrickFields::hi].push_back(bf16_to_float(b.hi));
+    f.records[BrickFields::bound].push_back(b.bound);
+    f.records[BrickFields::exact_lo].push_back(bf16_to_float(p.exact_lo));
+    f.records[BrickFields::exact_hi].push_back(bf16_to_float(p.exact_hi));
+    for (int w = 0; w < 3; ++w) f.records[BrickFields::w0 + w].push_back(bf16_to_float(p.weight[w]));
+    f.records[BrickFields::paper_lo].push_back(bf16_to_float(p.paper_lo));
+    f.records[BrickFields::paper_hi].push_back(bf16_to_float(p.paper_hi));
+    f.records[BrickFields::surplus].push_back(bf16_to_float(p.surplus));
+  }
+  return f;
+}
 
 // The banded build's sink for a store: each brick compacted and compressed on its tile's thread,
 // then appended to the file in file order.
@@ -112,13 +144,8 @@ class FileSink {
 
   using Sections = std::array<std::vector<uint8_t>, kSections>;
   Sections process(int band, const Box3& b, const BandTile& tile) const {
-    thread_local std::unique_ptr<BrickBuffers> buffers;
-    if (!buffers || static_cast<int64_t>(buffers->values.size()) != layout_.brick_nodes())
-      buffers = std::make_unique<BrickBuffers>(layout_.brick_nodes());
     const int64_t t = layout_.brick_width();
-    const BrickView view = buffers->view();
-    fill_brick(tile, {b[0] * t, b[1] * t, b[2] * t}, view, buffers->values.data());
-    return encode_brick(layout_, band, view, zstd_level_);
+    return encode_brick(layout_, band, brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}), zstd_level_);
   }
   void commit(int band, const Box3& b, Sections&& sections) {
     BrickEntry& e = entries_[static_cast<size_t>(layout_.brick_index(band, b))];

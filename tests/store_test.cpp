@@ -466,7 +466,7 @@ void rewrite_brick(const std::string& path, int64_t index, const std::function<v
   store.read_brick(index, {true, true, true, true}, view, values.data());
   edit(view);
   const auto [band, b] = store.locate_brick(index);
-  const auto sections = encode_brick(layout, band, view, store.header().zstd_level);
+  const auto sections = encode_brick(layout, band, fields_of(layout, band, view), store.header().zstd_level);
   std::vector<BrickEntry> dir(static_cast<size_t>(layout.brick_count()));
   for (int64_t i = 0; i < layout.brick_count(); ++i) dir[static_cast<size_t>(i)] = store.entry(i);
   std::vector<int64_t> order(dir.size());
