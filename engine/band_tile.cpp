@@ -115,7 +115,7 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
 
 // RecordBuilder::build for a diamond inside the data box, reading through a template; the same
 // record bit for bit (the max and hull folds do not depend on the order of the children).
-void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts) {
+void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts, bool topology) {
   const int64_t base = index(g, size_);
   const float* v = values_.data() + base;
   DiamondValues dv;
@@ -132,10 +132,10 @@ void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCount
     range.hi = std::max(range.hi, dv.ring[i]);
   }
   Saturation sat;
-  for (int i = 0; i < t.same_count; ++i) sat.add(records_[static_cast<size_t>(base + t.same[i])], range);
+  for (int i = 0; i < t.same_count; ++i) sat.add(records_[static_cast<size_t>(base + t.same[i])], range, topology);
   const int64_t cell_base = index(g, cells_);
-  for (int i = 0; i < t.cube_count; ++i) sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range);
-  records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts);
+  for (int i = 0; i < t.cube_count; ++i) sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range, topology);
+  records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology);
 }
 
 void BandTile::find_constant_blocks() {
@@ -168,7 +168,7 @@ void BandTile::find_constant_blocks() {
       }
 }
 
-void BandTile::build(CriticalCounts& counts) {
+void BandTile::build(CriticalCounts& counts, bool topology) {
   const Lattice& l = layout_.lattice();
   if (j_ >= l.k) return;  // the corners: no records
   const Band& band = layout_.band(j_);
@@ -228,8 +228,8 @@ void BandTile::build(CriticalCounts& counts) {
             }
             const bool core = core_yz && x >= core_first[0] && x <= core_last[0];
             CriticalCounts& c = core ? counts : halo_counts;
-            if (box_yz && x >= box_first[0] && x <= box_last[0]) build_fast({x, y, z}, template_for({x, y, z}), c);
-            else builder.build({x << j_, y << j_, z << j_}, c);
+            if (box_yz && x >= box_first[0] && x <= box_last[0]) build_fast({x, y, z}, template_for({x, y, z}), c, topology);
+            else builder.build({x << j_, y << j_, z << j_}, c, topology);
           }
         }
     }

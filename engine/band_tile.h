@@ -52,7 +52,9 @@ class BandTile {
   Array<Record>& children() { return children_; }
 
   // Computes the records of the core's scale-j nodes (and of the halo nodes they depend on).
-  void build(CriticalCounts& counts);
+  // Without `topology`, their range and errors only (critical intervals empty, weights 0, no
+  // critical point counted): what an extraction in mode none reads, for a fraction of the work.
+  void build(CriticalCounts& counts, bool topology = true);
 
   // G_j coordinates: node_value() anywhere in the window, node_record() of computed scale-j nodes.
   float node_value(const Box3& g) const { return values_[static_cast<size_t>(index(g, size_))]; }
@@ -99,7 +101,7 @@ class BandTile {
   };
   const DiamondTemplate& template_for(const Box3& g);
   bool inside_data_box(const Box3& g) const;
-  void build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts);
+  void build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts, bool topology);
   DiamondTemplate templates_[64];
   // Band 0: per 4^3 block of the window, whether every value within 4 nodes of it is one and the
   // same (most of a CT scan's background). Such a block's records are known without computing.

@@ -72,6 +72,7 @@ class MemoryHandover : public BandHandover {
 
 struct BandedBuildOptions {
   uint64_t memory_bytes = uint64_t{1} << 30;  // tiles in flight; a hand-over beyond a quarter of it may go elsewhere
+  bool topology = true;  // false: the records' range and errors only (BandTile::build)
   ProgressCallback progress;
   std::function<void()> check_cancel;  // called between batches; throws to stop
   // Where a band's hand-over goes; by default (or when this returns null) into memory.
@@ -186,7 +187,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
         BandTile tile(layout, band.scale, lo, hi, std::move(buffers[slot]));
         if (in) fill_from_handover(tile, *in);
         else fill_from_input(tile, layout, read);
-        tile.build(r.counts);
+        tile.build(r.counts, options.topology);
         if (next) write_next(tile, *next);
         if (band.scale == 0) value_range(tile, layout, r.lo, r.hi);
         // The tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,

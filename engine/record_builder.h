@@ -218,7 +218,8 @@ class RecordBuilder {
  public:
   explicit RecordBuilder(Grid& grid) : grid_(grid), lattice_(grid.lattice()) {}
 
-  void build(const Coord& v, CriticalCounts& counts) const {
+  // Without `topology`, the range and errors alone (engine/band_tile.h, build).
+  void build(const Coord& v, CriticalCounts& counts, bool topology = true) const {
     const Diamond d = diamond_of(v, lattice_);
     DiamondValues dv;
     DiamondBounds range;
@@ -229,9 +230,9 @@ class RecordBuilder {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node
       // below it, and v, which reaches out there too, is refined anyway.
       Record c;
-      if (grid_.child(u, c)) sat.add(c, range);
+      if (grid_.child(u, c)) sat.add(c, range, topology);
     });
-    grid_.store(v, finish_record(dv, shape_of(d, lattice_), inside_box, range, sat, counts));
+    grid_.store(v, finish_record(dv, shape_of(d, lattice_), inside_box, range, sat, counts, topology));
   }
 
  private:
