@@ -11,6 +11,7 @@
 #include <memory>
 #include <new>
 #include <span>
+#include <type_traits>
 
 #include "io/field_codec.h"
 #include "io/io_error.h"
@@ -89,32 +90,6 @@ float get_field(const BrickView& b, Field f, uint32_t m) {
   return 0;
 }
 
-// Writes field f of code m; bfloat16 fields are written into their word by a read-modify-write.
-void set_field(const BrickView& b, float* values, Field f, uint32_t m, float v) {
-  const auto code = static_cast<uint64_t>(std::bit_cast<uint32_t>(v) >> 16);
-  auto put16 = [&](auto* word, int shift) {
-    using W = std::remove_pointer_t<decltype(word)>;
-    *word = static_cast<W>((*word & ~(W{0xffff} << shift)) | static_cast<W>(code) << shift);
-  };
-  switch (f) {
-    case Field::values: values[m] = v; return;
-    case Field::lo: return put16(&b.bounds[m], 0);
-    case Field::hi: return put16(&b.bounds[m], 16);
-    case Field::bound:
-      b.bounds[m] = (b.bounds[m] & 0xffffffffu) | uint64_t{std::bit_cast<uint32_t>(v)} << 32;
-      return;
-    case Field::exact_lo: return put16(&b.exact[m], 0);
-    case Field::exact_hi: return put16(&b.exact[m], 16);
-    case Field::w0: return put16(&b.weights[m], 0);
-    case Field::w1: return put16(&b.weights[m], 16);
-    case Field::w2: return put16(&b.weights[m], 32);
-    case Field::paper_lo: return put16(&b.paper[m], 0);
-    case Field::paper_hi: return put16(&b.paper[m], 16);
-    case Field::surplus: b.surplus[m] = static_cast<Bf16>(code); return;
-  }
-}
-
-bool is_bf16(Field f) { return f != Field::values && f != Field::bound; }
 
 // zstd contexts kept per thread: ZSTD_compress and ZSTD_decompress make and initialize a context
 // per call, which for small bricks cost more than the (de)compression itself (at level 3, hundreds
@@ -361,23 +336,43 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
   thread_local std::vector<float> field;
   try {
     const uint8_t* p = raw.data();
+    const uint8_t* end = raw.data() + raw.size();
     for (const Field f : fields) {
-      field.resize(f == Field::values ? nodes : record_count);
-      p = decode_field(p, raw.data() + raw.size(), field);
       if (f == Field::values) {
-        std::copy(field.begin(), field.end(), values);
+        p = decode_field(p, end, std::span<float>(values, nodes));
         continue;
       }
-      size_t i = 0;
-      for (uint32_t m = 0; m < nodes; ++m) {
-        if ((m & 7) == 0) continue;
-        const float v = field[i++];
-        if (is_bf16(f) && (std::bit_cast<uint32_t>(v) & 0xffffu) != 0)
-          throw IoError("a field of bfloat16 codes holds another value");
-        set_field(out, values, f, m, v);
+      field.resize(record_count);
+      p = decode_field(p, end, field);
+      const uint32_t* bits = reinterpret_cast<const uint32_t*>(field.data());
+      // Scatter over the record slots (Morton codes not multiples of 8) into the field's word.
+      auto scatter = [&](auto* words, int shift, bool bf16) {
+        using W = std::remove_pointer_t<decltype(words)>;
+        uint32_t low = 0;
+        size_t i = 0;
+        for (uint32_t base = 0; base < nodes; base += 8)
+          for (uint32_t k = 1; k < 8; ++k, ++i) {
+            low |= bits[i];
+            words[base + k] |= static_cast<W>(static_cast<W>(bf16 ? bits[i] >> 16 : bits[i]) << shift);
+          }
+        if (bf16 && (low & 0xffffu) != 0) throw IoError("a field of bfloat16 codes holds another value");
+      };
+      switch (f) {
+        case Field::lo: scatter(out.bounds, 0, true); break;
+        case Field::hi: scatter(out.bounds, 16, true); break;
+        case Field::bound: scatter(out.bounds, 32, false); break;
+        case Field::exact_lo: scatter(out.exact, 0, true); break;
+        case Field::exact_hi: scatter(out.exact, 16, true); break;
+        case Field::w0: scatter(out.weights, 0, true); break;
+        case Field::w1: scatter(out.weights, 16, true); break;
+        case Field::w2: scatter(out.weights, 32, true); break;
+        case Field::paper_lo: scatter(out.paper, 0, true); break;
+        case Field::paper_hi: scatter(out.paper, 16, true); break;
+        case Field::surplus: scatter(out.surplus, 0, true); break;
+        case Field::values: break;
       }
     }
-    if (p != raw.data() + raw.size()) throw IoError("trailing bytes after the last field");
+    if (p != end) throw IoError("trailing bytes after the last field");
   } catch (const IoError& e) {
     throw IoError(where + ": " + e.what());
   }
