@@ -39,6 +39,22 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     in_codes.delta = options.delta / weight_scale[static_cast<size_t>(options.weight)];
   }
   ExtractStats total;
+  if (options.auto_delta) {
+    // Half the budget for the features kept, half for the geometry around them; when even with
+    // every feature dropped the coarsest mesh takes more than half, all of it for the features.
+    const double weight_scale[3] = {scale, scale * scale, 1.0};
+    in_codes.delta = 0;
+    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+    BudgetChoice d;
+    try {
+      d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
+    } catch (const std::runtime_error&) {
+      d = choose_delta_for_budget(source, rule, options.max_triangles);
+    }
+    in_codes.delta = d.eps;
+    total.chosen_delta = d.eps * weight_scale[static_cast<size_t>(options.weight)];
+    total.delta_floor_triangles = d.triangles;
+  }
   if (options.max_triangles > 0) {
     const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
     const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);

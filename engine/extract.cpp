@@ -126,6 +126,8 @@ void validate_extract_options(const ExtractOptions& o) {
   if (o.delta > 0 && o.topology != TopologyMode::simplify)
     throw std::invalid_argument("delta applies to topology mode simplify only");
   if (o.max_triangles < 0) throw std::invalid_argument("the triangle budget must be >= 0");
+  if (o.auto_delta && (o.topology != TopologyMode::simplify || o.max_triangles == 0 || o.delta != 0))
+    throw std::invalid_argument("choosing delta takes topology mode simplify, a triangle budget and no delta");
   if (o.focus) {
     const Focus& f = *o.focus;
     if (!std::isfinite(f.point[0]) || !std::isfinite(f.point[1]) || !std::isfinite(f.point[2]))

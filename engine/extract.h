@@ -24,6 +24,10 @@ struct ExtractStats {
   double next_eps = 0;
   int64_t next_triangles = 0;
   int64_t budget_steps = 0;  // distinct eps values the budget search went through
+  // With auto_delta: the delta chosen (in data units; -1 when none was), and the triangles of its
+  // coarsest mesh (eps = infinity).
+  double chosen_delta = -1;
+  int64_t delta_floor_triangles = 0;
 };
 
 // Throws std::invalid_argument for a non-finite iso, eps < 0, delta < 0, a focus radius <= 0,

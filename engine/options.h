@@ -48,6 +48,10 @@ struct ExtractOptions {
   std::optional<Focus> focus;
   // > 0: ignore eps and take the finest eps whose mesh has at most this many triangles.
   int64_t max_triangles = 0;
+  // With max_triangles in simplify mode: choose delta too (engine/adaptive_extract.h): the smallest
+  // delta whose coarsest mesh takes at most half the budget (features of smallest weight dropped
+  // first), then the finest eps within the whole budget. delta must be 0.
+  bool auto_delta = false;
   // Set (by another thread) to stop: the extraction then throws ExtractionCancelled at its next
   // piece or slab. For a server whose client asked for something newer; nullptr: never.
   const std::atomic<bool>* cancel = nullptr;

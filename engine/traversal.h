@@ -125,6 +125,12 @@ class SplitRule {
     }
     return false;
   }
+  // The chosen weight of v's diamond where the exact rule fires at the isovalue below it, else
+  // -infinity.
+  double topology_weight(const DiamondTopology& t) const {
+    return exact_fires(t) ? static_cast<double>(t.weight[static_cast<size_t>(options_.weight)])
+                          : -std::numeric_limits<double>::infinity();
+  }
   // Simplify mode: the exact rule fires below, but its weight is under delta.
   bool dropped(const DiamondTopology& t) const {
     return options_.topology == TopologyMode::simplify && exact_fires(t) && !heavy(t);
@@ -219,6 +225,20 @@ class Traversal {
     const DiamondBounds b = reader_.bounds(h, rule_.fields());
     if (!rule_.in_range(b)) return Fate::culled;
     *key = rule_.key(b, reader_.topology(h, rule_.fields()), v, level);
+    return Fate::split_key;
+  }
+  // For the choice of delta (engine/triangle_budget.h): the fate as judge's, the error's part of
+  // the key, and `weight`: the diamond's saturated weight when the exact rule fires at the
+  // isovalue below it, else -infinity (never split for its topology).
+  Fate judge_topology(const PackedTet& t, int level, double* error_key, double* weight) {
+    if (clip_ && outside_box(t)) return Fate::culled;
+    if (level == lattice_.max_level()) return Fate::leaf;
+    const Packed v = (t[0] + t[1]) >> 1;
+    const auto h = reader_.locate(v);
+    const DiamondBounds b = reader_.bounds(h, rule_.fields());
+    if (!rule_.in_range(b)) return Fate::culled;
+    *error_key = rule_.error_key(b, v, level);
+    *weight = rule_.topology_weight(reader_.topology(h, rule_.fields()));
     return Fate::split_key;
   }
   int triangles(const PackedTet& t, int level) {

@@ -28,8 +28,42 @@ struct BudgetChoice {
   int64_t steps = 0;
 };
 
+// The walk for any key that never grows from a diamond to its children: `key(t, level, &k)`
+// judges tetrahedron t (engine/traversal.h, Traversal::judge's fates) and, when it may be split,
+// sets its key. Returns the smallest threshold x (a key, or just above the largest) such that
+// splitting every tetrahedron with key >= x gives at most max_triangles; throws when even the
+// keys of +infinity alone exceed it.
+template <class Source, class Key>
+BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
+                                   const Key& judge);
+
 template <class Source>
 BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
+  return choose_cut_for_budget(source, rule, max_triangles,
+                               [](traversal::Traversal<Source>& walk, const traversal::PackedTet& t, int level, double* key) {
+                                 return walk.judge(t, level, key);
+                               });
+}
+
+// Simplify mode with a budget and no delta (engine/options.h, ExtractOptions::auto_delta): at
+// eps = infinity a tetrahedron is split iff its diamond reaches past the data box, or the exact
+// rule fires below it with a weight >= delta; the weight (saturated, so never growing downwards)
+// is the key. The smallest delta whose mesh at eps = infinity has at most max_triangles: the
+// features of smallest weight dropped first, the rest kept.
+template <class Source>
+BudgetChoice choose_delta_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
+  using Walk = traversal::Traversal<Source>;
+  return choose_cut_for_budget(source, rule, max_triangles, [&](Walk& walk, const traversal::PackedTet& t, int level, double* key) {
+    double error_key = 0;
+    const auto fate = walk.judge_topology(t, level, &error_key, key);
+    if (fate == Walk::Fate::split_key && std::isinf(error_key)) *key = std::numeric_limits<double>::infinity();
+    return fate;
+  });
+}
+
+template <class Source, class Key>
+BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
+                                   const Key& judge) {
   using namespace traversal;
   struct Item {
     double key;
@@ -44,11 +78,13 @@ BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitR
   int64_t count = 0;
   auto add = [&](const PackedTet& t, int level, bool positive) {
     double key = 0;
-    const auto fate = walk.judge(t, level, &key);
+    const auto fate = judge(walk, t, level, &key);
     if (fate == Traversal<Source>::Fate::culled) return;
     const int tris = walk.triangles(t, level);
     count += tris;
-    if (fate == Traversal<Source>::Fate::split_key) front.push({key, t, level, positive, tris});
+    // A key of -infinity is never split (choose_delta_for_budget: no critical point below).
+    if (fate == Traversal<Source>::Fate::split_key && key > -std::numeric_limits<double>::infinity())
+      front.push({key, t, level, positive, tris});
   };
   auto split_group = [&](double key) {
     while (!front.empty() && front.top().key == key) {
@@ -61,10 +97,15 @@ BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitR
   for (const Child& r : walk.roots()) add(r.tet, 0, r.positive);
   constexpr double kInf = std::numeric_limits<double>::infinity();
   split_group(kInf);  // what the topology mode refines whatever eps is
-  if (count > max_triangles)
+  if (count > max_triangles) {
+    const TopologyMode mode = rule.options().topology;
     throw std::runtime_error("a budget of " + std::to_string(max_triangles) +
                              " triangles is below the coarsest mesh this topology mode allows (" +
-                             std::to_string(count) + " triangles)");
+                             std::to_string(count) + " triangles)" +
+                             (mode == TopologyMode::preserve || mode == TopologyMode::paper
+                                  ? "; topology mode simplify with a budget and no delta drops the smallest features to fit"
+                                  : ""));
+  }
   BudgetChoice choice;
   choice.triangles = count;
   choice.eps = front.empty() ? 0 : std::nextafter(front.top().key, kInf);

@@ -358,6 +358,23 @@ TEST_F(Cli, ConvertFailuresLeaveNothing) {
 // The signal comes once the convert has its temporary output open (the store being written):
 // not a guess at how long it takes. A 225^3 volume converts in about a second on one thread, and
 // the poll sees the temporary file within a millisecond of its creation.
+// A triangle budget preserve cannot meet: refused with a hint; simplify without --delta chooses
+// delta and eps, and the report says which and what was dropped; with --delta, delta is the user's.
+TEST_F(Cli, SimplifyBudgetChoosesDeltaAndSaysSo) {
+  const std::string raw = kData + "/hydrogen_64x64x64_float32.raw";
+  const Result refused = run("extract " + quote(raw) + " --iso 0.001 --max-triangles 12000 -q -o " + quote(in_work("p.ply")));
+  EXPECT_EQ(refused.code, 1);
+  EXPECT_NE(refused.err.find("simplify with a budget and no delta"), std::string::npos) << refused.err;
+  const nlohmann::json r = extract_report(quote(raw) + " --iso 0.001 --max-triangles 12000 --topology simplify");
+  ASSERT_TRUE(r.contains("chosen_delta")) << r.dump();
+  EXPECT_LE(r["triangles"].get<int64_t>(), 12000);
+  EXPECT_GT(r["chosen_delta"].get<double>(), 0);
+  EXPECT_GT(r["tets_dropped"].get<int64_t>(), 0);
+  EXPECT_LE(r["delta_floor_triangles"].get<int64_t>(), 6000);
+  const nlohmann::json given = extract_report(quote(raw) + " --iso 0.001 --max-triangles 12000 --topology simplify --delta 1");
+  EXPECT_FALSE(given.contains("chosen_delta")) << "a delta given is used as it is";
+}
+
 TEST_F(Cli, InterruptedConvertLeavesNothing) {
   const std::string vol = generate("noise", 225, "n_225x225x225_float32.raw");
   const std::set<std::string> before = listing();

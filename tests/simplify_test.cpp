@@ -344,5 +344,52 @@ TEST(SimplifyFeatures, NoisyVolumeComparedWithFullResolution) {
   EXPECT_EQ(euler_change, measure_topology(simplified).euler_characteristic - ft.euler_characteristic);
 }
 
+// A triangle budget in simplify mode without a delta chooses delta too (ExtractOptions::auto_delta):
+// the smallest delta whose coarsest mesh takes at most half the budget, then the finest eps within
+// all of it. The mesh fits and is the plain simplify mesh at the chosen delta and eps; a larger
+// budget never drops more; where preserve cannot fit, this does.
+TEST(SimplifyBudget, ChoosesTheSmallestDeltaThatLeavesHalfTheBudget) {
+  const Volume v = testing::load_shared(testing::shared_volumes()[2]);  // hydrogen: dozens of small components
+  const MultiresVolume mv = MultiresVolume::build(v);
+  const float iso = 0.001f;
+  ExtractOptions preserve = options(iso, std::numeric_limits<double>::infinity(), TopologyMode::preserve);
+  const auto floor = static_cast<int64_t>(extract(mv, preserve).triangles.size());
+  ExtractOptions none = options(iso, std::numeric_limits<double>::infinity(), TopologyMode::none);
+  const auto none_floor = static_cast<int64_t>(extract(mv, none).triangles.size());
+  ASSERT_LT(2 * none_floor, floor) << "features must cost something to keep";
+  double last_delta = std::numeric_limits<double>::infinity();
+  int below_preserve = 0;
+  for (const int64_t budget : {2 * none_floor + 10, floor, 2 * floor, 4 * floor, 20 * floor}) {
+    for (const SimplificationWeight w : kWeights) {
+      ExtractOptions o = options(iso, 0, TopologyMode::simplify, 0, w);
+      o.max_triangles = budget;
+      o.auto_delta = true;
+      ExtractStats s;
+      const Mesh m = extract(mv, o, &s);
+      const std::string what = "budget " + std::to_string(budget) + " weight " + std::string(to_string(w));
+      EXPECT_LE(static_cast<int64_t>(m.triangles.size()), budget) << what;
+      ASSERT_GE(s.chosen_delta, 0) << what;
+      EXPECT_LE(s.delta_floor_triangles, budget / 2) << what;
+      // The chosen delta and eps, given as they are, make the same mesh.
+      ExtractOptions plain = options(iso, s.chosen_eps, TopologyMode::simplify, s.chosen_delta, w);
+      EXPECT_TRUE(triangle_set(extract(mv, plain)) == triangle_set(m)) << what;
+      // And its coarsest mesh is the floor reported.
+      plain.eps = std::numeric_limits<double>::infinity();
+      EXPECT_EQ(static_cast<int64_t>(extract(mv, plain).triangles.size()), s.delta_floor_triangles) << what;
+      if (w == SimplificationWeight::interval) {
+        EXPECT_LE(s.chosen_delta, last_delta) << what << ": a larger budget drops no more";
+        last_delta = s.chosen_delta;
+        below_preserve += budget < floor;
+      }
+    }
+  }
+  EXPECT_GT(below_preserve, 0) << "a budget preserve refuses was met";
+  EXPECT_EQ(last_delta, 0) << "a budget of many times preserve's floor keeps every feature";
+  ExtractOptions bad = options(iso, 0, TopologyMode::preserve);
+  bad.max_triangles = 1000;
+  bad.auto_delta = true;
+  EXPECT_THROW(extract(mv, bad), std::invalid_argument) << "choosing delta is for simplify mode";
+}
+
 }  // namespace
 }  // namespace isotope

@@ -129,6 +129,8 @@ int run_extract(const ExtractArgs& a) {
     run.options.focus = f;
   }
   run.options.max_triangles = a.max_triangles;
+  // A budget in simplify mode without a delta: delta is chosen too, dropping the smallest features.
+  run.options.auto_delta = run.options.topology == TopologyMode::simplify && a.max_triangles > 0 && a.delta.empty();
 
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) {
@@ -259,7 +261,9 @@ Command add_extract_command(CLI::App& app) {
       ->check(real_validator(true))
       ->type_name("R");
   cmd->add_option("--max-triangles", a->max_triangles,
-                  "Instead of --eps: the finest eps whose mesh has at most T triangles (0 = off)")
+                  "Instead of --eps: the finest eps whose mesh has at most T triangles (0 = off); with --topology "
+                  "simplify and no --delta, delta too: the features of smallest weight are dropped until the "
+                  "coarsest mesh takes half the budget")
       ->check(CLI::NonNegativeNumber)
       ->type_name("T");
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");

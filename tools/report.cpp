@@ -120,6 +120,11 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
     j["next_eps"] = run.extract.next_eps;
     j["next_triangles"] = run.extract.next_triangles;
   }
+  if (run.extract.chosen_delta >= 0) {
+    j["chosen_delta"] = run.extract.chosen_delta;
+    j["delta_floor_triangles"] = run.extract.delta_floor_triangles;
+    j["tets_dropped"] = run.extract.tets_simplified;
+  }
   j["data_dims"] = run.data_dims;
   j["lattice_k"] = run.lattice_k;
   j["lattice_side"] = (int64_t{1} << run.lattice_k) + 1;
@@ -155,7 +160,8 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
 
 std::string summary_line(const ExtractionRun& run) {
   const MeshTopology& t = run.topology;
-  const std::string chosen = run.options.max_triangles > 0 ? "; eps " + std::to_string(run.extract.chosen_eps) : "";
+  std::string chosen = run.options.max_triangles > 0 ? "; eps " + std::to_string(run.extract.chosen_eps) : "";
+  if (run.extract.chosen_delta >= 0) chosen += ", delta " + std::to_string(run.extract.chosen_delta);
   char buf[640];
   std::snprintf(buf, sizeof buf,
                 "%s: %lld triangles, %lld vertices, %lld component%s, chi %lld, %lld boundary / %lld "
