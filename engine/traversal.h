@@ -275,8 +275,11 @@ class Traversal {
     }
     return Step::refine;
   }
+  // Beyond the data box there may be no record to locate: step() culls such a tetrahedron
+  // before it reads the handle.
   Handle locate(const PackedTet& t, int level) {
-    return level < lattice_.max_level() ? reader_.locate((t[0] + t[1]) >> 1) : Handle{};
+    if (level == lattice_.max_level() || (clip_ && outside_box(t))) return Handle{};
+    return reader_.locate((t[0] + t[1]) >> 1);
   }
 
   void visit(const PackedTet& t, int level, bool positive) {
@@ -301,6 +304,7 @@ class Traversal {
       next_.reserve(2 * n);  // written by index: a refined tetrahedron has two children
       if (l < lattice_.max_level())
         for (size_t i = 0; i < n; ++i) {
+          if (clip_ && outside_box(frontier_[i].tet)) continue;  // see locate() below
           handles_[i] = reader_.locate((frontier_[i].tet[0] + frontier_[i].tet[1]) >> 1);
           reader_.prefetch(handles_[i]);
         }

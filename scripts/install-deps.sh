@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what building isotope needs on Debian/Ubuntu, and the viewer's npm packages
 # (viewer/package-lock.json). With --tests, also what the tests need: Chromium, for the viewer's
-# end-to-end test. Does nothing (and needs no network) when everything is already installed.
+# end-to-end test, and scikit-image, the peer the bench runs. Does nothing (and needs no network) when everything is already installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,7 +16,8 @@ packages=(
 # Node.js bundles the viewer (esbuild) and drives the browser test; a machine that has node and
 # npm already (e.g. from NodeSource) keeps them.
 if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+=(nodejs npm); fi
-if [ "${1:-}" = "--tests" ]; then packages+=(chromium); fi
+# python3-skimage: the peer that isotope bench (and its test) times beside ours.
+if [ "${1:-}" = "--tests" ]; then packages+=(chromium python3-skimage); fi
 
 missing=()
 for p in "${packages[@]}"; do

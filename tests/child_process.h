@@ -1,15 +1,9 @@
 #pragma once
 // The isotope command as a child process whose peak memory is measured (wait4's ru_maxrss), and
 // byte comparison of large files: what the memory tests (convert, extract) share.
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/resource.h>
-#include <sys/wait.h>
-
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -18,7 +12,7 @@
 #include <string>
 #include <vector>
 
-extern char** environ;
+#include "tools/child_run.h"
 
 namespace isotope::testing {
 
@@ -28,37 +22,14 @@ struct Child {
   double seconds = 0;
 };
 
-// Runs the isotope binary with ARGS, stdout into OUT (stderr too), and waits for it alone.
+// Runs the isotope binary with ARGS, stdout into OUT (stderr too), and waits for it alone
+// (tools/child_run.h, which isotope bench measures its processes with).
 inline Child run_isotope(const std::vector<std::string>& args, const std::string& out) {
-  std::vector<std::string> argv_text = {ISOTOPE_BINARY};
-  argv_text.insert(argv_text.end(), args.begin(), args.end());
-  std::vector<char*> argv;
-  for (std::string& a : argv_text) argv.push_back(a.data());
-  argv.push_back(nullptr);
-
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&actions, 1, 2);
-  const auto start = std::chrono::steady_clock::now();
-  pid_t pid = -1;
-  const int spawned = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  Child c;
-  if (spawned != 0) {
-    ADD_FAILURE() << "cannot start " << argv[0] << ": error " << spawned;
-    return c;
-  }
-  int status = 0;
-  rusage usage{};
-  if (wait4(pid, &status, 0, &usage) != pid) {
-    ADD_FAILURE() << "wait4 failed for " << argv[0];
-    return c;
-  }
-  c.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  c.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  c.max_rss_kb = usage.ru_maxrss;
-  return c;
+  std::vector<std::string> argv = {ISOTOPE_BINARY};
+  argv.insert(argv.end(), args.begin(), args.end());
+  const tools::ChildRun r = tools::run_child(argv, out);
+  if (r.code == -1) ADD_FAILURE() << "isotope did not start or did not exit normally: " << r.output;
+  return {r.code, r.max_rss_kb, r.seconds};
 }
 
 inline std::string slurp(const std::string& path) {
