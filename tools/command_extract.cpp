@@ -15,6 +15,7 @@
 #include <optional>
 #include <oneapi/tbb/global_control.h>
 #include <string>
+#include <thread>
 
 #include "engine/component_report.h"
 #include "engine/extract.h"
@@ -154,32 +155,56 @@ int run_extract(const ExtractArgs& a) {
       run.compare_seconds = seconds_since(compare_start);
     }
   }
-  const auto start = std::chrono::steady_clock::now();
-  run.topology = measure_topology(mesh);
-  const MeshComponents components = a.report.empty() ? MeshComponents{} : label_components(mesh);
-  run.components = components.components;
-  run.measure_seconds = seconds_since(start);
-  if (a.compare_full) {
-    const auto compare_start = std::chrono::steady_clock::now();
-    run.compare_tolerance = a.compare_voxels * std::max({run.spacing[0], run.spacing[1], run.spacing[2]});
-    run.comparison = compare_components(full, label_components(full), mesh, components, run.compare_tolerance);
-    run.compare_seconds += seconds_since(compare_start);
-  }
-  run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);  // this process so far
-
   // The report's temporary file is opened first (it checks its directory), the mesh is then
-  // renamed into place, and if the report cannot be completed the mesh is removed again.
+  // renamed into place, and if the report cannot be completed the mesh is removed again. On more
+  // than one thread the mesh is written while its topology is measured: the write ends waiting
+  // for the disk (fsync), which the measuring overlaps.
   std::optional<AtomicFile> report_file;
   if (!a.report.empty()) report_file.emplace(a.report);
-  write_ply(mesh, a.output);
+  std::exception_ptr write_error;
+  std::thread writer;
+  if (run.threads > 1)
+    writer = std::thread([&] {
+      try {
+        write_ply(mesh, a.output);
+      } catch (...) {
+        write_error = std::current_exception();
+      }
+    });
+  const auto remove_output = [&] {
+    std::error_code ignored;
+    std::filesystem::remove(a.output, ignored);
+  };
+  try {
+    const auto start = std::chrono::steady_clock::now();
+    run.topology = measure_topology(mesh);
+    const MeshComponents components = a.report.empty() ? MeshComponents{} : label_components(mesh);
+    run.components = components.components;
+    run.measure_seconds = seconds_since(start);
+    if (a.compare_full) {
+      const auto compare_start = std::chrono::steady_clock::now();
+      run.compare_tolerance = a.compare_voxels * std::max({run.spacing[0], run.spacing[1], run.spacing[2]});
+      run.comparison = compare_components(full, label_components(full), mesh, components, run.compare_tolerance);
+      run.compare_seconds += seconds_since(compare_start);
+    }
+  } catch (...) {
+    if (writer.joinable()) {
+      writer.join();
+      if (!write_error) remove_output();
+    }
+    throw;
+  }
+  if (writer.joinable()) writer.join();
+  if (write_error) std::rethrow_exception(write_error);
+  run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);  // this process so far
+  if (run.threads <= 1) write_ply(mesh, a.output);
   if (report_file) {
     try {
       const std::string text = report_json(run).dump(2) + "\n";
       report_file->write(text.data(), text.size());
       report_file->commit();
     } catch (...) {
-      std::error_code ignored;
-      std::filesystem::remove(a.output, ignored);
+      remove_output();
       throw;
     }
   }
