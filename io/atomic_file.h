@@ -1,11 +1,36 @@
 #pragma once
 // An output file that appears under its name only when complete: written to a temporary
 // name in the same directory, renamed by commit(), removed if destroyed before that.
+//
+// The output policy (every output of isotope goes through here):
+// - a new path or an existing regular file is written atomically, as above;
+// - a symbolic link is followed, and the file it names is replaced atomically in its own
+//   directory (the link stays a link);
+// - an existing target that is not a regular file (a device, FIFO, socket or directory) is
+//   refused with an IoError before anything is written: it is never replaced;
+// - an output that is the same file as an input, or as another output, is refused before any
+//   work (check_outputs, which every command calls with what it read and will write).
 #include <cstdint>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 namespace isotope {
+
+// The file that writing PATH replaces: PATH with every symbolic link followed (a relative link
+// resolved from its own directory, at most 40 links). Throws IoError when that file exists and
+// is not a regular file, or the links loop.
+std::string output_target(const std::string& path);
+
+// A path a command names, with the option or argument that named it (for the message).
+struct NamedPath {
+  std::string what;  // e.g. "-o", "--report", "INPUT"
+  std::string path;
+};
+// Throws IoError, naming both, when an output is the same file as an input (same device and
+// inode, links followed) or two outputs name the same file; also when an output is refused by
+// output_target. Inputs that do not exist are left to their readers' messages.
+void check_outputs(const std::vector<NamedPath>& inputs, const std::vector<NamedPath>& outputs);
 
 class AtomicFile {
  public:
@@ -22,7 +47,7 @@ class AtomicFile {
   const std::string& temp_path() const { return temp_path_; }
 
  private:
-  std::string path_, temp_path_;
+  std::string path_, target_, temp_path_;  // as named; the file replaced (output_target); temporary
   std::FILE* file_ = nullptr;
   bool committed_ = false;
   uint64_t size_ = 0;

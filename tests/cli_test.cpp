@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -281,6 +282,25 @@ TEST_F(Cli, OutputIntoMissingDirectoryFailsAndWritesNothing) {
                      quote(in_work("no/such/dir/r.json")),
                  1);
   expect_failure("generate sphere --size 9 -o " + quote(in_work("no/such/dir/s.raw")), 1);
+}
+
+// The output policy (io/atomic_file.h) through the commands: an output that is the input, or the
+// other output, is refused before any work, and the input is left as it was; a FIFO as output is
+// refused and stays a FIFO (a device node is tested in io_test, made there by mknod).
+TEST_F(Cli, AnOutputThatIsTheInputOrTheOtherOutputIsRefusedAndNothingChanges) {
+  const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
+  const std::string bytes = slurp(vol);
+  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(vol), 1, "is the same file as INPUT");
+  expect_failure("convert " + quote(vol) + " " + quote(vol), 1, "is the same file as INPUT");
+  fs::create_symlink(vol, in_work("link.raw"));
+  expect_failure("convert " + quote(vol) + " " + quote(in_work("link.raw")), 1, "is the same file as INPUT");
+  expect_failure("sweep " + quote(vol) + " --iso 0 --csv " + quote(vol), 1, "is the same file as INPUT");
+  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(in_work("m.ply")) + " --report " + quote(in_work("m.ply")),
+                 1, "is the same file as -o");
+  EXPECT_EQ(slurp(vol), bytes);
+  ASSERT_EQ(::mkfifo(in_work("pipe.ply").c_str(), 0644), 0);
+  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(in_work("pipe.ply")), 1, "is a FIFO");
+  EXPECT_TRUE(fs::is_fifo(in_work("pipe.ply")));
 }
 
 TEST_F(Cli, InvalidNumbersAreUsageErrors) {

@@ -1,6 +1,8 @@
 // The I/O boundary: readers agree with each other on the shared volumes, every bad input
 // becomes an IoError naming the file, and writers are atomic and round-trip exactly.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <unistd.h>
 
 #include <hdf5.h>
@@ -672,14 +674,85 @@ TEST_F(IoTest, AtomicFileCommitReplacesTheTargetAndRemovesTheTemporary) {
   EXPECT_EQ(entries(), (std::vector<std::string>{"done.bin"}));
 }
 
-TEST_F(IoTest, AtomicFileTargetThatIsADirectoryFailsAtCommit) {
+// The output policy (io/atomic_file.h): what is not a regular file is never replaced, and
+// refused before anything is written.
+TEST_F(IoTest, AtomicFileRefusesATargetThatIsADirectoryBeforeWriting) {
   fs::create_directory(path("taken"));
-  {
-    AtomicFile f(path("taken"));
-    f.write("x", 1);
-    EXPECT_CONTAINS(io_error_of([&] { f.commit(); }), "rename");
-  }
+  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("taken")); }), "is a directory");
   EXPECT_EQ(entries(), (std::vector<std::string>{"taken"}));
+  EXPECT_TRUE(fs::is_directory(path("taken")));
+}
+
+TEST_F(IoTest, AtomicFileNeverReplacesAFifo) {
+  ASSERT_EQ(::mkfifo(path("pipe").c_str(), 0644), 0) << std::strerror(errno);
+  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("pipe")); }), "is a FIFO");
+  EXPECT_TRUE(fs::is_fifo(path("pipe")));
+  EXPECT_EQ(entries(), (std::vector<std::string>{"pipe"}));
+}
+
+// A device node made here (as /dev/null is: character device 1,3), never /dev/null itself.
+TEST_F(IoTest, AtomicFileNeverReplacesADeviceNode) {
+  if (::geteuid() != 0) GTEST_SKIP() << "mknod of a device needs root";
+  ASSERT_EQ(::mknod(path("null").c_str(), S_IFCHR | 0666, makedev(1, 3)), 0) << std::strerror(errno);
+  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("null")); }), "is a character device");
+  EXPECT_TRUE(fs::is_character_file(path("null")));
+  EXPECT_EQ(entries(), (std::vector<std::string>{"null"}));
+}
+
+TEST_F(IoTest, AtomicFileFollowsALinkAndReplacesTheFileItNamesInItsOwnDirectory) {
+  fs::create_directory(path("real"));
+  write_values(path("real/mesh.ply"), std::vector<uint8_t>{1, 2, 3});
+  fs::create_symlink("real/mesh.ply", path("link.ply"));  // relative: resolved from the link's folder
+  {
+    AtomicFile f(path("link.ply"));
+    EXPECT_EQ(fs::path(f.temp_path()).parent_path(), fs::path(path("real")));
+    f.write("xyz", 3);
+    f.commit();
+  }
+  EXPECT_TRUE(fs::is_symlink(path("link.ply")));
+  EXPECT_EQ(read_bytes(path("real/mesh.ply")), (std::vector<unsigned char>{'x', 'y', 'z'}));
+  EXPECT_EQ(entries(), (std::vector<std::string>{"link.ply", "real"}));
+  EXPECT_TRUE(fs::exists(path("real/mesh.ply")));
+  EXPECT_EQ(std::distance(fs::directory_iterator(path("real")), fs::directory_iterator()), 1);
+
+  // A dangling link: the file it names is created. A link to a FIFO: refused. A loop: refused.
+  fs::create_symlink(path("real/new.ply"), path("dangling.ply"));
+  {
+    AtomicFile f(path("dangling.ply"));
+    f.write("n", 1);
+    f.commit();
+  }
+  EXPECT_TRUE(fs::is_symlink(path("dangling.ply")));
+  EXPECT_EQ(read_bytes(path("real/new.ply")), (std::vector<unsigned char>{'n'}));
+  ASSERT_EQ(::mkfifo(path("real/pipe").c_str(), 0644), 0);
+  fs::create_symlink("real/pipe", path("to_pipe"));
+  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("to_pipe")); }), "a FIFO");
+  fs::create_symlink("loop_b", path("loop_a"));
+  fs::create_symlink("loop_a", path("loop_b"));
+  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("loop_a")); }), "symbolic links");
+}
+
+TEST_F(IoTest, AnOutputThatIsAnInputOrAnotherOutputIsRefused) {
+  write_values(path("in.raw"), std::vector<uint8_t>{1, 2, 3});
+  fs::create_hard_link(path("in.raw"), path("hard.raw"));
+  fs::create_symlink(path("in.raw"), path("soft.raw"));
+  for (const char* same : {"in.raw", "hard.raw", "soft.raw"})
+    EXPECT_CONTAINS(io_error_of([&] { check_outputs({{"INPUT", path("in.raw")}}, {{"-o", path(same)}}); }),
+                    "is the same file as INPUT")
+        << same;
+  // FILE.h5:/dataset names FILE.h5.
+  write_values(path("v.h5"), std::vector<uint8_t>{0});
+  EXPECT_CONTAINS(io_error_of([&] { check_outputs({{"INPUT", path("v.h5") + ":/volume"}}, {{"OUTPUT", path("v.h5")}}); }),
+                  "is the same file as INPUT");
+  // Two outputs, existing or not, through a link or not.
+  EXPECT_CONTAINS(io_error_of([&] { check_outputs({}, {{"-o", path("m.ply")}, {"--report", path("./m.ply")}}); }),
+                  "--report " + path("./m.ply") + ": is the same file as -o");
+  EXPECT_CONTAINS(io_error_of([&] { check_outputs({}, {{"-o", path("soft.raw")}, {"--report", path("in.raw")}}); }),
+                  "is the same file as -o");
+  // Distinct files pass, and a missing input is left to its reader.
+  EXPECT_NO_THROW(check_outputs({{"INPUT", path("in.raw")}, {"INPUT", path("missing.raw")}},
+                                {{"-o", path("m.ply")}, {"--report", path("m.json")}, {"--csv", ""}}));
+  EXPECT_EQ(read_bytes(path("in.raw")), (std::vector<unsigned char>{1, 2, 3}));
 }
 
 // ---------------------------------------------------------------- PLY

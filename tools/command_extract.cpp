@@ -118,6 +118,7 @@ int run_extract(const ExtractArgs& a) {
       throw IoError("cannot write '" + *path + "': directory '" + dir.string() + "' does not exist");
     }
   }
+  check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
 
   if (a.focus.empty() != a.radius.empty())
     throw CLI::ValidationError("--focus/--radius", "give both a focus point and a radius");

@@ -14,6 +14,7 @@
 #include <string>
 
 #include "engine/traversal.h"
+#include "io/atomic_file.h"
 #include "io/box_reader.h"
 #include "io/brick_cache.h"
 #include "io/paged_volume.h"
@@ -45,6 +46,7 @@ int run_convert(const ConvertArgs& a) {
   mallopt(M_TRIM_THRESHOLD, 128 << 20);
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
+  check_outputs({{"INPUT", a.input}}, {{"OUTPUT", a.output}});
   VolumeSource source;
   source.spec = a.input;
   if (!a.dims.empty()) source.dims = parse_dims(a.dims);

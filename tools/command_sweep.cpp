@@ -122,6 +122,7 @@ int run_sweep(const SweepArgs& a) {
   base.weight = *parse_simplification_weight(a.weight);
   // Output paths are checked (and the files' temporaries created) only at the end; check the
   // directories now so that a long sweep does not fail at its last step.
+  check_outputs({{"INPUT", a.input}}, {{"--csv", a.csv}, {"--plot", a.plot}});
   for (const std::string* path : {&a.csv, &a.plot})
     if (!path->empty()) AtomicFile check(*path);
 
