@@ -246,6 +246,18 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
       if (b != 0 && b <= kChecksumBytes)
         throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " gives a section no room");
   }
+  // No two bricks of the band share bytes: an entry that points into another brick (a copy of
+  // one passes every checksum) would give a silently wrong brick. verify checks that the bricks
+  // of all bands tile the area; a band read alone checks its own.
+  std::vector<uint32_t> order(entries.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<uint32_t>(i);
+  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return entries[a].offset < entries[b].offset; });
+  for (size_t i = 1; i < order.size(); ++i) {
+    const BrickEntry& before = entries[order[i - 1]];
+    if (entries[order[i]].offset < before.offset + before.total())
+      throw IoError(file + ": directory entry " + std::to_string(order[i]) + " overlaps entry " + std::to_string(order[i - 1]) +
+                    " (corrupt directory)");
+  }
   return entries;
 }
 

@@ -313,6 +313,20 @@ TEST_F(Cli, InvalidNumbersAreUsageErrors) {
   expect_failure("generate sphere --size 1 -o " + quote(in_work("x.raw")), 2);
   expect_failure("generate sphere --size 9 -o " + quote(in_work("x.vtk")), 2);
   expect_failure("generate sphere --size 9 --shift 1,2,3 -o " + quote(in_work("x.raw")), 2);
+  // Ranges named in the message, in numbers a person reads.
+  for (const char* command : {"extract " , "sweep "}) {
+    const Result r = run(command + quote(vol) + " --iso 0 --threads -1" + (std::string(command) == "sweep " ? "" : outputs()));
+    EXPECT_EQ(r.code, 2) << command;
+    EXPECT_NE(r.err.find("--threads"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("0 to 4096"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("e+308"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("1797693"), std::string::npos) << r.err;
+  }
+  expect_failure("convert " + quote(vol) + " " + quote(in_work("v.isotope")) + " --threads 5000", 2, "0 to 4096");
+  expect_failure("extract " + quote(vol) + " --iso 0 --max-triangles -1" + outputs(), 2, "--max-triangles");
+  // A comparison tolerance too small to sample is refused before the work, not after it.
+  expect_failure("extract " + quote(vol) + " --iso 0 --compare-full --compare-voxels 1e-300" + outputs(), 2,
+                 "[0.0005, 1e6]");
 }
 
 TEST_F(Cli, ExtractAcceptsFractionsAndNegativeIsovalues) {

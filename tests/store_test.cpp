@@ -523,6 +523,31 @@ TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
   EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "value outside its record's range");
 }
 
+// A directory entry pointing at another brick's bytes (a duplicate, so every brick checksum holds),
+// with the directory's and the header's checksums redone: the extraction's reads refuse it, not
+// only verify.
+TEST_F(StoreCorruption, DirectoryEntriesThatOverlapAreCaughtByTheExtractionToo) {
+  testing::write_file(bad_, "", good_);
+  testing::Bytes file = read_bytes(bad_);
+  {
+    const StoreReader store(bad_);
+    StoreHeader h = store.header();
+    const Band& band0 = store.layout().band(0);
+    ASSERT_GE(band0.brick_count(), 2);
+    std::vector<BrickEntry> dir(static_cast<size_t>(band0.brick_count()));
+    for (int64_t i = 0; i < band0.brick_count(); ++i) dir[static_cast<size_t>(i)] = store.entry(band0.first_brick + i);
+    dir[1] = dir[0];
+    const std::vector<uint8_t> directory = encode_directory(dir);
+    BandDirectory& d = h.bands[0];
+    std::copy(directory.begin(), directory.end(), file.begin() + static_cast<std::ptrdiff_t>(d.offset));
+    d.checksum = store_checksum(directory.data(), directory.size());
+    const auto header = encode_header(h);
+    std::copy(header.begin(), header.end(), file.begin());
+  }
+  EXPECT_CONTAINS(load_message(file), "overlaps entry");
+  EXPECT_CONTAINS(verify_message(file), "overlaps entry");
+}
+
 // Randomized: flips, overwrites, truncations and insertions anywhere. Each one must be caught
 // (an IoError, never a crash), by verify and by the extraction's reads.
 TEST_F(StoreCorruption, RandomizedCorruptionIsAlwaysCaught) {

@@ -107,8 +107,11 @@ int run_extract(const ExtractArgs& a) {
   if (!a.weight.empty()) run.options.weight = *parse_simplification_weight(a.weight);
   if (!a.delta.empty()) run.options.delta = *parse_real(a.delta);
   if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
-  if (!(a.compare_voxels > 0) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6)
-    throw CLI::ValidationError("--compare-voxels", "must be a number of voxel spacings in (0, 1e6]");
+  // Below 2^-11 (about 0.00049) voxel spacings the comparison's sampling grid of a 2^19-node axis would overflow
+  // (engine/component_report.cpp): refused here, before the work, not after it.
+  if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6)
+    throw CLI::ValidationError("--compare-voxels", "must be a number of voxel spacings in [0.0005, 1e6], got " +
+                                                       std::to_string(a.compare_voxels));
 
   // Fail before the (possibly long) extraction when the outputs cannot be written; creates nothing.
   for (const std::string* path : {&a.output, &a.report}) {
@@ -276,7 +279,7 @@ Command add_extract_command(CLI::App& app) {
       ->capture_default_str()
       ->type_name("V");
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0, kMaxThreads))
       ->capture_default_str();
   cmd->add_option("--cache-mb", a->cache_mb,
                   "Store input: memory for decoded bricks, in MB (at least 16 bricks, under 1 MB); the store may be far larger")
@@ -292,7 +295,7 @@ Command add_extract_command(CLI::App& app) {
                   "Instead of --eps: the finest eps whose mesh has at most T triangles (0 = off); with --topology "
                   "simplify and no --delta, delta too: the features of smallest weight are dropped until the "
                   "coarsest mesh takes half the budget")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(int64_t{0}, int64_t{1} << 40))
       ->type_name("T");
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");
 

@@ -75,7 +75,7 @@ Command add_serve_command(CLI::App& app) {
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads per extraction (0 = all cores)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0, kMaxThreads))
       ->capture_default_str();
   cmd->add_flag("-q,--quiet", a->quiet, "Print only the line that names the address");
   return [a] { return run_serve(*a); };

@@ -15,6 +15,9 @@ namespace isotope::tools {
 
 using Command = std::function<int()>;  // returns the exit code
 
+// The largest --threads any command accepts: a usage error beyond, with the range in its message.
+inline constexpr int kMaxThreads = 4096;
+
 Command add_extract_command(CLI::App& app);   // isotope extract INPUT --iso V -o MESH.ply
 Command add_generate_command(CLI::App& app);  // isotope generate SHAPE --size N -o FILE
 Command add_demo_command(CLI::App& app);      // isotope demo [--out DIR] [--data DIR]
