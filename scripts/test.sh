@@ -42,14 +42,15 @@ phase "ASan+UBSan tests"
 run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "slow|e2e" \
   -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)'
 
-# The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there).
+# The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there), and
+# the server: its worker threads, concurrent extractions and supersession.
 phase "RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF
-cmake --build build-tsan --target test_determinism test_store test_paged_extract test_exact_full_resolution -j "$jobs"
+cmake --build build-tsan --target test_determinism test_store test_paged_extract test_exact_full_resolution test_serve -j "$jobs"
 phase "TSan tests"
-TSAN_OPTIONS="halt_on_error=1" run_ctest --test-dir build-tsan --output-on-failure --no-tests=error \
-  -R 'Determinism|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount'
+TSAN_OPTIONS="halt_on_error=1 suppressions=$PWD/tests/tsan.supp" run_ctest --test-dir build-tsan --output-on-failure --no-tests=error \
+  -R 'Determinism|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount|Serve\.|Supersession\.'
 
 # One closing line over the three runs (each ctest above has already failed the script on error).
 # A skipped test (GTEST_SKIP: e.g. a read-only directory, which root can write anyway) is counted

@@ -1,7 +1,11 @@
 // isotope serve (docs/SERVE.md): the request checks, supersession, the wire format, and the server
 // itself, run in process on a free loopback port and asked with an HTTP client. What it answers must
 // be exactly the mesh that extraction gives for the same options, however many ask at once.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 #include <httplib.h>
 
 #include <cmath>
@@ -360,6 +364,50 @@ TEST_F(Serve, NoUrlReachesAFileOutsideTheStore) {
   const auto post = client.Post("/api/extract", "iso=1", "application/x-www-form-urlencoded");
   ASSERT_TRUE(post);
   EXPECT_EQ(post->status, 405);
+}
+
+// docs/SERVE.md: 405 with Allow for any method but GET and HEAD, with or without a body; a body
+// over the limit is refused before it is read whole.
+TEST_F(Serve, OtherMethodsGet405WithAllowAndBodiesAreBounded) {
+  httplib::Client client("127.0.0.1", port_);
+  const auto options = client.Options("/api/info");
+  ASSERT_TRUE(options);
+  EXPECT_EQ(options->status, 405);
+  EXPECT_EQ(options->get_header_value("Allow"), "GET, HEAD");
+  const auto empty_post = client.Post("/api/extract");
+  ASSERT_TRUE(empty_post);
+  EXPECT_EQ(empty_post->status, 405);
+  const auto big = client.Post("/api/extract", std::string(1 << 20, 'x'), "application/octet-stream");
+  ASSERT_TRUE(big);
+  EXPECT_EQ(big->status, 413);
+}
+
+// Fifty clients that send a request a byte now and then hold fifty connections; a normal request
+// still gets its answer within a second.
+TEST_F(Serve, SlowClientsDoNotStallOthers) {
+  std::vector<int> drips;
+  for (int i = 0; i < 50; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    ASSERT_GE(fd, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(static_cast<uint16_t>(port_));
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr), 0);
+    ASSERT_EQ(::send(fd, "GET /api/in", 11, MSG_NOSIGNAL), 11);  // and no more, for now
+    drips.push_back(fd);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // every drip has its worker
+  const auto start = std::chrono::steady_clock::now();
+  const auto res = get("/api/info");
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200);
+  EXPECT_LT(seconds, 1.0);
+  for (int fd : drips) {
+    (void)::send(fd, "f", 1, MSG_NOSIGNAL);  // still dripping
+    ::close(fd);
+  }
 }
 
 TEST_F(Serve, APortInUseIsAnErrorNotASharedPort) {

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <random>
 
 #include <hdf5.h>
@@ -521,6 +522,46 @@ TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
     b.bounds[1] = bounds_word(p);
   });
   EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "value outside its record's range");
+}
+
+// Header fields edited and the header's checksum redone: the checksum holds, the content cannot
+// be. Every reader path (the extraction's, verify's) refuses each with a message naming it.
+TEST_F(StoreCorruption, HeaderFieldsOutOfTheirRangesAreRefusedUnderAValidChecksum) {
+  const StoreHeader good = StoreReader([&] {
+    testing::write_file(bad_, "", good_);
+    return bad_;
+  }()).header();
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  const std::vector<std::pair<std::function<void(StoreHeader&)>, std::string>> edits = {
+      {[&](StoreHeader& h) { h.spacing[1] = nan; }, "spacing"},
+      {[&](StoreHeader& h) { h.spacing[0] = 0; }, "spacing"},
+      {[&](StoreHeader& h) { h.spacing[2] = -1; }, "spacing"},
+      {[&](StoreHeader& h) { h.spacing[2] = inf; }, "spacing"},
+      {[&](StoreHeader& h) { h.origin[0] = nan; }, "origin"},
+      {[&](StoreHeader& h) { h.origin[1] = -inf; }, "origin"},
+      {[&](StoreHeader& h) { h.value_scale = 2; }, "value mapping"},    // lossless: the identity only
+      {[&](StoreHeader& h) { h.value_offset = 1; }, "value mapping"},
+      {[&](StoreHeader& h) { h.brick_bits = 8; }, "brick size"},        // 712 MB a brick in format 2
+      {[&](StoreHeader& h) { h.brick_bits = 2; }, "brick size"},
+      {[&](StoreHeader& h) { h.dims[0] = int64_t{1} << 40; }, "dimensions"},
+      {[&](StoreHeader& h) { h.value_min = nan; }, "value range"},
+  };
+  for (const auto& [edit, named] : edits) {
+    StoreHeader h = good;
+    edit(h);
+    auto bytes = good_;
+    const auto header = encode_header(h);
+    std::copy(header.begin(), header.end(), bytes.begin());
+    EXPECT_CONTAINS(load_message(bytes), named);
+    EXPECT_CONTAINS(verify_message(bytes), named);
+  }
+  // A reserved byte set, the checksum redone.
+  auto reserved = good_;
+  reserved[kHeaderBytes - 100] = 1;
+  const uint64_t sum = store_checksum(reserved.data(), kHeaderBytes - 8);
+  std::memcpy(reserved.data() + kHeaderBytes - 8, &sum, sizeof sum);
+  EXPECT_CONTAINS(load_message(reserved), "reserved bytes");
+  EXPECT_CONTAINS(verify_message(reserved), "reserved bytes");
 }
 
 // A directory entry pointing at another brick's bytes (a duplicate, so every brick checksum holds),

@@ -12,9 +12,9 @@
 #include <semaphore>
 #include <nlohmann/json.hpp>
 #include <oneapi/tbb/global_control.h>
-#include <oneapi/tbb/parallel_invoke.h>
 
 #include "engine/mesh_topology.h"
+#include "engine/parallel.h"
 #include "engine/vertex_normals.h"
 #include "io/io_error.h"
 #include "io/mesh_wire.h"
@@ -36,6 +36,12 @@ constexpr int64_t kHistogramSamples = int64_t{4} << 20;  // a fraction of a seco
 // Extractions at once. Each already runs on every core, so more would only hold more meshes in
 // memory; the others wait, and leave the queue as soon as a newer request supersedes them.
 constexpr std::ptrdiff_t kConcurrentExtractions = 2;
+// Limits against hostile clients (docs/SERVE.md, "Limits"). Each connection holds a worker while
+// it sends its request, however slowly: the pool is bounded, but larger than what a handful of
+// slow clients hold (httplib's default is 8 on this machine). Requests carry no body.
+constexpr size_t kWorkers = 64;
+constexpr size_t kMaxBodyBytes = 1024;
+constexpr time_t kReadTimeoutSeconds = 5;
 
 void answer_text(httplib::Response& res, int status, const std::string& message) {
   res.status = status;
@@ -92,9 +98,14 @@ struct ViewerServer::Impl {
       res.set_content(asset->bytes.data(), asset->bytes.size(), asset->content_type);
     });
     const httplib::Server::Handler get_only = [](const httplib::Request&, httplib::Response& res) {
+      res.set_header("Allow", "GET, HEAD");
       answer_text(res, 405, "method not allowed: the server answers GET only");
     };
-    http.Post(".*", get_only).Put(".*", get_only).Delete(".*", get_only).Patch(".*", get_only);
+    http.Post(".*", get_only).Put(".*", get_only).Delete(".*", get_only).Patch(".*", get_only).Options(".*", get_only);
+    http.new_task_queue = [] { return new httplib::ThreadPool(kWorkers); };
+    http.set_payload_max_length(kMaxBodyBytes);
+    http.set_read_timeout(kReadTimeoutSeconds, 0);
+    http.set_keep_alive_timeout(kReadTimeoutSeconds);
     http.set_error_handler([](const httplib::Request&, httplib::Response& res) {
       if (res.body.empty()) answer_text(res, res.status, res.status == 404 ? "not found" : "bad request");
     });
@@ -133,7 +144,10 @@ struct ViewerServer::Impl {
       input.describe(run);
       const auto measure_start = std::chrono::steady_clock::now();
       std::vector<std::array<float, 3>> normals;  // meanwhile, on the other core
-      tbb::parallel_invoke([&] { run.topology = measure_topology(mesh); }, [&] { normals = vertex_normals(mesh); });
+      parallel_for(0, 2, [&](int64_t part) {  // engine/parallel.h: std::threads under TSan
+        if (part == 0) run.topology = measure_topology(mesh);
+        else normals = vertex_normals(mesh);
+      });
       run.measure_seconds = seconds_since(measure_start);
       run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);
       if (ticket && ticket->superseded()) throw ExtractionCancelled{};
