@@ -53,7 +53,7 @@ TSAN_OPTIONS="halt_on_error=1 suppressions=$PWD/tests/tsan.supp" run_ctest --tes
   -R 'Determinism|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount|Serve\.|Supersession\.'
 
 # One closing line over the three runs (each ctest above has already failed the script on error).
-# A skipped test (GTEST_SKIP: e.g. a read-only directory, which root can write anyway) is counted
+# A skipped test (GTEST_SKIP: e.g. a device node where mknod is not allowed) is counted
 # as skipped, not as passed.
 total=0
 for n in $(sed -n 's/.*tests failed out of \([0-9]*\).*/\1/p' "$log"); do total=$((total + n)); done

@@ -1,6 +1,9 @@
 // The I/O boundary: readers agree with each other on the shared volumes, every bad input
 // becomes an IoError naming the file, and writers are atomic and round-trip exactly.
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <linux/fs.h>
+#include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <unistd.h>
@@ -637,12 +640,33 @@ TEST_F(IoTest, WritingIntoAMissingDirectoryThrowsAndLeavesNoFile) {
   EXPECT_TRUE(entries().empty());
 }
 
+// Sets or clears a directory's immutable attribute (chattr +i), which holds even for root.
+bool set_immutable(const std::string& dir, bool on) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return false;
+  int flags = 0;
+  bool ok = ::ioctl(fd, FS_IOC_GETFLAGS, &flags) == 0;
+  if (ok) {
+    flags = on ? (flags | FS_IMMUTABLE_FL) : (flags & ~FS_IMMUTABLE_FL);
+    ok = ::ioctl(fd, FS_IOC_SETFLAGS, &flags) == 0;
+  }
+  ::close(fd);
+  return ok;
+}
+
+// A directory the process may not write into: by its permissions for a user, by the immutable
+// attribute for root (whom permissions do not stop).
 TEST_F(IoTest, WritingIntoAReadOnlyDirectoryThrows) {
-  if (::geteuid() == 0) GTEST_SKIP() << "root may write anywhere";
   fs::create_directory(path("ro"));
-  fs::permissions(path("ro"), fs::perms::owner_read | fs::perms::owner_exec);
-  EXPECT_CONTAINS(io_error_of([&] { AtomicFile f(path("ro/x.ply")); }), "not writable");
+  if (::geteuid() == 0) {
+    if (!set_immutable(path("ro"), true)) GTEST_SKIP() << "as root, and the file system refuses chattr +i here";
+  } else {
+    fs::permissions(path("ro"), fs::perms::owner_read | fs::perms::owner_exec);
+  }
+  const std::string message = io_error_of([&] { AtomicFile f(path("ro/x.ply")); });
+  if (::geteuid() == 0) set_immutable(path("ro"), false);
   fs::permissions(path("ro"), fs::perms::owner_all);
+  EXPECT_CONTAINS(message, "not writable");
   EXPECT_TRUE(fs::is_empty(path("ro")));
 }
 
