@@ -12,6 +12,7 @@
 #include <new>
 #include <span>
 #include <type_traits>
+#include <utility>
 
 #include "io/field_codec.h"
 #include "io/io_error.h"
@@ -249,14 +250,16 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
   // No two bricks of the band share bytes: an entry that points into another brick (a copy of
   // one passes every checksum) would give a silently wrong brick. verify checks that the bricks
   // of all bands tile the area; a band read alone checks its own.
-  std::vector<uint32_t> order(entries.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<uint32_t>(i);
-  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return entries[a].offset < entries[b].offset; });
+  // (Offset, entry) pairs sorted: a band of 2 M bricks (a 2048^3 volume's band 0) sorts in a
+  // fraction of a second, once per process.
+  std::vector<std::pair<uint64_t, uint32_t>> order(entries.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = {entries[i].offset, static_cast<uint32_t>(i)};
+  std::sort(order.begin(), order.end());
   for (size_t i = 1; i < order.size(); ++i) {
-    const BrickEntry& before = entries[order[i - 1]];
-    if (entries[order[i]].offset < before.offset + before.total())
-      throw IoError(file + ": directory entry " + std::to_string(order[i]) + " overlaps entry " + std::to_string(order[i - 1]) +
-                    " (corrupt directory)");
+    const BrickEntry& before = entries[order[i - 1].second];
+    if (order[i].first < before.offset + before.total())
+      throw IoError(file + ": directory entry " + std::to_string(order[i].second) + " overlaps entry " +
+                    std::to_string(order[i - 1].second) + " (corrupt directory)");
   }
   return entries;
 }
