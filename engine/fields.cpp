@@ -60,12 +60,13 @@ double unit(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x
 
 }  // namespace
 
+double algebraic_function(double x, double y, double z) {
+  const double s = x / 2 + y / 2 - z + 0.01;
+  return std::sqrt(x * x + y * y) - s * s;
+}
+
 Volume generate_algebraic(int64_t size, std::array<double, 3> shift) {
-  return sample(size, [shift](const Point& p) {
-    const double x = p[0] - shift[0], y = p[1] - shift[1], z = p[2] - shift[2];
-    const double s = x / 2 + y / 2 - z + 0.01;
-    return std::sqrt(x * x + y * y) - s * s;
-  });
+  return sample(size, [shift](const Point& p) { return algebraic_function(p[0] - shift[0], p[1] - shift[1], p[2] - shift[2]); });
 }
 
 Volume generate_sphere(int64_t size) {

@@ -10,6 +10,8 @@ namespace isotope {
 // The paper's Table-1 function f = sqrt(x^2+y^2) - (x/2 + y/2 - z + 0.01)^2 on [-1,1]^3,
 // evaluated at (p - shift); size nodes per axis.
 Volume generate_algebraic(int64_t size, std::array<double, 3> shift = {0, 0, 0});
+// That function at one point (isotope bench --scale samples it slab by slab, as uint8).
+double algebraic_function(double x, double y, double z);
 // Signed fields whose isosurface at 0 is the named shape, positive inside (value > iso = inside).
 Volume generate_sphere(int64_t size);                  // one sphere: 1 component, chi 2
 Volume generate_torus(int64_t size);                   // one torus: 1 component, chi 0

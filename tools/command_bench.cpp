@@ -438,40 +438,49 @@ class Suite {
   // `isotope extract STORE` in a new process with the store dropped from the page cache first:
   // what a user meets the first time. The row's time is the extraction the process reports (read
   // from the disk as it goes), comparable with the baseline; process_seconds is the whole run.
-  Row cold_row(const DatasetSpec& spec, const std::string& store, const ExtractOptions& o, int threads) {
-    Row r = row(spec, "store-cold", std::string(to_string(o.topology)).c_str(), o.eps, threads);
-    r.delta = o.delta;
-    std::vector<std::string> args = {"extract", store, "--iso=" + number(o.iso), "--eps=" + number(o.eps),
-                                     "--topology=" + std::string(to_string(o.topology)), "--threads", std::to_string(threads),
-                                     "-o", (work_ / "cold.ply").string()};
-    if (o.topology == TopologyMode::simplify) args.push_back("--delta=" + number(o.delta));
+  // Runs `isotope extract ARGS -o MESH` as new processes until the cold policy is met. The row
+  // gets the median of the time each prints (its extraction, and its preprocessing when
+  // `preprocess`) and of its whole run, its triangles and the peak RSS over the runs. BEFORE runs
+  // ahead of each, untimed.
+  void extract_processes(Row& r, std::vector<std::string> args, const fs::path& mesh, bool preprocess,
+                         const std::function<void()>& before = {}) {
+    args.insert(args.end(), {"-o", mesh.string()});
     std::vector<double> times, process;
     double total = 0;
     uint64_t peak = 0;
     while (times.size() < cold_policy_.min_runs || (total < cold_policy_.min_seconds && times.size() < cold_policy_.max_runs)) {
-      evict_from_page_cache(store);
-      // The last run's mesh goes first: replacing it would time freeing its pages too.
-      fs::remove(work_ / "cold.ply");
+      if (before) before();
+      fs::remove(mesh);  // replacing the last run's mesh would time freeing its pages too
       const ChildRun c = child(args, work_);
       const Summary s = parse_summary(c.output);
-      times.push_back(s.extract_seconds);
+      times.push_back(s.extract_seconds + (preprocess ? s.preprocess_seconds : 0));
       process.push_back(c.seconds);
       total += c.seconds;
       r.triangles = s.triangles;
       peak = std::max(peak, static_cast<uint64_t>(c.max_rss_kb) << 10);
     }
+    fs::remove(mesh);
+    r.seconds = median(times);
+    r.process_seconds = median(process);
+    r.runs = static_cast<int>(times.size());
+    r.peak_rss = peak;
+  }
+
+  Row cold_row(const DatasetSpec& spec, const std::string& store, const ExtractOptions& o, int threads) {
+    Row r = row(spec, "store-cold", std::string(to_string(o.topology)).c_str(), o.eps, threads);
+    r.delta = o.delta;
+    std::vector<std::string> args = {"extract", store, "--iso=" + number(o.iso), "--eps=" + number(o.eps),
+                                     "--topology=" + std::string(to_string(o.topology)), "--threads", std::to_string(threads)};
+    if (o.topology == TopologyMode::simplify) args.push_back("--delta=" + number(o.delta));
+    extract_processes(r, args, work_ / "cold.ply", false, [&] { evict_from_page_cache(store); });
     // Once more with a report, untimed: the bytes read (the same in every cold run).
     evict_from_page_cache(store);
-    args.insert(args.end(), {"-q", "--report", (work_ / "cold.json").string()});
+    args.insert(args.end(), {"-o", (work_ / "cold.ply").string(), "-q", "--report", (work_ / "cold.json").string()});
     child(args, work_);
     std::ifstream in(work_ / "cold.json");
     r.bytes_read = nlohmann::json::parse(in).at("bytes_read").get<uint64_t>();
     fs::remove(work_ / "cold.ply");
     fs::remove(work_ / "cold.json");
-    r.seconds = median(times);
-    r.process_seconds = median(process);
-    r.runs = static_cast<int>(times.size());
-    r.peak_rss = peak;
     return r;
   }
 
@@ -500,27 +509,10 @@ class Suite {
     auto one_shot = [&](TopologyMode mode, double eps, int threads) {
       say(spec, "one shot from the raw file");
       Row r = row(spec, "one-shot", std::string(to_string(mode)).c_str(), eps, threads);
-      std::vector<double> times, process;
-      uint64_t peak = 0;
-      double total = 0;
-      while (times.size() < cold_policy_.min_runs || (total < cold_policy_.min_seconds && times.size() < cold_policy_.max_runs)) {
-        fs::remove(work_ / "one.ply");  // as for the cold rows
-        const ChildRun c = child({"extract", raw, "--iso=" + number(spec.iso), "--eps=" + number(eps),
-                                  "--topology=" + std::string(to_string(mode)), "--threads", std::to_string(threads), "-o",
-                                  (work_ / "one.ply").string()},
-                                 work_);
-        const Summary s = parse_summary(c.output);
-        times.push_back(s.preprocess_seconds + s.extract_seconds);
-        process.push_back(c.seconds);
-        total += c.seconds;
-        r.triangles = s.triangles;
-        peak = std::max(peak, static_cast<uint64_t>(c.max_rss_kb) << 10);
-      }
-      fs::remove(work_ / "one.ply");
-      r.seconds = median(times);
-      r.process_seconds = median(process);
-      r.runs = static_cast<int>(times.size());
-      r.peak_rss = peak;
+      extract_processes(r,
+                        {"extract", raw, "--iso=" + number(spec.iso), "--eps=" + number(eps),
+                         "--topology=" + std::string(to_string(mode)), "--threads", std::to_string(threads)},
+                        work_ / "one.ply", true);
       r.note = "extraction and hierarchy; process: the whole run, raw file read and mesh written";
       finish(r);
     };
@@ -1010,8 +1002,7 @@ int run_scale(const BenchArgs& a, const fs::path& work, bool progress) {
         const double py = -1 + h * static_cast<double>(y);
         for (int64_t x = 0; x < n; ++x) {
           const double px = -1 + h * static_cast<double>(x);
-          const double s = px / 2 + py / 2 - pz + 0.01;
-          const double f = std::sqrt(px * px + py * py) - s * s;
+          const double f = algebraic_function(px, py, pz);
           slab[static_cast<size_t>(y * n + x)] = static_cast<uint8_t>(std::lround(std::clamp((f + 2) / 3.5, 0.0, 1.0) * 255));
         }
       });
