@@ -154,7 +154,7 @@ AtomicFile::~AtomicFile() {
 }
 
 void AtomicFile::write(const void* data, size_t bytes) {
-  if (file_ == nullptr) throw IoError(path_ + ": write after commit");
+  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (bytes == 0) return;
   errno = 0;
   if (std::fwrite(data, 1, bytes, file_) != bytes)
@@ -163,7 +163,7 @@ void AtomicFile::write(const void* data, size_t bytes) {
 }
 
 void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
-  if (file_ == nullptr) throw IoError(path_ + ": write after commit");
+  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (offset + bytes > size_) throw IoError(path_ + ": write_at past the end of what was written");
   errno = 0;
   const bool ok = std::fseek(file_, static_cast<long>(offset), SEEK_SET) == 0 &&
@@ -171,8 +171,9 @@ void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
   if (!ok) throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
 }
 
-void AtomicFile::commit() {
-  if (file_ == nullptr) throw IoError(path_ + ": commit called twice");
+void AtomicFile::finish() {
+  if (finished_) return;
+  if (file_ == nullptr) throw IoError(path_ + ": finish after commit");
   // Buffered data may only meet a full disk here, so flush and close are checked too.
   errno = 0;
   const bool flushed = std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
@@ -182,6 +183,12 @@ void AtomicFile::commit() {
   file_ = nullptr;
   if (!flushed) throw IoError(path_ + ": write failed: " + errno_text(flush_err != 0 ? flush_err : EIO));
   if (!closed) throw IoError(path_ + ": close failed: " + errno_text(close_err != 0 ? close_err : EIO));
+  finished_ = true;
+}
+
+void AtomicFile::commit() {
+  if (committed_) throw IoError(path_ + ": commit called twice");
+  finish();
   if (std::rename(temp_path_.c_str(), target_.c_str()) != 0)
     throw IoError(path_ + ": cannot rename temporary file into place: " + std::strerror(errno));
   committed_ = true;

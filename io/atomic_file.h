@@ -43,13 +43,18 @@ class AtomicFile {
   // Overwrites bytes already written (a header completed last); the next write() appends.
   void write_at(uint64_t offset, const void* data, size_t bytes);
   uint64_t size() const { return size_; }      // bytes written so far
-  void commit();                               // flush, fsync, rename; throws IoError
+  // Flushes, fsyncs and closes the temporary file: what can fail for lack of disk fails here.
+  // Several outputs of one command are all finished before the first is committed, so that a
+  // failure leaves every target as it was (tools/command_extract.cpp).
+  void finish();                               // throws IoError; a second call does nothing
+  void commit();                               // finish() if not yet, then rename; throws IoError
   const std::string& temp_path() const { return temp_path_; }
+  const std::string& path() const { return path_; }  // as named
 
  private:
   std::string path_, target_, temp_path_;  // as named; the file replaced (output_target); temporary
   std::FILE* file_ = nullptr;
-  bool committed_ = false;
+  bool finished_ = false, committed_ = false;
   uint64_t size_ = 0;
 };
 

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "io/hdf5_handle.h"
+#include "io/input_file.h"
 #include "io/io_error.h"
 #include "io/nrrd_reader.h"
 #include "io/raw_reader.h"
@@ -77,6 +78,7 @@ class Fd {
 };
 
 Fd open_read_only(const std::string& path, const std::string& where) {
+  require_regular_file(path, where, "a volume file");
   Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
   if (fd.get() < 0) throw IoError(where + ": cannot open: " + errno_text(errno));
   return fd;

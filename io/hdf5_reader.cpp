@@ -10,6 +10,7 @@
 #include <new>
 
 #include "io/hdf5_handle.h"
+#include "io/input_file.h"
 #include "io/io_error.h"
 #include "io/raw_reader.h"
 
@@ -95,10 +96,7 @@ void read_xyz_attribute(hid_t ds, const char* name, const std::string& where, bo
 
 Hdf5Handle open_hdf5_file(const std::string& file) {
   silence_hdf5_errors();
-  std::error_code ec;
-  const fs::file_status st = fs::status(file, ec);
-  if (!fs::exists(st)) throw IoError(file + ": no such file");
-  if (fs::is_directory(st)) throw IoError(file + ": is a directory, not an HDF5 file");
+  require_regular_file(file, file, "an HDF5 file");
   const htri_t is_hdf5 = H5Fis_hdf5(file.c_str());
   if (is_hdf5 == 0) throw IoError(file + ": not an HDF5 file");
   if (is_hdf5 < 0) throw IoError(file + ": cannot open: " + hdf5_error_detail());

@@ -20,6 +20,7 @@
 #include <system_error>
 #include <vector>
 
+#include "io/input_file.h"
 #include "io/io_error.h"
 #include "io/raw_reader.h"
 
@@ -505,10 +506,7 @@ void seek_data(std::FILE* f, const NrrdHeader& h, int64_t data_bytes, const std:
 // ---------------------------------------------------------------- files
 
 FilePtr open_file(const std::string& path, const std::string& where) {
-  std::error_code ec;
-  const fs::file_status st = fs::status(path, ec);
-  if (!fs::exists(st)) throw IoError(where + ": no such file");
-  if (fs::is_directory(st)) throw IoError(where + ": is a directory, not a volume file");
+  require_regular_file(path, where, "a volume file");
   FilePtr file(std::fopen(path.c_str(), "rb"));
   if (!file) throw IoError(where + ": cannot open: " + std::strerror(errno));
   return file;

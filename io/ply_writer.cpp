@@ -86,13 +86,19 @@ void write_faces(AtomicFile& out, const Mesh& mesh, const std::string& path) {
 
 }  // namespace
 
-void write_ply(const Mesh& mesh, const std::string& path) {
-  check_mesh(mesh, path);
-  AtomicFile out(path);
+void write_ply(const Mesh& mesh, AtomicFile& out) {
+  check_mesh(mesh, out.path());
   const std::string head = header(mesh);
   out.write(head.data(), head.size());
   write_vertices(out, mesh);
-  write_faces(out, mesh, path);
+  write_faces(out, mesh, out.path());
+  out.finish();
+}
+
+void write_ply(const Mesh& mesh, const std::string& path) {
+  check_mesh(mesh, path);
+  AtomicFile out(path);
+  write_ply(mesh, out);
   out.commit();
 }
 

@@ -3,10 +3,14 @@
 #include <string>
 
 #include "engine/mesh.h"
+#include "io/atomic_file.h"
 
 namespace isotope {
 
 // Written to a temporary file beside PATH and renamed when complete; throws IoError.
 void write_ply(const Mesh& mesh, const std::string& path);
+// Writes and finishes OUT (AtomicFile::finish) without committing it: the caller renames it into
+// place together with its other outputs.
+void write_ply(const Mesh& mesh, AtomicFile& out);
 
 }  // namespace isotope

@@ -21,6 +21,8 @@
 #include <vector>
 
 #include "engine/parallel.h"
+#include "io/checked_size.h"
+#include "io/input_file.h"
 #include "io/io_error.h"
 
 namespace isotope {
@@ -178,13 +180,13 @@ int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes
   for (int64_t d : dims) {
     if (d < 1) throw IoError(file + ": dimensions " + dims_text(dims) + " invalid, each must be >= 1");
   }
-  const int64_t limit = std::numeric_limits<int64_t>::max() / std::max(element_bytes, 1);
-  int64_t count = 1;
-  for (int64_t d : dims) {
-    if (count > limit / d) throw IoError(file + ": dimensions " + dims_text(dims) + " too large");
-    count *= d;
-  }
-  return count;
+  std::optional<int64_t> count = int64_t{1};
+  for (int64_t d : dims)
+    if (count) count = checked_mul(*count, d);
+  // The byte count must fit too, since callers form count * element_bytes.
+  if (!count || !checked_mul(*count, int64_t{std::max(element_bytes, 1)}))
+    throw IoError(file + ": dimensions " + dims_text(dims) + " too large");
+  return *count;
 }
 
 void check_finite(const Volume& volume, const std::string& file) {
@@ -219,10 +221,8 @@ int64_t check_raw_file(const std::string& path, const RawLayout& layout) {
   const int elem = scalar_type_size(layout.type);
   const int64_t expected_bytes = checked_node_count(layout.dims, elem, path) * elem;
   // Distinguishes "missing" from "a directory" from "wrong size" before any allocation.
+  require_regular_file(path, path, "a volume file");
   std::error_code ec;
-  const fs::file_status st = fs::status(path, ec);
-  if (!fs::exists(st)) throw IoError(path + ": no such file");
-  if (fs::is_directory(st)) throw IoError(path + ": is a directory, not a volume file");
   const auto size = fs::file_size(path, ec);
   if (ec) throw IoError(path + ": cannot determine file size: " + ec.message());
   if (static_cast<int64_t>(size) != expected_bytes) {

@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "io/field_codec.h"
+#include "io/checked_size.h"
 #include "io/io_error.h"
 
 namespace isotope {
@@ -51,9 +52,6 @@ class Reader {
 };
 
 constexpr size_t kTypeChars = 16;
-constexpr size_t kBandTableAt = 256;
-constexpr size_t kHeaderChecksumAt = kHeaderBytes - 8;
-constexpr size_t kChecksumBytes = 8;  // each section starts with the XXH64 of its frame
 
 // The fields of each section, in order; a bfloat16 field holds floats whose low 16 bits are zero.
 enum class Field { values, lo, hi, bound, exact_lo, exact_hi, w0, w1, w2, paper_lo, paper_hi, surplus };
@@ -240,24 +238,28 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
   for (BrickEntry& e : entries) {
     e.offset = r.get<uint64_t>();
     for (uint32_t& b : e.bytes) b = r.get<uint32_t>();
-    // Overflow-free: each size is below 2^32 and the offset is checked against the area first.
-    if (e.offset < kHeaderBytes || e.offset > area_end || e.total() > area_end - e.offset)
+    if (e.offset < kHeaderBytes || !range_within(e.offset, e.total(), area_end))
       throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " points outside the brick area");
     for (uint32_t b : e.bytes)
       if (b != 0 && b <= kChecksumBytes)
         throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " gives a section no room");
   }
-  // No two bricks of the band share bytes: an entry that points into another brick (a copy of
-  // one passes every checksum) would give a silently wrong brick. verify checks that the bricks
-  // of all bands tile the area; a band read alone checks its own, sorted by offset (2 M entries,
-  // a 2048^3 volume's band 0: about 140 ms, once per process).
-  std::vector<std::pair<uint64_t, uint32_t>> order(entries.size());
-  for (size_t i = 0; i < order.size(); ++i) order[i] = {entries[i].offset, static_cast<uint32_t>(i)};
+  // The band's bricks tile one run of the file (the writer puts them one after the other): no two
+  // share bytes, since an entry that points into another brick (a copy of one passes every
+  // checksum) would give a silently wrong brick, and none leaves a gap. verify checks that the
+  // bands tile the whole brick area; a band read alone checks its own, sorted by offset (2 M
+  // entries, a 2048^3 volume's band 0: about 140 ms, once per process).
+  std::vector<std::pair<uint64_t, uint32_t>> order;  // an entry of no bytes takes no room: left out
+  order.reserve(entries.size());
+  for (size_t i = 0; i < entries.size(); ++i)
+    if (entries[i].total() != 0) order.emplace_back(entries[i].offset, static_cast<uint32_t>(i));
   std::sort(order.begin(), order.end());
   for (size_t i = 1; i < order.size(); ++i) {
     const BrickEntry& before = entries[order[i - 1].second];
-    if (order[i].first < before.offset + before.total())
-      throw IoError(file + ": directory entry " + std::to_string(order[i].second) + " overlaps entry " +
+    const uint64_t end = before.offset + before.total();  // no wrap: checked against the area above
+    if (order[i].first != end)
+      throw IoError(file + ": directory entry " + std::to_string(order[i].second) +
+                    (order[i].first < end ? " overlaps entry " : " leaves a gap after entry ") +
                     std::to_string(order[i - 1].second) + " (corrupt directory)");
   }
   return entries;

@@ -20,6 +20,9 @@ inline constexpr std::array<char, 8> kStoreMagic = {'I', 'S', 'O', 'S', 'T', 'O'
 inline constexpr uint32_t kStoreVersion = 3;
 inline constexpr size_t kHeaderBytes = 1024;
 inline constexpr size_t kEntryBytes = 24;
+inline constexpr size_t kBandTableAt = 256;                   // the header's table of band directories
+inline constexpr size_t kHeaderChecksumAt = kHeaderBytes - 8;  // XXH64 of the header's bytes before it
+inline constexpr size_t kChecksumBytes = 8;                   // each section starts with the XXH64 of its frame
 inline constexpr int kMaxBands = 20;        // k <= 19: dims up to 2^19 + 1
 inline constexpr int kMinBrickBits = 3, kMaxBrickBits = 6;
 

@@ -10,9 +10,12 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <limits>
 
 #include "engine/parallel.h"
+#include "io/checked_size.h"
+#include "io/input_file.h"
 #include "io/io_error.h"
 
 namespace isotope {
@@ -47,6 +50,8 @@ void for_each_run(const std::array<bool, kSections>& which, F f) {
 }  // namespace
 
 bool is_store_file(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return false;  // never open a FIFO (io/input_file.h)
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
   char magic[kStoreMagic.size()] = {};
@@ -57,6 +62,7 @@ bool is_store_file(const std::string& path) {
 }
 
 StoreReader::StoreReader(const std::string& path) : path_(path) {
+  require_regular_file(path, path, "an isotope store");
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
   try {
@@ -73,7 +79,7 @@ StoreReader::StoreReader(const std::string& path) : path_(path) {
     uint64_t at = area_end_;
     for (int j = 0; j <= header_.lattice_k; ++j) {
       const BandDirectory& d = header_.bands[static_cast<size_t>(j)];
-      if (d.offset != at || d.offset > file_bytes_ || d.bytes > file_bytes_ - d.offset)
+      if (d.offset != at || !range_within(d.offset, d.bytes, file_bytes_))
         throw IoError(path + ": file is truncated or its directories overlap (band " + std::to_string(j) + ")");
       at = d.offset + d.bytes;
     }
@@ -208,7 +214,8 @@ std::string check_brick(const StoreReader& store, int64_t index, FullBrick& bric
 // Bands j >= 1 repeat values of band j-1: node g holds band j-1's value at 2g (clamped to its grid).
 std::string check_values_against_finer_band(const StoreReader& store, int64_t index, const FullBrick& brick) {
   const StoreLayout& layout = store.layout();
-  const auto [j, b] = store.locate_brick(index);
+  const auto [band_j, b] = store.locate_brick(index);
+  const int j = band_j;  // a copy: lambdas cannot capture a structured binding before C++20 in clang 14
   const Band &band = layout.band(j), &finer = layout.band(j - 1);
   const int bits = layout.brick_bits();
   const int64_t t = layout.brick_width();

@@ -6,6 +6,7 @@
 #include <system_error>
 
 #include "io/hdf5_reader.h"
+#include "io/input_file.h"
 #include "io/io_error.h"
 #include "io/nrrd_reader.h"
 
@@ -72,13 +73,6 @@ RawLayout raw_layout(const VolumeSource& source) {
                 " from the file name (expected NAME_XxYxZ_TYPE.raw); pass --dims and --type");
 }
 
-// A mistyped path should say so, not ask for --dims and --type.
-void require_regular_file(const std::string& path) {
-  std::error_code ec;
-  const fs::file_status st = fs::status(path, ec);
-  if (!fs::exists(st)) throw IoError(path + ": no such file");
-  if (fs::is_directory(st)) throw IoError(path + ": is a directory, not a volume file");
-}
 
 }  // namespace
 
@@ -88,7 +82,7 @@ VolumeLocation locate_volume(const VolumeSource& source) {
   if (const auto h5 = split_hdf5_spec(source.spec)) return {Format::hdf5, h5->file, h5->dataset, {}};
   if (has_hdf5_extension(source.spec)) return {Format::hdf5, source.spec, only_3d_dataset(source.spec), {}};
   if (has_nrrd_extension(source.spec)) return {Format::nrrd, source.spec, "", {}};  // the header says dims and type
-  require_regular_file(source.spec);
+  require_regular_file(source.spec, source.spec, "a volume file");  // a mistyped path says so, not "pass --dims"
   return {Format::raw, source.spec, "", raw_layout(source)};
 }
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what building isotope needs on Debian/Ubuntu, and the viewer's npm packages
 # (viewer/package-lock.json). With --tests, also what the tests need: Chromium, for the viewer's
-# end-to-end test, and scikit-image, the peer the bench runs. Does nothing (and needs no network) when everything is already installed.
+# end-to-end test, scikit-image, the peer the bench runs, and clang-14 with libFuzzer. Does nothing (and needs no network) when everything is already installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -16,8 +16,9 @@ packages=(
 # Node.js bundles the viewer (esbuild) and drives the browser test; a machine that has node and
 # npm already (e.g. from NodeSource) keeps them.
 if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+=(nodejs npm); fi
-# python3-skimage: the peer that isotope bench (and its test) times beside ours.
-if [ "${1:-}" = "--tests" ]; then packages+=(chromium python3-skimage); fi
+# python3-skimage: the peer that isotope bench (and its test) times beside ours. clang-14 and its
+# runtime libraries (libFuzzer, the sanitizers): the fuzz targets of fuzz/ (scripts/fuzz.sh).
+if [ "${1:-}" = "--tests" ]; then packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev); fi
 
 missing=()
 for p in "${packages[@]}"; do

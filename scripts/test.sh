@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # What CI runs: a warnings-as-errors Release build with every test, then the tests again
-# under AddressSanitizer and UndefinedBehaviorSanitizer, then the parallel tests under
-# ThreadSanitizer. Fails on the first error.
+# under AddressSanitizer and UndefinedBehaviorSanitizer, then the parallel tests and the server under
+# ThreadSanitizer, then every parser under libFuzzer and the hostile-user table of
+# docs/RELIABILITY.md. Fails on the first error.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -51,6 +52,13 @@ cmake --build build-tsan --target test_determinism test_store test_paged_extract
 phase "TSan tests"
 TSAN_OPTIONS="halt_on_error=1 suppressions=$PWD/tests/tsan.supp" run_ctest --test-dir build-tsan --output-on-failure --no-tests=error \
   -R 'Determinism|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount|Serve\.|Supersession\.'
+
+# Every parser fuzzed for a bounded time (clang-14, libFuzzer, ASan+UBSan; build-fuzz), then the
+# hostile-user table of docs/RELIABILITY.md regenerated into a scratch file: CI fails when a row of
+# it does not hold (a crash, a hang, a write, a wrong status, unbounded memory).
+phase "fuzz targets, 60 s each (build-fuzz)"
+bash scripts/reliability.sh --fuzz-seconds 60 --isotope build-ci/tools/isotope --out "$log.reliability.md"
+rm -f "$log.reliability.md"
 
 # One closing line over the three runs (each ctest above has already failed the script on error).
 # A skipped test (GTEST_SKIP: e.g. a device node where mknod is not allowed) is counted

@@ -31,6 +31,7 @@
 #include "io/io_error.h"
 #include "io/ply_writer.h"
 #include "io/raw_reader.h"
+#include "io/store_reader.h"
 #include "io/volume_reader.h"
 #include "io/volume_writer.h"
 #include "tests/io_error_of.h"
@@ -262,6 +263,31 @@ TEST_F(IoTest, RawDirectoryInsteadOfFileIsRejected) {
   const std::string p = path("dir_2x2x2_uint8.raw");
   fs::create_directory(p);
   EXPECT_CONTAINS(io_error_of([&] { read_raw(p, *parse_raw_name(p)); }), "is a directory");
+}
+
+// The input policy (io/input_file.h): a FIFO without a writer would block every reader's open
+// forever (this test then hangs until ctest's timeout); each reader refuses it by name instead,
+// through a link too, and an NRRD header whose detached data file is a FIFO as well.
+TEST_F(IoTest, NonRegularInputsAreRefused) {
+  const std::string fifo = path("pipe");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  for (const std::string name : {"v_2x2x2_uint8.raw", "v.nrrd", "v.h5", "v.isotope"})
+    fs::create_symlink(fifo, path(name));
+  const auto source = [](const std::string& spec) {
+    VolumeSource s;
+    s.spec = spec;
+    return s;
+  };
+  const auto refused = [](const std::string& msg) { return msg.find("is a FIFO, not a regular file") != std::string::npos; };
+  EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("v_2x2x2_uint8.raw"))); }));
+  EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("v.nrrd"))); }));
+  EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("v.h5") + ":/data")); }));
+  EXPECT_PRED1(refused, io_error_of([&] { StoreReader store(path("v.isotope")); }));
+  EXPECT_FALSE(is_store_file(path("v.isotope")));
+  {
+    std::ofstream(path("d.nhdr")) << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: pipe\n";
+  }
+  EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("d.nhdr"))); }));
 }
 
 TEST_F(IoTest, RawNanIsRejectedWithItsCoordinates) {

@@ -109,9 +109,11 @@ int run_extract(const ExtractArgs& a) {
   if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
   // Below 2^-11 (about 0.00049) voxel spacings the comparison's sampling grid of a 2^19-node axis would overflow
   // (engine/component_report.cpp): refused here, before the work, not after it.
-  if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6)
-    throw CLI::ValidationError("--compare-voxels", "must be a number of voxel spacings in [0.0005, 1e6], got " +
-                                                       std::to_string(a.compare_voxels));
+  if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6) {
+    char given[32];
+    std::snprintf(given, sizeof given, "%g", a.compare_voxels);  // 1e-300, not 0.000000
+    throw CLI::ValidationError("--compare-voxels", std::string("must be a number of voxel spacings in [0.0005, 1e6], got ") + given);
+  }
 
   // Fail before the (possibly long) extraction when the outputs cannot be written; creates nothing.
   for (const std::string* path : {&a.output, &a.report}) {
@@ -159,10 +161,12 @@ int run_extract(const ExtractArgs& a) {
       run.compare_seconds = seconds_since(compare_start);
     }
   }
-  // The report's temporary file is opened first (it checks its directory), the mesh is then
-  // renamed into place, and if the report cannot be completed the mesh is removed again. On more
-  // than one thread the mesh is written while its topology is measured: the write ends waiting
-  // for the disk (fsync), which the measuring overlaps.
+  // Both outputs are written to temporary files and finished (flushed to disk) before either is
+  // renamed into place (io/atomic_file.h): a failure on the way, a full disk included, leaves the
+  // files named by -o and --report as they were. On more than one thread the mesh is written while
+  // its topology is measured: the write ends waiting for the disk (fsync), which the measuring
+  // overlaps.
+  AtomicFile mesh_file(a.output);
   std::optional<AtomicFile> report_file;
   if (!a.report.empty()) report_file.emplace(a.report);
   std::exception_ptr write_error;
@@ -170,15 +174,11 @@ int run_extract(const ExtractArgs& a) {
   if (run.threads > 1)
     writer = std::thread([&] {
       try {
-        write_ply(mesh, a.output);
+        write_ply(mesh, mesh_file);
       } catch (...) {
         write_error = std::current_exception();
       }
     });
-  const auto remove_output = [&] {
-    std::error_code ignored;
-    std::filesystem::remove(a.output, ignored);
-  };
   try {
     const auto start = std::chrono::steady_clock::now();
     run.topology = measure_topology(mesh);
@@ -192,26 +192,20 @@ int run_extract(const ExtractArgs& a) {
       run.compare_seconds += seconds_since(compare_start);
     }
   } catch (...) {
-    if (writer.joinable()) {
-      writer.join();
-      if (!write_error) remove_output();
-    }
+    if (writer.joinable()) writer.join();
     throw;
   }
   if (writer.joinable()) writer.join();
   if (write_error) std::rethrow_exception(write_error);
   run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);  // this process so far
-  if (run.threads <= 1) write_ply(mesh, a.output);
+  if (run.threads <= 1) write_ply(mesh, mesh_file);
   if (report_file) {
-    try {
-      const std::string text = report_json(run).dump(2) + "\n";
-      report_file->write(text.data(), text.size());
-      report_file->commit();
-    } catch (...) {
-      remove_output();
-      throw;
-    }
+    const std::string text = report_json(run).dump(2) + "\n";
+    report_file->write(text.data(), text.size());
+    report_file->finish();
   }
+  mesh_file.commit();
+  if (report_file) report_file->commit();
   if (!a.quiet) std::cout << summary_line(run) << std::endl;
   if (!a.quiet && run.comparison) std::cout << comparison_line(*run.comparison) << std::endl;
   return 0;

@@ -11,10 +11,6 @@
 #include "tools/commands.h"
 
 namespace isotope::tools {
-namespace {
-
-
-}  // namespace
 
 void keep_freed_brick_memory() {
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
@@ -22,7 +18,9 @@ void keep_freed_brick_memory() {
 }
 
 ExtractionInput::ExtractionInput(const Spec& spec) {
-  if (is_store_file(spec.path)) open_store(spec);
+  // A store is known by its magic; a file named .isotope without it is a damaged store, whose
+  // reader says so, not a raw volume whose name lacks its dimensions (tests/reject/zeros.isotope).
+  if (is_store_file(spec.path) || spec.path.ends_with(".isotope")) open_store(spec);
   else open_volume(spec);
 }
 

@@ -2,6 +2,7 @@
 // (Gerstner & Pajarola, IEEE Visualization 2000). Entry point and exit-code policy:
 // 0 success (and --help, --version), 1 runtime failure, 2 usage error.
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <cstdio>
 #include <exception>
 #include <iostream>
@@ -22,6 +23,10 @@ extern "C" const char* __lsan_default_suppressions() { return "leak:libfontconfi
 
 int main(int argc, char** argv) {
   using namespace isotope::tools;
+  // A file size limit (ulimit -f, a quota) would otherwise kill the process by SIGXFSZ halfway
+  // through a write; ignored, the write fails with EFBIG and the output's own error path runs
+  // (io/atomic_file.h: the message, the temporary removed, the target left as it was).
+  std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"isotope " ISOTOPE_VERSION
                ": multiresolution isosurface extraction with topology control\n"
                "(Gerstner & Pajarola, IEEE Visualization 2000)"};

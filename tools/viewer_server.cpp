@@ -36,6 +36,11 @@ constexpr int64_t kHistogramSamples = int64_t{4} << 20;  // a fraction of a seco
 // Extractions at once. Each already runs on every core, so more would only hold more meshes in
 // memory; the others wait, and leave the queue as soon as a newer request supersedes them.
 constexpr std::ptrdiff_t kConcurrentExtractions = 2;
+// Requests waiting for one of those slots, at most; a request beyond them, or one that has waited
+// kMaxWaitSeconds, gets 503 with Retry-After (docs/SERVE.md, "Limits"): the memory and the delay a
+// crowd of clients can cause stay bounded (tests/serve_test.cpp, ACrowdIsAnsweredOrRefusedWithBoundedMemory).
+constexpr int kWaitingExtractions = 16;
+constexpr int kMaxWaitSeconds = 30;
 // Limits against hostile clients (docs/SERVE.md, "Limits"). Each connection holds a worker while
 // it sends its request, however slowly: the pool is bounded, but larger than what a handful of
 // slow clients hold (httplib's default is 8 on this machine). Requests carry no body.
@@ -79,6 +84,8 @@ struct ViewerServer::Impl {
   std::string info;
   Supersession supersession;
   ExtractionSlots slots{kConcurrentExtractions};
+  std::atomic<int> waiting{0};
+  socket_t listen_socket = -1;
   httplib::Server http;
   std::mutex log_mutex;
   std::mutex run_mutex;  // listen() and stop() from different threads, in either order
@@ -112,9 +119,10 @@ struct ViewerServer::Impl {
     // httplib's default is SO_REUSEPORT, with which a second server (another user's, even) binds
     // the same port and takes a share of the connections. SO_REUSEADDR only lets a restarted
     // server take its port back from connections still in TIME_WAIT.
-    http.set_socket_options([](socket_t sock) {
+    http.set_socket_options([this](socket_t sock) {
       const int yes = 1;
       setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+      listen_socket = sock;
     });
     http.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr) {
       answer_text(res, 500, "internal error");
@@ -131,8 +139,11 @@ struct ViewerServer::Impl {
         ticket.emplace(supersession.enter(r.client, *r.seq));
         r.options.cancel = ticket->cancel();
       }
-      while (!slots.try_acquire_for(std::chrono::milliseconds(20)))
-        if (ticket && ticket->superseded()) throw ExtractionCancelled{};
+      if (!wait_for_slot(ticket ? &*ticket : nullptr)) {
+        res.set_header("Retry-After", "1");
+        return answer_text(res, 503, "busy: " + std::to_string(kWaitingExtractions) +
+                                         " extractions are waiting already; retry in a moment");
+      }
       const SlotRelease slot{slots};
       ExtractionRun run;
       run.input = settings.store;
@@ -170,6 +181,25 @@ struct ViewerServer::Impl {
     }
   }
 
+  // Takes an extraction slot; false when too many wait already or the wait took too long. Throws
+  // ExtractionCancelled when a newer request of the same client supersedes this one meanwhile.
+  bool wait_for_slot(const Supersession::Ticket* ticket) {
+    if (waiting.fetch_add(1) >= kWaitingExtractions) {
+      waiting.fetch_sub(1);
+      return false;
+    }
+    struct Leave {
+      std::atomic<int>& n;
+      ~Leave() { n.fetch_sub(1); }
+    } leave{waiting};
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(kMaxWaitSeconds);
+    while (!slots.try_acquire_for(std::chrono::milliseconds(20))) {
+      if (ticket && ticket->superseded()) throw ExtractionCancelled{};
+      if (std::chrono::steady_clock::now() > deadline) return false;
+    }
+    return true;
+  }
+
   void log(const httplib::Request& req, const ExtractionRun& run) {
     if (!settings.log) return;
     const std::lock_guard<std::mutex> lock(log_mutex);
@@ -187,6 +217,10 @@ ViewerServer::~ViewerServer() = default;
 int ViewerServer::bind(const std::string& host, int port) {
   const int bound = port == 0 ? impl_->http.bind_to_any_port(host) : (impl_->http.bind_to_port(host, port) ? port : -1);
   if (bound <= 0) throw IoError("cannot listen on " + host + ":" + std::to_string(port) + " (in use, or not an address of this machine)");
+  // cpp-httplib 0.11 listens with a backlog of 5: a crowd's connections beyond it were dropped by
+  // the kernel and their clients timed out. listen() again on the bound socket sets the kernel's
+  // largest backlog; the pool's workers then answer or refuse each (503) in turn.
+  if (impl_->listen_socket >= 0) ::listen(impl_->listen_socket, SOMAXCONN);
   return bound;
 }
 
