@@ -29,12 +29,12 @@
 #include <vector>
 
 #include "bench/bench_support.h"
-#include "engine/fields.h"
-#include "engine/store_layout.h"
-#include "engine/volume.h"
-#include "io/box_reader.h"
-#include "io/raw_reader.h"
-#include "io/store_writer.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/store_layout.h"
+#include "isotope/volume.h"
+#include "io/volume/box_reader.h"
+#include "io/volume/raw_reader.h"
+#include "io/store/store_writer.h"
 
 namespace {
 

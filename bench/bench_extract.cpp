@@ -24,23 +24,23 @@
 #include <string>
 #include <vector>
 
-#include "engine/critical_table.h"
-#include "engine/diamond.h"
-#include "engine/extract.h"
+#include "engine/hierarchy/critical_table.h"
+#include "engine/hierarchy/diamond.h"
+#include "engine/extract/extract.h"
 #include "bench/bench_support.h"
-#include "engine/fields.h"
-#include "engine/mesh.h"
-#include "engine/multires_volume.h"
-#include "engine/options.h"
-#include "engine/record.h"
-#include "engine/volume.h"
-#include "io/box_reader.h"
-#include "io/brick_cache.h"
-#include "io/paged_volume.h"
-#include "io/raw_reader.h"
-#include "io/store_format.h"
-#include "io/store_reader.h"
-#include "io/store_writer.h"
+#include "engine/core/fields.h"
+#include "isotope/mesh.h"
+#include "engine/hierarchy/multires_volume.h"
+#include "engine/extract/options.h"
+#include "engine/hierarchy/record.h"
+#include "isotope/volume.h"
+#include "io/volume/box_reader.h"
+#include "io/store/brick_cache.h"
+#include "io/store/paged_volume.h"
+#include "io/volume/raw_reader.h"
+#include "io/store/store_format.h"
+#include "io/store/store_reader.h"
+#include "io/store/store_writer.h"
 
 namespace {
 
@@ -270,7 +270,7 @@ void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mod
 // read and decode; the store file itself stays in the OS page cache.
 enum class PagedBudget { full, eighth, eighth_reached };
 
-// A brick's core decoded (io/brick_cache.h): values and the bounds word of every node.
+// A brick's core decoded (io/store/brick_cache.h): values and the bounds word of every node.
 uint64_t store_decoded_bytes(const isotope::StoreReader& store) {
   const isotope::StoreLayout& l = store.layout();
   return static_cast<uint64_t>(l.brick_count()) * static_cast<uint64_t>(l.brick_nodes() * (sizeof(float) + sizeof(uint64_t)));
@@ -341,7 +341,7 @@ void BM_FullResolutionBaseline(benchmark::State& state, Dataset d, int threads) 
 }
 
 // StoreReader::read_brick() of the core section, which is what a BrickCache miss runs
-// (io/brick_cache.cpp, decode): pread, checksum, zstd decompression and field decoding. Not timed:
+// (io/store/brick_cache.cpp, decode): pread, checksum, zstd decompression and field decoding. Not timed:
 // the cache's bookkeeping, and band 0's records, computed when the traversal reads them. One
 // iteration decodes every brick of the store once, in directory order, so the mix of bands is the
 // store's own whatever the iteration count. The file stays in the OS page cache: CPU cost, not disk.

@@ -11,7 +11,7 @@
 #include <thread>
 #include <vector>
 
-#include "io/temp_dir.h"
+#include "io/file/temp_dir.h"
 
 namespace isotope::bench {
 

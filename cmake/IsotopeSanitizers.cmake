@@ -7,7 +7,7 @@ if(ISOTOPE_SANITIZE)
   separate_arguments(_san_list UNIX_COMMAND "${_san}")
   add_compile_options(${_san_list} -fno-omit-frame-pointer -g)
   if(ISOTOPE_SANITIZE MATCHES "thread")
-    add_compile_definitions(ISOTOPE_STD_THREADS)  # see engine/parallel.h
+    add_compile_definitions(ISOTOPE_STD_THREADS)  # see engine/core/parallel.h
   endif()
   add_link_options(${_san_list})
 endif()

@@ -1,6 +1,6 @@
 # The browser viewer (viewer/): three.js and the viewer's script bundled by esbuild, both from npm
 # (viewer/package-lock.json; scripts/install-deps.sh runs `npm ci`), then embedded in the isotope
-# binary by tools/viewer_assets.cpp.in. Defines isotope_viewer_sources(OUT_VAR) for tools/.
+# binary by tools/serve/viewer_assets.cpp.in. Defines isotope_viewer_sources(OUT_VAR) for tools/.
 set(ISOTOPE_VIEWER_DIR ${PROJECT_SOURCE_DIR}/viewer)
 find_program(ISOTOPE_NODE node)
 if(NOT ISOTOPE_NODE OR NOT EXISTS ${ISOTOPE_VIEWER_DIR}/node_modules/esbuild/package.json
@@ -21,7 +21,7 @@ function(isotope_viewer_sources out_var)
   set(VIEWER_INDEX_HTML ${out}/index.html)
   set(VIEWER_CSS ${out}/viewer.css)
   set(VIEWER_JS ${out}/viewer.js)
-  configure_file(${PROJECT_SOURCE_DIR}/tools/viewer_assets.cpp.in ${out}/viewer_assets.cpp @ONLY)
+  configure_file(${PROJECT_SOURCE_DIR}/tools/serve/viewer_assets.cpp.in ${out}/viewer_assets.cpp @ONLY)
   set_source_files_properties(${out}/viewer_assets.cpp PROPERTIES
     OBJECT_DEPENDS "${out}/viewer.js;${VIEWER_INDEX_HTML};${VIEWER_CSS}")
   set(${out_var} ${out}/viewer_assets.cpp ${out}/index.html ${out}/viewer.js ${out}/viewer.css PARENT_SCOPE)

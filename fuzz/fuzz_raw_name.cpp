@@ -1,10 +1,10 @@
 // libFuzzer target: what isotope reads from a raw volume's name and from --dims/--type
-// (io/raw_reader.h): NAME_XxYxZ_TYPE.raw, "XxYxZ", a type name. Each either parses to dimensions
+// (io/volume/raw_reader.h): NAME_XxYxZ_TYPE.raw, "XxYxZ", a type name. Each either parses to dimensions
 // that are all >= 1 and a known type, or is refused (nullopt); nothing else.
 #include <cstdlib>
 #include <string>
 
-#include "io/raw_reader.h"
+#include "io/volume/raw_reader.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);

@@ -1,5 +1,5 @@
 // libFuzzer target: the query string of GET /api/extract as `isotope serve` takes it (docs/SERVE.md):
-// decoded by cpp-httplib, then checked by tools/serve_request.cpp. Every refusal must be a
+// decoded by cpp-httplib, then checked by tools/serve/serve_request.cpp. Every refusal must be a
 // BadRequest (HTTP 400 with its message); an accepted request must hold options the engine accepts.
 #include <httplib.h>
 
@@ -7,7 +7,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "tools/serve_request.h"
+#include "tools/serve/serve_request.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string query(reinterpret_cast<const char*>(data), size);

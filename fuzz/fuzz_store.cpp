@@ -13,13 +13,13 @@
 #include <string>
 #include <vector>
 
-#include "engine/options.h"
+#include "engine/extract/options.h"
 #include "fuzz/fuzz_temp_file.h"
-#include "io/brick_cache.h"
-#include "io/io_error.h"
-#include "io/paged_volume.h"
-#include "io/store_format.h"
-#include "io/store_reader.h"
+#include "io/store/brick_cache.h"
+#include "isotope/error.h"
+#include "io/store/paged_volume.h"
+#include "io/store/store_format.h"
+#include "io/store/store_reader.h"
 
 namespace {
 

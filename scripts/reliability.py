@@ -417,18 +417,18 @@ def write_table(out, fuzz_seconds):
              'the command printed, paths shortened. The golden reject files and their expected messages are in '
              '`tests/reject` (`tests/reject_test.cpp` runs them in CI); the server limits are in docs/SERVE.md.',
              '', '## The policies the table checks', '',
-             '- **Outputs** (io/atomic_file.h): a new path or a regular file is written to a temporary file in '
+             '- **Outputs** (io/file/atomic_file.h): a new path or a regular file is written to a temporary file in '
              'its directory and renamed when complete (a full disk leaves the old file); a symbolic link is '
              'followed and the file it names replaced in its own directory; a device, FIFO, socket or directory '
              'is refused, never replaced; an output that is the same file as an input (device and inode) or as '
              'another output is refused before any work. `extract` finishes the mesh and the report on disk '
              'before it renames either.',
-             '- **Inputs** (io/input_file.h): regular files only; a FIFO or a device is refused by name before '
+             '- **Inputs** (io/file/input_file.h): regular files only; a FIFO or a device is refused by name before '
              'it is opened.',
-             '- **Stores** (io/store_format.cpp, docs/FORMAT.md): one validation of the header and of each '
+             '- **Stores** (io/store/store_format.cpp, docs/FORMAT.md): one validation of the header and of each '
              'band directory on every reader path (extract, serve, info, verify): every header field within its '
              'documented range, reserved bytes zero, directory entries inside the brick area and not '
-             'overlapping; sizes and offsets from the file checked with io/checked_size.h, never by a sum that '
+             'overlapping; sizes and offsets from the file checked with io/file/checked_size.h, never by a sum that '
              'can wrap; nothing allocated by a file field before that check. Every byte of a store is under a '
              'checksum; `verify` also checks what a checksum cannot (bricks against their neighbours and bands).',
              '- **Server** (docs/SERVE.md, Limits): 64 workers, 5 s read and idle timeouts, 1 KB bodies, 8 KB '

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# What CI runs: a warnings-as-errors Release build with every test, then the tests again
+# What CI runs: a warnings-as-errors Release build with every test, the installed library used by
+# examples/, then the tests again
 # under AddressSanitizer and UndefinedBehaviorSanitizer, then the parallel tests and the server under
 # ThreadSanitizer, then every parser under libFuzzer and the hostile-user table of
 # docs/RELIABILITY.md. Fails on the first error.
@@ -18,6 +19,20 @@ cmake -S . -B build-ci -DCMAKE_BUILD_TYPE=Release -DISOTOPE_WERROR=ON
 cmake --build build-ci -j "$jobs"
 phase "Release tests"
 run_ctest --test-dir build-ci --output-on-failure --no-tests=error -j2
+
+# The library as a user meets it (docs/DESIGN.md, "The library"): the tree installed into a prefix,
+# examples/ configured against the installed package alone (find_package(isotope)), built and run;
+# its mesh must be the command's, byte for byte.
+phase "install, and examples/ built against the installed package (build-examples)"
+rm -rf build-ci/prefix build-examples
+cmake --install build-ci --prefix build-ci/prefix > /dev/null
+cmake -S examples -B build-examples -DCMAKE_PREFIX_PATH="$PWD/build-ci/prefix" -DCMAKE_BUILD_TYPE=Release > /dev/null
+cmake --build build-examples -j "$jobs"
+bolt=../shared/data/bolt_70x123x66_uint8.raw
+build-examples/extract_file "$bolt" 64.5 build-examples/bolt.ply 4
+build-ci/prefix/bin/isotope extract "$bolt" --iso 64.5 --eps 4 -q -o build-examples/bolt-command.ply
+cmp build-examples/bolt.ply build-examples/bolt-command.ply
+build-examples/extract_array build-examples/sphere.ply
 
 phase "RelWithDebInfo, address,undefined sanitizers (build-asan)"
 # Assertions stay on here (no NDEBUG): they check the traversal's invariants on every test.
@@ -43,7 +58,7 @@ phase "ASan+UBSan tests"
 run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "slow|e2e" \
   -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)'
 
-# The parallel paths under ThreadSanitizer (engine/parallel.h runs them on std::threads there), and
+# The parallel paths under ThreadSanitizer (engine/core/parallel.h runs them on std::threads there), and
 # the server: its worker threads, concurrent extractions and supersession.
 phase "RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \

@@ -1,13 +1,13 @@
-// The banded build (engine/band_tile.h) against MultiresVolume::build: every record bit for bit,
+// The banded build (engine/hierarchy/band_tile.h) against MultiresVolume::build: every record bit for bit,
 // with the bands chained through nothing but each tile's next-band output, as the store writer
 // chains them through its scratch files.
 #include <gtest/gtest.h>
 
 #include <cstring>
 
-#include "engine/band_tile.h"
-#include "engine/fields.h"
-#include "engine/multires_volume.h"
+#include "engine/hierarchy/band_tile.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {

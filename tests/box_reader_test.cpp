@@ -21,9 +21,9 @@
 #include <thread>
 #include <vector>
 
-#include "io/box_reader.h"
-#include "io/io_error.h"
-#include "io/volume_reader.h"
+#include "io/volume/box_reader.h"
+#include "isotope/error.h"
+#include "io/volume/volume_reader.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
@@ -238,7 +238,7 @@ TEST_F(BoxReaderTest, EveryBoxOfEverySharedHdf5VolumeEqualsReadVolume) {
 
 TEST_F(BoxReaderTest, RawLayoutOverridesApplyAsInReadVolume) {
   fs::copy_file(kNeghip, path("unnamed.bin"));
-  const VolumeSource source{path("unnamed.bin"), Xyz{66, 66, 66}, ScalarType::uint8};
+  const VolumeSpec source{path("unnamed.bin"), Xyz{66, 66, 66}, ScalarType::uint8};
   const auto r = open_box_reader(source, dir_.string());
   expect_boxes_match(*r, read_volume(source), 7);
 }

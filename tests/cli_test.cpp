@@ -1,5 +1,5 @@
 // The isotope command end to end: help and exit codes, reports of generated shapes, and bad
-// input that must fail with a message and leave no output file behind (design.md, invariant 6).
+// input that must fail with a message and leave no output file behind (docs/DESIGN.md, invariant 6).
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -284,7 +284,7 @@ TEST_F(Cli, OutputIntoMissingDirectoryFailsAndWritesNothing) {
   expect_failure("generate sphere --size 9 -o " + quote(in_work("no/such/dir/s.raw")), 1);
 }
 
-// The output policy (io/atomic_file.h) through the commands: an output that is the input, or the
+// The output policy (io/file/atomic_file.h) through the commands: an output that is the input, or the
 // other output, is refused before any work, and the input is left as it was; a FIFO as output is
 // refused and stays a FIFO (a device node is tested in io_test, made there by mknod).
 TEST_F(Cli, AnOutputThatIsTheInputOrTheOtherOutputIsRefusedAndNothingChanges) {

@@ -1,4 +1,4 @@
-// Compact records (engine/compact_record.h): every code rounds its field the conservative way, the
+// Compact records (engine/hierarchy/compact_record.h): every code rounds its field the conservative way, the
 // rounding commutes with saturation, and the meshes of the compact hierarchy differ from those of
 // the exact records only by refining more: none with the bound is the same mesh, every other mode
 // within 5% of the triangles and with the same topology where preserve keeps it.
@@ -11,12 +11,12 @@
 #include <limits>
 #include <random>
 
-#include "engine/compact_record.h"
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/hierarchy.h"
-#include "engine/mesh_topology.h"
-#include "engine/multires_volume.h"
+#include "engine/hierarchy/compact_record.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/hierarchy.h"
+#include "isotope/mesh.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {

@@ -1,13 +1,13 @@
-// Invariant 3 of design.md: no cracks at any eps in any mode: closed surfaces stay closed and
+// Invariant 3 of docs/DESIGN.md: no cracks at any eps in any mode: closed surfaces stay closed and
 // manifold, open ones end only on the faces of the data box, and nothing lies outside it.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <map>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/multires_volume.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {

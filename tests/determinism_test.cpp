@@ -1,6 +1,6 @@
 // The parallel parts of the engine, preprocessing and extraction (pieces of the traversal welded
 // in order): one thread and every thread give the same mesh bit for bit (invariant 5 of
-// design.md), and progress reports, made from any worker, reach the caller in order. Also run
+// docs/DESIGN.md), and progress reports, made from any worker, reach the caller in order. Also run
 // under TSan.
 #include <gtest/gtest.h>
 
@@ -8,9 +8,9 @@
 
 #include <vector>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/multires_volume.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {

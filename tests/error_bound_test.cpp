@@ -1,4 +1,4 @@
-// What eps means with the default indicator (design.md, "Per-vertex record"): the coarse field
+// What eps means with the default indicator (docs/METHOD.md, "Per-vertex records"): the coarse field
 // deviates from the data by at most eps. Its surface is where the coarse field equals the
 // isovalue, so at every vertex of an eps mesh the data's own (finest, piecewise linear) field lies
 // within eps of the isovalue. Checked on the shared volumes and synthetic fields, from the compact
@@ -11,12 +11,12 @@
 #include <numeric>
 #include <string>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/hierarchy.h"
-#include "io/brick_cache.h"
-#include "io/paged_volume.h"
-#include "io/store_reader.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/hierarchy.h"
+#include "io/store/brick_cache.h"
+#include "io/store/paged_volume.h"
+#include "io/store/store_reader.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
 
@@ -24,7 +24,7 @@ namespace isotope {
 namespace {
 
 // The data's piecewise linear field at p (lattice coordinates; spacing 1, origin 0): the Kuhn
-// tetrahedron of p's cell around the diagonal from the cell's all-even corner (engine/kuhn.h).
+// tetrahedron of p's cell around the diagonal from the cell's all-even corner (engine/hierarchy/kuhn.h).
 double fine_field(const Volume& v, const std::array<float, 3>& p) {
   std::array<int64_t, 3> c{};
   std::array<double, 3> t{};

@@ -1,4 +1,4 @@
-// Invariant 2 of design.md: at eps = 0 the adaptive extraction is exactly marching tetrahedra
+// Invariant 2 of docs/DESIGN.md: at eps = 0 the adaptive extraction is exactly marching tetrahedra
 // over every finest tetrahedron (same triangles), whatever the mode, indicator or dimensions.
 // And the baseline itself, built in slabs on several threads, is the one-walk mesh bit for bit.
 #include <gtest/gtest.h>
@@ -12,11 +12,11 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/kuhn.h"
-#include "engine/marching_tetrahedra.h"
-#include "engine/multires_volume.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/kuhn.h"
+#include "engine/mesh/marching_tetrahedra.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -69,7 +69,7 @@ TEST(ExactAtEpsZero, RealVolumesAtTheirIsovaluesAndAtIntegerTies) {
   }
 }
 
-// At eps 0 cells are marched block by block (engine/finest_extract.h): blocks of 2, 4 and 8
+// At eps 0 cells are marched block by block (engine/extract/finest_extract.h): blocks of 2, 4 and 8
 // cells, cut by the data box on any side, and lattices too small for a block at all.
 TEST(ExactAtEpsZero, BlocksOfAnySizeAndBlocksCutByTheDataBox) {
   const Volume noise = generate_noise(21, 5);

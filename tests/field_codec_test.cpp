@@ -19,9 +19,9 @@
 #include <string>
 #include <vector>
 
-#include "io/field_codec.h"
-#include "io/io_error.h"
-#include "io/raw_reader.h"
+#include "io/store/field_codec.h"
+#include "isotope/error.h"
+#include "io/volume/raw_reader.h"
 #include "tests/io_error_of.h"
 
 namespace isotope {

@@ -8,9 +8,9 @@
 #include <set>
 #include <vector>
 
-#include "engine/diamond.h"
-#include "engine/kuhn.h"
-#include "engine/lattice.h"
+#include "engine/hierarchy/diamond.h"
+#include "engine/hierarchy/kuhn.h"
+#include "engine/hierarchy/lattice.h"
 
 namespace isotope {
 namespace {

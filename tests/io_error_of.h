@@ -5,7 +5,7 @@
 #include <functional>
 #include <string>
 
-#include "io/io_error.h"
+#include "isotope/error.h"
 
 namespace isotope::testing {
 

@@ -26,14 +26,14 @@
 #include <string>
 #include <vector>
 
-#include "io/atomic_file.h"
-#include "io/hdf5_reader.h"
-#include "io/io_error.h"
-#include "io/ply_writer.h"
-#include "io/raw_reader.h"
-#include "io/store_reader.h"
-#include "io/volume_reader.h"
-#include "io/volume_writer.h"
+#include "io/file/atomic_file.h"
+#include "io/volume/hdf5_reader.h"
+#include "isotope/error.h"
+#include "io/mesh/ply_writer.h"
+#include "io/volume/raw_reader.h"
+#include "io/store/store_reader.h"
+#include "io/volume/volume_reader.h"
+#include "io/volume/volume_writer.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
 
@@ -265,7 +265,7 @@ TEST_F(IoTest, RawDirectoryInsteadOfFileIsRejected) {
   EXPECT_CONTAINS(io_error_of([&] { read_raw(p, *parse_raw_name(p)); }), "is a directory");
 }
 
-// The input policy (io/input_file.h): a FIFO without a writer would block every reader's open
+// The input policy (io/file/input_file.h): a FIFO without a writer would block every reader's open
 // forever (this test then hangs until ctest's timeout); each reader refuses it by name instead,
 // through a link too, and an NRRD header whose detached data file is a FIFO as well.
 TEST_F(IoTest, NonRegularInputsAreRefused) {
@@ -274,8 +274,8 @@ TEST_F(IoTest, NonRegularInputsAreRefused) {
   for (const std::string name : {"v_2x2x2_uint8.raw", "v.nrrd", "v.h5", "v.isotope"})
     fs::create_symlink(fifo, path(name));
   const auto source = [](const std::string& spec) {
-    VolumeSource s;
-    s.spec = spec;
+    VolumeSpec s;
+    s.path = spec;
     return s;
   };
   const auto refused = [](const std::string& msg) { return msg.find("is a FIFO, not a regular file") != std::string::npos; };
@@ -623,7 +623,7 @@ TEST_F(IoTest, WriteRawUint16NamedByConventionReadsBackThroughReadVolume) {
   const Volume v = sample_volume();
   const std::string p = path("sample_5x4x3_uint16.raw");
   const RawEncoding e = write_raw(v, p, ScalarType::uint16);
-  const Volume back = read_volume(VolumeSource{p, std::nullopt, std::nullopt});
+  const Volume back = read_volume(VolumeSpec{p, std::nullopt, std::nullopt});
   EXPECT_EQ(back.dims, v.dims);
   ASSERT_EQ(back.values.size(), v.values.size());
   for (size_t i = 0; i < v.values.size(); ++i) EXPECT_EQ(back.values[i], std::round(e.code(v.values[i]))) << i;
@@ -724,7 +724,7 @@ TEST_F(IoTest, AtomicFileCommitReplacesTheTargetAndRemovesTheTemporary) {
   EXPECT_EQ(entries(), (std::vector<std::string>{"done.bin"}));
 }
 
-// The output policy (io/atomic_file.h): what is not a regular file is never replaced, and
+// The output policy (io/file/atomic_file.h): what is not a regular file is never replaced, and
 // refused before anything is written.
 TEST_F(IoTest, AtomicFileRefusesATargetThatIsADirectoryBeforeWriting) {
   fs::create_directory(path("taken"));

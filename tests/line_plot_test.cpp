@@ -1,4 +1,4 @@
-// Line plots (io/line_plot.h): a PNG of the requested size, log axes that survive eps = 0,
+// Line plots (tools/support/line_plot.h): a PNG of the requested size, log axes that survive eps = 0,
 // atomic replacement, concurrent callers, no output on the terminal, and PLplot's fatal errors
 // turned into IoError instead of exit().
 #include <gtest/gtest.h>
@@ -17,8 +17,8 @@
 #include <utility>
 #include <vector>
 
-#include "io/io_error.h"
-#include "io/line_plot.h"
+#include "isotope/error.h"
+#include "tools/support/line_plot.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"

@@ -1,12 +1,12 @@
-// measure_topology (engine/mesh_topology.h), what every topology claim is checked with: counts on
+// measure_topology (isotope/mesh.h), what every topology claim is checked with: counts on
 // small meshes worked out by hand, and the same counts on any number of threads.
 #include <gtest/gtest.h>
 
 #include <tbb/global_control.h>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/mesh_topology.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "isotope/mesh.h"
 
 namespace isotope {
 namespace {

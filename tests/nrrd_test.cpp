@@ -17,10 +17,10 @@
 #include <string>
 #include <vector>
 
-#include "io/io_error.h"
-#include "io/nrrd_reader.h"
-#include "io/raw_reader.h"
-#include "io/volume_reader.h"
+#include "isotope/error.h"
+#include "io/volume/nrrd_reader.h"
+#include "io/volume/raw_reader.h"
+#include "io/volume/volume_reader.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"

@@ -1,4 +1,4 @@
-// Out-of-core extraction (io/paged_volume.h, io/brick_cache.h): a store paged through a brick
+// Out-of-core extraction (io/store/paged_volume.h, io/store/brick_cache.h): a store paged through a brick
 // cache gives the in-memory mesh bit for bit, whatever the threads and the cache budget; closed
 // surfaces stay closed and keep their topology through the paged, parallel path; a focus is full
 // resolution at its point; a triangle budget takes the finest eps that fits; the cache reads each
@@ -19,16 +19,16 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/mesh_topology.h"
-#include "engine/hierarchy.h"
-#include "io/box_reader.h"
-#include "io/brick_cache.h"
-#include "io/io_error.h"
-#include "io/paged_volume.h"
-#include "io/store_reader.h"
-#include "io/store_writer.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "isotope/mesh.h"
+#include "engine/hierarchy/hierarchy.h"
+#include "io/volume/box_reader.h"
+#include "io/store/brick_cache.h"
+#include "isotope/error.h"
+#include "io/store/paged_volume.h"
+#include "io/store/store_reader.h"
+#include "io/store/store_writer.h"
 #include "tests/byte_files.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
@@ -312,7 +312,7 @@ TEST_F(PagedParallel, SameBytesForAnyThreadsAndCacheBudget) {
   expect_same_bytes("noise", noise, 0.1f, StoreReader(convert(noise, "noise", 3)), {2, 8});
 }
 
-// 3. Invariant 3 of design.md through the paged, parallel path: the closed shapes of
+// 3. Invariant 3 of docs/DESIGN.md through the paged, parallel path: the closed shapes of
 // crack_free_test.cpp, converted to stores with small bricks and read through a cache of
 // an eighth of their decoded size on 4 threads, stay closed, manifold and oriented at every eps,
 // with a focus anywhere (inside, on the corner, outside the volume) and with a triangle budget;
@@ -431,7 +431,7 @@ TEST_F(PagedExtract, FocusIsFullResolutionAtItsPoint) {
           // Full resolution at the point. An eps 0 triangle with a vertex x within 0.25 of p lies
           // in a leaf; each of the leaf's ancestors at level l holds x, so its refinement vertex
           // lies within D(l) + 0.25 of p, D(l) being the farthest a point of a level-l
-          // tetrahedron is from its refinement vertex. D(l) + 0.25 < reach(l) (engine/traversal.h)
+          // tetrahedron is from its refinement vertex. D(l) + 0.25 < reach(l) (engine/extract/traversal.h)
           // at every level: at the last one above the leaves D = sqrt(2), reach = sqrt(3); higher
           // up the margin only grows. So every ancestor has focus factor 0, an infinite key, and
           // is refined: the triangle is in the focused mesh.

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "tools/child_run.h"
+#include "tools/support/child_run.h"
 
 namespace isotope {
 namespace {

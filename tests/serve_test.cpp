@@ -18,20 +18,19 @@
 #include <thread>
 #include <vector>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/mesh_topology.h"
-#include "engine/vertex_normals.h"
-#include "io/io_error.h"
-#include "io/mesh_wire.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "isotope/mesh.h"
+#include "isotope/error.h"
+#include "io/mesh/mesh_wire.h"
 #include "tests/child_process.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
-#include "tools/extraction_input.h"
-#include "tools/peak_memory.h"
-#include "tools/serve_request.h"
-#include "tools/supersession.h"
-#include "tools/viewer_server.h"
+#include "isotope/source.h"
+#include "tools/support/peak_memory.h"
+#include "tools/serve/serve_request.h"
+#include "tools/serve/supersession.h"
+#include "tools/serve/viewer_server.h"
 
 namespace isotope {
 namespace {
@@ -87,16 +86,16 @@ TEST(ServeRequest, RefusesWhatIsNotAnExtractionWithAMessage) {
       {query({{"iso", "1"}, {"eps", "-1"}}), "eps must be >= 0, got '-1'"},
       {query({{"iso", "1"}, {"eps", "1e400"}}), "eps must be a finite number"},
       {query({{"iso", "1"}, {"topology", "bogus"}}), "topology must be none, paper, preserve or simplify"},
-      {query({{"iso", "1"}, {"delta", "1"}}), "apply to topology=simplify only"},
+      {query({{"iso", "1"}, {"delta", "1"}}), "delta applies to topology simplify only"},
       {query({{"iso", "1"}, {"topology", "simplify"}, {"delta", "-1"}}), "delta must be >= 0"},
       {query({{"iso", "1"}, {"topology", "simplify"}, {"weight", "mass"}}), "weight must be interval"},
       {query({{"iso", "1"}, {"error", "max"}}), "error must be bound or surplus"},
-      {query({{"iso", "1"}, {"focus", "1,2,3"}}), "focus and radius go together"},
+      {query({{"iso", "1"}, {"focus", "1,2,3"}}), "radius is required with focus"},
       {query({{"iso", "1"}, {"focus", "1,2"}, {"radius", "1"}}), "focus must be three numbers"},
       {query({{"iso", "1"}, {"focus", "1,2,3,4"}, {"radius", "1"}}), "focus must be three numbers"},
       {query({{"iso", "1"}, {"focus", "1,x,3"}, {"radius", "1"}}), "focus must be a finite number"},
       {query({{"iso", "1"}, {"focus", "1,2,3"}, {"radius", "0"}}), "radius must be > 0"},
-      {query({{"iso", "1"}, {"foo", "2"}}), "unknown parameter 'foo'"},
+      {query({{"iso", "1"}, {"foo", "2"}}), "foo is not an extraction option"},
       {query({{"iso", "1"}, {"iso", "2"}}), "iso is given twice"},
       {query({{"iso", std::string(200, '1')}}), "iso is too long"},
       {query({{"iso", "1"}, {"client", "../etc"}}), "client must be 1-64 characters"},
@@ -206,7 +205,9 @@ class Serve : public testing::TempDirTest {
   }
   // What `isotope extract` gives for the same options, from the same store.
   Mesh expected(const ExtractOptions& o) const {
-    return tools::ExtractionInput({store_, "", "", 64, false}).extract(o);
+    OpenOptions options;
+    options.cache_mb = 64;
+    return open_volume(VolumeSpec{store_, std::nullopt, std::nullopt}, options).extract(o);
   }
   // Numbers with all their digits, so that the server extracts at exactly these options.
   static std::string exact(double v) {
@@ -414,7 +415,7 @@ TEST_F(Serve, SlowClientsDoNotStallOthers) {
 
 // 200 clients at once, each asking for a full-resolution mesh: every one is answered, with the
 // mesh (200) or with 503 and Retry-After, and the server's memory stays what a few extractions
-// take: 2 run, 16 wait (tools/viewer_server.cpp), the rest are refused at once. Unbounded, the
+// take: 2 run, 16 wait (tools/serve/viewer_server.cpp), the rest are refused at once. Unbounded, the
 // server would hold every mesh at the same time.
 TEST_F(Serve, ACrowdIsAnsweredOrRefusedWithBoundedMemory) {
   ExtractOptions o;

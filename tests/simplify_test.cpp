@@ -10,11 +10,11 @@
 #include <string>
 #include <vector>
 
-#include "engine/component_report.h"
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/mesh_topology.h"
-#include "engine/multires_volume.h"
+#include "engine/topology/component_report.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "isotope/mesh.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "test_support.h"
 
 namespace isotope {

@@ -16,18 +16,18 @@
 
 #include <hdf5.h>
 
-#include "engine/compact_record.h"
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/hierarchy.h"
-#include "engine/multires_volume.h"
-#include "engine/traversal.h"
-#include "io/box_reader.h"
-#include "io/brick_cache.h"
-#include "io/io_error.h"
-#include "io/paged_volume.h"
-#include "io/store_reader.h"
-#include "io/store_writer.h"
+#include "engine/hierarchy/compact_record.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "engine/hierarchy/hierarchy.h"
+#include "engine/hierarchy/multires_volume.h"
+#include "engine/extract/traversal.h"
+#include "io/volume/box_reader.h"
+#include "io/store/brick_cache.h"
+#include "isotope/error.h"
+#include "io/store/paged_volume.h"
+#include "io/store/store_reader.h"
+#include "io/store/store_writer.h"
 #include "tbb/global_control.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
@@ -82,7 +82,7 @@ class Store : public TempDirTest {
 
   // Every value and record of the store, read as an extraction reads it (band 0's records
   // computed from the values), equals the in-memory build's bit for bit, and each record is the
-  // exact one (MultiresVolume) rounded as engine/compact_record.h says.
+  // exact one (MultiresVolume) rounded as engine/hierarchy/compact_record.h says.
   void expect_round_trip(const Volume& v, const std::string& store, int brick_bits = StoreLayout::kDefaultBrickBits) {
     const Hierarchy loaded = load(store);
     const Hierarchy built = Hierarchy::build(v, kAll, brick_bits);

@@ -5,8 +5,8 @@
 #include <fstream>
 #include <cmath>
 
-#include "io/box_reader.h"
-#include "io/raw_reader.h"
+#include "io/volume/box_reader.h"
+#include "io/volume/raw_reader.h"
 
 namespace isotope::testing {
 

@@ -4,11 +4,10 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract.h"
-#include "engine/mesh.h"
-#include "engine/mesh_topology.h"
-#include "engine/volume.h"
-#include "io/store_writer.h"
+#include "engine/extract/extract.h"
+#include "isotope/mesh.h"
+#include "isotope/volume.h"
+#include "io/store/store_writer.h"
 
 namespace isotope::testing {
 

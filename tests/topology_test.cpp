@@ -1,4 +1,4 @@
-// Topology preservation (design.md invariant 4): with the exact rule, components and Euler
+// Topology preservation (docs/DESIGN.md, invariant 4): with the exact rule, components and Euler
 // characteristic at every eps equal those at eps = 0; the paper's rule and no control do not.
 #include <gtest/gtest.h>
 
@@ -7,13 +7,13 @@
 #include <string>
 #include <vector>
 
-#include "engine/critical_rule.h"
-#include "engine/critical_table.h"
-#include "engine/diamond.h"
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/mesh_topology.h"
-#include "engine/multires_volume.h"
+#include "engine/hierarchy/critical_rule.h"
+#include "engine/hierarchy/critical_table.h"
+#include "engine/hierarchy/diamond.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "isotope/mesh.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -105,7 +105,7 @@ TEST(TopologyPreservation, ExactRuleKeepsComponentsAndEulerCharacteristicEverywh
   EXPECT_GE(sweep.hard[0].cases, 50);
 }
 
-// design.md's smallest case: a 3x3x3 grid whose root cube diamond the paper calls regular,
+// The design notes' smallest case (docs/METHOD.md, "What the tests measured"): a 3x3x3 grid whose root cube diamond the paper calls regular,
 // although refining it splits one component into two at iso 0.8585. Every finer vertex has
 // zero surplus, so the field at full resolution is the once-refined one.
 Volume paper_counterexample() {

@@ -11,15 +11,15 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract.h"
-#include "engine/fields.h"
-#include "engine/mesh_topology.h"
-#include "engine/multires_volume.h"
-#include "io/ply_writer.h"
-#include "io/volume_reader.h"
+#include "engine/extract/extract.h"
+#include "engine/core/fields.h"
+#include "isotope/mesh.h"
+#include "engine/hierarchy/multires_volume.h"
+#include "io/mesh/ply_writer.h"
+#include "io/volume/volume_reader.h"
 #include "tools/commands.h"
-#include "tools/paper_table1.h"
-#include "tools/report.h"
+#include "tools/support/paper_table1.h"
+#include "tools/support/report.h"
 
 #ifndef ISOTOPE_SHARED_DATA
 #define ISOTOPE_SHARED_DATA "../shared/data"
@@ -303,7 +303,7 @@ int run_demo(const DemoArgs& a) {
   std::error_code ec;
   if (std::filesystem::is_regular_file(real, ec)) {
     cases.push_back({"ironProt", "ironProt 68^3 uint8, iso 128.5 (eps in data units)",
-                     read_volume(VolumeSource{real.string(), std::nullopt, std::nullopt}), 128.5f, kByteEps, false});
+                     read_volume(VolumeSpec{real.string(), std::nullopt, std::nullopt}), 128.5f, kByteEps, false});
   }
 
   std::printf("isotope demo: Gerstner & Pajarola 2000, Table 1 and beyond; meshes in %s\n", out.string().c_str());

@@ -17,17 +17,17 @@
 #include <string>
 #include <thread>
 
-#include "engine/component_report.h"
-#include "engine/extract.h"
-#include "engine/mesh_topology.h"
-#include "io/atomic_file.h"
-#include "io/io_error.h"
-#include "io/ply_writer.h"
-#include "io/volume_reader.h"
+#include "engine/topology/component_report.h"
+#include "engine/extract/extract.h"
+#include "isotope/mesh.h"
+#include "io/file/atomic_file.h"
+#include "isotope/error.h"
+#include "io/mesh/ply_writer.h"
+#include "io/volume/volume_reader.h"
+#include "isotope/source.h"
 #include "tools/commands.h"
-#include "tools/extraction_input.h"
-#include "tools/peak_memory.h"
-#include "tools/report.h"
+#include "tools/support/peak_memory.h"
+#include "tools/support/report.h"
 
 namespace isotope::tools {
 namespace {
@@ -42,7 +42,7 @@ struct ExtractArgs {
   std::string delta;
   bool compare_full = false;
   // --compare-full relates components whose surfaces lie within this many voxel spacings: a
-  // coarse mesh moves the surface by up to a few voxels (engine/component_report.h).
+  // coarse mesh moves the surface by up to a few voxels (engine/topology/component_report.h).
   double compare_voxels = 3;
   std::string dims;
   std::string type;
@@ -56,18 +56,6 @@ struct ExtractArgs {
   bool quiet = false;
 };
 
-CLI::Validator real_validator(bool non_negative) {
-  return CLI::Validator(
-      [non_negative](std::string& s) -> std::string {
-        const auto v = parse_real(s);
-        if (!v || std::isnan(*v)) return "must be a number, got '" + s + "'";
-        if (!non_negative && !std::isfinite(*v)) return "must be finite, got '" + s + "'";
-        if (non_negative && *v < 0) return "must be >= 0, got '" + s + "'";
-        return {};
-      },
-      "");
-}
-
 // --compare-full: the same isovalue at full resolution (eps = 0 equals marching tetrahedra on
 // every cell), from the same source, so a store is read out of core again.
 ExtractOptions full_resolution(const ExtractOptions& o) {
@@ -78,41 +66,29 @@ ExtractOptions full_resolution(const ExtractOptions& o) {
   return full;
 }
 
-std::array<double, 3> parse_point(const std::string& s) {
-  std::array<double, 3> p{};
-  size_t at = 0;
-  for (size_t a = 0; a < 3; ++a) {
-    const size_t end = a < 2 ? s.find(',', at) : s.size();
-    const auto v = end == std::string::npos ? std::nullopt : parse_real(s.substr(at, end - at));
-    if (!v || !std::isfinite(*v) || (a == 2 && s.find(',', at) != std::string::npos))
-      throw CLI::ValidationError("--focus", "must be three finite numbers X,Y,Z, got '" + s + "'");
-    p[a] = *v;
-    at = end + 1;
-  }
-  return p;
-}
-
 int run_extract(const ExtractArgs& a) {
   const bool progress = progress_enabled(a.quiet);
   ExtractionRun run;
   run.input = a.input;
   run.output = a.output;
-  run.options.iso = static_cast<float>(*parse_real(a.iso));
-  if (!std::isfinite(run.options.iso)) throw CLI::ValidationError("--iso", "out of the float range: " + a.iso);
-  run.options.eps = *parse_real(a.eps);
-  run.options.error = *parse_error_indicator(a.error);
-  run.options.topology = *parse_topology_mode(a.topology);
-  if (run.options.topology != TopologyMode::simplify && (!a.weight.empty() || !a.delta.empty()))
-    throw CLI::ValidationError("--weight/--delta", "apply to --topology simplify only");
-  if (!a.weight.empty()) run.options.weight = *parse_simplification_weight(a.weight);
-  if (!a.delta.empty()) run.options.delta = *parse_real(a.delta);
+  // The extraction's options through the parser every face shares (isotope/extract.h): the
+  // same words, ranges and relations as `isotope serve` and `isotope sweep`.
+  std::vector<std::pair<std::string, std::string>> given = {
+      {"iso", a.iso}, {"eps", a.eps}, {"error", a.error}, {"topology", a.topology}};
+  for (const auto& [name, text] : {std::pair<const char*, const std::string&>{"weight", a.weight}, {"delta", a.delta},
+                                   {"focus", a.focus}, {"radius", a.radius}})
+    if (!text.empty()) given.emplace_back(name, text);
+  if (a.max_triangles > 0) given.emplace_back("max-triangles", std::to_string(a.max_triangles));
+  run.options = parse_command_line_options(given);
+  // A budget in simplify mode without a delta: delta is chosen too, dropping the smallest features.
+  run.options.auto_delta = run.options.topology == TopologyMode::simplify && a.max_triangles > 0 && a.delta.empty();
   if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
   // Below 2^-11 (about 0.00049) voxel spacings the comparison's sampling grid of a 2^19-node axis would overflow
-  // (engine/component_report.cpp): refused here, before the work, not after it.
+  // (engine/topology/component_report.cpp): refused here, before the work, not after it.
   if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6) {
-    char given[32];
-    std::snprintf(given, sizeof given, "%g", a.compare_voxels);  // 1e-300, not 0.000000
-    throw CLI::ValidationError("--compare-voxels", std::string("must be a number of voxel spacings in [0.0005, 1e6], got ") + given);
+    char shown[32];
+    std::snprintf(shown, sizeof shown, "%g", a.compare_voxels);  // 1e-300, not 0.000000
+    throw CLI::ValidationError("--compare-voxels", std::string("must be a number of voxel spacings in [0.0005, 1e6], got ") + shown);
   }
 
   // Fail before the (possibly long) extraction when the outputs cannot be written; creates nothing.
@@ -125,20 +101,6 @@ int run_extract(const ExtractArgs& a) {
   }
   check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
 
-  if (a.focus.empty() != a.radius.empty())
-    throw CLI::ValidationError("--focus/--radius", "give both a focus point and a radius");
-  if (!a.focus.empty()) {
-    Focus f;
-    f.point = parse_point(a.focus);
-    f.radius = *parse_real(a.radius);
-    if (!(f.radius > 0) || !std::isfinite(f.radius))
-      throw CLI::ValidationError("--radius", "must be a finite number > 0, got '" + a.radius + "'");
-    run.options.focus = f;
-  }
-  run.options.max_triangles = a.max_triangles;
-  // A budget in simplify mode without a delta: delta is chosen too, dropping the smallest features.
-  run.options.auto_delta = run.options.topology == TopologyMode::simplify && a.max_triangles > 0 && a.delta.empty();
-
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) {
     threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
@@ -147,11 +109,11 @@ int run_extract(const ExtractArgs& a) {
 
   Mesh mesh, full;
   {  // scoped: the input's memory (volume or brick cache) is given back before measuring and writing
-    const ExtractionInput input({a.input, a.dims, a.type, a.cache_mb, progress});
+    const Source input = open_input(a.input, a.dims, a.type, a.cache_mb, progress);
     const auto start = std::chrono::steady_clock::now();
     mesh = input.extract(run.options, &run.extract);
     const double elapsed = seconds_since(start);
-    input.describe(run);  // before --compare-full: the cache's reads are the extraction's own
+    describe(input.info(), run);  // before --compare-full: the cache's reads are the extraction's own
     // A volume's hierarchy is built on demand inside the extraction: that part is preprocessing.
     run.extract_seconds = elapsed - run.preprocess_seconds;
     if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
@@ -162,7 +124,7 @@ int run_extract(const ExtractArgs& a) {
     }
   }
   // Both outputs are written to temporary files and finished (flushed to disk) before either is
-  // renamed into place (io/atomic_file.h): a failure on the way, a full disk included, leaves the
+  // renamed into place (io/file/atomic_file.h): a failure on the way, a full disk included, leaves the
   // files named by -o and --report as they were. On more than one thread the mesh is written while
   // its topology is measured: the write ends waiting for the disk (fsync), which the measuring
   // overlaps.
@@ -222,31 +184,31 @@ Command add_extract_command(CLI::App& app) {
       ->required();
   cmd->add_option("--iso", a->iso, "Isovalue (inside means value > iso)")
       ->required()
-      ->check(real_validator(false))
+      ->check(extract_option_check("iso"))
       ->type_name("V");
   cmd->add_option("--eps", a->eps, "Error threshold: refine while the error indicator is >= eps; 0 = full resolution")
-      ->check(real_validator(true))
+      ->check(extract_option_check("eps"))
       ->type_name("E")
       ->capture_default_str();
   cmd->add_option("--error", a->error,
                   "Error indicator: bound (guaranteed L-infinity bound of the coarse field) or surplus (the paper's)")
-      ->check(CLI::IsMember({"bound", "surplus"}))
+      ->check(extract_option_check("error"))
       ->capture_default_str();
   cmd->add_option("--topology", a->topology,
                   "Topology control: none, paper (the paper's critical intervals), preserve (exact local rule) or "
                   "simplify (preserve, but drop critical points whose --weight is below --delta)")
-      ->check(CLI::IsMember({"none", "paper", "preserve", "simplify"}))
+      ->check(extract_option_check("topology"))
       ->capture_default_str();
   cmd->add_option("--weight", a->weight,
                   "With --topology simplify: interval (|X|, value units, the default), gradient (|X| times the "
                   "steepest gradient around the critical point, value^2 per voxel) or size (full-resolution "
                   "tetrahedra the feature's isosurfaces cut)")
-      ->check(CLI::IsMember({"interval", "gradient", "size"}))
+      ->check(extract_option_check("weight"))
       ->type_name("W");
   cmd->add_option("--delta", a->delta,
                   "With --topology simplify: keep critical points of weight >= D; 0 = preserve, larger = simpler "
                   "(isotope info STORE prints the largest weights)")
-      ->check(real_validator(true))
+      ->check(extract_option_check("delta"))
       ->type_name("D");
   cmd->add_option("--dims", a->dims, "Raw input: nodes per axis, e.g. 301x324x56 (overrides the file name)")
       ->check(CLI::Validator(
@@ -281,15 +243,16 @@ Command add_extract_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--focus", a->focus,
                   "Point of interest X,Y,Z (output coordinates): full resolution there, coarsening to eps at --radius")
+      ->check(extract_option_check("focus"))
       ->type_name("X,Y,Z");
   cmd->add_option("--radius", a->radius, "With --focus: the distance at which the error threshold reaches eps")
-      ->check(real_validator(true))
+      ->check(extract_option_check("radius"))
       ->type_name("R");
   cmd->add_option("--max-triangles", a->max_triangles,
                   "Instead of --eps: the finest eps whose mesh has at most T triangles (0 = off); with --topology "
                   "simplify and no --delta, delta too: the features of smallest weight are dropped until the "
                   "coarsest mesh takes half the budget")
-      ->check(CLI::Range(int64_t{0}, int64_t{1} << 40))
+      ->check(CLI::Range(int64_t{0}, kMaxTriangleBudget))
       ->type_name("T");
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");
 

@@ -11,11 +11,10 @@
 #include <string>
 #include <thread>
 
-#include "io/io_error.h"
+#include "isotope/error.h"
 #include "tools/commands.h"
-#include "tools/extraction_input.h"
-#include "tools/interrupt_guard.h"
-#include "tools/viewer_server.h"
+#include "tools/support/interrupt_guard.h"
+#include "tools/serve/viewer_server.h"
 
 namespace isotope::tools {
 namespace {
@@ -32,7 +31,6 @@ struct ServeArgs {
 int run_serve(const ServeArgs& a) {
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
-  keep_freed_brick_memory();
   const InterruptGuard interrupt;
   ViewerServer server({a.store, a.cache_mb, !a.quiet});
   const int port = server.bind(a.host, a.port);

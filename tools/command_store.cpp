@@ -13,17 +13,17 @@
 #include <optional>
 #include <string>
 
-#include "engine/traversal.h"
-#include "io/atomic_file.h"
-#include "io/box_reader.h"
-#include "io/brick_cache.h"
-#include "io/paged_volume.h"
-#include "io/io_error.h"
-#include "io/raw_reader.h"
-#include "io/store_reader.h"
-#include "io/store_writer.h"
+#include "engine/extract/traversal.h"
+#include "io/file/atomic_file.h"
+#include "io/volume/box_reader.h"
+#include "io/store/brick_cache.h"
+#include "io/store/paged_volume.h"
+#include "isotope/error.h"
+#include "io/volume/raw_reader.h"
+#include "io/store/store_reader.h"
+#include "io/store/store_writer.h"
 #include "tools/commands.h"
-#include "tools/interrupt_guard.h"
+#include "tools/support/interrupt_guard.h"
 
 namespace isotope::tools {
 namespace {
@@ -46,13 +46,10 @@ int run_convert(const ConvertArgs& a) {
   mallopt(M_TRIM_THRESHOLD, 128 << 20);
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
-  check_outputs({{"INPUT", a.input}}, {{"OUTPUT", a.output}});
-  VolumeSource source;
-  source.spec = a.input;
-  if (!a.dims.empty()) source.dims = parse_dims(a.dims);
-  if (!a.type.empty()) source.type = parse_scalar_type(a.type);
-  const std::string scratch = std::filesystem::absolute(a.output).parent_path().string();
-  const std::unique_ptr<BoxReader> input = open_box_reader(source, scratch);
+  VolumeSpec input;
+  input.path = a.input;
+  if (!a.dims.empty()) input.dims = parse_dims(a.dims);
+  if (!a.type.empty()) input.type = parse_scalar_type(a.type);
 
   ConvertOptions options;
   options.memory_mb = a.memory_mb;
@@ -62,12 +59,12 @@ int run_convert(const ConvertArgs& a) {
   if (progress_enabled(a.quiet)) options.progress = progress_bar("converting");
   const InterruptGuard guard;  // stops the convert between tiles; its temporary output is removed
   options.cancel = &InterruptGuard::flag();
-  const ConvertStats s = convert_to_store(*input, a.output, options);
+  const ConvertStats s = convert(input, a.output, options);
   if (!a.quiet) {
-    const auto& d = input->info().dims;
+    const auto& d = s.dims;
     std::printf("%s: %lldx%lldx%lld %s, %lld bricks, %.1f MB (%.3fx the input's %.1f MB); %.2f s, %.1f MB/s\n",
                 a.output.c_str(), static_cast<long long>(d[0]), static_cast<long long>(d[1]),
-                static_cast<long long>(d[2]), input->info().type.c_str(), static_cast<long long>(s.bricks),
+                static_cast<long long>(d[2]), s.type.c_str(), static_cast<long long>(s.bricks),
                 static_cast<double>(s.output_bytes) / 1e6,
                 static_cast<double>(s.output_bytes) / static_cast<double>(s.input_bytes),
                 static_cast<double>(s.input_bytes) / 1e6, s.seconds,

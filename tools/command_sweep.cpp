@@ -12,12 +12,12 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract.h"
-#include "engine/mesh_topology.h"
-#include "io/atomic_file.h"
-#include "io/line_plot.h"
+#include "engine/extract/extract.h"
+#include "isotope/mesh.h"
+#include "io/file/atomic_file.h"
+#include "tools/support/line_plot.h"
 #include "tools/commands.h"
-#include "tools/extraction_input.h"
+#include "isotope/source.h"
 
 namespace isotope::tools {
 namespace {
@@ -42,16 +42,21 @@ struct SweepRow {
   double seconds = 0;
 };
 
-std::vector<double> parse_list(const std::string& text, const std::string& option) {
+// A comma-separated list of one extraction option's values, each read by the parser every face
+// shares (isotope/extract.h).
+std::vector<double> parse_list(const std::string& text, const std::string& name) {
   std::vector<double> values;
   std::stringstream in(text);
   for (std::string item; std::getline(in, item, ',');) {
-    const auto v = parse_real(item);
-    if (!v || !std::isfinite(*v) || *v < 0)
-      throw CLI::ValidationError(option, "must be a comma-separated list of numbers >= 0, got '" + item + "'");
-    values.push_back(*v);
+    ExtractOptions o;
+    try {
+      set_extract_option(o, name, item);
+    } catch (const OptionError& e) {
+      throw CLI::ValidationError("--" + name, "must be a comma-separated list of numbers >= 0: " + e.message);
+    }
+    values.push_back(name == "eps" ? o.eps : o.delta);
   }
-  if (values.empty()) throw CLI::ValidationError(option, "must list at least one number");
+  if (values.empty()) throw CLI::ValidationError("--" + name, "must list at least one number");
   return values;
 }
 
@@ -113,13 +118,9 @@ void write_plot(const std::vector<SweepRow>& rows, const std::string& iso, const
 
 int run_sweep(const SweepArgs& a) {
   const bool progress = progress_enabled(a.quiet);
-  const std::vector<double> eps = parse_list(a.eps, "--eps"), deltas = parse_list(a.delta, "--delta");
-  ExtractOptions base;
-  const auto iso = parse_real(a.iso);
-  if (!iso) throw CLI::ValidationError("--iso", "must be a number, got '" + a.iso + "'");
-  base.iso = static_cast<float>(*iso);
-  if (!std::isfinite(base.iso)) throw CLI::ValidationError("--iso", "out of the float range: " + a.iso);
-  base.weight = *parse_simplification_weight(a.weight);
+  const std::vector<double> eps = parse_list(a.eps, "eps"), deltas = parse_list(a.delta, "delta");
+  // The weight is read as simplify's, the mode whose rows use it.
+  ExtractOptions base = parse_command_line_options({{"iso", a.iso}, {"topology", "simplify"}, {"weight", a.weight}});
   // Output paths are checked (and the files' temporaries created) only at the end; check the
   // directories now so that a long sweep does not fail at its last step.
   check_outputs({{"INPUT", a.input}}, {{"--csv", a.csv}, {"--plot", a.plot}});
@@ -130,7 +131,7 @@ int run_sweep(const SweepArgs& a) {
   if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
   // A store is paged through one cache for the whole sweep (each brick is read once); any other
   // volume is preprocessed once.
-  const ExtractionInput source({a.input, "", "", a.cache_mb, progress});
+  const Source source = open_input(a.input, "", "", a.cache_mb, progress);
 
   std::vector<SweepRow> plan;
   auto add_mode = [&](TopologyMode mode, double delta) {
@@ -139,14 +140,14 @@ int run_sweep(const SweepArgs& a) {
   add_mode(TopologyMode::none, 0);
   add_mode(TopologyMode::preserve, 0);
   for (double d : deltas) add_mode(TopologyMode::simplify, d);
-  RecordFields fields{false, false, false, false};
+  std::vector<ExtractOptions> planned;
   for (const SweepRow& r : plan) {
     ExtractOptions o = base;
     o.topology = r.mode;
     o.eps = r.eps;
-    fields = fields | fields_for(o);
+    planned.push_back(o);
   }
-  source.prepare(fields);
+  source.prepare(planned);
   for (size_t i = 0; i < plan.size(); ++i) {
     SweepRow& r = plan[i];
     ExtractOptions o = base;
@@ -174,7 +175,10 @@ Command add_sweep_command(CLI::App& app) {
       "sweep", "Tabulate triangles, components, Euler characteristic and time over eps x topology mode x delta");
   cmd->add_option("INPUT", a->input, "Store made by 'isotope convert' (or any volume 'isotope extract' reads)")
       ->required();
-  cmd->add_option("--iso", a->iso, "Isovalue (inside means value > iso)")->required()->type_name("V");
+  cmd->add_option("--iso", a->iso, "Isovalue (inside means value > iso)")
+      ->required()
+      ->check(extract_option_check("iso"))
+      ->type_name("V");
   cmd->add_option("--eps", a->eps, "Error thresholds, comma-separated (fractions like 1/64 allowed)")
       ->type_name("LIST")
       ->capture_default_str();
@@ -182,7 +186,7 @@ Command add_sweep_command(CLI::App& app) {
       ->type_name("LIST")
       ->capture_default_str();
   cmd->add_option("--weight", a->weight, "Simplification weight: interval, gradient or size")
-      ->check(CLI::IsMember({"interval", "gradient", "size"}))
+      ->check(extract_option_check("weight"))
       ->capture_default_str();
   cmd->add_option("--csv", a->csv, "Also write the table as CSV")->type_name("F.csv");
   cmd->add_option("--plot", a->plot, "Also plot triangles against eps per mode (PNG)")->type_name("F.png");

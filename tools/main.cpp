@@ -8,12 +8,10 @@
 #include <iostream>
 #include <new>
 
-#include "io/io_error.h"
+#include "isotope/error.h"
 #include "tools/commands.h"
+#include "isotope/version.h"
 
-#ifndef ISOTOPE_VERSION
-#define ISOTOPE_VERSION "unknown"
-#endif
 
 // Under AddressSanitizer (CI): fontconfig, which PLplot's cairo driver reaches through pango
 // for `sweep --plot`, keeps a process-lifetime cache that LeakSanitizer reports as leaked. It
@@ -25,13 +23,13 @@ int main(int argc, char** argv) {
   using namespace isotope::tools;
   // A file size limit (ulimit -f, a quota) would otherwise kill the process by SIGXFSZ halfway
   // through a write; ignored, the write fails with EFBIG and the output's own error path runs
-  // (io/atomic_file.h: the message, the temporary removed, the target left as it was).
+  // (io/file/atomic_file.h: the message, the temporary removed, the target left as it was).
   std::signal(SIGXFSZ, SIG_IGN);
-  CLI::App app{"isotope " ISOTOPE_VERSION
+  CLI::App app{"isotope " ISOTOPE_VERSION_STRING
                ": multiresolution isosurface extraction with topology control\n"
                "(Gerstner & Pajarola, IEEE Visualization 2000)"};
   app.name("isotope");
-  app.set_version_flag("--version", std::string("isotope ") + ISOTOPE_VERSION);
+  app.set_version_flag("--version", std::string("isotope ") + ISOTOPE_VERSION_STRING);
   app.require_subcommand(1);
   const Command extract = add_extract_command(app);
   const Command generate = add_generate_command(app);

@@ -1,0 +1,30 @@
+#pragma once
+// The benchmark suite `isotope bench` runs (bench/suite/bench_suite.cpp): the product timed as a
+// user meets it on a fixed set of volumes, beside full-resolution marching tetrahedra and the
+// peers, with the targets met or missed row by row. The Google Benchmark binaries of
+// bench/ time the same engine paths stage by stage (bench/README.md).
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace isotope::bench {
+
+struct SuiteOptions {
+  bool quick = false;
+  std::string json;
+  int threads = 0;
+  std::string data;  // the shared volumes' folder
+  std::vector<std::string> datasets;
+  std::string work_dir;
+  int64_t cache_mb = 512;
+  bool quiet = false;
+  bool scale = false;
+  int64_t scale_size = 2048;
+};
+
+// Runs the suite (or, with `scale`, the large-volume row) and prints its tables; writes `json`.
+// Throws IoError (a missing volume, an interrupted run, a child that failed) and
+// std::invalid_argument for a dataset name that is not in the suite. Returns the exit code.
+int run_suite(const SuiteOptions& options);
+
+}  // namespace isotope::bench

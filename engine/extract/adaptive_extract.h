@@ -1,0 +1,103 @@
+#pragma once
+// Adaptive extraction over any source of values and records (engine/extract/traversal.h): the traversal
+// is cut into pieces, the pieces run as parallel tasks, and their meshes are welded in order.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "engine/extract/extract.h"
+#include "engine/extract/finest_extract.h"
+#include "engine/core/parallel.h"
+#include "engine/mesh/piece_weld.h"
+#include "engine/extract/traversal.h"
+#include "engine/extract/triangle_budget.h"
+
+namespace isotope {
+
+// Deep enough for a few hundred pieces (6 roots, two children per level) to balance the threads,
+// shallow enough that each is worth a task. Fixed, so the pieces and hence the welding order do
+// not depend on the thread count.
+constexpr int kPieceLevel = 6;
+
+template <TraversalSource Source>
+Mesh extract_adaptive(const Source& source, const ExtractOptions& options, ExtractStats* stats) {
+  using namespace traversal;
+  const auto start = std::chrono::steady_clock::now();
+  options.validate();
+  ExtractOptions in_codes = options;  // identity unless the source holds quantized codes
+  const double offset = source.value_offset(), scale = source.value_scale();
+  if (offset != 0 || scale != 1) {
+    in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale);
+    in_codes.eps = options.eps / scale;
+    // Weights in codes: |X| scales with the values, |X| times a gradient with their square.
+    const double weight_scale[3] = {scale, scale * scale, 1.0};
+    in_codes.delta = options.delta / weight_scale[static_cast<size_t>(options.weight)];
+  }
+  ExtractStats total;
+  if (options.auto_delta) {
+    // Half the budget for the features kept, half for the geometry around them; when even with
+    // every feature dropped the coarsest mesh takes more than half, all of it for the features.
+    const double weight_scale[3] = {scale, scale * scale, 1.0};
+    in_codes.delta = 0;
+    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+    BudgetChoice d;
+    try {
+      d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
+    } catch (const std::runtime_error&) {
+      d = choose_delta_for_budget(source, rule, options.max_triangles);
+    }
+    in_codes.delta = d.eps;
+    total.chosen_delta = d.eps * weight_scale[static_cast<size_t>(options.weight)];
+    total.delta_floor_triangles = d.triangles;
+  }
+  if (options.max_triangles > 0) {
+    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+    const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);
+    in_codes.eps = c.eps;
+    total.chosen_eps = c.eps * scale;
+    total.next_eps = c.next_eps * scale;
+    total.next_triangles = c.next_triangles;
+    total.budget_steps = c.steps;
+  }
+  const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+  auto finish = [&](Mesh mesh) {
+    if (stats) {
+      *stats = total;
+      stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
+    return mesh;
+  };
+  if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) return finish(extract_finest(source, rule, &total));
+  std::vector<Piece> pieces;
+  {  // scoped: a paged source's reader lets its bricks go before the pieces run
+    Traversal<Source> top(source, rule);
+    pieces = top.split(std::min(kPieceLevel, source.lattice().max_level()));
+    total.tets_visited = top.tets_visited();
+    total.tets_simplified = top.tets_simplified();
+  }
+  std::vector<PartMesh> parts(pieces.size());
+  parallel_for_in_order(int64_t{0}, static_cast<int64_t>(pieces.size()), [&](int64_t i) {
+    throw_if_cancelled(rule.options());
+    Traversal<Source> t(source, rule);
+    t.keep_keys();
+    t.run(pieces[static_cast<size_t>(i)]);
+    PartMesh& part = parts[static_cast<size_t>(i)];
+    const Piece& piece = pieces[static_cast<size_t>(i)];
+    part.region = {unpack(piece.tet[0]), unpack(piece.tet[1]), unpack(piece.tet[2]), unpack(piece.tet[3])};
+    part.tets_visited = t.tets_visited();
+    part.tets_emitted = t.tets_emitted();
+    part.tets_simplified = t.tets_simplified();
+    part.keys = t.take_keys();
+    part.mesh = t.take();
+  });
+  for (const PartMesh& p : parts) {
+    total.tets_visited += p.tets_visited;
+    total.tets_emitted += p.tets_emitted;
+    total.tets_simplified += p.tets_simplified;
+  }
+  return finish(weld(parts, source.lattice().side));
+}
+
+}  // namespace isotope

@@ -1,0 +1,127 @@
+#include "engine/extract/extract.h"
+
+#include <algorithm>
+#include <cassert>
+#include <string>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "engine/extract/adaptive_extract.h"
+#include "engine/hierarchy/hierarchy.h"
+
+namespace isotope {
+namespace {
+
+// MultiresVolume as a traversal source (engine/extract/traversal.h).
+class InMemory {
+ public:
+  explicit InMemory(const MultiresVolume& mv) : mv_(mv) {}
+  const Lattice& lattice() const { return mv_.lattice(); }
+  const std::array<int64_t, 3>& data_dims() const { return mv_.data_dims(); }
+  const std::array<double, 3>& origin() const { return mv_.origin(); }
+  const std::array<double, 3>& spacing() const { return mv_.spacing(); }
+  double value_offset() const { return mv_.value_offset(); }
+  double value_scale() const { return mv_.value_scale(); }
+  double error_fold() const { return 0; }
+
+  class Reader {
+   public:
+    explicit Reader(const MultiresVolume& mv) : mv_(mv) {}
+    float value(const Coord& c, int /*band*/) const { return mv_.value(c); }
+    bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
+      for (int64_t z = 0; z <= n[2]; ++z)
+        for (int64_t y = 0; y <= n[1]; ++y) mv_.value_row(lo[0], lo[1] + y, lo[2] + z, n[0] + 1, f + (z * stride + y) * stride);
+      return true;
+    }
+    using Handle = int64_t;  // the record's slot
+    Handle locate(traversal::Packed v) const {
+      const Coord c = traversal::unpack(v);
+      assert(mv_.has_record(c) && "the outside test keeps the traversal near the data box");
+      return mv_.record_slot(c);
+    }
+    const DiamondBounds& bounds(Handle h, const RecordFields&) const { return mv_.bounds(h); }
+    const DiamondTopology& topology(Handle h, const RecordFields&) const { return mv_.topology(h); }
+    void prefetch(Handle h) const { __builtin_prefetch(&mv_.bounds(h)); }
+
+   private:
+    const MultiresVolume& mv_;
+  };
+  Reader reader() const { return Reader(mv_); }
+
+ private:
+  const MultiresVolume& mv_;
+};
+
+// A plain array as a source of values only: what eps = 0 reads (engine/extract/finest_extract.h).
+class ArraySource {
+ public:
+  explicit ArraySource(const Volume& v) : v_(v), lattice_(Lattice::enclosing(v.dims)) {}
+  const Lattice& lattice() const { return lattice_; }
+  const std::array<int64_t, 3>& data_dims() const { return v_.dims; }
+  const std::array<double, 3>& origin() const { return v_.origin; }
+  const std::array<double, 3>& spacing() const { return v_.spacing; }
+
+  class Reader {
+   public:
+    explicit Reader(const Volume& v) : v_(v) {}
+    float value(const Coord& c, int /*band*/) const {
+      return v_.at(std::min(c[0], v_.dims[0] - 1), std::min(c[1], v_.dims[1] - 1), std::min(c[2], v_.dims[2] - 1));
+    }
+    // Blocks lie in the data box (extract_finest cuts them there): whole rows of the array.
+    bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
+      for (int64_t z = 0; z <= n[2]; ++z)
+        for (int64_t y = 0; y <= n[1]; ++y) {
+          const float* row = v_.values.data() + v_.index(lo[0], lo[1] + y, lo[2] + z);
+          std::copy(row, row + n[0] + 1, f + (z * stride + y) * stride);
+        }
+      return true;
+    }
+
+   private:
+    const Volume& v_;
+  };
+  Reader reader() const { return Reader(v_); }
+
+ private:
+  const Volume& v_;
+  Lattice lattice_;
+};
+
+
+}  // namespace
+
+void validate_volume(const Volume& volume) {
+  for (int64_t d : volume.dims)
+    if (d < 2 || d > (int64_t{1} << 19) + 1)
+      throw std::invalid_argument("volume dimensions must be 2 .. 524289 nodes per axis");
+  if (static_cast<int64_t>(volume.values.size()) != volume.node_count())
+    throw std::invalid_argument("volume holds " + std::to_string(volume.values.size()) +
+                                " values, its dimensions need " + std::to_string(volume.node_count()));
+  for (size_t i = 0; i < volume.values.size(); ++i)
+    if (!std::isfinite(volume.values[i])) throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
+}
+
+bool needs_hierarchy(const ExtractOptions& options) { return options.eps != 0 || options.max_triangles > 0; }
+
+Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
+  options.validate();
+  validate_volume(volume);
+  const ArraySource source(volume);
+  if (needs_hierarchy(options) || !finest_extract_applies(source.lattice()))
+    return extract(Hierarchy::build(volume, fields_for(options)), options, stats);
+  const auto start = std::chrono::steady_clock::now();
+  const traversal::SplitRule rule(options, source.lattice(), source.origin(), source.spacing());
+  ExtractStats s;
+  Mesh mesh = extract_finest(source, rule, &s);
+  s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (stats) *stats = s;
+  return mesh;
+}
+
+Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats) {
+  return extract_adaptive(InMemory(mv), options, stats);
+}
+
+}  // namespace isotope

@@ -1,0 +1,26 @@
+#pragma once
+// Adaptive isosurface extraction over the bisection hierarchy (paper Sec. 3.2 with the stopping
+// rule of docs/METHOD.md), and the full-resolution baseline it must equal at eps = 0. The
+// extraction from an array, extract(const Volume&, ...), is public (isotope/extract.h).
+#include <cstdint>
+
+#include "engine/extract/full_resolution.h"  // the baseline, offered with the extraction it checks
+#include "engine/extract/options.h"
+#include "engine/hierarchy/multires_volume.h"
+#include "isotope/extract.h"
+#include "isotope/mesh.h"
+#include "isotope/volume.h"
+
+namespace isotope {
+
+// Throws as extract(const Volume&, ...) does (isotope/extract.h).
+Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+// Throws std::invalid_argument for dimensions outside 2 .. 2^19 + 1, values that do not fill them,
+// or values that are not finite: what extract(const Volume&, ...) refuses.
+void validate_volume(const Volume& volume);
+
+// Whether extract(volume, options) needs a hierarchy (eps > 0, or a triangle budget).
+bool needs_hierarchy(const ExtractOptions& options);
+
+}  // namespace isotope

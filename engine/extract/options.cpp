@@ -1,0 +1,208 @@
+// The extraction's options (isotope/extract.h): their names as every face spells them, one text
+// parser, and one validation.
+#include "engine/extract/options.h"
+
+#include <charconv>
+#include <cmath>
+#include <limits>
+#include <set>
+
+namespace isotope {
+namespace {
+
+constexpr size_t kMaxValueChars = 128;  // longer than any number or point a user types
+
+std::string quoted(std::string_view text) {
+  return "'" + std::string(text.substr(0, kMaxValueChars)) + (text.size() > kMaxValueChars ? "...'" : "'");
+}
+
+double finite_real(std::string_view name, std::string_view text) {
+  const auto v = parse_real(text);
+  if (!v || !std::isfinite(*v)) throw OptionError(std::string(name), "must be a finite number, got " + quoted(text));
+  return *v;
+}
+
+double non_negative_real(std::string_view name, std::string_view text) {
+  const double v = finite_real(name, text);
+  if (v < 0) throw OptionError(std::string(name), "must be >= 0, got " + quoted(text));
+  return v;
+}
+
+std::array<double, 3> point(std::string_view text) {
+  std::array<double, 3> p{};
+  size_t at = 0;
+  for (size_t a = 0; a < 3; ++a) {
+    const size_t end = a < 2 ? text.find(',', at) : text.size();
+    if (end == std::string_view::npos || (a == 2 && text.find(',', at) != std::string_view::npos))
+      throw OptionError("focus", "must be three numbers X,Y,Z, got " + quoted(text));
+    p[a] = finite_real("focus", text.substr(at, end - at));
+    at = end + 1;
+  }
+  return p;
+}
+
+int64_t triangle_budget(std::string_view text) {
+  int64_t v = 0;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+  if (ec != std::errc() || end != text.data() + text.size() || v < 0 || v > kMaxTriangleBudget)
+    throw OptionError("max-triangles", "must be an integer in 0 .. " + std::to_string(kMaxTriangleBudget) +
+                                           ", got " + quoted(text));
+  return v;
+}
+
+}  // namespace
+
+OptionError::OptionError(std::string option_name, std::string what_it_must_be)
+    : std::invalid_argument(option_name + " " + what_it_must_be),
+      option(std::move(option_name)),
+      message(std::move(what_it_must_be)) {}
+
+std::optional<double> parse_real(std::string_view text) {
+  auto parse_one = [](std::string_view s) -> std::optional<double> {
+    if (s.empty()) return std::nullopt;
+    if (s.front() == '+') s.remove_prefix(1);
+    double v = 0;
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec != std::errc() || end != s.data() + s.size()) return std::nullopt;
+    return v;
+  };
+  const size_t slash = text.find('/');
+  if (slash == std::string_view::npos) return parse_one(text);
+  const auto num = parse_one(text.substr(0, slash));
+  const auto den = parse_one(text.substr(slash + 1));
+  if (!num || !den || *den == 0) return std::nullopt;
+  return *num / *den;
+}
+
+void set_extract_option(ExtractOptions& o, std::string_view name, std::string_view text) {
+  if (name == "iso") {
+    const double iso = finite_real(name, text);
+    o.iso = static_cast<float>(iso);
+    if (!std::isfinite(o.iso)) throw OptionError("iso", "is out of the float range: " + quoted(text));
+  } else if (name == "eps") {
+    o.eps = non_negative_real(name, text);
+  } else if (name == "delta") {
+    o.delta = non_negative_real(name, text);
+  } else if (name == "radius") {
+    const double r = finite_real(name, text);
+    if (!(r > 0)) throw OptionError("radius", "must be > 0, got " + quoted(text));
+    if (!o.focus) o.focus = Focus{};
+    o.focus->radius = r;
+  } else if (name == "focus") {
+    const auto p = point(text);
+    if (!o.focus) o.focus = Focus{};
+    o.focus->point = p;
+  } else if (name == "topology") {
+    const auto t = parse_topology_mode(text);
+    if (!t) throw OptionError("topology", "must be none, paper, preserve or simplify, got " + quoted(text));
+    o.topology = *t;
+  } else if (name == "weight") {
+    const auto w = parse_simplification_weight(text);
+    if (!w) throw OptionError("weight", "must be interval, gradient or size, got " + quoted(text));
+    o.weight = *w;
+  } else if (name == "error") {
+    const auto e = parse_error_indicator(text);
+    if (!e) throw OptionError("error", "must be bound or surplus, got " + quoted(text));
+    o.error = *e;
+  } else if (name == "max-triangles") {
+    o.max_triangles = triangle_budget(text);
+  } else {
+    throw OptionError(std::string(name.substr(0, kMaxValueChars)), "is not an extraction option");
+  }
+}
+
+ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, std::string>>& given) {
+  ExtractOptions o;
+  std::set<std::string> seen;
+  for (const auto& [name, text] : given) {
+    if (text.size() > kMaxValueChars) throw OptionError(name, "is too long");
+    if (!seen.insert(name).second) throw OptionError(name, "is given twice");
+    set_extract_option(o, name, text);
+  }
+  const auto has = [&](const char* name) { return seen.count(name) > 0; };
+  if (!has("iso")) throw OptionError("iso", "is required");
+  if (o.topology != TopologyMode::simplify && (has("delta") || has("weight")))
+    throw OptionError(has("delta") ? "delta" : "weight", "applies to topology simplify only");
+  if (has("focus") != has("radius"))
+    throw OptionError(has("focus") ? "radius" : "focus", has("focus") ? "is required with focus" : "is required with radius");
+  o.validate();
+  return o;
+}
+
+void ExtractOptions::validate() const {
+  if (!std::isfinite(iso)) throw OptionError("iso", "must be a finite number");
+  // Infinity is allowed here (the coarsest mesh the mode allows; every weight under delta), not
+  // in text, where it is more likely a typo than a wish.
+  if (!(eps >= 0)) throw OptionError("eps", "must be >= 0");
+  if (!(delta >= 0)) throw OptionError("delta", "must be >= 0");
+  if (delta > 0 && topology != TopologyMode::simplify) throw OptionError("delta", "applies to topology simplify only");
+  if (max_triangles < 0 || max_triangles > kMaxTriangleBudget)
+    throw OptionError("max-triangles", "must be in 0 .. " + std::to_string(kMaxTriangleBudget));
+  if (auto_delta && (topology != TopologyMode::simplify || max_triangles == 0 || delta != 0))
+    throw OptionError("delta", "is chosen only with topology simplify, a triangle budget and no delta given");
+  if (focus) {
+    if (!std::isfinite(focus->point[0]) || !std::isfinite(focus->point[1]) || !std::isfinite(focus->point[2]))
+      throw OptionError("focus", "must be a finite point");
+    if (!(focus->radius > 0) || !std::isfinite(focus->radius)) throw OptionError("radius", "must be a finite number > 0");
+  }
+}
+
+std::string_view to_string(ErrorIndicator e) {
+  switch (e) {
+    case ErrorIndicator::bound: return "bound";
+    case ErrorIndicator::surplus: return "surplus";
+  }
+  return "unknown";
+}
+
+std::string_view to_string(TopologyMode t) {
+  switch (t) {
+    case TopologyMode::none: return "none";
+    case TopologyMode::paper: return "paper";
+    case TopologyMode::preserve: return "preserve";
+    case TopologyMode::simplify: return "simplify";
+  }
+  return "unknown";
+}
+
+std::optional<ErrorIndicator> parse_error_indicator(std::string_view s) {
+  if (s == "bound") return ErrorIndicator::bound;
+  if (s == "surplus") return ErrorIndicator::surplus;
+  return std::nullopt;
+}
+
+std::optional<TopologyMode> parse_topology_mode(std::string_view s) {
+  if (s == "none") return TopologyMode::none;
+  if (s == "paper") return TopologyMode::paper;
+  if (s == "preserve") return TopologyMode::preserve;
+  if (s == "simplify") return TopologyMode::simplify;
+  return std::nullopt;
+}
+
+std::string_view to_string(SimplificationWeight w) {
+  switch (w) {
+    case SimplificationWeight::interval: return "interval";
+    case SimplificationWeight::gradient: return "gradient";
+    case SimplificationWeight::size: return "size";
+  }
+  return "unknown";
+}
+
+std::optional<SimplificationWeight> parse_simplification_weight(std::string_view s) {
+  if (s == "interval") return SimplificationWeight::interval;
+  if (s == "gradient") return SimplificationWeight::gradient;
+  if (s == "size") return SimplificationWeight::size;
+  return std::nullopt;
+}
+
+RecordFields fields_for(const ExtractOptions& o) {
+  RecordFields f{false, false, false, false};
+  if (o.eps == 0 && o.max_triangles == 0) return f;
+  f.exact = o.topology == TopologyMode::preserve || o.topology == TopologyMode::simplify;
+  f.weights = o.topology == TopologyMode::simplify;
+  f.paper = o.topology == TopologyMode::paper;
+  f.surplus = o.error == ErrorIndicator::surplus;
+  return f;
+}
+
+}  // namespace isotope

@@ -1,0 +1,113 @@
+#include "engine/extract/slab_march.h"
+
+#include <algorithm>
+#include <mutex>
+#include <numeric>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "engine/mesh/edge_vertex_map.h"
+#include "engine/core/parallel.h"
+
+namespace isotope {
+namespace {
+
+// A vertex that the neighbouring slab may also have: its index in its slab and its edge key.
+struct PlaneVertex {
+  uint32_t local;
+  uint64_t key;
+};
+
+struct Slab {
+  Mesh mesh;
+  // Vertices on the plane shared with the slab below (bottom) and above (top), in vertex order.
+  std::vector<PlaneVertex> bottom, top;
+};
+
+// One slab's own welded mesh. Only an edge lying in the plane z = z0 between two slabs can be cut
+// in both (its p + q has z 2 z0; every other edge has both ends in one slab), so those vertices
+// are the only ones the merge has to look up.
+Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, int64_t z_begin, int64_t z_end, bool below,
+                  bool above) {
+  MeshBuilder builder(plan.iso, plan.side, plan.origin, plan.spacing);
+  builder.keep_keys();
+  march(z_begin, z_end, builder);
+  Slab slab{builder.take(), {}, {}};
+  const std::vector<uint64_t> keys = builder.take_keys();
+  if (!below && !above) return slab;
+  for (size_t k = 0; k < keys.size(); ++k) {
+    const int64_t z = edge_key_sum(keys[k], plan.side)[2];
+    if (below && z == 2 * z_begin) slab.bottom.push_back({static_cast<uint32_t>(k), keys[k]});
+    if (above && z == 2 * z_end) slab.top.push_back({static_cast<uint32_t>(k), keys[k]});
+  }
+  return slab;
+}
+
+// Joins the slabs' meshes, handed to it in order. A vertex of slab s on its bottom plane takes the
+// index slab s - 1 gave it; any other vertex is new, in slab s's order. Since slab s - 1 came
+// first in the serial walk, that is the serial walk's first-appearance numbering exactly.
+class SlabMerger {
+ public:
+  // Frees the slab.
+  void append(Slab& s) {
+    if (out_.positions.empty()) {  // nothing before it to share with: its numbering is the output's
+      out_ = std::move(s.mesh);
+      remap_.resize(out_.positions.size());
+      std::iota(remap_.begin(), remap_.end(), 0u);
+    } else {
+      remap_.assign(s.mesh.positions.size(), EdgeVertexMap::kAbsent);
+      for (const PlaneVertex& v : s.bottom) remap_[v.local] = previous_top_.find_or_insert(v.key, EdgeVertexMap::kAbsent);
+      for (size_t k = 0; k < remap_.size(); ++k)
+        if (remap_[k] == EdgeVertexMap::kAbsent) {
+          remap_[k] = static_cast<uint32_t>(out_.positions.size());
+          out_.positions.push_back(s.mesh.positions[k]);
+        }
+      for (const auto& t : s.mesh.triangles) out_.triangles.push_back({remap_[t[0]], remap_[t[1]], remap_[t[2]]});
+    }
+    EdgeVertexMap top(s.top.size());
+    for (const PlaneVertex& v : s.top) top.find_or_insert(v.key, remap_[v.local]);
+    previous_top_ = std::move(top);
+    s = Slab{};
+  }
+  Mesh take() { return std::move(out_); }
+
+ private:
+  Mesh out_;
+  EdgeVertexMap previous_top_{0};  // edge key -> output index, on the plane below the next slab
+  std::vector<uint32_t> remap_;    // the current slab's vertex -> output index
+};
+
+}  // namespace
+
+Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march) {
+  const int64_t count = (plan.cell_layers + plan.slab_layers - 1) / plan.slab_layers;
+  if (count <= 0) return Mesh{};
+  // Each slab is merged as soon as it and all before it are done, by the thread that finished the
+  // last of them (the others go on extracting): only the slabs in flight or waiting for an earlier
+  // one are held, not the whole mesh twice. Slabs are handed out in order, so few wait.
+  SlabMerger merger;
+  std::vector<std::optional<Slab>> done(static_cast<size_t>(count));
+  std::mutex mutex;
+  int64_t next = 0;      // the next slab to merge
+  bool merging = false;  // a thread is merging, and takes any slab that becomes next meanwhile
+  parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
+    const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
+    Slab slab = extract_slab(plan, march, z_begin, z_end, s > 0, s + 1 < count);
+    std::unique_lock<std::mutex> lock(mutex);
+    done[static_cast<size_t>(s)] = std::move(slab);
+    if (merging) return;
+    merging = true;
+    while (next < count && done[static_cast<size_t>(next)]) {
+      Slab ready = std::move(*done[static_cast<size_t>(next)]);
+      done[static_cast<size_t>(next++)].reset();
+      lock.unlock();
+      merger.append(ready);
+      lock.lock();
+    }
+    merging = false;
+  });
+  return merger.take();
+}
+
+}  // namespace isotope

@@ -1,0 +1,31 @@
+#pragma once
+// Marching tetrahedra over z-slabs of cells on all threads, joined into the mesh of one walk over
+// the slabs in order: what the full-resolution baseline (engine/extract/full_resolution.cpp) and the
+// finest-level extraction (engine/extract/finest_extract.h) share.
+#include <array>
+#include <cstdint>
+#include <functional>
+
+#include "engine/mesh/marching_tetrahedra.h"
+#include "isotope/mesh.h"
+
+namespace isotope {
+
+struct SlabPlan {
+  int64_t cell_layers = 0;  // cells along z
+  int64_t slab_layers = 1;  // cell layers per slab: slab s covers [s * slab_layers, ...)
+  int64_t side = 2;         // the MeshBuilder's grid side (fixes the edge keys)
+  float iso = 0;
+  std::array<double, 3> origin{0, 0, 0}, spacing{1, 1, 1};
+};
+
+// Feeds the cells of layers [z_begin, z_end) to the builder. Must touch no vertex off those
+// layers' nodes; may be called concurrently for different slabs.
+using MarchSlab = std::function<void(int64_t z_begin, int64_t z_end, MeshBuilder& builder)>;
+
+// Runs march on every slab, in parallel, and joins the meshes in slab order: vertices are numbered
+// in order of first appearance in one walk over the slabs in order, so the mesh is the same bit
+// for bit whatever the number of threads.
+Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march);
+
+}  // namespace isotope

@@ -1,0 +1,360 @@
+#pragma once
+// The adaptive traversal (paper Sec. 3.2 with the stopping rule of docs/METHOD.md), generic over where
+// values and records come from: any TraversalSource (engine/extract/traversal_source.h), a
+// hierarchy in memory or a store paged through a brick cache.
+#include <algorithm>
+#include <array>
+#include <cassert>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <utility>
+#include <vector>
+
+#include "engine/hierarchy/kuhn.h"
+#include "engine/hierarchy/lattice.h"
+#include "engine/mesh/marching_tetrahedra.h"
+#include "engine/extract/options.h"
+#include "engine/hierarchy/record.h"
+#include "engine/extract/traversal_source.h"
+
+namespace isotope {
+
+namespace traversal {
+
+using PackedTet = std::array<Packed, 4>;
+
+inline int64_t orientation(const Tet& c) {
+  const int64_t ax = c[1][0] - c[0][0], ay = c[1][1] - c[0][1], az = c[1][2] - c[0][2];
+  const int64_t bx = c[2][0] - c[0][0], by = c[2][1] - c[0][1], bz = c[2][2] - c[0][2];
+  const int64_t cx = c[3][0] - c[0][0], cy = c[3][1] - c[0][1], cz = c[3][2] - c[0][2];
+  return ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx);
+}
+
+// Bisecting t at level `level` (`positive`: its corners in this order span a positively oriented
+// tetrahedron). The first child keeps the orientation; the second too at level mod 3 == 0, and is
+// mirrored otherwise (its corners are an odd permutation of the parent's, up to the midpoint).
+struct Child {
+  PackedTet tet;
+  bool positive;
+};
+inline std::array<Child, 2> bisect(const PackedTet& t, int level, bool positive) {
+  const Packed v = (t[0] + t[1]) >> 1;
+  if (level % 3 == 0) return {{{{t[0], t[2], t[3], v}, positive}, {{t[1], t[3], t[2], v}, positive}}};
+  return {{{{t[0], t[2], t[3], v}, positive}, {{t[1], t[2], t[3], v}, !positive}}};
+}
+
+// Triangles marching tetrahedra makes of one tetrahedron (engine/mesh/marching_tetrahedra.cpp).
+inline int triangles_of(const std::array<float, 4>& f, float iso) {
+  const int above = (f[0] > iso) + (f[1] > iso) + (f[2] > iso) + (f[3] > iso);
+  return above == 2 ? 2 : (above == 1 || above == 3) ? 1 : 0;
+}
+
+// When a diamond is refined. Each diamond v gets a split key: +inf when its topology forbids
+// stopping there, else its error divided by the focus factor g(v) in [0, 1]; a tetrahedron
+// bisected at v is refined iff key >= eps. Keys never grow from a diamond to its children
+// (errors and critical flags are saturated, g never shrinks), which keeps the mesh conforming
+// (crack-free) for any eps and makes "refine everything with key >= eps" a cut of the tree that
+// moves down monotonically as eps falls (choose_eps_for_budget relies on this).
+class SplitRule {
+ public:
+  // error_fold: added to every error before it is compared (a quantized store's rounding,
+  // io/store/store_format.h): the records are those of the quantized field.
+  SplitRule(const ExtractOptions& o, const Lattice& lattice, const std::array<double, 3>& origin,
+            const std::array<double, 3>& spacing, double error_fold = 0)
+      : options_(o), origin_(origin), spacing_(spacing), fold_(error_fold) {
+    fields_.exact = o.topology == TopologyMode::preserve || o.topology == TopologyMode::simplify;
+    fields_.weights = o.topology == TopologyMode::simplify;
+    fields_.paper = o.topology == TopologyMode::paper;
+    fields_.surplus = o.error == ErrorIndicator::surplus;
+    if (!o.focus) return;
+    // Focus: g(v) = clamp(d(v) / R, 0, 1), d(v) = |v - focus| - reach(level). reach(l) is the sum
+    // of the longest edges of all finer levels, so d(child) >= d(parent) by the triangle
+    // inequality (a child diamond's centre lies within one such edge of its parent's centre).
+    const double h = std::max({spacing[0], spacing[1], spacing[2]});
+    reach_.assign(static_cast<size_t>(lattice.max_level() + 1), 0.0);
+    for (int l = lattice.max_level() - 1; l >= 0; --l)
+      reach_[static_cast<size_t>(l)] = reach_[static_cast<size_t>(l) + 1] + longest_edge(l + 1, lattice, h);
+  }
+
+  double key(const DiamondBounds& b, const DiamondTopology& t, Packed v, int level) const {
+    return critical(t) ? std::numeric_limits<double>::infinity() : error_key(b, v, level);
+  }
+  // The key as far as the error goes: key = error_key unless critical(). The traversal reads the
+  // topology record only when this alone would let it stop (docs/METHOD.md: most visits never do).
+  double error_key(const DiamondBounds& b, Packed v, int level) const {
+    const double err = (options_.error == ErrorIndicator::bound ? b.error_bound : b.error_surplus) + fold_;
+    if (reach_.empty()) return err;
+    const double g = focus_factor(v, level);
+    return g > 0 ? err / g : std::numeric_limits<double>::infinity();
+  }
+  bool critical(const DiamondTopology& t) const {
+    const float iso = options_.iso;
+    switch (options_.topology) {
+      case TopologyMode::none: return false;
+      case TopologyMode::paper: return t.paper_lo <= iso && iso < t.paper_hi;
+      case TopologyMode::preserve: return exact_fires(t);
+      case TopologyMode::simplify: return exact_fires(t) && heavy(t);
+    }
+    return false;
+  }
+  // The chosen weight of v's diamond where the exact rule fires at the isovalue below it, else
+  // -infinity.
+  double topology_weight(const DiamondTopology& t) const {
+    return exact_fires(t) ? static_cast<double>(t.weight[static_cast<size_t>(options_.weight)])
+                          : -std::numeric_limits<double>::infinity();
+  }
+  // Simplify mode: the exact rule fires below, but its weight is under delta.
+  bool dropped(const DiamondTopology& t) const {
+    return options_.topology == TopologyMode::simplify && exact_fires(t) && !heavy(t);
+  }
+  bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
+  const ExtractOptions& options() const { return options_; }
+  // The fields error_key(), critical() and dropped() read beyond the range and the bound.
+  const RecordFields& fields() const { return fields_; }
+
+ private:
+  bool exact_fires(const DiamondTopology& t) const { return t.exact_lo <= options_.iso && options_.iso < t.exact_hi; }
+  bool heavy(const DiamondTopology& t) const {
+    return static_cast<double>(t.weight[static_cast<size_t>(options_.weight)]) >= options_.delta;
+  }
+  // Of a level-l tetrahedron: its refinement edge, a diagonal of a cube, of a face, or an edge.
+  static double longest_edge(int l, const Lattice& lattice, double h) {
+    const double longest[3] = {std::sqrt(3.0), std::sqrt(2.0), 1.0};
+    return std::ldexp(h, lattice.k - l / 3) * longest[l % 3];
+  }
+  double focus_factor(Packed v, int level) const {
+    const Coord c = unpack(v);
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double x = origin_[a] + spacing_[a] * static_cast<double>(c[a]) - options_.focus->point[a];
+      d2 += x * x;
+    }
+    const double d = std::sqrt(d2) - reach_[static_cast<size_t>(level)];
+    return std::clamp(d / options_.focus->radius, 0.0, 1.0);
+  }
+
+  ExtractOptions options_;
+  std::array<double, 3> origin_, spacing_;
+  double fold_ = 0;
+  RecordFields fields_;
+  std::vector<double> reach_;  // per level; empty without a focus
+};
+
+// A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
+struct Piece {
+  PackedTet tet{};
+  int level = 0;
+  bool positive = false;
+  bool emit_only = false;
+};
+
+// Over the bisection tree (depth first down to the pieces, level by level within each): cull by
+// range, stop by the split rule, emit at stopping tetrahedra and at the leaves.
+template <TraversalSource Source>
+class Traversal {
+ public:
+  Traversal(const Source& source, const SplitRule& rule)
+      : reader_(source.reader()), lattice_(source.lattice()), rule_(rule),
+        builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing()) {
+    for (int i = 0; i < 3; ++i) {
+      box_max_[i] = source.data_dims()[i] - 1;
+      clip_ = clip_ || box_max_[i] < lattice_.n;
+    }
+  }
+
+  // The traversal cut at `level` into pieces, in depth-first order: the subtrees rooted there and
+  // the tetrahedra emitted above it. Running the pieces in this order is the whole traversal.
+  std::vector<Piece> split(int level) {
+    std::vector<Piece> pieces;
+    pieces_ = &pieces;
+    split_level_ = level;
+    for (const auto& [root, positive] : roots()) visit(root, 0, positive);
+    pieces_ = nullptr;
+    return pieces;
+  }
+
+  std::vector<Child> roots() const {
+    std::vector<Child> out;
+    const int64_t n = lattice_.n;
+    for (const Tet& r : kuhn_tetrahedra({0, 0, 0}, {n, n, n}))
+      out.push_back({{pack(r[0]), pack(r[1]), pack(r[2]), pack(r[3])}, orientation(r) > 0});
+    return out;
+  }
+
+  void run(const Piece& p) {
+    if (p.emit_only) emit(p.tet, p.level, p.positive);
+    else visit_by_levels(p.tet, p.level, p.positive);
+  }
+
+  // What the traversal decides about one tetrahedron, without descending: used by the budget
+  // search, which walks the same tree in another order.
+  enum class Fate { culled, leaf, split_key };
+  Fate judge(const PackedTet& t, int level, double* key) {
+    if (clip_ && outside_box(t)) return Fate::culled;
+    if (level == lattice_.max_level()) return Fate::leaf;
+    const Packed v = (t[0] + t[1]) >> 1;
+    const auto h = reader_.locate(v);
+    const DiamondBounds b = reader_.bounds(h, rule_.fields());
+    if (!rule_.in_range(b)) return Fate::culled;
+    *key = rule_.key(b, reader_.topology(h, rule_.fields()), v, level);
+    return Fate::split_key;
+  }
+  // For the choice of delta (engine/extract/triangle_budget.h): the fate as judge's, the error's part of
+  // the key, and `weight`: the diamond's saturated weight when the exact rule fires at the
+  // isovalue below it, else -infinity (never split for its topology).
+  Fate judge_topology(const PackedTet& t, int level, double* error_key, double* weight) {
+    if (clip_ && outside_box(t)) return Fate::culled;
+    if (level == lattice_.max_level()) return Fate::leaf;
+    const Packed v = (t[0] + t[1]) >> 1;
+    const auto h = reader_.locate(v);
+    const DiamondBounds b = reader_.bounds(h, rule_.fields());
+    if (!rule_.in_range(b)) return Fate::culled;
+    *error_key = rule_.error_key(b, v, level);
+    *weight = rule_.topology_weight(reader_.topology(h, rule_.fields()));
+    return Fate::split_key;
+  }
+  int triangles(const PackedTet& t, int level) {
+    const int j = band_of(level);
+    return triangles_of({value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)}, rule_.options().iso);
+  }
+
+  void keep_keys() { builder_.keep_keys(); }
+  std::vector<uint64_t> take_keys() { return builder_.take_keys(); }
+  Mesh take() { return builder_.take(); }
+  int64_t tets_visited() const { return tets_visited_; }
+  int64_t tets_emitted() const { return tets_emitted_; }
+  int64_t tets_simplified() const { return tets_simplified_; }
+
+ private:
+  enum class Step { cull, stop, refine };
+  // What the traversal does at t: cull it (no value on each side, or beyond the data box), stop
+  // and emit it, or refine it.
+  using Handle = typename Source::Reader::Handle;
+  // h: where the record of t's refinement vertex lives (unused at the leaves).
+  Step step(const PackedTet& t, int level, const Handle& h) {
+    ++tets_visited_;
+    if (clip_ && outside_box(t)) return Step::cull;
+    if (level == lattice_.max_level()) return Step::stop;
+    const DiamondBounds b = reader_.bounds(h, rule_.fields());
+    if (!rule_.in_range(b)) return Step::cull;
+    if (!(rule_.error_key(b, (t[0] + t[1]) >> 1, level) >= rule_.options().eps)) {
+      if (!rule_.fields().topology()) return Step::stop;  // topology none: nothing more to read
+      const DiamondTopology topology = reader_.topology(h, rule_.fields());
+      if (!rule_.critical(topology)) {
+        tets_simplified_ += rule_.dropped(topology);
+        return Step::stop;
+      }
+    }
+    return Step::refine;
+  }
+  // Beyond the data box there may be no record to locate: step() culls such a tetrahedron
+  // before it reads the handle.
+  Handle locate(const PackedTet& t, int level) {
+    if (level == lattice_.max_level() || (clip_ && outside_box(t))) return Handle{};
+    return reader_.locate((t[0] + t[1]) >> 1);
+  }
+
+  void visit(const PackedTet& t, int level, bool positive) {
+    if (pieces_ && level == split_level_) return pieces_->push_back({t, level, positive, false});
+    switch (step(t, level, locate(t, level))) {
+      case Step::cull: return;
+      case Step::stop: return emit(t, level, positive);
+      case Step::refine:
+        for (const Child& c : bisect(t, level, positive)) visit(c.tet, level + 1, c.positive);
+    }
+  }
+
+  // The subtree of t level by level, not depth first: a whole level's records are asked for
+  // before any is read, so their cache misses overlap instead of queuing one behind the other.
+  // The same tetrahedra stop and are emitted as in visit(), in another order.
+  void visit_by_levels(const PackedTet& t, int level, bool positive) {
+    frontier_.reserve(1);
+    frontier_[0] = Child{t, positive};
+    size_t n = 1;
+    for (int l = level; n > 0; ++l) {
+      handles_.reserve(n);
+      next_.reserve(2 * n);  // written by index: a refined tetrahedron has two children
+      if (l < lattice_.max_level())
+        for (size_t i = 0; i < n; ++i) {
+          if (clip_ && outside_box(frontier_[i].tet)) continue;  // see locate() below
+          handles_[i] = reader_.locate((frontier_[i].tet[0] + frontier_[i].tet[1]) >> 1);
+          reader_.prefetch(handles_[i]);
+        }
+      size_t next = 0;
+      for (size_t i = 0; i < n; ++i) {
+        const Child& c = frontier_[i];
+        switch (step(c.tet, l, handles_[i])) {
+          case Step::cull: break;
+          case Step::stop: emit(c.tet, l, c.positive); break;
+          case Step::refine: {
+            const auto children = bisect(c.tet, l, c.positive);
+            next_[next++] = children[0];
+            next_[next++] = children[1];
+          }
+        }
+      }
+      std::swap(frontier_, next_);
+      n = next;
+    }
+  }
+
+  // The tetrahedron lies in a half-space beyond a face of the data box: it meets the box in a
+  // face at most. Leaves are unit-cell Kuhn tetrahedra, wholly inside or caught here.
+  bool outside_box(const PackedTet& t) const {
+    for (int a = 0; a < 3; ++a) {
+      const int shift = a * kFieldBits;
+      Packed lo = kFieldMask;
+      for (Packed p : t) lo = std::min(lo, (p >> shift) & kFieldMask);
+      if (static_cast<int64_t>(lo) >= box_max_[a]) return true;
+    }
+    return false;
+  }
+
+  float value(Packed p, int j) { return reader_.value(unpack(p), j); }
+  // The corners of a level-l tetrahedron lie on G_j for this j (its refinement vertex has scale j).
+  int band_of(int level) const { return std::max(0, lattice_.k - 1 - level / 3); }
+
+  void emit(const PackedTet& t, int level, bool positive) {
+    if (pieces_) return pieces_->push_back({t, level, positive, true});
+    ++tets_emitted_;
+    const int j = band_of(level);
+    const std::array<float, 4> f{value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)};
+    // Most stopping tetrahedra lie in a diamond whose range holds the isovalue but are not cut
+    // themselves: settle that before building their corners.
+    const int cut = triangles_of(f, rule_.options().iso);
+    if (cut == 0) return;
+    builder_.add_tet({unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])}, f, positive);
+  }
+
+  typename Source::Reader reader_;
+  const Lattice& lattice_;
+  const SplitRule& rule_;
+  MeshBuilder builder_;
+  Coord box_max_{};
+  bool clip_ = false;  // the data box is smaller than the lattice
+  int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;
+  std::vector<Piece>* pieces_ = nullptr;  // while splitting
+  // An array that grows without initializing: the levels' tetrahedra are written before read.
+  template <class T>
+  class Scratch {
+   public:
+    void reserve(size_t n) {
+      if (n <= capacity_) return;
+      capacity_ = std::max(n, 2 * capacity_);
+      data_ = std::make_unique_for_overwrite<T[]>(capacity_);
+    }
+    T& operator[](size_t i) { return data_[i]; }
+
+   private:
+    std::unique_ptr<T[]> data_;
+    size_t capacity_ = 0;
+  };
+  Scratch<Child> frontier_, next_;  // visit_by_levels
+  Scratch<Handle> handles_;         // of frontier_
+  int split_level_ = 0;
+};
+
+}  // namespace traversal
+}  // namespace isotope

@@ -1,0 +1,238 @@
+#include "engine/hierarchy/band_tile.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <tuple>
+
+namespace isotope {
+
+std::pair<Box3, Box3> BandTile::window_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi) {
+  const int64_t top = layout.lattice().n >> band;
+  Box3 lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max<int64_t>(0, core_lo[a] - 2);
+    hi[a] = std::min(top, core_hi[a] - 1 + 2);
+  }
+  return {lo, hi};
+}
+
+BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi, Buffers buffers)
+    : layout_(layout), j_(band), core_lo_(core_lo), core_hi_(core_hi), values_(std::move(buffers.values)),
+      records_(std::move(buffers.records)), children_(std::move(buffers.children)) {
+  top_ = layout.lattice().n >> band;
+  std::tie(lo_, hi_) = window_of(layout, band, core_lo, core_hi);
+  for (int a = 0; a < 3; ++a) {
+    size_[a] = hi_[a] - lo_[a] + 1;
+    cells_[a] = std::max<int64_t>(1, size_[a] - 1);
+    next_lo_[a] = core_lo[a] / 2;
+    next_hi_[a] = core_hi[a] / 2;
+    if (band == layout.lattice().k) next_hi_[a] = next_lo_[a];  // no band above the corners
+    else if (core_hi[a] == layout.band(band).nodes[a]) next_hi_[a] = layout.band(band + 1).nodes[a];
+  }
+  // Grown, never cleared: every entry read is written first (values by the caller, records by
+  // build() before any parent reads them, children by the caller where they exist), and
+  // re-initializing the arrays of a large tile costs as much as filling them.
+  const auto nodes = static_cast<size_t>(size_[0] * size_[1] * size_[2]);
+  if (values_.size() < nodes) values_.resize(nodes);
+  if (records_.size() < nodes) records_.resize(nodes);
+  const auto cells = static_cast<size_t>(cells_[0] * cells_[1] * cells_[2]);
+  if (band > 0 && children_.size() < cells) children_.resize(cells);
+}
+
+float BandTile::value(const Coord& c) const {
+  const Box3 g{c[0] >> j_, c[1] >> j_, c[2] >> j_};
+  assert(g[0] >= lo_[0] && g[0] <= hi_[0] && g[1] >= lo_[1] && g[1] <= hi_[1] && g[2] >= lo_[2] && g[2] <= hi_[2]);
+  return node_value(g);
+}
+
+bool BandTile::child(const Coord& u, Record& r) const {
+  const Lattice& l = layout_.lattice();
+  const int s = scale_of(u, l);
+  for (int a = 0; a < 3; ++a)
+    if (u[a] > record_extent(l, layout_.dims(), a, s)) return false;
+  if (s == j_) {
+    r = node_record({u[0] >> j_, u[1] >> j_, u[2] >> j_});
+  } else {
+    assert(s == j_ - 1 && "a scale-j vertex's children are of scale j or j-1 cube centres");
+    r = child_record({u[0] >> j_, u[1] >> j_, u[2] >> j_});
+  }
+  return true;
+}
+
+Record BandTile::next_child(const Box3& g) const {
+  const Band& band = layout_.band(j_);
+  const Box3 c{2 * g[0] + 1, 2 * g[1] + 1, 2 * g[2] + 1};
+  for (int a = 0; a < 3; ++a)
+    if (c[a] >= band.nodes[a]) return Record{};
+  return node_record(c);
+}
+
+void BandTile::store(const Coord& v, const Record& r) {
+  records_[static_cast<size_t>(index({v[0] >> j_, v[1] >> j_, v[2] >> j_}, size_))] = r;
+}
+
+// Whether every node g's record depends on lies in the window (or beyond a lattice face, where
+// the diamond is cut): one step for edge midpoints; for face and cube centres two steps along
+// their odd axes (children one step away, and those children's own reach), one along the even.
+bool BandTile::computable(const Box3& g, int odd) const {
+  for (int a = 0; a < 3; ++a) {
+    const int64_t m = (odd >= 2 && (g[a] & 1)) ? 2 : 1;
+    if (g[a] - m < lo_[a] && lo_[a] != 0) return false;
+    if (g[a] + m > hi_[a] && hi_[a] != top_) return false;
+  }
+  return true;
+}
+
+bool BandTile::inside_data_box(const Box3& g) const {
+  const int64_t h = int64_t{1} << j_;
+  for (int a = 0; a < 3; ++a)
+    if ((g[a] << j_) - h < 0 || (g[a] << j_) + h > layout_.dims()[a] - 1) return false;
+  return true;
+}
+
+const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
+  DiamondTemplate& t = templates_[(g[0] & 3) | (g[1] & 3) << 2 | (g[2] & 3) << 4];
+  if (t.ready) return t;
+  const Lattice& l = layout_.lattice();
+  const Diamond d = diamond_of({g[0] << j_, g[1] << j_, g[2] << j_}, l);
+  const int64_t base = index(g, size_), cell_base = index(g, cells_);
+  auto value_offset = [&](const Coord& p) { return index({p[0] >> j_, p[1] >> j_, p[2] >> j_}, size_) - base; };
+  t.type = d.type;
+  t.shape = shape_of(d, l);
+  t.ring_count = d.ring_count;
+  t.a = value_offset(d.a);
+  t.b = value_offset(d.b);
+  for (int i = 0; i < d.ring_count; ++i) t.ring[i] = value_offset(d.ring[i]);
+  for_each_child(d, l, [&](const Coord& u) {
+    const Box3 gu{u[0] >> j_, u[1] >> j_, u[2] >> j_};
+    if (scale_of(u, l) == j_) t.same[t.same_count++] = index(gu, size_) - base;
+    else t.cube[t.cube_count++] = index(gu, cells_) - cell_base;
+  });
+  t.ready = true;
+  return t;
+}
+
+// RecordBuilder::build for a diamond inside the data box, reading through a template; the same
+// record bit for bit (the max and hull folds do not depend on the order of the children).
+void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts, bool topology) {
+  const int64_t base = index(g, size_);
+  const float* v = values_.data() + base;
+  DiamondValues dv;
+  dv.type = t.type;
+  dv.fa = v[t.a];
+  dv.fb = v[t.b];
+  dv.fv = v[0];
+  DiamondBounds range;
+  range.lo = std::min({dv.fa, dv.fb, dv.fv});
+  range.hi = std::max({dv.fa, dv.fb, dv.fv});
+  for (int i = 0; i < t.ring_count; ++i) {
+    dv.ring[i] = v[t.ring[i]];
+    range.lo = std::min(range.lo, dv.ring[i]);
+    range.hi = std::max(range.hi, dv.ring[i]);
+  }
+  Saturation sat;
+  for (int i = 0; i < t.same_count; ++i) sat.add(records_[static_cast<size_t>(base + t.same[i])], range, topology);
+  const int64_t cell_base = index(g, cells_);
+  for (int i = 0; i < t.cube_count; ++i) sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range, topology);
+  records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology);
+}
+
+void BandTile::find_constant_blocks() {
+  for (int a = 0; a < 3; ++a) blocks_[a] = (size_[a] + 3) / 4;
+  const auto count = static_cast<size_t>(blocks_[0] * blocks_[1] * blocks_[2]);
+  std::vector<float> lo(count, INFINITY), hi(count, -INFINITY);
+  auto block = [&](int64_t bx, int64_t by, int64_t bz) { return static_cast<size_t>((bz * blocks_[1] + by) * blocks_[0] + bx); };
+  for (int64_t z = 0; z < size_[2]; ++z)
+    for (int64_t y = 0; y < size_[1]; ++y) {
+      const float* row = values_.data() + (z * size_[1] + y) * size_[0];
+      for (int64_t x = 0; x < size_[0]; ++x) {
+        const size_t b = block(x >> 2, y >> 2, z >> 2);
+        lo[b] = std::min(lo[b], row[x]);
+        hi[b] = std::max(hi[b], row[x]);
+      }
+    }
+  constant_.assign(count, 0);
+  for (int64_t bz = 1; bz + 1 < blocks_[2]; ++bz)
+    for (int64_t by = 1; by + 1 < blocks_[1]; ++by)
+      for (int64_t bx = 1; bx + 1 < blocks_[0]; ++bx) {
+        const float c = lo[block(bx, by, bz)];
+        bool same = true;
+        for (int64_t dz = -1; dz <= 1 && same; ++dz)
+          for (int64_t dy = -1; dy <= 1 && same; ++dy)
+            for (int64_t dx = -1; dx <= 1 && same; ++dx) {
+              const size_t n = block(bx + dx, by + dy, bz + dz);
+              same = lo[n] == c && hi[n] == c;
+            }
+        constant_[block(bx, by, bz)] = same;
+      }
+}
+
+void BandTile::build(CriticalCounts& counts, bool topology) {
+  const Lattice& l = layout_.lattice();
+  if (j_ >= l.k) return;  // the corners: no records
+  const Band& band = layout_.band(j_);
+  // Band 0 where the values around a node are all one value c: its record is range [c, c], errors
+  // 0 (every surplus is 0), no critical interval (the exact rule needs v beyond both a and b; the
+  // paper's flags v an extremum, but its interval [c, c) is empty), weights 0; and so are its
+  // children's, which lie within one node of it and reach one node further. Only inside the data
+  // box's inner part, where no descendant reaches past the box (those are refined always).
+  const bool trivial = j_ == 0;
+  if (trivial) find_constant_blocks();
+  Box3 trivial_first{}, trivial_last{};
+  for (int a = 0; a < 3; ++a) trivial_first[a] = 3, trivial_last[a] = layout_.dims()[a] - 4;
+  RecordBuilder<BandTile> builder(*this);
+  CriticalCounts halo_counts = {{0, 0, 0}, {0, 0, 0}};  // halo nodes belong to (and are counted by) other tiles
+  const int64_t h = int64_t{1} << j_;
+  // Finest first, as in MultiresVolume::build: edge midpoints, face centres, cube centres; each
+  // class of parities (which coordinates are odd) walked with stride 2. Per axis, the nodes whose
+  // records this window can compute (computable()), and those in the core and inside the data
+  // box, are ranges: fixed once the class is.
+  for (int m = 1; m <= 3; ++m)
+    for (int parity = 1; parity < 8; ++parity) {
+      const std::array<int64_t, 3> odd{parity & 1, parity >> 1 & 1, parity >> 2 & 1};
+      if (odd[0] + odd[1] + odd[2] != m) continue;
+      Box3 first, last, core_first, core_last, box_first, box_last;
+      bool empty = false;
+      for (int a = 0; a < 3; ++a) {
+        // Two steps along the odd axes of face and cube centres (their children one step away,
+        // and those children's own reach), one step otherwise.
+        const int64_t reach = (m >= 2 && odd[a]) ? 2 : 1;
+        int64_t lo = lo_[a] == 0 ? 0 : lo_[a] + reach;
+        int64_t hi = std::min(hi_[a] == top_ ? hi_[a] : hi_[a] - reach, band.nodes[a] - 1);
+        if ((lo & 1) != odd[a]) ++lo;
+        first[a] = lo;
+        last[a] = hi;
+        empty = empty || lo > hi;
+        core_first[a] = core_lo_[a], core_last[a] = core_hi_[a] - 1;
+        // inside_data_box: (g << j) - h >= 0 and (g << j) + h <= dims - 1
+        box_first[a] = (h + (int64_t{1} << j_) - 1) >> j_;
+        box_last[a] = (layout_.dims()[a] - 1 - h) >> j_;
+      }
+      if (empty) continue;
+      for (int64_t z = first[2]; z <= last[2]; z += 2)
+        for (int64_t y = first[1]; y <= last[1]; y += 2) {
+          const bool core_yz = y >= core_first[1] && y <= core_last[1] && z >= core_first[2] && z <= core_last[2];
+          const bool box_yz = y >= box_first[1] && y <= box_last[1] && z >= box_first[2] && z <= box_last[2];
+          const bool trivial_yz = trivial && y >= trivial_first[1] && y <= trivial_last[1] && z >= trivial_first[2] &&
+                                  z <= trivial_last[2];
+          for (int64_t x = first[0]; x <= last[0]; x += 2) {
+            if (trivial_yz && x >= trivial_first[0] && x <= trivial_last[0] &&
+                constant_[static_cast<size_t>((((z - lo_[2]) >> 2) * blocks_[1] + ((y - lo_[1]) >> 2)) * blocks_[0] +
+                                              ((x - lo_[0]) >> 2))]) {
+              const float c = node_value({x, y, z});
+              Record& r = records_[static_cast<size_t>(index({x, y, z}, size_))];
+              r = Record{};
+              r.bounds = {c, c, 0, 0};
+              continue;
+            }
+            const bool core = core_yz && x >= core_first[0] && x <= core_last[0];
+            CriticalCounts& c = core ? counts : halo_counts;
+            if (box_yz && x >= box_first[0] && x <= box_last[0]) build_fast({x, y, z}, template_for({x, y, z}), c, topology);
+            else builder.build({x << j_, y << j_, z << j_}, c, topology);
+          }
+        }
+    }
+}
+
+}  // namespace isotope

@@ -1,0 +1,128 @@
+#include "engine/hierarchy/hierarchy.h"
+
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "engine/extract/adaptive_extract.h"
+#include "engine/hierarchy/band_tile.h"
+#include "engine/hierarchy/banded_build.h"
+#include "engine/hierarchy/record_builder.h"
+
+namespace isotope {
+
+BrickIndexer::BrickIndexer(const StoreLayout& layout) : bits_(layout.brick_bits()) {
+  mask_ = layout.brick_width() - 1;
+  nodes_ = layout.brick_nodes();
+  for (int64_t i = 0; i <= mask_; ++i) spread_[static_cast<size_t>(i)] = spread_bits_3(i);
+  for (const Band& b : layout.bands())
+    band_[static_cast<size_t>(b.scale)] = {b.first_brick, b.bricks[0], b.bricks[1], b.nodes};
+}
+
+void store_record(const BrickView& brick, uint32_t m, const Record& r) {
+  brick.bounds[m] = bounds_word(pack_bounds(r.bounds));
+  if (!brick.surplus && !brick.exact && !brick.paper && !brick.weights) return;
+  const PackedTopology t = pack_topology(r.topology, r.bounds.error_surplus);
+  if (brick.surplus) brick.surplus[m] = t.surplus;
+  if (brick.exact) brick.exact[m] = interval_word(t.exact_lo, t.exact_hi);
+  if (brick.paper) brick.paper[m] = interval_word(t.paper_lo, t.paper_hi);
+  if (brick.weights) brick.weights[m] = weights_word(t.weight);
+}
+
+void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, float* values) {
+  const StoreLayout& layout = tile.layout();
+  const Band& band = layout.band(tile.band());
+  const bool records = tile.band() < layout.lattice().k;  // the corners have none: all absent
+  const Record absent{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, {0, 0, 0}}};
+  for (uint32_t m = 0; m < static_cast<uint32_t>(layout.brick_nodes()); ++m) {
+    const Box3 g{origin[0] + compact_bits_3(m), origin[1] + compact_bits_3(m >> 1), origin[2] + compact_bits_3(m >> 2)};
+    const bool in_grid = g[0] < band.nodes[0] && g[1] < band.nodes[1] && g[2] < band.nodes[2];
+    values[m] = in_grid ? tile.node_value(g) : 0.0f;
+    if ((m & 7) == 0 || !in_grid || !records) {
+      store_record(out, m, absent);  // coarser nodes' entries are never read; written all the same
+      continue;
+    }
+    store_record(out, m, tile.node_record(g));
+  }
+}
+
+Hierarchy Hierarchy::allocate(const std::array<int64_t, 3>& dims, int brick_bits, const RecordFields& fields) {
+  for (int64_t d : dims)
+    if (d < 2 || d > (int64_t{1} << 19) + 1)
+      throw std::invalid_argument("volume dimensions must be 2 .. 524289 nodes per axis");
+  Hierarchy h;
+  h.layout_ = std::make_unique<StoreLayout>(dims, brick_bits);
+  h.indexer_ = std::make_unique<BrickIndexer>(*h.layout_);
+  h.fields_ = fields;
+  // Not zeroed here: the build writes every entry of every brick, on all threads.
+  const auto n = static_cast<size_t>(h.layout_->brick_count() * h.layout_->brick_nodes());
+  h.values_ = std::make_unique_for_overwrite<float[]>(n);
+  h.bounds_ = std::make_unique_for_overwrite<uint64_t[]>(n);
+  if (fields.surplus) h.surplus_ = std::make_unique_for_overwrite<uint16_t[]>(n);
+  if (fields.exact) h.exact_ = std::make_unique_for_overwrite<uint32_t[]>(n);
+  if (fields.paper) h.paper_ = std::make_unique_for_overwrite<uint32_t[]>(n);
+  if (fields.weights) h.weights_ = std::make_unique_for_overwrite<uint64_t[]>(n);
+  return h;
+}
+
+int64_t Hierarchy::memory_bytes() const {
+  const int64_t n = layout_->brick_count() * layout_->brick_nodes();
+  return n * static_cast<int64_t>(sizeof(float) + sizeof(uint64_t) + (surplus_ ? 2 : 0) + (exact_ ? 4 : 0) +
+                                  (paper_ ? 4 : 0) + (weights_ ? 8 : 0));
+}
+
+namespace {
+
+// The banded build's sink for a hierarchy in memory: each brick straight into its place.
+struct MemorySink {
+  Hierarchy& h;
+  int process(int band, const Box3& b, const BandTile& tile) {
+    const int64_t index = h.layout().brick_index(band, b);
+    const int64_t t = h.layout().brick_width();
+    fill_brick(tile, {b[0] * t, b[1] * t, b[2] * t}, h.brick(index), h.values(index));
+    return 0;
+  }
+  void commit(int, const Box3&, int&&) {}
+};
+
+}  // namespace
+
+Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int brick_bits,
+                           const ProgressCallback& progress) {
+  if (static_cast<int64_t>(volume.values.size()) != volume.node_count())
+    throw std::invalid_argument("volume holds " + std::to_string(volume.values.size()) +
+                                " values, its dimensions need " + std::to_string(volume.node_count()));
+  for (size_t i = 0; i < volume.values.size(); ++i)
+    if (!std::isfinite(volume.values[i])) throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
+  const auto start = std::chrono::steady_clock::now();
+  Hierarchy h = allocate(volume.dims, brick_bits, fields);
+  h.set_geometry(volume.origin, volume.spacing);
+  const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
+    for (int64_t z = 0; z < size[2]; ++z)
+      for (int64_t y = 0; y < size[1]; ++y) {
+        const float* row = volume.values.data() + volume.index(lo[0], lo[1] + y, lo[2] + z);
+        std::copy(row, row + size[0], out + (z * size[1] + y) * size[0]);
+      }
+  };
+  BandedBuildOptions options;
+  options.memory_bytes = uint64_t{256} << 20;  // tiles in flight: the hierarchy itself is already in memory
+  options.progress = progress;
+  options.topology = fields.topology();  // mode none reads no interval nor weight: none computed
+  MemorySink sink{h};
+  const BandedBuildStats built = build_bands(h.layout(), read, sink, 0, options);
+  for (int t = 0; t < 3; ++t) {
+    h.stats_.critical_paper[t] = built.critical[0][t];
+    h.stats_.critical_exact[t] = built.critical[1][t];
+  }
+  h.stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return h;
+}
+
+Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats) {
+  if (!hierarchy.fields().covers(fields_for(options)))
+    throw std::invalid_argument("this hierarchy was built without the records topology mode " +
+                                std::string(to_string(options.topology)) + " reads");
+  return extract_adaptive(hierarchy, options, stats);
+}
+
+}  // namespace isotope

@@ -1,0 +1,259 @@
+#pragma once
+// The hierarchy as extraction reads it: the bands and bricks of engine/hierarchy/store_layout.h, each brick
+// holding its nodes' values and the compact records (engine/hierarchy/compact_record.h) of its scale-j
+// nodes, in Morton order within the brick, so that a subtree of the traversal reads a few
+// contiguous kilobytes. The same bricks, byte for byte, whether built in memory from a volume (this
+// file: a one-shot extraction with eps > 0) or read from a store (io/store/paged_volume.h), so a
+// store's extraction equals the in-memory one and a warm brick cache runs as fast as memory.
+//
+// Fields a mode does not read need not be held (engine/extract/options.h, RecordFields).
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+
+#include "engine/hierarchy/compact_record.h"
+#include "engine/extract/extract.h"
+#include "engine/hierarchy/lattice.h"
+#include "engine/hierarchy/multires_volume.h"
+#include "engine/extract/options.h"
+#include "engine/core/progress.h"
+#include "engine/hierarchy/record.h"
+#include "engine/hierarchy/store_layout.h"
+#include "isotope/volume.h"
+
+namespace isotope {
+
+// One brick's arrays, indexed by the Morton code of a node within the brick (brick_morton);
+// entries of nodes coarser than the band (code a multiple of 8) hold nothing. A null array is a
+// field not held. Written through std::atomic_ref where a store fills band 0's records on first
+// use (io/store/paged_volume.h).
+struct BrickView {
+  const float* values = nullptr;
+  uint64_t* bounds = nullptr;   // bounds_word(PackedBounds)
+  uint16_t* surplus = nullptr;  // bfloat16
+  uint32_t* exact = nullptr;    // exact_lo | exact_hi << 16
+  uint32_t* paper = nullptr;    // paper_lo | paper_hi << 16
+  uint64_t* weights = nullptr;  // weight 0 | 1 << 16 | 2 << 32
+};
+
+inline uint32_t interval_word(Bf16 lo, Bf16 hi) { return uint32_t{lo} | uint32_t{hi} << 16; }
+inline uint64_t weights_word(const Bf16 (&w)[3]) { return uint64_t{w[0]} | uint64_t{w[1]} << 16 | uint64_t{w[2]} << 32; }
+
+// The topology of a node from the words held (fields not held read as "never critical").
+inline DiamondTopology topology_of(uint32_t exact, uint32_t paper, uint64_t weights) {
+  PackedTopology p;
+  p.exact_lo = static_cast<Bf16>(exact), p.exact_hi = static_cast<Bf16>(exact >> 16);
+  p.paper_lo = static_cast<Bf16>(paper), p.paper_hi = static_cast<Bf16>(paper >> 16);
+  for (int w = 0; w < 3; ++w) p.weight[w] = static_cast<Bf16>(weights >> (16 * w));
+  return unpack(p);
+}
+
+// Writes record r (packed here, rounded as engine/hierarchy/compact_record.h says) of Morton code m into a
+// brick, the fields the brick holds.
+void store_record(const BrickView& brick, uint32_t m, const Record& r);
+
+class BandTile;
+// The brick of a built tile whose first node is `origin` (G_j units): values (into `values`) and
+// records, every entry written (nodes beyond the band's grid: value 0, an all-zero record).
+void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, float* values);
+
+// Nodes per brick and the Morton code of a node within its brick, by table.
+class BrickIndexer {
+ public:
+  explicit BrickIndexer(const StoreLayout& layout);
+  int64_t brick_nodes() const { return nodes_; }
+  // Brick index (directory order) and Morton code of node g of band j (G_j units, inside the grid).
+  int64_t locate(int j, int64_t gx, int64_t gy, int64_t gz, uint32_t* m) const {
+    const int bits = bits_;
+    *m = spread_[static_cast<size_t>(gx & mask_)] | spread_[static_cast<size_t>(gy & mask_)] << 1 |
+         spread_[static_cast<size_t>(gz & mask_)] << 2;
+    const BandInfo& b = band_[static_cast<size_t>(j)];
+    return b.first_brick + ((gz >> bits) * b.bricks_y + (gy >> bits)) * b.bricks_x + (gx >> bits);
+  }
+  // Whether node g of band j lies in the band's grid.
+  bool in_grid(int j, int64_t gx, int64_t gy, int64_t gz) const {
+    const BandInfo& b = band_[static_cast<size_t>(j)];
+    return gx < b.nodes[0] && gy < b.nodes[1] && gz < b.nodes[2];
+  }
+
+ private:
+  struct BandInfo {
+    int64_t first_brick = 0, bricks_x = 0, bricks_y = 0;
+    std::array<int64_t, 3> nodes{};
+  };
+  int bits_ = 0;
+  int64_t mask_ = 0, nodes_ = 0;
+  std::array<uint32_t, 256> spread_{};
+  std::array<BandInfo, 24> band_{};
+};
+
+// The hierarchy built in memory, every brick present.
+class Hierarchy {
+ public:
+  // The banded build (engine/hierarchy/banded_build.h) on all threads, with only the topology fields asked
+  // for. Throws std::invalid_argument for dimensions below 2 or non-finite values.
+  static Hierarchy build(const Volume& volume, const RecordFields& fields = {},
+                         int brick_bits = StoreLayout::kDefaultBrickBits, const ProgressCallback& progress = {});
+  // Empty bricks to be filled (a store read whole: io/store/store_reader.h).
+  static Hierarchy allocate(const std::array<int64_t, 3>& dims, int brick_bits, const RecordFields& fields);
+
+  Hierarchy(Hierarchy&&) = default;
+  Hierarchy& operator=(Hierarchy&&) = default;
+
+  const StoreLayout& layout() const { return *layout_; }
+  const Lattice& lattice() const { return layout_->lattice(); }
+  const std::array<int64_t, 3>& data_dims() const { return layout_->dims(); }
+  const std::array<double, 3>& origin() const { return origin_; }
+  const std::array<double, 3>& spacing() const { return spacing_; }
+  double value_offset() const { return value_offset_; }
+  double value_scale() const { return value_scale_; }
+  double error_fold() const { return 0; }  // values held exactly
+  const RecordFields& fields() const { return fields_; }
+  const PreprocessStats& stats() const { return stats_; }
+  void set_geometry(const std::array<double, 3>& origin, const std::array<double, 3>& spacing) {
+    origin_ = origin, spacing_ = spacing;
+  }
+  void set_value_map(double offset, double scale) { value_offset_ = offset, value_scale_ = scale; }
+  void set_stats(const PreprocessStats& s) { stats_ = s; }
+  int64_t memory_bytes() const;
+
+  BrickView brick(int64_t index) const {
+    const auto at = static_cast<size_t>(index * indexer_->brick_nodes());
+    return {values_.get() + at, bounds_.get() + at, surplus_ ? surplus_.get() + at : nullptr,
+            exact_ ? exact_.get() + at : nullptr, paper_ ? paper_.get() + at : nullptr,
+            weights_ ? weights_.get() + at : nullptr};
+  }
+  float* values(int64_t index) { return values_.get() + index * indexer_->brick_nodes(); }
+  const float* values_data() const { return values_.get(); }
+  const uint64_t* bounds_data() const { return bounds_.get(); }
+  const uint16_t* surplus_data() const { return surplus_.get(); }
+  const uint32_t* exact_data() const { return exact_.get(); }
+  const uint32_t* paper_data() const { return paper_.get(); }
+  const uint64_t* weights_data() const { return weights_.get(); }
+  const BrickIndexer& indexer() const { return *indexer_; }
+
+  // As a traversal source (engine/extract/traversal.h).
+  class Reader;
+  Reader reader() const;
+
+ private:
+  Hierarchy() = default;
+  std::unique_ptr<StoreLayout> layout_;  // by pointer: readers keep references across moves
+  std::unique_ptr<BrickIndexer> indexer_;
+  std::array<double, 3> origin_{0, 0, 0}, spacing_{1, 1, 1};
+  double value_offset_ = 0, value_scale_ = 1;
+  RecordFields fields_;
+  PreprocessStats stats_;
+  std::unique_ptr<float[]> values_;
+  std::unique_ptr<uint64_t[]> bounds_;
+  std::unique_ptr<uint16_t[]> surplus_;
+  std::unique_ptr<uint32_t[]> exact_, paper_;
+  std::unique_ptr<uint64_t[]> weights_;
+};
+
+// Values and records by coordinates over any set of bricks, as a traversal reader
+// (engine/extract/traversal.h). `Bricks` gives a brick's arrays (view) and reads record words
+// (bounds_word, topology). Lookups as MultiresVolume's: a node's value is read from band j (its
+// coordinates lie on G_j), clamped into the data box beyond band j's grid; a record from the band
+// of the node's scale.
+template <class Bricks>
+class CompactLookup {
+ public:
+  struct Handle {
+    int64_t index = 0;  // brick
+    uint32_t m = 0;     // Morton code within it
+  };
+
+  CompactLookup(const StoreLayout& layout, const BrickIndexer& indexer, Bricks bricks)
+      : layout_(layout), indexer_(indexer), bricks_(std::move(bricks)) {}
+
+  float value(const Coord& c, int j) {
+    Coord q = c;
+    if (!indexer_.in_grid(j, c[0] >> j, c[1] >> j, c[2] >> j)) [[unlikely]] {
+      for (int a = 0; a < 3; ++a) q[a] = std::min(c[a], layout_.dims()[a] - 1);
+      j = scale_of(q, layout_.lattice());
+    }
+    uint32_t m = 0;
+    const int64_t index = indexer_.locate(j, q[0] >> j, q[1] >> j, q[2] >> j, &m);
+    return bricks_.values(index)[m];
+  }
+  Handle locate(uint64_t packed) const {
+    constexpr uint64_t kMask = (uint64_t{1} << 21) - 1;
+    const int64_t x = static_cast<int64_t>(packed & kMask), y = static_cast<int64_t>((packed >> 21) & kMask),
+                  z = static_cast<int64_t>(packed >> 42);
+    const int j = std::min(layout_.lattice().k, std::countr_zero(static_cast<uint64_t>(x | y | z)));
+    Handle h;
+    h.index = indexer_.locate(j, x >> j, y >> j, z >> j, &h.m);
+    return h;
+  }
+  DiamondBounds bounds(const Handle& h, const RecordFields& read) {
+    const PackedBounds p = bounds_of(bricks_.bounds_word(h.index, h.m));
+    return {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
+            read.surplus ? bf16_to_float(bricks_.surplus(h.index, h.m)) : 0.0f};
+  }
+  DiamondTopology topology(const Handle& h, const RecordFields& read) { return bricks_.topology(h.index, h.m, read); }
+  void prefetch(const Handle& h) { bricks_.prefetch(h.index, h.m); }
+
+  // The values of band-0 nodes lo .. lo + n (inclusive; inside band 0's grid) into f, x fastest,
+  // rows `stride` apart: a block of finest cells (engine/extract/finest_extract.h), from every brick it spans.
+  bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) {
+    const int bits = layout_.brick_bits();
+    const int64_t t = layout_.brick_width();
+    for (int64_t bz = lo[2] >> bits; bz <= (lo[2] + n[2]) >> bits; ++bz)
+      for (int64_t by = lo[1] >> bits; by <= (lo[1] + n[1]) >> bits; ++by)
+        for (int64_t bx = lo[0] >> bits; bx <= (lo[0] + n[0]) >> bits; ++bx) {
+          uint32_t unused = 0;
+          const float* values = bricks_.values(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused));
+          const int64_t x0 = std::max(lo[0], bx * t), x1 = std::min(lo[0] + n[0], bx * t + t - 1);
+          const int64_t y0 = std::max(lo[1], by * t), y1 = std::min(lo[1] + n[1], by * t + t - 1);
+          const int64_t z0 = std::max(lo[2], bz * t), z1 = std::min(lo[2] + n[2], bz * t + t - 1);
+          for (int64_t z = z0; z <= z1; ++z)
+            for (int64_t y = y0; y <= y1; ++y) {
+              float* row = f + ((z - lo[2]) * stride + (y - lo[1])) * stride - lo[0];
+              const uint32_t yz = spread_bits_3(y & (t - 1)) << 1 | spread_bits_3(z & (t - 1)) << 2;
+              for (int64_t x = x0; x <= x1; ++x) row[x] = values[yz | spread_bits_3(x & (t - 1))];
+            }
+        }
+    return true;
+  }
+  Bricks& bricks() { return bricks_; }
+
+ private:
+  const StoreLayout& layout_;
+  const BrickIndexer& indexer_;
+  Bricks bricks_;
+};
+
+namespace hierarchy_internal {
+// Every brick of an in-memory hierarchy, all records present.
+struct MemoryBricks {
+  const Hierarchy* h;
+  int64_t brick_nodes;
+  const float* values(int64_t index) const { return h->values_data() + index * brick_nodes; }
+  uint64_t bounds_word(int64_t index, uint32_t m) const { return h->bounds_data()[index * brick_nodes + m]; }
+  Bf16 surplus(int64_t index, uint32_t m) const { return h->surplus_data()[index * brick_nodes + m]; }
+  DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read) const {
+    const int64_t at = index * brick_nodes + m;
+    constexpr uint32_t kNever = 0x3f80u;  // [1, 0): empty
+    return topology_of(read.exact ? h->exact_data()[at] : kNever, read.paper ? h->paper_data()[at] : kNever,
+                       read.weights ? h->weights_data()[at] : 0);
+  }
+  void prefetch(int64_t index, uint32_t m) const { __builtin_prefetch(h->bounds_data() + index * brick_nodes + m); }
+};
+}  // namespace hierarchy_internal
+
+class Hierarchy::Reader : public CompactLookup<hierarchy_internal::MemoryBricks> {
+ public:
+  explicit Reader(const Hierarchy& h) : CompactLookup(h.layout(), h.indexer(), {&h, h.layout().brick_nodes()}) {}
+};
+inline Hierarchy::Reader Hierarchy::reader() const { return Reader(*this); }
+
+// extract() (engine/extract/extract.h) over an in-memory hierarchy. Throws std::invalid_argument when the
+// options read a field the hierarchy was built without.
+Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+}  // namespace isotope

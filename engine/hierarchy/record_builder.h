@@ -1,0 +1,243 @@
+#pragma once
+// One refinement vertex's saturated record (docs/METHOD.md, "Per-vertex records"), computed from the
+// values at its polyhedron and the already final records of its children. Written once, used by
+// the in-memory build (MultiresVolume) and by the banded out-of-core build (engine/hierarchy/band_tile.h),
+// which therefore produce the same bits.
+//
+// Grid is where values and records live; it provides
+//   const Lattice& lattice() const;  const std::array<int64_t, 3>& data_dims() const;
+//   float value(const Coord&) const;            // any lattice node; beyond the data box, clamped
+//   bool child(const Coord&, Record&) const;    // false where no record exists
+//   void store(const Coord&, const Record&);
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "engine/hierarchy/critical_rule.h"
+#include "engine/hierarchy/diamond.h"
+#include "engine/hierarchy/record.h"
+
+namespace isotope {
+
+// Smallest float >= d, so that stored errors never under-state the exact ones.
+inline float round_up(double d) {
+  float f = static_cast<float>(d);
+  if (static_cast<double>(f) < d) {
+    // The next float up: for the non-negative finite floats errors and weights are, the next bit
+    // pattern (std::nextafter is a library call, and this runs for every record).
+    f = f >= 0 && f < std::numeric_limits<float>::max() ? std::bit_cast<float>(std::bit_cast<uint32_t>(f) + 1)
+                                                         : std::nextafter(f, std::numeric_limits<float>::infinity());
+  }
+  return f;
+}
+
+// Per diamond type (cube, octahedron, diamond): how many vertices the paper's rule flags at
+// f(v) ([0]) and where the exact rule fires for some isovalue ([1]).
+using CriticalCounts = int64_t[2][3];
+
+// What a vertex inherits from the records of its children's refinement vertices.
+struct Saturation {
+  double bound = 0;
+  float surplus = 0;
+  IsoInterval exact, paper;
+  std::array<float, 3> weight{0, 0, 0};
+
+  // Folds in one child; its range widens the vertex's range `bounds`. Without `topology`, only
+  // the range and errors (a store's band 0 read in mode none: io/store/paged_volume.h).
+  void add(const Record& c, DiamondBounds& bounds, bool topology = true) {
+    bound = std::max(bound, static_cast<double>(c.bounds.error_bound));
+    surplus = std::max(surplus, c.bounds.error_surplus);
+    bounds.lo = std::min(bounds.lo, c.bounds.lo);
+    bounds.hi = std::max(bounds.hi, c.bounds.hi);
+    if (!topology) return;
+    exact.hull({c.topology.exact_lo, c.topology.exact_hi});
+    paper.hull({c.topology.paper_lo, c.topology.paper_hi});
+    for (size_t w = 0; w < weight.size(); ++w) weight[w] = std::max(weight[w], c.topology.weight[w]);
+  }
+};
+
+// Where v's polyhedron lies, relative to v, in lattice steps: what the gradient and size weights
+// need beyond the values. The same for every vertex of one diamond shape and scale.
+struct DiamondShape {
+  std::array<std::array<int64_t, 3>, 10> offset{};  // a, b, then the ring in cycle order
+  int ring_count = 0;
+  uint32_t real_ring = 0;  // bit i: ring vertex i is a lattice node (not mirrored)
+  double child_tets = 0;   // full-resolution tetrahedra in one child tetrahedron of the diamond
+};
+
+inline DiamondShape shape_of(const Diamond& d, const Lattice& lattice) {
+  DiamondShape s;
+  auto rel = [&](const Coord& p) { return std::array<int64_t, 3>{p[0] - d.v[0], p[1] - d.v[1], p[2] - d.v[2]}; };
+  s.offset[0] = rel(d.a);
+  s.offset[1] = rel(d.b);
+  s.ring_count = d.ring_count;
+  for (int i = 0; i < d.ring_count; ++i) {
+    s.offset[static_cast<size_t>(2 + i)] = rel(d.ring[i]);
+    if (lattice.contains(d.ring[i])) s.real_ring |= 1u << i;
+  }
+  // Each level halves a tetrahedron; the finest (level 3k) are the 6 per unit cell.
+  s.child_tets = std::ldexp(1.0, lattice.max_level() - (d.level + 1));
+  return s;
+}
+
+// The gradient and size weights of a vertex whose exact interval x is not empty, over the
+// tetrahedra (end, v, r_i, r_i+1) that refining v creates: the steepest linear gradient among them
+// (value per lattice step), and how many full-resolution tetrahedra those that some isovalue in x
+// cuts cover. A count of the coarse tetrahedra themselves would hardly vary (at most 16); their
+// volume tells a feature the size of a voxel from one the size of the volume.
+struct LocalWeights {
+  double gradient = 0, size = 0;
+};
+
+inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s, IsoInterval x) {
+  LocalWeights w;
+  for (int e = 0; e < 2; ++e) {
+    const double fe = e == 0 ? dv.fa : dv.fb;
+    const auto& pe = s.offset[static_cast<size_t>(e)];
+    for (int i = 0; i < s.ring_count; ++i) {
+      const int i1 = (i + 1) % s.ring_count;
+      if ((s.real_ring >> i & 1u) == 0 || (s.real_ring >> i1 & 1u) == 0) continue;
+      const auto& p1 = s.offset[static_cast<size_t>(2 + i)];
+      const auto& p2 = s.offset[static_cast<size_t>(2 + i1)];
+      const double f1 = dv.ring[i], f2 = dv.ring[i1], fv = dv.fv;
+      // Gradient g of the linear interpolant: (p - v) . g = f(p) - f(v) at p = end, r_i, r_i+1.
+      const double m[3][3] = {{double(pe[0]), double(pe[1]), double(pe[2])},
+                              {double(p1[0]), double(p1[1]), double(p1[2])},
+                              {double(p2[0]), double(p2[1]), double(p2[2])}};
+      const double r[3] = {fe - fv, f1 - fv, f2 - fv};
+      const double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+                         m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                         m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+      if (det == 0) continue;  // degenerate: not a tetrahedron of a proper ring
+      double g2 = 0;
+      for (int c = 0; c < 3; ++c) {
+        double mc[3][3];
+        for (int row = 0; row < 3; ++row)
+          for (int col = 0; col < 3; ++col) mc[row][col] = col == c ? r[row] : m[row][col];
+        const double gc = (mc[0][0] * (mc[1][1] * mc[2][2] - mc[1][2] * mc[2][1]) -
+                           mc[0][1] * (mc[1][0] * mc[2][2] - mc[1][2] * mc[2][0]) +
+                           mc[0][2] * (mc[1][0] * mc[2][1] - mc[1][1] * mc[2][0])) / det;
+        g2 += gc * gc;
+      }
+      w.gradient = std::max(w.gradient, std::sqrt(g2));
+      // Cut by some t in [x.lo, x.hi): some corner > t and some corner <= t.
+      const double lo = std::min({fe, fv, f1, f2}), hi = std::max({fe, fv, f1, f2});
+      if (std::max(lo, double(x.lo)) < std::min(hi, double(x.hi))) w.size += s.child_tets;
+    }
+  }
+  return w;
+}
+
+// The record from what was gathered: the polyhedron's values, shape and range, whether every real
+// polyhedron vertex lies in the data box, and the children's saturation. Without `topology`, the
+// range and errors alone (the topology left empty), the same bits as with it.
+inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, bool inside_box,
+                            const DiamondBounds& range, Saturation sat, CriticalCounts& counts, bool topology = true) {
+  Record r;
+  r.bounds = range;
+  if (!inside_box) {
+    // Refine always: its tetrahedra reach past the data box (docs/METHOD.md, "Volumes that are not
+    // (2^k+1)^3"), so they are cut down to unit cells, each wholly inside or outside.
+    r.bounds.error_bound = r.bounds.error_surplus = std::numeric_limits<float>::infinity();
+  } else {
+    const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
+    r.bounds.error_bound = round_up(eta + sat.bound);
+    r.bounds.error_surplus = std::max(round_up(eta), sat.surplus);
+    if (!topology) return r;
+    const IsoInterval exact = exact_interval(dv);
+    const IsoInterval paper = paper_interval(dv);
+    counts[0][static_cast<int>(dv.type)] += paper.empty() ? 0 : 1;
+    counts[1][static_cast<int>(dv.type)] += exact.empty() ? 0 : 1;
+    sat.exact.hull(exact);
+    sat.paper.hull(paper);
+    if (!exact.empty()) {
+      const LocalWeights w = local_weights(dv, shape, exact);
+      sat.weight[0] = std::max(sat.weight[0], exact.length());
+      sat.weight[1] = std::max(sat.weight[1], round_up(exact.length() * w.gradient));
+      sat.weight[2] = std::max(sat.weight[2], round_up(w.size));
+    }
+  }
+  if (!sat.exact.empty()) { r.topology.exact_lo = sat.exact.lo; r.topology.exact_hi = sat.exact.hi; }
+  if (!sat.paper.empty()) { r.topology.paper_lo = sat.paper.lo; r.topology.paper_hi = sat.paper.hi; }
+  r.topology.weight = sat.weight;
+  return r;
+}
+
+// Calls f(u) for the refinement vertex u of each child tetrahedron of v's diamond d. The
+// children of tetrahedron (a, b, p, q) are (a, v, p, q) and (b, v, p, q), bisected at the
+// midpoint of `end` and the farther of p and q (checked by the hierarchy test). Far vertices
+// alternate around the ring, so each child is shared by two tetrahedra: each (end, far ring
+// vertex) pair once. A real far vertex always has a real tetrahedron; leaves have no children.
+template <class F>
+void for_each_child(const Diamond& d, const Lattice& lattice, F f) {
+  if (d.level + 1 >= lattice.max_level()) return;
+  auto squared_distance = [](const Coord& p, const Coord& q) {
+    int64_t s = 0;
+    for (int a = 0; a < 3; ++a) s += (p[a] - q[a]) * (p[a] - q[a]);
+    return s;
+  };
+  for (const Coord* end : {&d.a, &d.b})
+    for (int i = 0; i < d.ring_count; ++i) {
+      const Coord& r = d.ring[i];
+      if (squared_distance(*end, r) < squared_distance(*end, d.ring[(i + 1) % d.ring_count])) continue;
+      if (!lattice.contains(r)) continue;  // a missing tetrahedron of a cut diamond
+      f(Coord{((*end)[0] + r[0]) / 2, ((*end)[1] + r[1]) / 2, ((*end)[2] + r[2]) / 2});
+    }
+}
+
+// Values at v's polyhedron (mirrored across the domain faces where the diamond is cut, paper
+// Sec. 4.3) and their range, from value(c) of a lattice node (clamped into the data box beyond it);
+// true when every real vertex lies in the data box.
+template <class Value>
+bool read_polyhedron(const Diamond& d, const Lattice& lattice, const std::array<int64_t, 3>& dims, Value value,
+                     DiamondValues& dv, DiamondBounds& bounds) {
+  auto in_box = [&](const Coord& c) { return c[0] < dims[0] && c[1] < dims[1] && c[2] < dims[2]; };
+  dv.type = d.type;
+  dv.fa = value(d.a);
+  dv.fb = value(d.b);
+  dv.fv = value(d.v);
+  bool inside_box = in_box(d.a) && in_box(d.b);
+  bounds.lo = std::min({dv.fa, dv.fb, dv.fv});
+  bounds.hi = std::max({dv.fa, dv.fb, dv.fv});
+  for (int i = 0; i < d.ring_count; ++i) {
+    const bool real = lattice.contains(d.ring[i]);
+    dv.ring[i] = value(real ? d.ring[i] : mirror_into(d.ring[i], lattice));
+    if (!real) continue;
+    inside_box = inside_box && in_box(d.ring[i]);
+    bounds.lo = std::min(bounds.lo, dv.ring[i]);
+    bounds.hi = std::max(bounds.hi, dv.ring[i]);
+  }
+  return inside_box;
+}
+
+template <class Grid>
+class RecordBuilder {
+ public:
+  explicit RecordBuilder(Grid& grid) : grid_(grid), lattice_(grid.lattice()) {}
+
+  // Without `topology`, the range and errors alone (engine/hierarchy/band_tile.h, build).
+  void build(const Coord& v, CriticalCounts& counts, bool topology = true) const {
+    const Diamond d = diamond_of(v, lattice_);
+    DiamondValues dv;
+    DiamondBounds range;
+    const bool inside_box =
+        read_polyhedron(d, lattice_, grid_.data_dims(), [&](const Coord& c) { return grid_.value(c); }, dv, range);
+    Saturation sat;
+    for_each_child(d, lattice_, [&](const Coord& u) {
+      // Without a record, u's whole diamond lies beyond a face of the data box: no data node
+      // below it, and v, which reaches out there too, is refined anyway.
+      Record c;
+      if (grid_.child(u, c)) sat.add(c, range, topology);
+    });
+    grid_.store(v, finish_record(dv, shape_of(d, lattice_), inside_box, range, sat, counts, topology));
+  }
+
+ private:
+  Grid& grid_;
+  const Lattice& lattice_;
+};
+
+}  // namespace isotope

@@ -1,0 +1,147 @@
+#include "engine/mesh/marching_tetrahedra.h"
+
+#include <utility>
+
+namespace isotope {
+namespace {
+
+// One case of the table: the polygon's corners as tetrahedron edges (pairs of corner indices),
+// in counter-clockwise order seen from the outside for a positively oriented tetrahedron.
+struct Case {
+  int count = 0;  // 0, 3 (triangle) or 4 (quadrilateral)
+  std::array<std::array<int, 2>, 4> edges{};
+};
+
+using Vec = std::array<double, 3>;
+
+Vec sub(const Vec& a, const Vec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec cross(const Vec& a, const Vec& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// Generated from the definition rather than typed in: cut the edges whose ends differ, order
+// the cut points around the section, and orient by the reference tetrahedron's geometry.
+std::array<Case, 16> make_table() {
+  static constexpr Vec kRef[4] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // det = +1
+  std::array<Case, 16> table{};
+  for (int c = 1; c < 15; ++c) {
+    int in[4], out[4], ni = 0, no = 0;
+    for (int i = 0; i < 4; ++i) ((c >> i) & 1 ? in[ni++] : out[no++]) = i;
+    Case& k = table[static_cast<size_t>(c)];
+    if (ni == 1 || no == 1) {
+      const int lone = ni == 1 ? in[0] : out[0];
+      int n = 0;
+      for (int i = 0; i < 4; ++i)
+        if (i != lone) k.edges[static_cast<size_t>(n++)] = {lone, i};
+      k.count = 3;
+    } else {  // in {i, j}, out {k, l}: cycle ik, il, jl, jk (consecutive points share a face)
+      k.edges = {{{in[0], out[0]}, {in[0], out[1]}, {in[1], out[1]}, {in[1], out[0]}}};
+      k.count = 4;
+    }
+    Vec p[4], cin{0, 0, 0}, cout{0, 0, 0};
+    for (int i = 0; i < k.count; ++i)
+      for (int a = 0; a < 3; ++a) p[i][a] = 0.5 * (kRef[k.edges[i][0]][a] + kRef[k.edges[i][1]][a]);
+    for (int i = 0; i < ni; ++i)
+      for (int a = 0; a < 3; ++a) cin[a] += kRef[in[i]][a] / ni;
+    for (int i = 0; i < no; ++i)
+      for (int a = 0; a < 3; ++a) cout[a] += kRef[out[i]][a] / no;
+    if (dot(cross(sub(p[1], p[0]), sub(p[2], p[0])), sub(cout, cin)) < 0)
+      std::swap(k.edges[1], k.edges[static_cast<size_t>(k.count - 1)]);
+  }
+  return table;
+}
+
+const std::array<Case, 16>& table() {
+  static const std::array<Case, 16> t = make_table();
+  return t;
+}
+
+bool before(const Coord& p, const Coord& q) {
+  return p[2] != q[2] ? p[2] < q[2] : p[1] != q[1] ? p[1] < q[1] : p[0] < q[0];
+}
+
+
+}  // namespace
+
+MeshBuilder::MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin,
+                         const std::array<double, 3>& spacing)
+    : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing) {}
+
+// p + q in brick order (16^3 doubled coordinates, i.e. the 8^3 node bricks): edges met close
+// together in the traversal get close keys, and the welding table keeps them close in memory.
+uint64_t MeshBuilder::edge_key(const Coord& p, const Coord& q) const {
+  const int64_t x = p[0] + q[0], y = p[1] + q[1], z = p[2] + q[2];
+  const int64_t brick = ((z >> 4) * key_bricks_ + (y >> 4)) * key_bricks_ + (x >> 4);
+  return static_cast<uint64_t>(brick << 12 | (z & 15) << 8 | (y & 15) << 4 | (x & 15));
+}
+
+Coord edge_key_sum(uint64_t key, int64_t side) {
+  const int64_t bricks = (2 * side - 1 + 15) / 16;
+  const auto brick = static_cast<int64_t>(key >> 12);
+  const int64_t bx = brick % bricks, by = brick / bricks % bricks, bz = brick / (bricks * bricks);
+  return {bx << 4 | static_cast<int64_t>(key & 15), by << 4 | static_cast<int64_t>(key >> 4 & 15),
+          bz << 4 | static_cast<int64_t>(key >> 8 & 15)};
+}
+
+uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coord& q0, float f1) {
+  const uint32_t fresh = static_cast<uint32_t>(mesh_.positions.size());
+  const uint32_t found = map_.find_or_insert(key, fresh);
+  if (found != EdgeVertexMap::kAbsent) return found;
+  // Interpolate from the edge's first node in grid order, so every tetrahedron sharing the
+  // edge would compute the same bits.
+  const bool swap = before(q0, p0);
+  const Coord& p = swap ? q0 : p0;
+  const Coord& q = swap ? p0 : q0;
+  const double fp = swap ? f1 : f0, fq = swap ? f0 : f1;
+  const double t = (static_cast<double>(iso_) - fp) / (fq - fp);
+  std::array<float, 3> pos;
+  for (int a = 0; a < 3; ++a)
+    pos[a] = static_cast<float>(origin_[a] + spacing_[a] * (static_cast<double>(p[a]) + t * static_cast<double>(q[a] - p[a])));
+  mesh_.positions.push_back(pos);
+  if (keep_keys_) keys_.push_back(key);
+  return fresh;
+}
+
+void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
+                          EdgeMemo* memo) {
+  int c = 0;
+  for (int i = 0; i < 4; ++i) c |= (values[i] > iso_ ? 1 : 0) << i;
+  const Case& k = table()[static_cast<size_t>(c)];
+  if (k.count == 0) return;
+  uint32_t v[4];
+  for (int i = 0; i < k.count; ++i) {
+    const int a = k.edges[i][0], b = k.edges[i][1];
+    if (!memo) {
+      v[i] = vertex(edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
+      continue;
+    }
+    uint64_t& slot = memo->slot(corners[a], corners[b]);
+    if (slot >> 32 == memo->stamp()) {
+      v[i] = static_cast<uint32_t>(slot);
+    } else {
+      v[i] = vertex(edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
+      slot = memo->stamp() << 32 | v[i];
+    }
+  }
+  const bool flip = !positive;
+  auto emit = [&](uint32_t x, uint32_t y, uint32_t z) {
+    if (flip) std::swap(y, z);
+    mesh_.triangles.push_back({x, y, z});
+  };
+  if (k.count == 3) {
+    emit(v[0], v[1], v[2]);
+    return;
+  }
+  // Split along the diagonal through the smallest edge key: it depends on the grid edges only,
+  // not on the corner order or on which tetrahedron welded a vertex first.
+  uint64_t keys[4];
+  for (int i = 0; i < 4; ++i) keys[i] = edge_key(corners[k.edges[i][0]], corners[k.edges[i][1]]);
+  int m = 0;
+  for (int i = 1; i < 4; ++i)
+    if (keys[i] < keys[m]) m = i;
+  emit(v[m], v[(m + 1) & 3], v[(m + 2) & 3]);
+  emit(v[m], v[(m + 2) & 3], v[(m + 3) & 3]);
+}
+
+}  // namespace isotope

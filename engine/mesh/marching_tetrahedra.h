@@ -1,0 +1,83 @@
+#pragma once
+// Marching tetrahedra with vertices welded by grid edge, so the mesh comes out indexed.
+// Every mesh vertex lies on a grid edge (p, q) of the hierarchy; p + q (in lattice
+// coordinates) is unique to that edge, so it is the vertex's key (docs/METHOD.md, "Stopping rule and extraction").
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "engine/mesh/edge_vertex_map.h"
+#include "engine/hierarchy/lattice.h"
+#include "isotope/mesh.h"
+
+namespace isotope {
+
+// p + q of the edge whose vertex has this key (MeshBuilder, for a grid of `side` nodes per axis).
+Coord edge_key_sum(uint64_t key, int64_t side);
+
+// The vertices already made for the cut edges of one box of cells, in an array slot per edge (by
+// its p + q): in front of the welding table while a box is marched (engine/extract/block_march.cpp),
+// since most cut edges are shared by several tetrahedra of a box and a slot is cheaper than a
+// hash probe. Forgets everything at the next start(), in O(1).
+class EdgeMemo {
+ public:
+  // A box of at most `cells` cells per axis.
+  explicit EdgeMemo(int64_t cells) : width_(2 * cells + 1), slots_(static_cast<size_t>(width_ * width_ * width_), 0) {}
+  void start(const Coord& base) {
+    base2_ = {2 * base[0], 2 * base[1], 2 * base[2]};
+    if (++stamp_ == 0) {  // the stamps wrapped: no slot may look current
+      std::fill(slots_.begin(), slots_.end(), 0);
+      stamp_ = 1;
+    }
+  }
+  // The slot of edge (p, q), both in the box: stamp << 32 | vertex once filled in this box.
+  uint64_t& slot(const Coord& p, const Coord& q) {
+    const int64_t x = p[0] + q[0] - base2_[0], y = p[1] + q[1] - base2_[1], z = p[2] + q[2] - base2_[2];
+    return slots_[static_cast<size_t>((z * width_ + y) * width_ + x)];
+  }
+  uint64_t stamp() const { return stamp_; }
+
+ private:
+  int64_t width_;
+  Coord base2_{};
+  uint64_t stamp_ = 0;
+  std::vector<uint64_t> slots_;
+};
+
+class MeshBuilder {
+ public:
+  // side: nodes per axis of the grid whose coordinates are passed in.
+  MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing);
+
+  // Emits the 0, 1 or 2 triangles of one tetrahedron. `positive`: det(c1-c0, c2-c0, c3-c0) > 0.
+  // Triangles are wound counter-clockwise seen from the outside (value <= iso); a quadrilateral
+  // is split along the diagonal at its smallest edge key, so the triangle set does not depend on
+  // the order of the corners.
+  // With a memo, the corners must lie in its current box.
+  void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
+               EdgeMemo* memo = nullptr);
+
+  Mesh take() { return std::move(mesh_); }
+  // The edge key of every vertex, in vertex order (kept only when asked for, by keep_keys()):
+  // what welds the meshes of separately built parts into one (engine/mesh/piece_weld.cpp,
+  // engine/extract/full_resolution.cpp).
+  void keep_keys() { keep_keys_ = true; }
+  std::vector<uint64_t> take_keys() { return std::move(keys_); }
+
+ private:
+  uint64_t edge_key(const Coord& p, const Coord& q) const;
+  uint32_t vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
+
+  float iso_;
+  int64_t key_bricks_;  // bricks per axis of the doubled lattice
+  std::array<double, 3> origin_, spacing_;
+  // Small at first: the traversal makes a builder per piece, hundreds per extraction, most of
+  // them with a few hundred vertices; a table sized for thousands cost more to clear than to fill.
+  EdgeVertexMap map_{64};
+  Mesh mesh_;
+  bool keep_keys_ = false;
+  std::vector<uint64_t> keys_;
+};
+
+}  // namespace isotope

@@ -1,0 +1,27 @@
+#pragma once
+// Joining the meshes of the traversal's pieces (engine/extract/adaptive_extract.h) into one.
+#include <cstdint>
+#include <vector>
+
+#include "engine/hierarchy/kuhn.h"
+#include "isotope/mesh.h"
+
+namespace isotope {
+
+// What one piece produced: its own welded mesh, the edge key of each of its vertices, counts, and
+// the tetrahedron the piece covers (lattice coordinates).
+struct PartMesh {
+  Mesh mesh;
+  std::vector<uint64_t> keys;
+  int64_t tets_visited = 0, tets_emitted = 0, tets_simplified = 0;
+  Tet region{};
+};
+
+// Welds the pieces' meshes in piece order, freeing each as it goes. A vertex takes the next index
+// the first time its edge appears, exactly as in one pass over the pieces in order, so the result is the same,
+// bit for bit, whatever the number of threads that built the pieces. Only vertices on a face of
+// their piece's tetrahedron can appear in another piece, so only those go through a welding
+// table. `side`: nodes per lattice axis.
+Mesh weld(std::vector<PartMesh>& parts, int64_t side);
+
+}  // namespace isotope

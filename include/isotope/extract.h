@@ -1,0 +1,142 @@
+#pragma once
+// What a user chooses for one extraction, and what it reports: the one owner of the extraction's
+// options. Every face (the command line, `isotope sweep`, `isotope serve`, the C++ API) reads them
+// through parse_extract_options() and checks them with ExtractOptions::validate(), so that an
+// option means the same and is refused with the same words everywhere (docs/DESIGN.md, "Seams").
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <exception>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <isotope/mesh.h>
+#include <isotope/volume.h>
+
+namespace isotope {
+
+// Which saturated error a tetrahedron's refinement vertex is judged by (docs/METHOD.md, "Per-vertex
+// records").
+enum class ErrorIndicator {
+  bound,    // guaranteed L-infinity deviation of the coarse interpolant from the data (default)
+  surplus,  // the paper's |f(v) - (f(a)+f(b))/2|, saturated by max
+};
+
+enum class TopologyMode {
+  none,      // refine by error only (paper Sec. 3)
+  paper,     // the paper's critical points and intervals (Sec. 4.2-4.4), faithfully
+  preserve,  // the exact local rule (docs/METHOD.md): keeps components and Euler characteristic
+  simplify,  // the exact rule, but critical points of weight < delta may go (paper Sec. 5)
+};
+
+// What makes a critical point worth keeping in `simplify` mode (paper Sec. 5.1), computed by
+// convert for every vertex and saturated as a max. X is the exact rule's interval of isovalues.
+enum class SimplificationWeight {
+  interval,  // |X|: how far the isovalue may move while the feature exists (value units)
+  gradient,  // |X| times the steepest gradient of the tetrahedra around v (value^2 per voxel)
+  size,      // full-resolution tetrahedra covered by those around v that isovalues in X cut
+};
+
+// Finer near a point of interest: eps is scaled by min(1, distance / radius), so the mesh is as
+// fine as the data at the point and as coarse as eps from `radius` on (distances in the
+// output's coordinates, i.e. origin + spacing * index).
+struct Focus {
+  std::array<double, 3> point{0, 0, 0};
+  double radius = 1;
+};
+
+// The largest triangle budget any face accepts.
+inline constexpr int64_t kMaxTriangleBudget = int64_t{1} << 40;
+
+struct ExtractOptions {
+  float iso = 0.0f;  // inside means value > iso
+  double eps = 0.0;  // refine while the chosen error is >= eps; 0 gives full resolution
+  ErrorIndicator error = ErrorIndicator::bound;
+  TopologyMode topology = TopologyMode::preserve;
+  SimplificationWeight weight = SimplificationWeight::interval;  // simplify mode only
+  double delta = 0.0;  // simplify mode: critical points of weight < delta may be dropped
+  std::optional<Focus> focus;
+  // > 0: ignore eps and take the finest eps whose mesh has at most this many triangles.
+  int64_t max_triangles = 0;
+  // With max_triangles in simplify mode: choose delta too: the smallest delta whose coarsest mesh
+  // takes at most half the budget (features of smallest weight dropped first), then the finest eps
+  // within the whole budget. delta must be 0.
+  bool auto_delta = false;
+  // Set (by another thread) to stop: the extraction then throws ExtractionCancelled at its next
+  // piece or slab. For a server whose client asked for something newer; nullptr: never.
+  const std::atomic<bool>* cancel = nullptr;
+
+  // Throws OptionError naming the first option out of its range: iso not finite, eps or delta
+  // negative or NaN (infinity is the coarsest), delta without `simplify`, a focus point not finite or a
+  // radius not > 0, a budget outside [0, kMaxTriangleBudget], auto_delta without a budget in
+  // simplify mode. Every extraction calls it; a face calls it to refuse before any work.
+  void validate() const;
+};
+
+// An option out of its range, or text that is not one: `option` is its name as the faces spell it
+// ("eps", "max-triangles"; the command line adds "--"), `message` what it must be, e.g. "must be
+// >= 0, got '-1'". what() is "OPTION MESSAGE".
+struct OptionError : std::invalid_argument {
+  OptionError(std::string option_name, std::string what_it_must_be);
+  std::string option, message;
+};
+
+// The options as text, by name: iso (required), eps, error, topology, weight, delta, focus ("X,Y,Z"),
+// radius, max-triangles. Numbers as a user types them ("0.25", "-3e-2", "1/64"). Each name at most
+// once; the result is validated. Throws OptionError (an unknown name is reported under its own
+// name, with the message "is not an extraction option").
+ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, std::string>>& given);
+
+// One option's text into OPTIONS, without the checks that relate options to each other (which
+// validate() makes): for a face that lists values of one option (`isotope sweep --eps 0,1/64`).
+// Throws OptionError.
+void set_extract_option(ExtractOptions& options, std::string_view name, std::string_view text);
+
+// A real number as a user types it: "0.25", "-3e-2", "+1" or a fraction "1/64"; nullopt otherwise.
+std::optional<double> parse_real(std::string_view text);
+
+std::string_view to_string(ErrorIndicator e);
+std::string_view to_string(TopologyMode t);
+std::string_view to_string(SimplificationWeight w);
+std::optional<ErrorIndicator> parse_error_indicator(std::string_view s);
+std::optional<TopologyMode> parse_topology_mode(std::string_view s);
+std::optional<SimplificationWeight> parse_simplification_weight(std::string_view s);
+
+// What an extraction measured of itself.
+struct ExtractStats {
+  int64_t tets_visited = 0;
+  int64_t tets_emitted = 0;  // stopping tetrahedra that were handed to marching tetrahedra
+  // Simplify mode: stopping tetrahedra that preserve would have refined (a critical point below
+  // fires at the isovalue, but its weight is under delta). 0 means the mesh is preserve's.
+  int64_t tets_simplified = 0;
+  double seconds = 0;
+  // With max_triangles: the eps chosen (in data units), and the next finer eps step and the
+  // triangles it would give (next_triangles = 0 when the chosen mesh is already full resolution).
+  double chosen_eps = 0;
+  double next_eps = 0;
+  int64_t next_triangles = 0;
+  int64_t budget_steps = 0;  // distinct eps values the budget search went through
+  // With auto_delta: the delta chosen (in data units; -1 when none was), and the triangles of its
+  // coarsest mesh (eps = infinity).
+  double chosen_delta = -1;
+  int64_t delta_floor_triangles = 0;
+};
+
+// What an extraction throws when its ExtractOptions::cancel was set.
+struct ExtractionCancelled : std::exception {
+  const char* what() const noexcept override { return "extraction cancelled"; }
+};
+
+// One extraction from an array in memory, with only the hierarchy the options need: at eps = 0
+// (no triangle budget) none at all, since the mesh is marching tetrahedra over every cut cell;
+// otherwise the hierarchy with the record fields the mode reads. The same mesh, byte for byte, as
+// from a store of the same volume (isotope::Source). Throws OptionError for options out of range,
+// std::invalid_argument for dimensions below 2 or values that are not finite, and
+// std::runtime_error when max_triangles is below the coarsest mesh the topology mode allows.
+Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+}  // namespace isotope

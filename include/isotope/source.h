@@ -1,0 +1,109 @@
+#pragma once
+// An input opened for extraction, whatever it is: a store made by convert is paged through a brick
+// cache, so that only the bricks a traversal reaches are read (memory: the cache's budget plus the
+// mesh, whatever the store's size); any other volume (raw, NRRD, HDF5, or an array handed over) is
+// held in memory, and its hierarchy is built the first time an extraction needs one (eps > 0 or a
+// triangle budget; at eps 0 the array is marched as it is). Either way extract() can run many
+// times, from several threads at once, and gives the same mesh, byte for byte, for the same volume.
+//
+//   isotope::Source scan = isotope::open_volume({"scan_512x512x300_uint16.raw"});
+//   isotope::ExtractOptions o;
+//   o.iso = 1200;
+//   o.eps = 4;
+//   isotope::write_ply(scan.extract(o), "scan.ply");
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <isotope/extract.h>
+#include <isotope/mesh.h>
+#include <isotope/progress.h>
+#include <isotope/volume.h>
+
+namespace isotope {
+
+class StoreReader;  // io/store/store_reader.h: not part of the public interface
+
+// What names an input, as a user types it on the command line.
+struct VolumeSpec {
+  // A store (`isotope convert`'s output, known by its magic number or the .isotope suffix), a raw
+  // file NAME_XxYxZ_TYPE.raw (or any name, with dims and type below), FILE.h5:/path/to/dataset
+  // (FILE.h5 alone: its one 3-D dataset), or NRRD (.nrrd, .nhdr).
+  std::string path;
+  std::optional<std::array<int64_t, 3>> dims;  // raw only: overrides the file name
+  std::optional<ScalarType> type;              // raw only: overrides the file name
+};
+
+struct OpenOptions {
+  int64_t cache_mb = 512;  // a store: memory for decoded bricks (at least 16 bricks)
+  // A volume's hierarchy being built (on the first extraction that needs it).
+  ProgressCallback preprocess_progress;
+  // Process-wide: keep freed brick memory for reuse (glibc's mallopt) instead of returning it to the
+  // kernel and faulting fresh pages in for the next brick. What the isotope command does; a host
+  // program with its own allocator policy leaves it off.
+  bool tune_allocator = false;
+};
+
+// What a source is, and what it has read and built so far (for reports).
+struct SourceInfo {
+  bool store = false;
+  std::array<int64_t, 3> dims{0, 0, 0};
+  std::array<double, 3> spacing{1, 1, 1};
+  std::array<double, 3> origin{0, 0, 0};
+  int lattice_k = 0;                     // the hierarchy's lattice has 2^k cells per axis
+  double read_seconds = 0;               // opening (a volume: reading it whole)
+  double preprocess_seconds = 0;         // a volume: building its hierarchy, so far
+  bool hierarchy_built = false;          // a store: always (by convert)
+  // Critical points per diamond type (cube, octahedron, diamond): the paper's rule at f(v), and
+  // the exact rule for some isovalue. A store's header keeps them; a volume has them once built.
+  std::array<int64_t, 3> critical_paper{0, 0, 0}, critical_exact{0, 0, 0};
+  uint64_t input_bytes = 0;              // a volume: its values in memory (as float)
+  // A store: its size, the cache's budget as asked and in effect, a decoded brick's bytes, and
+  // what the cache has read (compressed bytes, bricks), served from memory, and held at most.
+  uint64_t store_bytes = 0;
+  int64_t cache_mb = 0;
+  uint64_t cache_budget_bytes = 0, cache_brick_bytes = 0;
+  uint64_t bytes_read = 0;
+  int64_t bricks_read = 0, cache_hits = 0;
+  uint64_t cache_peak_bytes = 0;
+};
+
+class Source {
+ public:
+  Source(Source&&) noexcept;
+  Source& operator=(Source&&) noexcept;
+  ~Source();
+
+  // The mesh of the isosurface these options choose. Throws as isotope::extract() does
+  // (isotope/extract.h), and IoError when a store's brick cannot be read or is corrupt.
+  Mesh extract(const ExtractOptions& options, ExtractStats* stats = nullptr) const;
+  // Builds now what extractions with these options will need (a volume's hierarchy, with every
+  // record field they read), so that a series of them builds it once. A store needs nothing.
+  void prepare(const std::vector<ExtractOptions>& planned) const;
+  SourceInfo info() const;
+  // A store's reader, for the isotope command's own views of a store (its header, a histogram);
+  // nullptr for a volume. Its type is not part of the public interface.
+  const StoreReader* store() const;
+
+  struct Impl;
+
+ private:
+  friend Source open_volume(const VolumeSpec& spec, const OpenOptions& options);
+  friend Source open_volume(Volume volume, const OpenOptions& options);
+  explicit Source(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+// Opens what SPEC names: reads a volume whole, or a store's header (its bricks on demand). Throws
+// IoError naming the file and what is wrong (missing, unreadable, not a volume, a corrupt store,
+// a version 2 store), and std::invalid_argument for dims or type given with a store.
+Source open_volume(const VolumeSpec& spec, const OpenOptions& options = {});
+// An array already in memory (a simulation's field, a numpy array's copy). Throws
+// std::invalid_argument for dimensions below 2, values that do not fill them, or values that are
+// not finite.
+Source open_volume(Volume volume, const OpenOptions& options = {});
+
+}  // namespace isotope

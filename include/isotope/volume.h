@@ -1,0 +1,33 @@
+#pragma once
+// A scalar volume held in memory, and the element types isotope reads from files.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace isotope {
+
+// Nodes on a regular grid, x fastest, then y, then z (a numpy array a[z, y, x] in C order).
+struct Volume {
+  std::array<int64_t, 3> dims{0, 0, 0};     // nodes per axis (x, y, z)
+  std::array<double, 3> spacing{1, 1, 1};   // physical distance between nodes
+  std::array<double, 3> origin{0, 0, 0};    // physical position of node (0,0,0)
+  std::vector<float> values;                // dims[0]*dims[1]*dims[2], x fastest
+
+  int64_t node_count() const { return dims[0] * dims[1] * dims[2]; }
+  size_t index(int64_t x, int64_t y, int64_t z) const {
+    return static_cast<size_t>((z * dims[1] + y) * dims[0] + x);
+  }
+  float at(int64_t x, int64_t y, int64_t z) const { return values[index(x, y, z)]; }
+};
+
+// The element types of raw files (and what NRRD and HDF5 inputs are read as).
+enum class ScalarType { uint8, uint16, int16, float32, float64 };
+
+std::optional<ScalarType> parse_scalar_type(const std::string& name);  // uint8|uint16|int16|float32|float64
+const char* scalar_type_name(ScalarType t);
+int scalar_type_size(ScalarType t);
+
+}  // namespace isotope

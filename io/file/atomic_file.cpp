@@ -1,0 +1,198 @@
+#include "io/file/atomic_file.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <system_error>
+#include <utility>
+
+#include "isotope/error.h"
+
+namespace isotope {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string errno_text(int err) {
+  if (err == ENOSPC || err == EDQUOT) return "disk full (" + std::string(std::strerror(err)) + ")";
+  return std::strerror(err);
+}
+
+std::string directory_of(const std::string& path) {
+  const fs::path dir = fs::path(path).parent_path();
+  return dir.empty() ? std::string(".") : dir.string();
+}
+
+// Throws when the target's directory is missing, so the message names the real problem
+// rather than a failed create of a temporary name the user never chose.
+void require_directory(const std::string& path, const std::string& dir) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(dir, ec);
+  if (!fs::exists(st)) throw IoError(path + ": directory '" + dir + "' does not exist");
+  if (!fs::is_directory(st)) throw IoError(path + ": '" + dir + "' is not a directory");
+}
+
+std::string temp_name(const std::string& path, const std::string& dir, unsigned serial) {
+  const std::string name = fs::path(path).filename().string();
+  return (fs::path(dir) / ("." + name + ".tmp." + std::to_string(::getpid()) + "." +
+                           std::to_string(serial)))
+      .string();
+}
+
+// Makes the rename itself durable; failure here only weakens crash safety, so it is ignored.
+void sync_directory(const std::string& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  (void)::fsync(fd);
+  (void)::close(fd);
+}
+
+const char* kind_of(mode_t mode) {
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISFIFO(mode)) return "a FIFO";
+  if (S_ISSOCK(mode)) return "a socket";
+  return "not a regular file";
+}
+
+}  // namespace
+
+std::string output_target(const std::string& path) {
+  if (path.empty()) throw IoError("output path is empty");
+  fs::path target = path;
+  for (int links = 0;; ++links) {
+    struct stat st {};
+    if (::lstat(target.c_str(), &st) != 0) return target.string();  // a new file
+    if (S_ISREG(st.st_mode)) return target.string();
+    if (!S_ISLNK(st.st_mode))
+      throw IoError(path + ": " + (target.string() == path ? "is " : "names '" + target.string() + "', ") + kind_of(st.st_mode) +
+                    "; isotope writes regular files only and never replaces anything else");
+    if (links == 40) throw IoError(path + ": too many levels of symbolic links");
+    std::error_code ec;
+    const fs::path next = fs::read_symlink(target, ec);
+    if (ec) throw IoError(path + ": cannot read the symbolic link '" + target.string() + "': " + ec.message());
+    target = next.is_absolute() ? next : target.parent_path() / next;
+  }
+}
+
+void check_outputs(const std::vector<NamedPath>& inputs, const std::vector<NamedPath>& outputs) {
+  struct Seen {
+    const NamedPath* named;
+    std::string target;  // output_target, made absolute
+    bool exists = false;
+    dev_t dev = 0;
+    ino_t ino = 0;
+  };
+  auto identify = [](const NamedPath& p, std::string target) {
+    Seen s{&p, std::move(target)};
+    struct stat st {};
+    if (::stat(s.target.c_str(), &st) == 0) {
+      s.exists = true;
+      s.dev = st.st_dev;
+      s.ino = st.st_ino;
+    }
+    std::error_code ec;
+    const fs::path absolute = fs::weakly_canonical(s.target, ec);
+    if (!ec) s.target = absolute.string();
+    return s;
+  };
+  std::vector<Seen> in, out;
+  for (const NamedPath& p : inputs) {
+    if (p.path.empty()) continue;
+    Seen s = identify(p, p.path);
+    // FILE.h5:/dataset names a file before its last ":/" (io/volume/volume_reader.h).
+    const size_t split = p.path.rfind(":/");
+    if (!s.exists && split != std::string::npos) s = identify(p, p.path.substr(0, split));
+    in.push_back(s);
+  }
+  for (const NamedPath& p : outputs)
+    if (!p.path.empty()) out.push_back(identify(p, output_target(p.path)));
+  auto same = [](const Seen& a, const Seen& b) {
+    return (a.exists && b.exists) ? a.dev == b.dev && a.ino == b.ino : a.target == b.target;
+  };
+  for (size_t i = 0; i < out.size(); ++i) {
+    for (const Seen& s : in)
+      if (same(out[i], s))
+        throw IoError(out[i].named->what + " " + out[i].named->path + ": is the same file as " + s.named->what + " " +
+                      s.named->path + "; isotope does not overwrite its input");
+    for (size_t j = 0; j < i; ++j)
+      if (same(out[i], out[j]))
+        throw IoError(out[i].named->what + " " + out[i].named->path + ": is the same file as " + out[j].named->what + " " +
+                      out[j].named->path + "; each output needs its own file");
+  }
+}
+
+AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
+  if (path_.empty()) throw IoError("output path is empty");
+  target_ = output_target(path_);
+  const std::string dir = directory_of(target_);
+  require_directory(path_, dir);
+  static std::atomic<unsigned> serial{0};
+  // "x" (exclusive create) so two writers in one directory never share a temporary.
+  for (int attempt = 0; attempt < 100 && file_ == nullptr; ++attempt) {
+    temp_path_ = temp_name(target_, dir, serial.fetch_add(1));
+    file_ = std::fopen(temp_path_.c_str(), "wbx");
+    if (file_ == nullptr && errno != EEXIST) {
+      const int err = errno;
+      if (err == EACCES || err == EPERM || err == EROFS)
+        throw IoError(path_ + ": directory '" + dir + "' is not writable (" + std::strerror(err) + ")");
+      throw IoError(path_ + ": cannot create a file in '" + dir + "': " + errno_text(err));
+    }
+  }
+  if (file_ == nullptr) throw IoError(path_ + ": cannot find a free temporary name in '" + dir + "'");
+}
+
+AtomicFile::~AtomicFile() {
+  if (file_ != nullptr) std::fclose(file_);
+  if (!committed_ && !temp_path_.empty()) std::remove(temp_path_.c_str());
+}
+
+void AtomicFile::write(const void* data, size_t bytes) {
+  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
+  if (bytes == 0) return;
+  errno = 0;
+  if (std::fwrite(data, 1, bytes, file_) != bytes)
+    throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
+  size_ += bytes;
+}
+
+void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
+  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
+  if (offset + bytes > size_) throw IoError(path_ + ": write_at past the end of what was written");
+  errno = 0;
+  const bool ok = std::fseek(file_, static_cast<long>(offset), SEEK_SET) == 0 &&
+                  std::fwrite(data, 1, bytes, file_) == bytes && std::fseek(file_, 0, SEEK_END) == 0;
+  if (!ok) throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
+}
+
+void AtomicFile::finish() {
+  if (finished_) return;
+  if (file_ == nullptr) throw IoError(path_ + ": finish after commit");
+  // Buffered data may only meet a full disk here, so flush and close are checked too.
+  errno = 0;
+  const bool flushed = std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
+  const int flush_err = errno;
+  const bool closed = std::fclose(file_) == 0;
+  const int close_err = errno;
+  file_ = nullptr;
+  if (!flushed) throw IoError(path_ + ": write failed: " + errno_text(flush_err != 0 ? flush_err : EIO));
+  if (!closed) throw IoError(path_ + ": close failed: " + errno_text(close_err != 0 ? close_err : EIO));
+  finished_ = true;
+}
+
+void AtomicFile::commit() {
+  if (committed_) throw IoError(path_ + ": commit called twice");
+  finish();
+  if (std::rename(temp_path_.c_str(), target_.c_str()) != 0)
+    throw IoError(path_ + ": cannot rename temporary file into place: " + std::strerror(errno));
+  committed_ = true;
+  sync_directory(directory_of(target_));
+}
+
+}  // namespace isotope

@@ -1,0 +1,30 @@
+#pragma once
+// The input policy (the counterpart of the output policy in io/file/atomic_file.h): every file isotope
+// reads is a regular file. A FIFO without a writer would block the open or the first read forever,
+// a device such as /dev/zero never ends, so both are refused by name before anything opens them
+// (`isotope extract some.fifo` used to hang; tests/io_test.cpp, NonRegularInputsAreRefused).
+#include <filesystem>
+#include <string>
+#include <system_error>
+
+#include "isotope/error.h"
+
+namespace isotope {
+
+// Throws IoError "WHERE: no such file", "WHERE: is a directory, not KIND" or "WHERE: is a FIFO
+// (device, socket), not a regular file"; links are followed.
+inline void require_regular_file(const std::string& path, const std::string& where, const std::string& kind) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (!fs::exists(st)) throw IoError(where + ": no such file");
+  if (fs::is_directory(st)) throw IoError(where + ": is a directory, not " + kind);
+  if (fs::is_regular_file(st)) return;
+  const char* what = fs::is_fifo(st)                                             ? "a FIFO"
+                     : fs::is_block_file(st) || fs::is_character_file(st)        ? "a device"
+                     : fs::is_socket(st)                                         ? "a socket"
+                                                                                 : "a special file";
+  throw IoError(where + ": is " + what + ", not a regular file");
+}
+
+}  // namespace isotope

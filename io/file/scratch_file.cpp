@@ -1,0 +1,63 @@
+#include "io/file/scratch_file.h"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <vector>
+
+#include "isotope/error.h"
+
+namespace isotope {
+
+ScratchFile::ScratchFile(const std::string& directory) : directory_(directory) {
+  std::string name = directory + "/.isotope-scratch-XXXXXX";
+  std::vector<char> buf(name.begin(), name.end());
+  buf.push_back('\0');
+  fd_ = ::mkstemp(buf.data());
+  if (fd_ < 0) throw IoError("cannot create a scratch file in '" + directory + "': " + std::strerror(errno));
+  ::unlink(buf.data());
+}
+
+ScratchFile::ScratchFile(uint64_t memory_bytes) : memory_(static_cast<size_t>(memory_bytes)) {}
+
+ScratchFile::~ScratchFile() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void ScratchFile::write(const void* data, size_t bytes, uint64_t offset) const {
+  if (fd_ < 0) {
+    if (offset + bytes > memory_.size()) throw IoError("scratch write past its end");
+    std::memcpy(const_cast<char*>(memory_.data()) + offset, data, bytes);
+    return;
+  }
+  const auto* p = static_cast<const char*>(data);
+  while (bytes > 0) {
+    const ssize_t n = ::pwrite(fd_, p, bytes, static_cast<off_t>(offset));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int err = n < 0 ? errno : ENOSPC;
+      throw IoError("cannot write scratch data in '" + directory_ + "': " +
+                    (err == ENOSPC || err == EDQUOT ? "disk full" : std::strerror(err)));
+    }
+    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
+  }
+}
+
+void ScratchFile::read(void* data, size_t bytes, uint64_t offset) const {
+  if (fd_ < 0) {
+    if (offset + bytes > memory_.size()) throw IoError("scratch read past its end");
+    std::memcpy(data, memory_.data() + offset, bytes);
+    return;
+  }
+  auto* p = static_cast<char*>(data);
+  while (bytes > 0) {
+    const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw IoError("cannot read scratch data in '" + directory_ + "'" + (n < 0 ? std::string(": ") + std::strerror(errno) : ""));
+    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
+  }
+}
+
+}  // namespace isotope

@@ -1,0 +1,30 @@
+#pragma once
+// The mesh as `isotope serve` sends it (docs/SERVE.md): a 20-byte header, the report as JSON, then
+// positions, normals and indices as flat little-endian arrays that a browser hands to WebGL
+// without a parse: every array starts on a 4-byte boundary.
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "isotope/mesh.h"
+
+namespace isotope {
+
+inline constexpr std::array<char, 4> kMeshWireMagic = {'I', 'S', 'O', 'M'};
+inline constexpr uint32_t kMeshWireVersion = 1;
+
+// Throws std::length_error when the mesh or the report does not fit the format's 32-bit counts.
+std::string encode_mesh_wire(const Mesh& mesh, const std::vector<std::array<float, 3>>& normals,
+                             std::string_view report_json);
+
+struct MeshWire {
+  std::string report_json;
+  Mesh mesh;
+  std::vector<std::array<float, 3>> normals;
+};
+// Throws std::runtime_error on a wrong magic, version or size (for tests and clients in C++).
+MeshWire decode_mesh_wire(std::string_view bytes);
+
+}  // namespace isotope

@@ -1,0 +1,160 @@
+// Any input opened for extraction (isotope/source.h): the one place that assembles the chain
+// store -> brick cache -> paged volume, or holds a volume and builds its hierarchy on demand. Every
+// face (the isotope command's extract, sweep and serve, the C++ API, the bench) opens its input
+// here (docs/DESIGN.md, "Seams").
+#include "isotope/source.h"
+
+#include <malloc.h>
+
+#include <chrono>
+#include <mutex>
+#include <utility>
+
+#include "engine/extract/extract.h"
+#include "engine/hierarchy/hierarchy.h"
+#include "engine/hierarchy/lattice.h"
+#include "io/store/brick_cache.h"
+#include "io/store/paged_volume.h"
+#include "io/store/store_reader.h"
+#include "io/volume/volume_reader.h"
+
+namespace isotope {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// The brick cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
+// return each to the kernel and fault fresh zeroed pages in for the next. This keeps them.
+void keep_freed_brick_memory() {
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 128 << 20);
+}
+
+}  // namespace
+
+struct Source::Impl {
+  // A store, paged:
+  std::unique_ptr<StoreReader> store;
+  std::unique_ptr<BrickCache> cache;
+  std::unique_ptr<PagedVolume> paged;
+  int64_t cache_mb = 0;
+  // Or a volume, with its hierarchy built on first use, with the fields asked for; built again with
+  // more when a later extraction reads more.
+  std::unique_ptr<Volume> volume;
+  ProgressCallback progress;
+  mutable std::mutex build_mutex;
+  mutable std::unique_ptr<Hierarchy> memory;
+  mutable double preprocess_seconds = 0;
+  double read_seconds = 0;
+
+  const Hierarchy& hierarchy(const RecordFields& fields) const {
+    const std::lock_guard<std::mutex> lock(build_mutex);
+    if (memory && memory->fields().covers(fields)) return *memory;
+    const RecordFields all = memory ? memory->fields() | fields : fields;
+    memory.reset();
+    const auto start = std::chrono::steady_clock::now();
+    memory = std::make_unique<Hierarchy>(Hierarchy::build(*volume, all, StoreLayout::kDefaultBrickBits, progress));
+    preprocess_seconds += seconds_since(start);
+    return *memory;
+  }
+};
+
+Source::Source(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Source::Source(Source&&) noexcept = default;
+Source& Source::operator=(Source&&) noexcept = default;
+Source::~Source() = default;
+
+Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  auto impl = std::make_unique<Source::Impl>();
+  impl->progress = options.preprocess_progress;
+  // A store is known by its magic; a file named .isotope without it is a damaged store, whose
+  // reader says so, not a raw volume whose name lacks its dimensions (tests/reject/zeros.isotope).
+  if (is_store_file(spec.path) || spec.path.ends_with(".isotope")) {
+    if (spec.dims || spec.type) throw OptionError(spec.dims ? "dims" : "type", "does not apply to a store");
+    if (options.tune_allocator) keep_freed_brick_memory();
+    impl->store = std::make_unique<StoreReader>(spec.path);
+    impl->cache = std::make_unique<BrickCache>(*impl->store, static_cast<uint64_t>(options.cache_mb) << 20);
+    impl->paged = std::make_unique<PagedVolume>(*impl->cache);
+    impl->cache_mb = options.cache_mb;
+  } else {
+    impl->volume = std::make_unique<Volume>(read_volume({spec.path, spec.dims, spec.type}));
+  }
+  impl->read_seconds = seconds_since(start);
+  return Source(std::move(impl));
+}
+
+Source open_volume(Volume volume, const OpenOptions& options) {
+  validate_volume(volume);  // what extract() would refuse, refused at open
+  auto impl = std::make_unique<Source::Impl>();
+  impl->progress = options.preprocess_progress;
+  impl->volume = std::make_unique<Volume>(std::move(volume));
+  return Source(std::move(impl));
+}
+
+Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
+  if (impl_->paged) return isotope::extract(*impl_->paged, options, stats);
+  if (!needs_hierarchy(options)) return isotope::extract(*impl_->volume, options, stats);
+  return isotope::extract(impl_->hierarchy(fields_for(options)), options, stats);
+}
+
+void Source::prepare(const std::vector<ExtractOptions>& planned) const {
+  if (!impl_->volume) return;
+  RecordFields fields{false, false, false, false};
+  bool needed = false;
+  for (const ExtractOptions& o : planned) {
+    fields = fields | fields_for(o);
+    needed = needed || needs_hierarchy(o);
+  }
+  if (needed) impl_->hierarchy(fields);
+}
+
+const StoreReader* Source::store() const { return impl_->store.get(); }
+
+SourceInfo Source::info() const {
+  const Impl& s = *impl_;
+  SourceInfo info;
+  info.read_seconds = s.read_seconds;
+  if (s.volume) {
+    info.dims = s.volume->dims;
+    info.spacing = s.volume->spacing;
+    info.origin = s.volume->origin;
+    info.lattice_k = Lattice::enclosing(info.dims).k;
+    info.input_bytes = s.volume->values.size() * sizeof(float);
+    const std::lock_guard<std::mutex> lock(s.build_mutex);
+    info.preprocess_seconds = s.preprocess_seconds;
+    info.hierarchy_built = s.memory != nullptr;
+    if (s.memory)
+      for (int t = 0; t < 3; ++t) {
+        info.critical_paper[t] = s.memory->stats().critical_paper[t];
+        info.critical_exact[t] = s.memory->stats().critical_exact[t];
+      }
+    return info;
+  }
+  // A store was preprocessed by convert; its header keeps the critical-point counts.
+  const StoreHeader& h = s.store->header();
+  info.store = true;
+  info.hierarchy_built = true;
+  info.dims = h.dims;
+  info.spacing = h.spacing;
+  info.origin = h.origin;
+  info.lattice_k = s.paged->lattice().k;
+  for (int t = 0; t < 3; ++t) {
+    info.critical_paper[t] = h.critical_paper[t];
+    info.critical_exact[t] = h.critical_exact[t];
+  }
+  info.store_bytes = s.store->file_bytes();
+  info.cache_mb = s.cache_mb;
+  info.cache_budget_bytes = s.cache->budget_bytes();
+  info.cache_brick_bytes = s.cache->brick_bytes();
+  const BrickCacheStats c = s.cache->stats();
+  info.bytes_read = c.bytes_read;
+  info.bricks_read = c.bricks_read;
+  info.cache_hits = c.hits;
+  info.cache_peak_bytes = c.peak_bytes;
+  return info;
+}
+
+}  // namespace isotope

@@ -1,0 +1,196 @@
+#include "io/store/brick_cache.h"
+
+#include <algorithm>
+
+namespace isotope {
+namespace {
+
+size_t core_bytes(const StoreLayout& layout) {
+  return static_cast<size_t>(layout.brick_nodes()) * (sizeof(float) + sizeof(uint64_t));
+}
+
+template <class T>
+T* new_array(std::vector<std::unique_ptr<char[]>>& owner, int64_t n, T fill) {
+  owner.push_back(std::make_unique_for_overwrite<char[]>(static_cast<size_t>(n) * sizeof(T)));
+  T* p = reinterpret_cast<T*>(owner.back().get());
+  std::fill_n(p, n, fill);
+  return p;
+}
+
+}  // namespace
+
+CachedBrick::~CachedBrick() = default;
+
+BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
+    : store_(store), budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
+      pool_(std::make_shared<BrickPool>(core_bytes(store.layout()))),
+      slots_(new Slot[static_cast<size_t>(store.layout().brick_count())]) {}
+
+uint64_t BrickCache::brick_bytes() const {
+  return static_cast<uint64_t>(store_.layout().brick_nodes()) * (4 + 8 + 2 + 4 + 4 + 8);
+}
+
+std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
+  const StoreLayout& layout = store_.layout();
+  auto b = std::make_shared<CachedBrick>();
+  b->band_ = store_.locate_brick(index).first;
+  std::shared_ptr<BrickPool> pool = pool_;
+  void* block = pool->allocate();
+  b->core_block_ = std::shared_ptr<void>(block, [pool](void* p) { pool->release(p); });
+  b->values_ = static_cast<float*>(block);
+  b->bounds_ = reinterpret_cast<uint64_t*>(b->values_ + layout.brick_nodes());
+  b->bytes_ = pool->block_bytes();
+  const BrickView view{b->values_, b->bounds_, nullptr, nullptr, nullptr, nullptr};
+  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, b->values_);
+  bytes_read_.fetch_add(read, std::memory_order_relaxed);
+  if (!stores_records(layout, b->band_))  // band 0: filled on first read; the corners: none
+    std::fill_n(b->bounds_, layout.brick_nodes(), b->band_ == 0 ? kUnsetBounds : 0);
+  return b;
+}
+
+void BrickCache::require(CachedBrick& brick, int64_t index, const RecordFields& fields) {
+  if (brick.has(fields)) return;
+  const std::lock_guard<std::mutex> lock(brick.mutex_);
+  const StoreLayout& layout = store_.layout();
+  const int64_t n = layout.brick_nodes();
+  const bool stored = stores_records(layout, brick.band_);
+  const bool band0 = brick.band_ == 0;
+  // Arrays for the sections needed and missing; the extra section holds paper and surplus.
+  std::array<bool, kSections> which{false, false, false, false};
+  uint16_t* surplus = brick.surplus();
+  uint32_t *exact = brick.exact(), *paper = brick.paper();
+  uint64_t* weights = brick.weights();
+  const uint64_t before = static_cast<uint64_t>(brick.extra_.size());
+  uint64_t added = 0;
+  if (fields.exact && !exact) {
+    exact = new_array<uint32_t>(brick.extra_, n, band0 ? kUnsetInterval : 0);
+    which[static_cast<size_t>(Section::exact)] = true;
+    added += n * 4;
+  }
+  if (fields.weights && !weights) {
+    weights = new_array<uint64_t>(brick.extra_, n, band0 ? kUnsetWeights : 0);
+    which[static_cast<size_t>(Section::weights)] = true;
+    added += n * 8;
+  }
+  if ((fields.paper || fields.surplus) && !(paper && surplus)) {
+    paper = new_array<uint32_t>(brick.extra_, n, band0 ? kUnsetInterval : 0);
+    surplus = new_array<uint16_t>(brick.extra_, n, band0 ? kUnsetSurplus : 0);
+    which[static_cast<size_t>(Section::extra)] = true;
+    added += n * 6;
+  }
+  if (brick.extra_.size() == before) return;
+  if (stored) {
+    const BrickView view{brick.values_, brick.bounds_, surplus, exact, paper, weights};
+    // The values were decoded with the core; the sections here do not touch them.
+    const uint64_t read = store_.read_brick(index, which, view, brick.values_);
+    bytes_read_.fetch_add(read, std::memory_order_relaxed);
+  }
+  if (which[static_cast<size_t>(Section::exact)]) brick.exact_.store(exact, std::memory_order_release);
+  if (which[static_cast<size_t>(Section::weights)]) brick.weights_.store(weights, std::memory_order_release);
+  if (which[static_cast<size_t>(Section::extra)]) {
+    brick.paper_.store(paper, std::memory_order_release);
+    brick.surplus_.store(surplus, std::memory_order_release);
+  }
+  grow(index, brick, added);
+}
+
+void BrickCache::prefetch(int64_t index) {
+  Slot& slot = slots_[static_cast<size_t>(index)];
+  if (slot.prefetched.load(std::memory_order_relaxed)) return;
+  slot.prefetched.store(true, std::memory_order_relaxed);
+  if (resident(index)) return;
+  store_.prefetch(index, {true, false, false, false});
+}
+
+std::shared_ptr<CachedBrick> BrickCache::resident(int64_t index) {
+  const std::lock_guard<std::mutex> lock(slot_locks_[static_cast<size_t>(index) % kStripes]);
+  return slots_[static_cast<size_t>(index)].brick;
+}
+
+std::shared_ptr<CachedBrick> BrickCache::get(int64_t index) {
+  Slot& slot = slots_[static_cast<size_t>(index)];
+  auto found = resident(index);
+  if (!found) {
+    const std::lock_guard<std::mutex> lock(load_locks_[static_cast<size_t>(index) % kStripes]);
+    found = resident(index);  // another thread may have loaded it meanwhile
+    if (!found) {
+      {  // evicted, but still held by a reader?
+        const std::lock_guard<std::mutex> slot_lock(slot_locks_[static_cast<size_t>(index) % kStripes]);
+        found = slot.evicted.lock();
+      }
+      const bool fresh = !found;
+      if (fresh) {
+        found = decode(index);
+        bricks_read_.fetch_add(1, std::memory_order_relaxed);
+      }
+      {
+        const std::lock_guard<std::mutex> slot_lock(slot_locks_[static_cast<size_t>(index) % kStripes]);
+        slot.brick = found;
+      }
+      slot.referenced.store(true, std::memory_order_relaxed);
+      admit(index, found->bytes_.load(std::memory_order_relaxed));
+      if (fresh) return found;
+    }
+  }
+  hits_.fetch_add(1, std::memory_order_relaxed);
+  if (!slot.referenced.load(std::memory_order_relaxed)) slot.referenced.store(true, std::memory_order_relaxed);
+  return found;
+}
+
+void BrickCache::grow(int64_t index, CachedBrick& brick, uint64_t bytes) {
+  // Under the clock's lock, as eviction: an evicted brick counts again only when taken back.
+  const std::lock_guard<std::mutex> lock(clock_mutex_);
+  brick.bytes_.fetch_add(bytes, std::memory_order_relaxed);
+  bool is_resident = false;
+  {
+    const std::lock_guard<std::mutex> slot_lock(slot_locks_[static_cast<size_t>(index) % kStripes]);
+    is_resident = slots_[static_cast<size_t>(index)].brick.get() == &brick;
+  }
+  if (!is_resident) return;
+  resident_bytes_ += bytes;
+  peak_bytes_ = std::max(peak_bytes_, resident_bytes_);
+  evict_to_budget(index);
+}
+
+void BrickCache::admit(int64_t index, uint64_t bytes) {
+  const std::lock_guard<std::mutex> lock(clock_mutex_);
+  resident_.push_back(index);
+  resident_bytes_ += bytes;
+  peak_bytes_ = std::max(peak_bytes_, resident_bytes_);
+  evict_to_budget(index);
+}
+
+void BrickCache::evict_to_budget(int64_t index) {
+  while (resident_bytes_ > budget_ && resident_.size() > 1) {
+    if (hand_ >= resident_.size()) hand_ = 0;
+    const int64_t victim = resident_[hand_];
+    Slot& slot = slots_[static_cast<size_t>(victim)];
+    if (victim == index || slot.referenced.exchange(false, std::memory_order_relaxed)) {
+      ++hand_;  // a second chance
+      continue;
+    }
+    uint64_t freed = 0;
+    {
+      const std::lock_guard<std::mutex> slot_lock(slot_locks_[static_cast<size_t>(victim) % kStripes]);
+      freed = slot.brick->bytes_.load(std::memory_order_relaxed);
+      slot.evicted = slot.brick;
+      slot.brick.reset();
+      slot.prefetched.store(false, std::memory_order_relaxed);
+    }
+    resident_bytes_ -= std::min(freed, resident_bytes_);
+    resident_[hand_] = resident_.back();
+    resident_.pop_back();
+  }
+}
+
+BrickCacheStats BrickCache::stats() const {
+  BrickCacheStats s;
+  s.bricks_read = bricks_read_.load();
+  s.bytes_read = bytes_read_.load();
+  s.hits = hits_.load();
+  const std::lock_guard<std::mutex> lock(clock_mutex_);
+  s.peak_bytes = peak_bytes_;
+  return s;
+}
+
+}  // namespace isotope

@@ -1,0 +1,134 @@
+#pragma once
+// Decoded bricks of a store (io/store/store_reader.h) shared by all threads under a byte budget.
+//
+// A brick enters with its core section decoded (values; the range and bound of its records), and
+// gains its other fields the first time an extraction reads them (require): a `none` extraction
+// never decodes a critical interval. Band 0 stores no records: its bricks enter with their record
+// arrays marked unset, and io/store/paged_volume.h fills each record from the values the first time it is
+// read. So the cost of a brick follows what the traversal reads of it.
+//
+// A hit copies the brick's pointer under one of 64 striped locks (held for a pointer copy); a miss
+// takes one of 64 other striped locks, so two threads wanting the same brick decode it once, then
+// reads it with pread and admits it. Eviction is CLOCK, a cheap LRU approximation: a hit sets the
+// brick's reference bit, and the hand evicts bricks whose bit it finds clear until the decoded bytes
+// are within the budget. A brick evicted while a reader still holds it lives on until that reader
+// lets go (io/store/paged_volume.h keeps a few per thread), so the memory in use stays within the budget
+// plus those few bricks per thread; and a miss on such a brick takes it back instead of decoding it
+// again.
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "engine/hierarchy/hierarchy.h"
+#include "io/store/brick_pool.h"
+#include "io/store/store_format.h"
+#include "io/store/store_reader.h"
+
+namespace isotope {
+
+// Band 0's record words before they are computed (no record has them: their low half is a NaN code).
+inline constexpr uint64_t kUnsetBounds = ~uint64_t{0};
+inline constexpr uint32_t kUnsetInterval = ~uint32_t{0};
+inline constexpr uint64_t kUnsetWeights = ~uint64_t{0};
+inline constexpr uint16_t kUnsetSurplus = 0xffffu;
+
+// One decoded brick. Arrays as engine/hierarchy/hierarchy.h's BrickView; those of fields not yet required
+// are null.
+class CachedBrick {
+ public:
+  int band() const { return band_; }
+  const float* values() const { return values_; }
+  uint64_t* bounds() const { return bounds_; }
+  uint16_t* surplus() const { return surplus_.load(std::memory_order_acquire); }
+  uint32_t* exact() const { return exact_.load(std::memory_order_acquire); }
+  uint32_t* paper() const { return paper_.load(std::memory_order_acquire); }
+  uint64_t* weights() const { return weights_.load(std::memory_order_acquire); }
+  // Whether the arrays of these fields are present (a published array is complete).
+  bool has(const RecordFields& f) const {
+    return (!f.exact || exact()) && (!f.weights || weights()) && (!f.paper || paper()) && (!f.surplus || surplus());
+  }
+  ~CachedBrick();
+
+ private:
+  friend class BrickCache;
+  int band_ = 0;
+  float* values_ = nullptr;
+  uint64_t* bounds_ = nullptr;
+  std::atomic<uint16_t*> surplus_{nullptr};
+  std::atomic<uint32_t*> exact_{nullptr}, paper_{nullptr};
+  std::atomic<uint64_t*> weights_{nullptr};
+  std::mutex mutex_;  // while a section is decoded into it
+  std::atomic<uint64_t> bytes_{0};
+  std::shared_ptr<void> core_block_;     // values and bounds, from the pool
+  std::vector<std::unique_ptr<char[]>> extra_;  // the other fields' arrays
+};
+
+struct BrickCacheStats {
+  int64_t bricks_read = 0;   // misses: bricks read, checked and decoded
+  uint64_t bytes_read = 0;   // compressed bytes read, core and other sections
+  int64_t hits = 0;          // lookups served from memory
+  uint64_t peak_bytes = 0;   // most decoded bytes held at once
+};
+
+class BrickCache {
+ public:
+  // Below kMinBricks bricks a traversal's working set (its region's bricks in a few bands) does
+  // not fit and every step decodes again, so the budget is at least that many bricks.
+  static constexpr uint64_t kMinBricks = 16;
+  BrickCache(const StoreReader& store, uint64_t budget_bytes);
+  BrickCache(const BrickCache&) = delete;
+  BrickCache& operator=(const BrickCache&) = delete;
+
+  // Brick `index` of the store's directory order with its core decoded. Thread-safe. Throws
+  // IoError naming the brick when it cannot be read or is corrupt.
+  std::shared_ptr<CachedBrick> get(int64_t index);
+  // Makes the arrays of `fields` present in brick `index` (decoding their sections; band 0:
+  // unset, to be filled by the reader). Thread-safe; throws as get().
+  void require(CachedBrick& brick, int64_t index, const RecordFields& fields);
+  // A hint: brick `index` will be asked for soon. Starts the kernel reading it if it is not
+  // resident (and was not asked for before).
+  void prefetch(int64_t index);
+
+  const StoreReader& store() const { return store_; }
+  uint64_t budget_bytes() const { return budget_; }  // as given, raised to kMinBricks bricks
+  uint64_t brick_bytes() const;  // a brick decoded whole, every field: the largest entry
+  BrickCacheStats stats() const;
+
+ private:
+  // brick and evicted are guarded by slot_locks_[index % kStripes]: held for a pointer copy only.
+  // (std::atomic<std::shared_ptr> would do without them, but GCC 12's is not race-free by the
+  // memory model: its load releases its internal lock with a relaxed store; ThreadSanitizer
+  // reports it, google/sanitizers#1558.)
+  struct Slot {
+    std::shared_ptr<CachedBrick> brick;
+    // After eviction: still alive while some reader holds it, and then taken back, not decoded
+    // again (readers keep their recent bricks, so a small budget does not thrash on those).
+    std::weak_ptr<CachedBrick> evicted;
+    std::atomic<bool> referenced{false};
+    std::atomic<bool> prefetched{false};
+  };
+  std::shared_ptr<CachedBrick> decode(int64_t index);
+  std::shared_ptr<CachedBrick> resident(int64_t index);
+  void admit(int64_t index, uint64_t bytes);
+  void evict_to_budget(int64_t keep);  // under clock_mutex_; CLOCK, sparing brick `keep`
+  void grow(int64_t index, CachedBrick& brick, uint64_t bytes);  // a brick took more memory
+
+  const StoreReader& store_;
+  const uint64_t budget_;
+  std::shared_ptr<BrickPool> pool_;  // core blocks, shared with the bricks
+  std::unique_ptr<Slot[]> slots_;
+  static constexpr size_t kStripes = 64;
+  std::mutex slot_locks_[kStripes];  // short: a pointer copy
+  std::mutex load_locks_[kStripes];  // long: one brick's read and decode, so it is done once
+  mutable std::mutex clock_mutex_;  // the resident list and the hand; taken on misses only
+  std::vector<int64_t> resident_;
+  size_t hand_ = 0;
+  uint64_t resident_bytes_ = 0, peak_bytes_ = 0;
+  std::atomic<int64_t> hits_{0}, bricks_read_{0};
+  std::atomic<uint64_t> bytes_read_{0};
+};
+
+}  // namespace isotope

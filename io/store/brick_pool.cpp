@@ -1,0 +1,47 @@
+#include "io/store/brick_pool.h"
+
+#include <sys/mman.h>
+
+#include <cstdlib>
+#include <new>
+
+namespace isotope {
+namespace {
+
+constexpr size_t kHugePage = size_t{2} << 20;
+
+}  // namespace
+
+BrickPool::BrickPool(size_t block_bytes) : block_((block_bytes + 63) / 64 * 64) {}
+
+BrickPool::~BrickPool() {
+  for (void* c : chunks_) std::free(c);
+}
+
+void* BrickPool::allocate() {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  if (!free_.empty()) {
+    void* p = free_.back();
+    free_.pop_back();
+    return p;
+  }
+  if (next_ == nullptr || static_cast<size_t>(end_ - next_) < block_) {
+    const size_t chunk = std::max<size_t>(8 * kHugePage, (block_ + kHugePage - 1) / kHugePage * kHugePage);
+    void* c = std::aligned_alloc(kHugePage, chunk);
+    if (!c) throw std::bad_alloc();
+    madvise(c, chunk, MADV_HUGEPAGE);  // a hint: without it, only slower
+    chunks_.push_back(c);
+    next_ = static_cast<char*>(c);
+    end_ = next_ + chunk;
+  }
+  void* p = next_;
+  next_ += block_;
+  return p;
+}
+
+void BrickPool::release(void* block) {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  free_.push_back(block);
+}
+
+}  // namespace isotope

@@ -1,0 +1,33 @@
+#pragma once
+// Memory for decoded bricks (io/store/brick_cache.h): blocks of one fixed size carved from 16 MB chunks
+// that the kernel is asked to back with huge pages, and recycled through a free list. A paged
+// extraction decodes hundreds of MB of bricks; on fresh 4 KB pages the page faults alone cost
+// more than decoding them, and being serialized in the kernel they did not scale with threads.
+// Chunks are kept until the pool goes; untouched parts of a chunk cost no memory.
+#include <cstddef>
+#include <mutex>
+#include <vector>
+
+namespace isotope {
+
+class BrickPool {
+ public:
+  explicit BrickPool(size_t block_bytes);
+  ~BrickPool();
+  BrickPool(const BrickPool&) = delete;
+  BrickPool& operator=(const BrickPool&) = delete;
+
+  size_t block_bytes() const { return block_; }
+  void* allocate();          // thread-safe; throws std::bad_alloc
+  void release(void* block); // thread-safe
+
+ private:
+  size_t block_;
+  std::mutex mutex_;
+  std::vector<void*> free_;
+  std::vector<void*> chunks_;
+  char* next_ = nullptr;  // unused tail of the newest chunk
+  char* end_ = nullptr;
+};
+
+}  // namespace isotope

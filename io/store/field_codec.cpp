@@ -1,0 +1,379 @@
+#include "io/store/field_codec.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <string>
+
+#include "isotope/error.h"
+
+namespace isotope {
+namespace {
+
+// Mode byte values and flag bits are part of the store format (docs/FORMAT.md).
+constexpr uint8_t kModeConstant = 1, kModeInteger = 2, kModeFloat = 3;
+constexpr uint8_t kIntegerHasInf = 1, kIntegerDelta = 2;  // integer flags; other bits must be 0
+constexpr uint8_t kFloatPlanes = 1;                       // float flags; other bits must be 0
+// Integer mode takes v when 2v is an integer with |2v| <= 2^30: codes, the +inf code just above
+// them and their wrapped differences all stay within 32 bits.
+constexpr float kMaxTwiceValue = 1 << 30;
+constexpr uint32_t kInfBits = 0x7f800000u;
+
+// Float fields go to byte planes when fewer than 1 in kRepeatRarity values repeats one of the
+// kRepeatWindow before it (see planes_pay_off).
+constexpr size_t kRepeatWindow = 8, kRepeatRarity = 50;
+
+// ---- little-endian bytes, independent of the host's byte order ----
+
+void put_u8(std::vector<uint8_t>& out, uint8_t v) { out.push_back(v); }
+void put_u32(std::vector<uint8_t>& out, uint32_t v) {
+  for (int b = 0; b < 4; ++b) out.push_back(static_cast<uint8_t>(v >> (8 * b)));
+}
+void put_u64(std::vector<uint8_t>& out, uint64_t v) {
+  for (int b = 0; b < 8; ++b) out.push_back(static_cast<uint8_t>(v >> (8 * b)));
+}
+
+// Bounds-checked reads: every read names what it wanted when the bytes run out.
+struct Reader {
+  const uint8_t* p;
+  const uint8_t* end;
+
+  void need(size_t n, const char* what) const {
+    if (static_cast<size_t>(end - p) < n)
+      throw IoError(std::string("field codec: truncated ") + what + " (need " + std::to_string(n) +
+                    " bytes, have " + std::to_string(end - p) + ")");
+  }
+  uint8_t u8(const char* what) {
+    need(1, what);
+    return *p++;
+  }
+  uint64_t le(int bytes, const char* what) {
+    need(static_cast<size_t>(bytes), what);
+    uint64_t v = 0;
+    for (int b = 0; b < bytes; ++b) v |= uint64_t{p[b]} << (8 * b);
+    p += bytes;
+    return v;
+  }
+  uint32_t u32(const char* what) { return static_cast<uint32_t>(le(4, what)); }
+  uint64_t u64(const char* what) { return le(8, what); }
+  // The next n bytes, consumed.
+  const uint8_t* take(size_t n, const char* what) {
+    need(n, what);
+    const uint8_t* start = p;
+    p += n;
+    return start;
+  }
+};
+
+// ---- byte planes: byte b of every word together, so constant high bytes form long runs ----
+
+// Appends words(i), i < n, as W byte planes.
+template <int W, class WordOf>
+void append_planes(size_t n, WordOf word_of, std::vector<uint8_t>& out) {
+  const size_t start = out.size();
+  out.resize(start + n * W);
+  uint8_t* planes = out.data() + start;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t w = word_of(i);
+    for (int b = 0; b < W; ++b)
+      planes[static_cast<size_t>(b) * n + i] = static_cast<uint8_t>(w >> (8 * b));
+  }
+}
+
+// Appends words(i), i < n, as little-endian 4-byte words.
+template <class WordOf>
+void append_words(size_t n, WordOf word_of, std::vector<uint8_t>& out) {
+  const size_t start = out.size();
+  out.resize(start + n * 4);
+  uint8_t* bytes = out.data() + start;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t w = word_of(i);
+    for (int b = 0; b < 4; ++b)
+      bytes[4 * i + static_cast<size_t>(b)] = static_cast<uint8_t>(w >> (8 * b));
+  }
+}
+
+template <int W>
+uint32_t word_at(const uint8_t* planes, size_t n, size_t i) {
+  uint32_t w = planes[i];
+  if constexpr (W >= 2) w |= uint32_t{planes[n + i]} << 8;
+  if constexpr (W == 4) w |= uint32_t{planes[2 * n + i]} << 16 | uint32_t{planes[3 * n + i]} << 24;
+  return w;
+}
+
+// ---- constant: one bit pattern repeated (empty metadata intervals, all-zero errors) ----
+
+bool is_constant(std::span<const float> values) {
+  const uint32_t first = std::bit_cast<uint32_t>(values[0]);
+  for (float v : values)
+    if (std::bit_cast<uint32_t>(v) != first) return false;
+  return true;
+}
+
+// ---- integer: codes v*m (m = 1, or 2 for half-integers), +inf as the code above all others ----
+
+struct IntegerPlan {
+  int32_t multiplier = 1;
+  int32_t min_code = 0, max_code = 0;  // over the finite values
+  bool has_inf = false;
+};
+
+// Empty when some value is neither +inf nor an exactly representable (half-)integer code; -0.0
+// is excluded because code 0 decodes to +0.0.
+std::optional<IntegerPlan> plan_integer(std::span<const float> values) {
+  int32_t lo = std::numeric_limits<int32_t>::max(), hi = std::numeric_limits<int32_t>::min();
+  uint32_t odd = 0;
+  bool has_inf = false, has_finite = false;
+  for (float v : values) {
+    if (std::bit_cast<uint32_t>(v) == kInfBits) {
+      has_inf = true;
+      continue;
+    }
+    const float twice = v * 2;  // exact for every value that passes the range test
+    if (!(std::fabs(twice) <= kMaxTwiceValue)) return std::nullopt;  // also NaN and -inf
+    const auto c = static_cast<int32_t>(twice);
+    if (static_cast<float>(c) != twice || (c == 0 && std::signbit(v))) return std::nullopt;
+    odd |= static_cast<uint32_t>(c);
+    lo = std::min(lo, c);
+    hi = std::max(hi, c);
+    has_finite = true;
+  }
+  if (!has_finite) return std::nullopt;
+  IntegerPlan plan;
+  plan.multiplier = (odd & 1) ? 2 : 1;
+  const int shift = plan.multiplier == 2 ? 0 : 1;  // twice-values -> codes
+  plan.min_code = lo >> shift;
+  plan.max_code = hi >> shift;
+  plan.has_inf = has_inf;
+  return plan;
+}
+
+// Offsets o = code - min_code fit in W bytes (the width); deltas between neighbouring offsets
+// are taken modulo 2^(8W) and zigzagged within W bytes, so both choices have the same width and a
+// uint8 field stays one byte per value even where it jumps from 0 to 255.
+template <int W>
+constexpr uint32_t kWidthMask = W == 4 ? ~0u : (1u << (8 * W)) - 1;
+
+template <int W>
+uint32_t zigzag(uint32_t d) {  // d: a W-byte two's complement difference
+  const uint32_t sign = d >> (8 * W - 1) & 1;
+  return ((d << 1) ^ (0u - sign)) & kWidthMask<W>;
+}
+template <int W>
+uint32_t unzigzag(uint32_t z) {
+  return ((z >> 1) ^ (0u - (z & 1))) & kWidthMask<W>;
+}
+
+int width_of(uint32_t range) { return range <= 0xff ? 1 : range <= 0xffff ? 2 : 4; }
+
+// Byte histograms of the W planes of one payload choice, to estimate its entropy-coded size.
+template <int W>
+struct PlaneHistograms {
+  std::array<std::array<uint32_t, 256>, W> counts{};
+
+  void add(uint32_t word) {
+    for (int b = 0; b < W; ++b) ++counts[static_cast<size_t>(b)][word >> (8 * b) & 0xff];
+  }
+  // Order-0 entropy of all planes in bits, up to a term that depends on the value count alone.
+  double bits() const {
+    double sum = 0;
+    for (const auto& plane : counts)
+      for (uint32_t c : plane)
+        if (c > 1) sum -= c * std::log2(static_cast<double>(c));
+    return sum;
+  }
+};
+
+// Smooth fields (values, ranges) give small deltas; sparse fields (errors that are mostly 0 with
+// rare spikes) give smaller offsets, since a delta pays for every spike twice. zstd's Huffman
+// stage sees the byte planes, so their order-0 entropy decides. On all fields of the shared uint8
+// volumes (neghip, ironProt, bolt), bytes per voxel after zstd: deltas only 1.84/1.75/0.61,
+// offsets only 1.84/1.69/0.55, summed bit lengths as the judge 1.76/1.67/0.58, entropy 1.73/1.65/0.57.
+template <int W, class OffsetOf>
+bool deltas_pay_off(size_t n, OffsetOf offset_of) {
+  PlaneHistograms<W> deltas, offsets;
+  uint32_t prev = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t o = offset_of(i);
+    deltas.add(zigzag<W>(o - prev));
+    offsets.add(o);
+    prev = o;
+  }
+  return deltas.bits() <= offsets.bits();
+}
+
+// Appends the integer header after the count, then W byte planes of offsets or of their deltas.
+template <int W, class OffsetOf>
+void append_integer(size_t n, OffsetOf offset_of, const IntegerPlan& plan, uint32_t min_code,
+                    uint32_t inf_code, std::vector<uint8_t>& out) {
+  const bool delta = deltas_pay_off<W>(n, offset_of);
+  put_u8(out, static_cast<uint8_t>(plan.multiplier));
+  put_u8(out, static_cast<uint8_t>(W));
+  put_u8(out, static_cast<uint8_t>((plan.has_inf ? kIntegerHasInf : 0) | (delta ? kIntegerDelta : 0)));
+  put_u32(out, min_code);
+  put_u32(out, inf_code);
+  if (delta) {
+    const auto delta_of = [&](size_t i) { return zigzag<W>(offset_of(i) - (i ? offset_of(i - 1) : 0)); };
+    append_planes<W>(n, delta_of, out);
+  } else {
+    append_planes<W>(n, offset_of, out);
+  }
+}
+
+void encode_integer(std::span<const float> values, const IntegerPlan& plan, std::vector<uint8_t>& out) {
+  const auto min_code = static_cast<uint32_t>(plan.min_code);
+  const auto inf_code = static_cast<uint32_t>(plan.max_code + 1);
+  const float m = static_cast<float>(plan.multiplier);
+  const auto offset_of = [&](size_t i) {
+    const float v = values[i];
+    if (std::bit_cast<uint32_t>(v) == kInfBits) return inf_code - min_code;
+    return static_cast<uint32_t>(static_cast<int32_t>(v * m)) - min_code;
+  };
+  const uint32_t range = (plan.has_inf ? inf_code : static_cast<uint32_t>(plan.max_code)) - min_code;
+  const size_t n = values.size();
+  switch (width_of(range)) {
+    case 1: append_integer<1>(n, offset_of, plan, min_code, inf_code, out); break;
+    case 2: append_integer<2>(n, offset_of, plan, min_code, inf_code, out); break;
+    default: append_integer<4>(n, offset_of, plan, min_code, inf_code, out); break;
+  }
+}
+
+template <int W, bool Delta>
+void decode_codes(const uint8_t* planes, uint32_t min_code, uint32_t inf_code, bool has_inf, float scale,
+                  std::span<float> values) {
+  const size_t n = values.size();
+  uint32_t offset = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t w = word_at<W>(planes, n, i);
+    if constexpr (Delta) {
+      offset = (offset + unzigzag<W>(w)) & kWidthMask<W>;
+    } else {
+      offset = w;
+    }
+    const uint32_t code = min_code + offset;
+    values[i] = has_inf && code == inf_code ? std::numeric_limits<float>::infinity()
+                                            : static_cast<float>(static_cast<int32_t>(code)) * scale;
+  }
+}
+
+template <bool Delta>
+void decode_codes(int width, const uint8_t* planes, uint32_t min_code, uint32_t inf_code, bool has_inf,
+                  float scale, std::span<float> values) {
+  switch (width) {
+    case 1: decode_codes<1, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
+    case 2: decode_codes<2, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
+    default: decode_codes<4, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
+  }
+}
+
+const uint8_t* decode_integer(Reader r, std::span<float> values) {
+  const uint8_t multiplier = r.u8("integer multiplier");
+  if (multiplier != 1 && multiplier != 2)
+    throw IoError("field codec: integer multiplier " + std::to_string(multiplier) + ", expected 1 or 2");
+  const uint8_t width = r.u8("integer width");
+  if (width != 1 && width != 2 && width != 4)
+    throw IoError("field codec: integer width " + std::to_string(width) + ", expected 1, 2 or 4");
+  const uint8_t flags = r.u8("integer flags");
+  if (flags & ~(kIntegerHasInf | kIntegerDelta))
+    throw IoError("field codec: unknown integer flags " + std::to_string(flags));
+  const uint32_t min_code = r.u32("integer minimum code");
+  const uint32_t inf_code = r.u32("integer +inf code");
+  const uint8_t* planes = r.take(values.size() * width, "integer payload");
+  const float scale = multiplier == 2 ? 0.5f : 1.0f;
+  const bool has_inf = flags & kIntegerHasInf;
+  if (flags & kIntegerDelta)
+    decode_codes<true>(width, planes, min_code, inf_code, has_inf, scale, values);
+  else
+    decode_codes<false>(width, planes, min_code, inf_code, has_inf, scale, values);
+  return r.p;
+}
+
+// ---- float: the bit patterns, as little-endian words or as four byte planes ----
+
+// zstd finds exactly repeated values (saturated ranges and errors, quantized data) as 4-byte
+// matches only in whole words; byte planes help where mantissas are noisy and nothing repeats.
+// Measured on hydrogen, noise and algebraic fields with all their records: planes for every field
+// cost 15.0/15.7/11.8 bytes per voxel after zstd, words 9.8/13.4/9.5, this choice 9.8/12.8/9.5.
+bool planes_pay_off(std::span<const float> values) {
+  size_t repeats = 0;
+  for (size_t i = kRepeatWindow; i < values.size(); ++i) {
+    const auto bits = std::bit_cast<uint32_t>(values[i]);
+    bool seen = false;
+    for (size_t lag = 1; lag <= kRepeatWindow; ++lag)
+      seen |= std::bit_cast<uint32_t>(values[i - lag]) == bits;
+    repeats += seen;
+  }
+  return repeats * kRepeatRarity < values.size();
+}
+
+void encode_float(std::span<const float> values, std::vector<uint8_t>& out) {
+  const bool planes = planes_pay_off(values);
+  put_u8(out, planes ? kFloatPlanes : 0);
+  const auto bits_of = [&](size_t i) { return std::bit_cast<uint32_t>(values[i]); };
+  if (planes) {
+    append_planes<4>(values.size(), bits_of, out);
+  } else {
+    append_words(values.size(), bits_of, out);
+  }
+}
+
+const uint8_t* decode_float(Reader r, std::span<float> values) {
+  const uint8_t flags = r.u8("float flags");
+  if (flags & ~kFloatPlanes) throw IoError("field codec: unknown float flags " + std::to_string(flags));
+  const size_t n = values.size();
+  const uint8_t* bytes = r.take(n * 4, "float payload");
+  if (flags & kFloatPlanes) {
+    for (size_t i = 0; i < n; ++i) values[i] = std::bit_cast<float>(word_at<4>(bytes, n, i));
+  } else {
+    for (size_t i = 0; i < n; ++i) {
+      const uint8_t* b = bytes + 4 * i;
+      values[i] = std::bit_cast<float>(uint32_t{b[0]} | uint32_t{b[1]} << 8 | uint32_t{b[2]} << 16 |
+                                       uint32_t{b[3]} << 24);
+    }
+  }
+  return r.p;
+}
+
+}  // namespace
+
+void encode_field(std::span<const float> values, std::vector<uint8_t>& out) {
+  if (!values.empty() && is_constant(values)) {
+    put_u8(out, kModeConstant);
+    put_u64(out, values.size());
+    put_u32(out, std::bit_cast<uint32_t>(values[0]));
+    return;
+  }
+  const std::optional<IntegerPlan> plan = values.empty() ? std::nullopt : plan_integer(values);
+  put_u8(out, plan ? kModeInteger : kModeFloat);
+  put_u64(out, values.size());
+  if (plan)
+    encode_integer(values, *plan, out);
+  else
+    encode_float(values, out);
+}
+
+const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<float> values) {
+  if (p == nullptr || end < p) throw IoError("field codec: no bytes to decode");
+  Reader r{p, end};
+  const uint8_t mode = r.u8("field mode");
+  if (mode != kModeConstant && mode != kModeInteger && mode != kModeFloat)
+    throw IoError("field codec: unknown field mode " + std::to_string(mode));
+  const uint64_t count = r.u64("field count");
+  if (count != values.size())
+    throw IoError("field codec: field holds " + std::to_string(count) + " values, expected " +
+                  std::to_string(values.size()));
+  switch (mode) {
+    case kModeConstant: {
+      const float v = std::bit_cast<float>(r.u32("constant value"));
+      for (float& x : values) x = v;
+      return r.p;
+    }
+    case kModeInteger: return decode_integer(r, values);
+    default: return decode_float(r, values);
+  }
+}
+
+}  // namespace isotope

@@ -1,0 +1,239 @@
+#include "io/store/paged_volume.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+
+#include "engine/extract/adaptive_extract.h"
+#include "engine/core/parallel.h"
+#include "engine/hierarchy/record_builder.h"
+
+namespace isotope {
+namespace {
+
+template <class T>
+T load(T* p) {
+  return std::atomic_ref<T>(*p).load(std::memory_order_relaxed);
+}
+template <class T>
+void store(T* p, T v) {
+  std::atomic_ref<T>(*p).store(v, std::memory_order_relaxed);
+}
+
+}  // namespace
+
+PagedVolume::PagedVolume(BrickCache& cache)
+    : cache_(cache), layout_(cache.store().layout()), header_(cache.store().header()), indexer_(layout_),
+      value_offset_(header_.value_offset), value_scale_(header_.value_scale) {
+  for (int i = 0; i < 256; ++i) spread_[static_cast<size_t>(i)] = spread_bits_3(i);
+  // Templates from a reference vertex of each class on a large lattice, far from its faces: at
+  // scale 0 the shape does not depend on the lattice, and the leaves (children of edge
+  // midpoints) are the same levels below.
+  Lattice reference;
+  reference.k = 10;
+  reference.n = 1024;
+  reference.side = 1025;
+  for (int c = 0; c < 64; ++c) {
+    const Coord v{16 + (c & 3), 16 + (c >> 2 & 3), 16 + (c >> 4 & 3)};
+    if (((v[0] | v[1] | v[2]) & 1) == 0) continue;  // not of scale 0
+    Band0Template& t = band0_templates_[static_cast<size_t>(c)];
+    const Diamond d = diamond_of(v, reference);
+    auto offset = [&](const Coord& p) {
+      return std::array<int8_t, 3>{static_cast<int8_t>(p[0] - v[0]), static_cast<int8_t>(p[1] - v[1]),
+                                   static_cast<int8_t>(p[2] - v[2])};
+    };
+    t.value[0] = offset(d.a), t.value[1] = offset(d.b), t.value[2] = offset(d.v);
+    for (int i = 0; i < d.ring_count; ++i) t.value[static_cast<size_t>(3 + i)] = offset(d.ring[i]);
+    t.values = 3 + d.ring_count;
+    for_each_child(d, reference, [&](const Coord& u) { t.child[static_cast<size_t>(t.children++)] = offset(u); });
+    t.valid = true;
+  }
+}
+
+Coord PagedVolume::Pager::band0_node(int64_t index, uint32_t m) const {
+  const StoreLayout& layout = volume_->layout_;
+  const Band& band = layout.band(0);
+  const int64_t i = index - band.first_brick, t = layout.brick_width();
+  return {(i % band.bricks[0]) * t + compact_bits_3(m), (i / band.bricks[0] % band.bricks[1]) * t + compact_bits_3(m >> 1),
+          (i / (band.bricks[0] * band.bricks[1])) * t + compact_bits_3(m >> 2)};
+}
+
+float PagedVolume::Pager::value_at(const Coord& c) {
+  const auto& dims = volume_->layout_.dims();
+  uint32_t m = 0;
+  const int64_t index =
+      volume_->indexer_.locate(0, std::min(c[0], dims[0] - 1), std::min(c[1], dims[1] - 1), std::min(c[2], dims[2] - 1), &m);
+  return brick(index).values()[m];
+}
+
+Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
+  const StoreLayout& layout = volume_->layout_;
+  const Lattice& lattice = layout.lattice();
+  uint32_t m = 0;
+  const int64_t index = volume_->indexer_.locate(0, v[0], v[1], v[2], &m);
+  const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
+  const Diamond d = diamond_of(v, lattice);
+  DiamondValues dv;
+  DiamondBounds range;
+  const bool inside = read_polyhedron(d, lattice, layout.dims(), [&](const Coord& c) { return value_at(c); }, dv, range);
+  const bool surplus = home->surplus() != nullptr;
+  Saturation sat;
+  for_each_child(d, lattice, [&](const Coord& u) {
+    // Without a record, u's whole diamond lies beyond a face of the data box (as RecordBuilder).
+    for (int a = 0; a < 3; ++a)
+      if (u[a] > record_extent(lattice, layout.dims(), a, 0)) return;
+    uint32_t cm = 0;
+    const int64_t ci = volume_->indexer_.locate(0, u[0], u[1], u[2], &cm);
+    const PackedBounds p = bounds_of(bounds_word(ci, cm));
+    Record c;
+    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound, surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
+    if (topology) {
+      RecordFields held{home->exact() != nullptr, home->paper() != nullptr, home->weights() != nullptr, false};
+      c.topology = this->topology(ci, cm, held);
+    }
+    sat.add(c, range, topology);
+  });
+  CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
+  const Record r = finish_record(dv, shape_of(d, lattice), inside, range, sat, unused, topology);
+  const PackedTopology t = pack_topology(r.topology, r.bounds.error_surplus);
+  if (surplus) store(home->surplus() + m, t.surplus);
+  if (topology) {
+    if (home->exact()) store(home->exact() + m, interval_word(t.exact_lo, t.exact_hi));
+    if (home->paper()) store(home->paper() + m, interval_word(t.paper_lo, t.paper_hi));
+    if (home->weights()) store(home->weights() + m, weights_word(t.weight));
+  }
+  store(home->bounds() + m, isotope::bounds_word(pack_bounds(r.bounds)));  // last: the word others check first
+  return r;
+}
+
+void PagedVolume::Pager::band0_bounds_inside(const Coord& v) {
+  const PagedVolume& pv = *volume_;
+  const Band0Template& t = pv.band0_templates_[static_cast<size_t>((v[0] & 3) | (v[1] & 3) << 2 | (v[2] & 3) << 4)];
+  uint32_t m = 0;
+  const int64_t index = pv.indexer_.locate(0, v[0], v[1], v[2], &m);
+  const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
+  const int64_t mask = pv.layout_.brick_width() - 1;
+  const int64_t lx = v[0] & mask, ly = v[1] & mask, lz = v[2] & mask;
+  // Within one node of the brick's faces, the polyhedron lies in the brick: read it there.
+  const bool local = lx >= 1 && ly >= 1 && lz >= 1 && lx < mask && ly < mask && lz < mask;
+  auto local_index = [&](const std::array<int8_t, 3>& o) {
+    return pv.spread_[static_cast<size_t>(lx + o[0])] | pv.spread_[static_cast<size_t>(ly + o[1])] << 1 |
+           pv.spread_[static_cast<size_t>(lz + o[2])] << 2;
+  };
+  float f[11];
+  for (int i = 0; i < t.values; ++i) {
+    const auto& o = t.value[static_cast<size_t>(i)];
+    f[i] = local ? home->values()[local_index(o)] : value_at({v[0] + o[0], v[1] + o[1], v[2] + o[2]});
+  }
+  // As read_polyhedron and finish_record (engine/hierarchy/record_builder.h) with every vertex in the box.
+  DiamondBounds range{std::min({f[0], f[1], f[2]}), std::max({f[0], f[1], f[2]}), 0, 0};
+  for (int i = 3; i < t.values; ++i) range.lo = std::min(range.lo, f[i]), range.hi = std::max(range.hi, f[i]);
+  const bool surplus = home->surplus() != nullptr;
+  Saturation sat;
+  for (int i = 0; i < t.children; ++i) {
+    const auto& o = t.child[static_cast<size_t>(i)];
+    const Coord u{v[0] + o[0], v[1] + o[1], v[2] + o[2]};
+    uint32_t cm = 0;
+    const int64_t ci = pv.indexer_.locate(0, u[0], u[1], u[2], &cm);
+    const PackedBounds p = bounds_of(bounds_word(ci, cm));
+    Record c;
+    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound, surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
+    sat.add(c, range, false);
+  }
+  const double eta = std::fabs(static_cast<double>(f[2]) - 0.5 * (static_cast<double>(f[0]) + f[1]));
+  range.error_bound = round_up(eta + sat.bound);
+  range.error_surplus = std::max(round_up(eta), sat.surplus);
+  if (surplus) store(home->surplus() + m, bf16_up(range.error_surplus));
+  store(home->bounds() + m, isotope::bounds_word(pack_bounds(range)));
+}
+
+uint64_t PagedVolume::Pager::bounds_word(int64_t index, uint32_t m) {
+  const uint64_t w = load(brick(index).bounds() + m);
+  if (w != kUnsetBounds) return w;
+  const Coord v = band0_node(index, m);
+  const auto& dims = volume_->layout_.dims();
+  if (v[0] >= 1 && v[1] >= 1 && v[2] >= 1 && v[0] + 1 < dims[0] && v[1] + 1 < dims[1] && v[2] + 1 < dims[2])
+    band0_bounds_inside(v);
+  else
+    band0_record(v, false);
+  return load(brick(index).bounds() + m);
+}
+
+Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {
+  CachedBrick& b = brick(index);
+  if (!b.surplus()) volume_->cache_.require(b, index, {false, false, false, true});
+  const Bf16 s = load(b.surplus() + m);
+  if (s != kUnsetSurplus || b.band() != 0) return s;
+  band0_record(band0_node(index, m), false);
+  return load(brick(index).surplus() + m);
+}
+
+DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const RecordFields& read) {
+  CachedBrick* b = &brick(index);
+  if (!b->has(read)) volume_->cache_.require(*b, index, read);
+  constexpr uint32_t kNever = 0x3f80u;  // [1, 0): empty
+  auto words = [&] {
+    return std::array<uint64_t, 3>{read.exact ? load(b->exact() + m) : kNever, read.paper ? load(b->paper() + m) : kNever,
+                                   read.weights ? load(b->weights() + m) : 0};
+  };
+  std::array<uint64_t, 3> w = words();
+  if (b->band() == 0 && ((read.exact && w[0] == kUnsetInterval) || (read.paper && w[1] == kUnsetInterval) ||
+                         (read.weights && w[2] == kUnsetWeights))) {
+    band0_record(band0_node(index, m), true);
+    b = &brick(index);
+    w = words();
+  }
+  return topology_of(static_cast<uint32_t>(w[0]), static_cast<uint32_t>(w[1]), w[2]);
+}
+
+void PagedVolume::Pager::prefetch(int64_t index, uint32_t m) {
+  const Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
+  if (p.index == index) __builtin_prefetch(p.brick->bounds() + m);
+  else volume_->cache_.prefetch(index);
+}
+
+Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats) {
+  return extract_adaptive(volume, options, stats);
+}
+
+Hierarchy load_hierarchy(const PagedVolume& volume, const RecordFields& fields) {
+  const StoreLayout& layout = volume.layout();
+  const StoreHeader& h = volume.cache().store().header();
+  Hierarchy out = Hierarchy::allocate(layout.dims(), layout.brick_bits(), fields);
+  out.set_geometry(h.origin, h.spacing);
+  out.set_value_map(h.value_offset, h.value_scale);
+  PreprocessStats stats;
+  for (int t = 0; t < 3; ++t) stats.critical_paper[t] = h.critical_paper[t], stats.critical_exact[t] = h.critical_exact[t];
+  out.set_stats(stats);
+  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  parallel_for(int64_t{0}, layout.brick_count(), [&](int64_t index) {
+    PagedVolume::Reader reader = volume.reader();
+    PagedVolume::Pager& pager = reader.bricks();
+    const float* values = pager.values(index);
+    std::copy(values, values + nodes, out.values(index));
+    const BrickView to = out.brick(index);
+    const int band = pager.band(index);
+    const auto [j, b] = volume.cache().store().locate_brick(index);
+    const Band& grid = layout.band(j);
+    const int64_t t = layout.brick_width();
+    const Record absent{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, {0, 0, 0}}};
+    for (uint32_t m = 0; m < nodes; ++m) {
+      const Box3 g{b[0] * t + compact_bits_3(m), b[1] * t + compact_bits_3(m >> 1), b[2] * t + compact_bits_3(m >> 2)};
+      const bool in_grid = g[0] < grid.nodes[0] && g[1] < grid.nodes[1] && g[2] < grid.nodes[2];
+      if ((m & 7) == 0 || !in_grid || band == layout.lattice().k) {
+        store_record(to, m, absent);
+        continue;
+      }
+      to.bounds[m] = pager.bounds_word(index, m);
+      if (fields.surplus) to.surplus[m] = pager.surplus(index, m);
+      if (!fields.topology()) continue;
+      const PackedTopology p = pack_topology(pager.topology(index, m, fields), 0);
+      if (to.exact) to.exact[m] = interval_word(p.exact_lo, p.exact_hi);
+      if (to.paper) to.paper[m] = interval_word(p.paper_lo, p.paper_hi);
+      if (to.weights) to.weights[m] = weights_word(p.weight);
+    }
+  });
+  return out;
+}
+
+}  // namespace isotope

@@ -1,0 +1,111 @@
+#pragma once
+// A store as a traversal source (engine/extract/traversal.h): values and records are looked up in the
+// bricks that hold them, through a shared BrickCache, so extraction reads only the bricks its
+// traversal reaches, and of those only the sections its mode reads. A node's value is read from
+// the coarsest band that holds it, and a diamond's record from its own band, so a coarse
+// extraction never touches the finer bands. Band 0's records are not stored: each is computed
+// from the values the first time the traversal reads it, from the compact records of its
+// children (engine/hierarchy/compact_record.h: the same bits as the in-memory build's), and kept in the
+// cached brick for the next reader.
+#include <array>
+#include <cstdint>
+#include <memory>
+
+#include "engine/extract/extract.h"
+#include "engine/hierarchy/hierarchy.h"
+#include "engine/hierarchy/lattice.h"
+#include "io/store/brick_cache.h"
+
+namespace isotope {
+
+class PagedVolume {
+ public:
+  explicit PagedVolume(BrickCache& cache);
+
+  const Lattice& lattice() const { return layout_.lattice(); }
+  const std::array<int64_t, 3>& data_dims() const { return layout_.dims(); }
+  const std::array<double, 3>& origin() const { return header_.origin; }
+  const std::array<double, 3>& spacing() const { return header_.spacing; }
+  double value_offset() const { return value_offset_; }
+  double value_scale() const { return value_scale_; }
+  double error_fold() const { return header_.quantize_bits != 0 ? kQuantizationError : 0.0; }
+  const StoreLayout& layout() const { return layout_; }
+  const BrickIndexer& indexer() const { return indexer_; }
+  BrickCache& cache() const { return cache_; }
+
+  // One per task: pins the bricks it used last (direct-mapped by brick index), so most lookups
+  // touch no shared state at all.
+  class Pager {
+   public:
+    explicit Pager(const PagedVolume& volume) : volume_(&volume) {}
+    const float* values(int64_t index) { return brick(index).values(); }
+    int band(int64_t index) { return brick(index).band(); }
+    uint64_t bounds_word(int64_t index, uint32_t m);
+    Bf16 surplus(int64_t index, uint32_t m);
+    DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read);
+    void prefetch(int64_t index, uint32_t m);
+
+   private:
+    CachedBrick& brick(int64_t index) {
+      Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
+      if (p.index != index) {
+        p.brick = volume_->cache_.get(index);
+        p.index = index;
+      }
+      return *p.brick;
+    }
+    std::shared_ptr<CachedBrick> hold(int64_t index) {
+      brick(index);
+      return pinned_[static_cast<size_t>(index) % pinned_.size()].brick;
+    }
+    // Band 0, computed on first read: v's record, its range and errors (and with `topology` its
+    // intervals and weights), stored into v's brick.
+    Record band0_record(const Coord& v, bool topology);
+    // The same for the range and errors of a vertex whose polyhedron lies in the data box (all but
+    // the box's outer layer of nodes), without building its diamond: a template of its class.
+    void band0_bounds_inside(const Coord& v);
+    float value_at(const Coord& c);  // as MultiresVolume::value: any lattice node, clamped into the data box
+    Coord band0_node(int64_t index, uint32_t m) const;
+
+    struct Pinned {
+      int64_t index = -1;
+      std::shared_ptr<CachedBrick> brick;
+    };
+    const PagedVolume* volume_;
+    std::array<Pinned, 32> pinned_;
+  };
+
+  class Reader : public CompactLookup<Pager> {
+   public:
+    explicit Reader(const PagedVolume& v) : CompactLookup(v.layout(), v.indexer(), Pager(v)) {}
+  };
+  Reader reader() const { return Reader(*this); }
+
+ private:
+  // A scale-0 diamond's shape relative to its vertex, for one class of coordinates mod 4 (the
+  // geometry of a vertex depends only on them: engine/hierarchy/band_tile.h): its polyhedron and the
+  // refinement vertices of its children, as offsets.
+  struct Band0Template {
+    bool valid = false;
+    int values = 0, children = 0;  // polyhedron: a, b, v, then the ring
+    std::array<std::array<int8_t, 3>, 11> value{};
+    std::array<std::array<int8_t, 3>, 12> child{};
+  };
+  BrickCache& cache_;
+  const StoreLayout& layout_;
+  const StoreHeader& header_;
+  BrickIndexer indexer_;
+  double value_offset_ = 0, value_scale_ = 1;
+  std::array<Band0Template, 64> band0_templates_;
+  std::array<uint32_t, 256> spread_{};  // spread_bits_3, by table
+};
+
+// extract() (engine/extract/extract.h) over a store, paged through the volume's cache.
+Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+// The whole store in memory with the record fields asked for, every brick read as an extraction
+// reads it (band 0's records computed from its values): what a store holds, made comparable with
+// Hierarchy::build of its volume. Throws IoError naming a brick that cannot be read.
+Hierarchy load_hierarchy(const PagedVolume& volume, const RecordFields& fields);
+
+}  // namespace isotope

@@ -1,0 +1,397 @@
+#include "io/store/store_format.h"
+
+#include <xxhash.h>
+#include <zstd.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <new>
+#include <span>
+#include <type_traits>
+#include <utility>
+
+#include "io/store/field_codec.h"
+#include "io/file/checked_size.h"
+#include "isotope/error.h"
+
+namespace isotope {
+namespace {
+
+// Little-endian field writer/reader over a byte buffer (the machine is little-endian; memcpy
+// keeps it free of alignment and aliasing trouble).
+class Writer {
+ public:
+  explicit Writer(uint8_t* p) : p_(p) {}
+  template <class T>
+  void put(T v) {
+    std::memcpy(p_, &v, sizeof v);
+    p_ += sizeof v;
+  }
+
+ private:
+  uint8_t* p_;
+};
+
+class Reader {
+ public:
+  explicit Reader(const uint8_t* p) : p_(p) {}
+  template <class T>
+  T get() {
+    T v;
+    std::memcpy(&v, p_, sizeof v);
+    p_ += sizeof v;
+    return v;
+  }
+
+ private:
+  const uint8_t* p_;
+};
+
+constexpr size_t kTypeChars = 16;
+
+// The fields of each section, in order; a bfloat16 field holds floats whose low 16 bits are zero.
+enum class Field { values, lo, hi, bound, exact_lo, exact_hi, w0, w1, w2, paper_lo, paper_hi, surplus };
+std::span<const Field> fields_of(Section s, bool records) {
+  static constexpr Field kCore[] = {Field::values, Field::lo, Field::hi, Field::bound};
+  static constexpr Field kExact[] = {Field::exact_lo, Field::exact_hi};
+  static constexpr Field kWeights[] = {Field::w0, Field::w1, Field::w2};
+  static constexpr Field kExtra[] = {Field::paper_lo, Field::paper_hi, Field::surplus};
+  switch (s) {
+    case Section::core: return records ? std::span<const Field>(kCore) : std::span<const Field>(kCore, 1);
+    case Section::exact: return records ? kExact : std::span<const Field>{};
+    case Section::weights: return records ? kWeights : std::span<const Field>{};
+    case Section::extra: return records ? kExtra : std::span<const Field>{};
+  }
+  return {};
+}
+
+// A record field of Morton code m as a float, and back (the bfloat16 ones from their bits).
+float get_field(const BrickView& b, Field f, uint32_t m) {
+  const PackedBounds p = bounds_of(b.bounds[m]);
+  switch (f) {
+    case Field::values: return b.values[m];
+    case Field::lo: return bf16_to_float(p.lo);
+    case Field::hi: return bf16_to_float(p.hi);
+    case Field::bound: return p.bound;
+    case Field::exact_lo: return bf16_to_float(static_cast<Bf16>(b.exact[m]));
+    case Field::exact_hi: return bf16_to_float(static_cast<Bf16>(b.exact[m] >> 16));
+    case Field::w0: return bf16_to_float(static_cast<Bf16>(b.weights[m]));
+    case Field::w1: return bf16_to_float(static_cast<Bf16>(b.weights[m] >> 16));
+    case Field::w2: return bf16_to_float(static_cast<Bf16>(b.weights[m] >> 32));
+    case Field::paper_lo: return bf16_to_float(static_cast<Bf16>(b.paper[m]));
+    case Field::paper_hi: return bf16_to_float(static_cast<Bf16>(b.paper[m] >> 16));
+    case Field::surplus: return bf16_to_float(b.surplus[m]);
+  }
+  return 0;
+}
+
+
+// zstd contexts kept per thread: ZSTD_compress and ZSTD_decompress make and initialize a context
+// per call, which for small bricks cost more than the (de)compression itself (at level 3, hundreds
+// of KB of tables cleared per brick).
+ZSTD_CCtx* compression_context() {
+  thread_local const std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> context(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  if (!context) throw std::bad_alloc();
+  return context.get();
+}
+ZSTD_DCtx* decompression_context() {
+  thread_local const std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> context(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  if (!context) throw std::bad_alloc();
+  return context.get();
+}
+
+}  // namespace
+
+std::array<bool, kSections> sections_for(const RecordFields& f) {
+  return {true, f.exact, f.weights, f.paper || f.surplus};
+}
+
+uint64_t store_checksum(const void* data, size_t bytes) { return XXH64(data, bytes, 0); }
+
+std::array<uint8_t, kHeaderBytes> encode_header(const StoreHeader& h) {
+  std::array<uint8_t, kHeaderBytes> bytes{};
+  Writer w(bytes.data());
+  for (char c : kStoreMagic) w.put(c);
+  w.put(kStoreVersion);
+  w.put(static_cast<uint32_t>(kHeaderBytes));
+  for (int64_t d : h.dims) w.put(d);
+  for (double d : h.spacing) w.put(d);
+  for (double d : h.origin) w.put(d);
+  w.put(static_cast<uint8_t>(h.brick_bits));
+  w.put(static_cast<uint8_t>(h.lattice_k));
+  w.put(static_cast<uint8_t>(h.zstd_level));
+  w.put(static_cast<uint8_t>(h.quantize_bits));
+  char type[kTypeChars] = {};
+  std::memcpy(type, h.source_type.data(), std::min(h.source_type.size(), kTypeChars - 1));
+  for (char c : type) w.put(c);
+  w.put(h.value_min);
+  w.put(h.value_max);
+  w.put(h.brick_count);
+  for (int64_t c : h.critical_paper) w.put(c);
+  for (int64_t c : h.critical_exact) w.put(c);
+  w.put(h.input_bytes);
+  w.put(h.value_offset);
+  w.put(h.value_scale);
+  Writer table(bytes.data() + kBandTableAt);
+  for (const BandDirectory& d : h.bands) {
+    table.put(d.offset);
+    table.put(d.bytes);
+    table.put(d.checksum);
+  }
+  const uint64_t sum = store_checksum(bytes.data(), kHeaderChecksumAt);
+  std::memcpy(bytes.data() + kHeaderChecksumAt, &sum, sizeof sum);
+  return bytes;
+}
+
+StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& file) {
+  if (size < kHeaderBytes)
+    throw IoError(file + ": not an isotope store (" + std::to_string(size) + " bytes, shorter than the header)");
+  if (std::memcmp(bytes, kStoreMagic.data(), kStoreMagic.size()) != 0)
+    throw IoError(file + ": not an isotope store (wrong magic number)");
+  Reader r(bytes + kStoreMagic.size());
+  const auto version = r.get<uint32_t>();
+  if (version != kStoreVersion)
+    throw IoError(file + ": store format version " + std::to_string(version) + " is not supported (this isotope reads version " +
+                  std::to_string(kStoreVersion) + (version < kStoreVersion ? "; convert the volume again" : "") + ")");
+  uint64_t sum;
+  std::memcpy(&sum, bytes + kHeaderChecksumAt, sizeof sum);
+  if (sum != store_checksum(bytes, kHeaderChecksumAt)) throw IoError(file + ": header checksum mismatch (corrupt header)");
+  if (r.get<uint32_t>() != kHeaderBytes) throw IoError(file + ": header size field is wrong");
+  StoreHeader h;
+  for (int64_t& d : h.dims) d = r.get<int64_t>();
+  for (double& d : h.spacing) d = r.get<double>();
+  for (double& d : h.origin) d = r.get<double>();
+  h.brick_bits = r.get<uint8_t>();
+  h.lattice_k = r.get<uint8_t>();
+  h.zstd_level = r.get<uint8_t>();
+  h.quantize_bits = r.get<uint8_t>();
+  char type[kTypeChars];
+  for (char& c : type) c = r.get<char>();
+  if (type[kTypeChars - 1] != 0) throw IoError(file + ": header holds an unterminated element type");
+  h.source_type = type;
+  h.value_min = r.get<double>();
+  h.value_max = r.get<double>();
+  h.brick_count = r.get<int64_t>();
+  for (int64_t& c : h.critical_paper) c = r.get<int64_t>();
+  for (int64_t& c : h.critical_exact) c = r.get<int64_t>();
+  h.input_bytes = r.get<uint64_t>();
+  h.value_offset = r.get<double>();
+  h.value_scale = r.get<double>();
+  Reader table(bytes + kBandTableAt);
+  for (BandDirectory& d : h.bands) {
+    d.offset = table.get<uint64_t>();
+    d.bytes = table.get<uint64_t>();
+    d.checksum = table.get<uint64_t>();
+  }
+  // Every field within the range the format allows (docs/FORMAT.md, "Header").
+  for (size_t at = 204; at < kBandTableAt; ++at)
+    if (bytes[at] != 0) throw IoError(file + ": header's reserved bytes are not zero");
+  for (size_t at = kBandTableAt + kMaxBands * 24; at < kHeaderChecksumAt; ++at)
+    if (bytes[at] != 0) throw IoError(file + ": header's reserved bytes are not zero");
+  for (int64_t d : h.dims)
+    if (d < 2 || d > (int64_t{1} << 19) + 1) throw IoError(file + ": header holds impossible dimensions");
+  for (int a = 0; a < 3; ++a) {
+    if (!std::isfinite(h.spacing[a]) || !(h.spacing[a] > 0)) throw IoError(file + ": header holds a spacing that is not a positive number");
+    if (!std::isfinite(h.origin[a])) throw IoError(file + ": header holds an origin that is not finite");
+  }
+  if (h.brick_bits < kMinBrickBits || h.brick_bits > kMaxBrickBits) throw IoError(file + ": header holds an impossible brick size");
+  if (h.zstd_level < 1 || h.zstd_level > 19) throw IoError(file + ": header holds an impossible zstd level");
+  if (h.quantize_bits != 0 && h.quantize_bits != 8 && h.quantize_bits != 16)
+    throw IoError(file + ": header holds an impossible quantization");
+  if (!std::isfinite(h.value_offset) || !(h.value_scale > 0) || !std::isfinite(h.value_scale) ||
+      (h.quantize_bits == 0 && (h.value_offset != 0 || h.value_scale != 1)))
+    throw IoError(file + ": header holds an impossible value mapping");
+  if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || !(h.value_min <= h.value_max))
+    throw IoError(file + ": header holds an impossible value range");
+  const StoreLayout layout(h.dims, h.brick_bits);
+  if (layout.lattice().k != h.lattice_k || layout.brick_count() != h.brick_count)
+    throw IoError(file + ": header contradicts itself (levels or brick count do not match the dimensions)");
+  for (int j = 0; j < kMaxBands; ++j) {
+    const BandDirectory& d = h.bands[static_cast<size_t>(j)];
+    const uint64_t expected = j <= h.lattice_k ? static_cast<uint64_t>(layout.band(j).brick_count()) * kEntryBytes : 0;
+    if (d.bytes != expected || (j > h.lattice_k && (d.offset != 0 || d.checksum != 0)))
+      throw IoError(file + ": header gives band " + std::to_string(j) + " a directory that does not match its bricks");
+  }
+  return h;
+}
+
+std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries) {
+  std::vector<uint8_t> bytes(entries.size() * kEntryBytes);
+  Writer w(bytes.data());
+  for (const BrickEntry& e : entries) {
+    w.put(e.offset);
+    for (uint32_t b : e.bytes) w.put(b);
+  }
+  return bytes;
+}
+
+std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
+                                         uint64_t area_end, const std::string& file) {
+  if (size != d.bytes || size != static_cast<uint64_t>(count) * kEntryBytes) throw IoError(file + ": directory is truncated");
+  if (store_checksum(bytes, size) != d.checksum) throw IoError(file + ": directory checksum mismatch (corrupt directory)");
+  std::vector<BrickEntry> entries(static_cast<size_t>(count));
+  Reader r(bytes);
+  for (BrickEntry& e : entries) {
+    e.offset = r.get<uint64_t>();
+    for (uint32_t& b : e.bytes) b = r.get<uint32_t>();
+    if (e.offset < kHeaderBytes || !range_within(e.offset, e.total(), area_end))
+      throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " points outside the brick area");
+    for (uint32_t b : e.bytes)
+      if (b != 0 && b <= kChecksumBytes)
+        throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " gives a section no room");
+  }
+  // The band's bricks tile one run of the file (the writer puts them one after the other): no two
+  // share bytes, since an entry that points into another brick (a copy of one passes every
+  // checksum) would give a silently wrong brick, and none leaves a gap. verify checks that the
+  // bands tile the whole brick area; a band read alone checks its own, sorted by offset (2 M
+  // entries, a 2048^3 volume's band 0: about 140 ms, once per process).
+  std::vector<std::pair<uint64_t, uint32_t>> order;  // an entry of no bytes takes no room: left out
+  order.reserve(entries.size());
+  for (size_t i = 0; i < entries.size(); ++i)
+    if (entries[i].total() != 0) order.emplace_back(entries[i].offset, static_cast<uint32_t>(i));
+  std::sort(order.begin(), order.end());
+  for (size_t i = 1; i < order.size(); ++i) {
+    const BrickEntry& before = entries[order[i - 1].second];
+    const uint64_t end = before.offset + before.total();  // no wrap: checked against the area above
+    if (order[i].first != end)
+      throw IoError(file + ": directory entry " + std::to_string(order[i].second) +
+                    (order[i].first < end ? " overlaps entry " : " leaves a gap after entry ") +
+                    std::to_string(order[i - 1].second) + " (corrupt directory)");
+  }
+  return entries;
+}
+
+BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick) {
+  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  BrickFields out;
+  out.values.assign(brick.values, brick.values + nodes);
+  if (!stores_records(layout, band)) return out;
+  static constexpr Field kOrder[BrickFields::count] = {Field::lo,      Field::hi,       Field::bound, Field::exact_lo,
+                                                        Field::exact_hi, Field::w0,      Field::w1,    Field::w2,
+                                                        Field::paper_lo, Field::paper_hi, Field::surplus};
+  for (int f = 0; f < BrickFields::count; ++f)
+    for (uint32_t m = 0; m < nodes; ++m)
+      if ((m & 7) != 0) out.records[static_cast<size_t>(f)].push_back(get_field(brick, kOrder[f], m));
+  return out;
+}
+
+std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
+                                                         int zstd_level) {
+  const bool records = stores_records(layout, band);
+  auto field_of = [&](Field f) -> const std::vector<float>& {
+    switch (f) {
+      case Field::values: return brick.values;
+      case Field::lo: return brick.records[BrickFields::lo];
+      case Field::hi: return brick.records[BrickFields::hi];
+      case Field::bound: return brick.records[BrickFields::bound];
+      case Field::exact_lo: return brick.records[BrickFields::exact_lo];
+      case Field::exact_hi: return brick.records[BrickFields::exact_hi];
+      case Field::w0: return brick.records[BrickFields::w0];
+      case Field::w1: return brick.records[BrickFields::w1];
+      case Field::w2: return brick.records[BrickFields::w2];
+      case Field::paper_lo: return brick.records[BrickFields::paper_lo];
+      case Field::paper_hi: return brick.records[BrickFields::paper_hi];
+      case Field::surplus: return brick.records[BrickFields::surplus];
+    }
+    return brick.values;
+  };
+  std::array<std::vector<uint8_t>, kSections> out;
+  thread_local std::vector<uint8_t> raw, frame;
+  for (int s = 0; s < kSections; ++s) {
+    const auto fields = fields_of(static_cast<Section>(s), records);
+    if (fields.empty()) continue;
+    raw.clear();
+    for (const Field f : fields) encode_field(field_of(f), raw);
+    frame.resize(std::max(frame.size(), ZSTD_compressBound(raw.size())));  // grown, never cleared again
+    const size_t n = ZSTD_compressCCtx(compression_context(), frame.data(), frame.size(), raw.data(), raw.size(), zstd_level);
+    if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
+    std::vector<uint8_t>& bytes = out[static_cast<size_t>(s)];
+    bytes.resize(kChecksumBytes + n);
+    const uint64_t sum = store_checksum(frame.data(), n);
+    std::memcpy(bytes.data(), &sum, sizeof sum);
+    std::memcpy(bytes.data() + kChecksumBytes, frame.data(), n);
+  }
+  return out;
+}
+
+void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
+                    const BrickView& out, float* values, const std::string& where) {
+  const bool records = stores_records(layout, band);
+  const auto fields = fields_of(s, records);
+  if (fields.empty()) {
+    if (size != 0) throw IoError(where + ": a section this band does not store is not empty");
+    return;
+  }
+  if (size <= kChecksumBytes) throw IoError(where + ": a section is missing");
+  uint64_t sum;
+  std::memcpy(&sum, bytes, sizeof sum);
+  if (store_checksum(bytes + kChecksumBytes, size - kChecksumBytes) != sum) throw IoError(where + ": checksum mismatch (corrupt brick)");
+  const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
+  const uint32_t record_count = nodes - nodes / 8;
+  // Generous: a field never takes more than 4 bytes per value plus a header.
+  const uint64_t limit = fields.size() * (uint64_t{nodes} * 4 + 64);
+  const unsigned long long declared = ZSTD_getFrameContentSize(bytes + kChecksumBytes, size - kChecksumBytes);
+  if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN || declared > limit)
+    throw IoError(where + ": impossible uncompressed size");
+  thread_local std::vector<uint8_t> raw;
+  raw.resize(declared);
+  const size_t n = ZSTD_decompressDCtx(decompression_context(), raw.data(), raw.size(), bytes + kChecksumBytes, size - kChecksumBytes);
+  if (ZSTD_isError(n)) throw IoError(where + ": cannot decompress (" + ZSTD_getErrorName(n) + ")");
+  if (n != raw.size()) throw IoError(where + ": decompressed size differs from the frame's");
+  // The words the section's fields fill part by part start at zero.
+  switch (s) {
+    case Section::core: if (records) std::fill_n(out.bounds, nodes, 0); break;
+    case Section::exact: std::fill_n(out.exact, nodes, 0); break;
+    case Section::weights: std::fill_n(out.weights, nodes, 0); break;
+    case Section::extra: std::fill_n(out.paper, nodes, 0), std::fill_n(out.surplus, nodes, 0); break;
+  }
+  thread_local std::vector<float> field;
+  try {
+    const uint8_t* p = raw.data();
+    const uint8_t* end = raw.data() + raw.size();
+    for (const Field f : fields) {
+      if (f == Field::values) {
+        p = decode_field(p, end, std::span<float>(values, nodes));
+        continue;
+      }
+      field.resize(record_count);
+      p = decode_field(p, end, field);
+      const uint32_t* bits = reinterpret_cast<const uint32_t*>(field.data());
+      // Scatter over the record slots (Morton codes not multiples of 8) into the field's word.
+      auto scatter = [&](auto* words, int shift, bool bf16) {
+        using W = std::remove_pointer_t<decltype(words)>;
+        uint32_t low = 0;
+        size_t i = 0;
+        for (uint32_t base = 0; base < nodes; base += 8)
+          for (uint32_t k = 1; k < 8; ++k, ++i) {
+            low |= bits[i];
+            words[base + k] |= static_cast<W>(static_cast<W>(bf16 ? bits[i] >> 16 : bits[i]) << shift);
+          }
+        if (bf16 && (low & 0xffffu) != 0) throw IoError("a field of bfloat16 codes holds another value");
+      };
+      switch (f) {
+        case Field::lo: scatter(out.bounds, 0, true); break;
+        case Field::hi: scatter(out.bounds, 16, true); break;
+        case Field::bound: scatter(out.bounds, 32, false); break;
+        case Field::exact_lo: scatter(out.exact, 0, true); break;
+        case Field::exact_hi: scatter(out.exact, 16, true); break;
+        case Field::w0: scatter(out.weights, 0, true); break;
+        case Field::w1: scatter(out.weights, 16, true); break;
+        case Field::w2: scatter(out.weights, 32, true); break;
+        case Field::paper_lo: scatter(out.paper, 0, true); break;
+        case Field::paper_hi: scatter(out.paper, 16, true); break;
+        case Field::surplus: scatter(out.surplus, 0, true); break;
+        case Field::values: break;
+      }
+    }
+    if (p != end) throw IoError("trailing bytes after the last field");
+  } catch (const IoError& e) {
+    throw IoError(where + ": " + e.what());
+  }
+}
+
+}  // namespace isotope

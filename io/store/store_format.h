@@ -1,0 +1,111 @@
+#pragma once
+// The .isotope store, version 3 (docs/FORMAT.md): a 1024-byte header with a table of band
+// directories, the bricks, then one directory per band. A brick is up to four sections, each a
+// checksummed zstd frame, so that an extraction reads and decodes only the fields its mode needs:
+// core (values; range and bound of the records), exact intervals, weights, and extra (the paper's
+// intervals and surplus). Everything little-endian, offsets 64-bit. This file turns those bytes
+// into structs and back and checks them; it never touches a file.
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "engine/hierarchy/hierarchy.h"
+#include "engine/hierarchy/store_layout.h"
+
+namespace isotope {
+
+inline constexpr std::array<char, 8> kStoreMagic = {'I', 'S', 'O', 'S', 'T', 'O', 'R', 'E'};
+// 2: three simplification weights per record; 3: compact records in sections, band directories.
+inline constexpr uint32_t kStoreVersion = 3;
+inline constexpr size_t kHeaderBytes = 1024;
+inline constexpr size_t kEntryBytes = 24;
+inline constexpr size_t kBandTableAt = 256;                   // the header's table of band directories
+inline constexpr size_t kHeaderChecksumAt = kHeaderBytes - 8;  // XXH64 of the header's bytes before it
+inline constexpr size_t kChecksumBytes = 8;                   // each section starts with the XXH64 of its frame
+inline constexpr int kMaxBands = 20;        // k <= 19: dims up to 2^19 + 1
+inline constexpr int kMinBrickBits = 3, kMaxBrickBits = 6;
+
+// A brick's sections, in file order.
+enum class Section : int { core = 0, exact = 1, weights = 2, extra = 3 };
+inline constexpr int kSections = 4;
+// Which sections an extraction reading these fields needs besides the core.
+std::array<bool, kSections> sections_for(const RecordFields& f);
+
+struct BandDirectory {
+  uint64_t offset = 0, bytes = 0, checksum = 0;  // XXH64 (seed 0) of the directory's bytes
+};
+
+struct StoreHeader {
+  std::array<int64_t, 3> dims{0, 0, 0};
+  std::array<double, 3> spacing{1, 1, 1};
+  std::array<double, 3> origin{0, 0, 0};
+  int brick_bits = StoreLayout::kDefaultBrickBits;
+  int lattice_k = 0;                 // redundant with dims, checked
+  std::string source_type;           // element type of the input, e.g. "uint16" (at most 15 chars)
+  double value_min = 0, value_max = 0;
+  int64_t brick_count = 0;
+  std::array<int64_t, 3> critical_paper{0, 0, 0}, critical_exact{0, 0, 0};
+  uint64_t input_bytes = 0;          // size of the input's element data, for the ratio
+  int zstd_level = 0;
+  int quantize_bits = 0;             // 0: lossless; else values are codes, value = offset + scale * code
+  double value_offset = 0, value_scale = 1;
+  std::array<BandDirectory, kMaxBands> bands{};
+};
+
+// Half a code step in code units: the rounding of a quantized store's values, which its records
+// (those of the quantized field) do not include; the traversal adds it to every error it compares
+// with eps (engine/extract/traversal.h, SplitRule), so eps still bounds the deviation from the data.
+inline constexpr float kQuantizationError = 0.5f;
+
+struct BrickEntry {
+  uint64_t offset = 0;                       // of the first section
+  std::array<uint32_t, kSections> bytes{};   // each section's size, 0: none
+  uint64_t section_offset(Section s) const {
+    uint64_t at = offset;
+    for (int i = 0; i < static_cast<int>(s); ++i) at += bytes[static_cast<size_t>(i)];
+    return at;
+  }
+  uint64_t total() const { return uint64_t{bytes[0]} + bytes[1] + bytes[2] + bytes[3]; }
+};
+
+uint64_t store_checksum(const void* data, size_t bytes);
+
+std::array<uint8_t, kHeaderBytes> encode_header(const StoreHeader& h);
+// Throws IoError naming `file`: wrong magic, unsupported version (an older one: "convert the volume
+// again"), checksum mismatch, fields out of their range or contradicting each other.
+StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& file);
+
+std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries);
+// One band's directory of `count` entries; every brick must lie in [kHeaderBytes, area_end).
+// Throws IoError naming `file` when the size, checksum or an entry is wrong.
+std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
+                                         uint64_t area_end, const std::string& file);
+
+// Whether band j's bricks have records (bands 1 .. k-1 store them; band 0's are rebuilt from its
+// values, the corners of band k have none).
+inline bool stores_records(const StoreLayout& layout, int j) { return j >= 1 && j < layout.lattice().k; }
+
+// A brick's fields as the encoder takes them: the values (T^3, Morton order) and, for bands that
+// store records, each record field over the record slots (7/8 T^3, Morton order), as the floats
+// their codes stand for (engine/hierarchy/compact_record.h).
+struct BrickFields {
+  enum Record { lo, hi, bound, exact_lo, exact_hi, w0, w1, w2, paper_lo, paper_hi, surplus, count };
+  std::vector<float> values;
+  std::array<std::vector<float>, count> records;
+};
+// The fields of a filled brick (engine/hierarchy/hierarchy.h BrickView, every field present).
+BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick);
+
+// The sections of a brick, each ready to be written: an XXH64 of the zstd frame, then the frame.
+// Sections the band does not store are empty.
+std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
+                                                         int zstd_level);
+
+// Checks a section's checksum, inflates it and decodes its fields into the brick's arrays (those
+// the section holds must be present). Throws IoError starting with `where` ("FILE: brick 12 (band
+// 0, brick 1 0 0)") naming what is wrong.
+void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
+                    const BrickView& out, float* values, const std::string& where);
+
+}  // namespace isotope

@@ -1,0 +1,76 @@
+#pragma once
+// Reading a store (docs/FORMAT.md): the header at open, a band's directory the first time one of
+// its bricks is asked for (a coarse extraction never loads band 0's, nine tenths of them), bricks
+// on demand by pread, section by section (thread-safe), and a full verification.
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "engine/hierarchy/hierarchy.h"
+#include "engine/core/progress.h"
+#include "engine/hierarchy/store_layout.h"
+#include "io/store/store_format.h"
+
+namespace isotope {
+
+class StoreReader {
+ public:
+  // Reads and checks the header. Throws IoError naming the file.
+  explicit StoreReader(const std::string& path);
+  ~StoreReader();
+  StoreReader(const StoreReader&) = delete;
+  StoreReader& operator=(const StoreReader&) = delete;
+
+  const std::string& path() const { return path_; }
+  const StoreHeader& header() const { return header_; }
+  const StoreLayout& layout() const { return layout_; }
+  uint64_t file_bytes() const { return file_bytes_; }
+  // Where the bricks end and the directories begin.
+  uint64_t brick_area_end() const { return area_end_; }
+
+  // Brick `index` of the directory order (engine/hierarchy/store_layout.h). Loads and checks its band's
+  // directory on first use; throws IoError naming the file when that fails.
+  const BrickEntry& entry(int64_t index) const;
+  // Reads the brick's sections that `which` names with as few preads as they take, checks and
+  // decodes them into `out` (whose arrays for those sections must be present; values into
+  // `values`). Returns the bytes read. Throws IoError naming the brick.
+  uint64_t read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out, float* values) const;
+  // Asks the kernel to start reading those sections in the background: a hint that costs no
+  // thread and pays when the file is not in the page cache.
+  void prefetch(int64_t index, const std::array<bool, kSections>& which) const;
+  // "FILE: brick 12 (band 0, brick 1 0 0)"
+  std::string describe_brick(int64_t index) const;
+  // Band and brick coordinates of a directory index.
+  std::pair<int, Box3> locate_brick(int64_t index) const;
+
+ private:
+  const std::vector<BrickEntry>& band_directory(int band) const;
+
+  std::string path_;
+  int fd_ = -1;
+  uint64_t file_bytes_ = 0, area_end_ = 0;
+  StoreHeader header_;
+  StoreLayout layout_;
+  struct LazyDirectory {
+    std::mutex mutex;
+    std::shared_ptr<const std::vector<BrickEntry>> entries;
+  };
+  std::unique_ptr<LazyDirectory[]> directories_;
+};
+
+// True when PATH is a readable file that starts with the store's magic number.
+bool is_store_file(const std::string& path);
+
+// Reads every brick and checks every checksum and the format's invariants (see FORMAT.md,
+// "Verification"). Throws IoError naming the first problem.
+struct VerifyStats {
+  int64_t bricks = 0;
+  uint64_t compressed_bytes = 0;
+};
+VerifyStats verify_store(const std::string& path, const ProgressCallback& progress = {});
+
+}  // namespace isotope

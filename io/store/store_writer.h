@@ -1,0 +1,18 @@
+#pragma once
+// `isotope convert`: a volume on disk -> a store (docs/FORMAT.md), band by band and tile by
+// tile (engine/hierarchy/band_tile.h), so that memory stays within a budget whatever the volume's size.
+#include <atomic>
+#include <cstdint>
+#include <string>
+
+#include "isotope/convert.h"
+#include "engine/hierarchy/store_layout.h"
+#include "io/volume/box_reader.h"
+
+namespace isotope {
+
+// Writes OUTPUT atomically (temporary name, renamed when complete); on any error or
+// cancellation nothing is left behind. Throws IoError.
+ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options);
+
+}  // namespace isotope

@@ -1,0 +1,315 @@
+#include "io/volume/box_reader.h"
+
+#include <fcntl.h>
+#include <hdf5.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstddef>
+#include <filesystem>
+#include <mutex>
+#include <stdexcept>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+#include "io/volume/hdf5_handle.h"
+#include "io/file/input_file.h"
+#include "isotope/error.h"
+#include "io/volume/nrrd_reader.h"
+#include "io/volume/raw_reader.h"
+
+namespace isotope {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Bounds the staging buffer of one read_box call however large the box; a whole number of
+// values of every type.
+constexpr size_t kStageBytes = size_t{1} << 20;
+
+// strerror may share a static buffer between threads; this does not.
+std::string errno_text(int err) { return std::error_code(err, std::generic_category()).message(); }
+
+std::string xyz_text(const std::array<int64_t, 3>& v) {
+  return "(" + std::to_string(v[0]) + "," + std::to_string(v[1]) + "," + std::to_string(v[2]) + ")";
+}
+
+// A size of 0 is inside (it reads nothing). lo + size is never formed, so it cannot overflow.
+void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+               const VolumeInfo& info, const std::string& where) {
+  for (int axis = 0; axis < 3; ++axis) {
+    if (lo[axis] < 0 || size[axis] < 0 || size[axis] > info.dims[axis] - lo[axis]) {
+      throw std::invalid_argument(where + ": box of size " + xyz_text(size) + " at (x,y,z) = " + xyz_text(lo) +
+                                  " is not inside the volume of size " + xyz_text(info.dims));
+    }
+  }
+}
+
+VolumeInfo info_of(ScalarType type, const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
+                   const std::array<double, 3>& origin) {
+  VolumeInfo info;
+  info.dims = dims;
+  info.spacing = spacing;
+  info.origin = origin;
+  info.type = scalar_type_name(type);
+  info.element_bytes = scalar_type_size(type);
+  info.is_integer = type != ScalarType::float32 && type != ScalarType::float64;
+  return info;
+}
+
+// ---------------------------------------------------------------- files
+
+class Fd {
+ public:
+  explicit Fd(int fd) : fd_(fd) {}
+  Fd(Fd&& other) noexcept : fd_(std::exchange(other.fd_, -1)) {}
+  Fd& operator=(Fd&&) = delete;
+  Fd(const Fd&) = delete;
+  Fd& operator=(const Fd&) = delete;
+  ~Fd() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  int get() const { return fd_; }
+
+ private:
+  int fd_;
+};
+
+Fd open_read_only(const std::string& path, const std::string& where) {
+  require_regular_file(path, where, "a volume file");
+  Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  if (fd.get() < 0) throw IoError(where + ": cannot open: " + errno_text(errno));
+  return fd;
+}
+
+// The inflated copy of gzip data: a file created under a unique name in DIR, removed when this
+// is destroyed.
+class InflatedFile {
+ public:
+  // An empty DIR is the working directory, as everywhere else a relative path is.
+  InflatedFile(const std::string& dir, const std::string& purpose)
+      : path_((fs::path(dir) / "isotope-inflated-XXXXXX").string()),
+        fd_(::mkostemp(path_.data(), O_CLOEXEC)) {  // fills in the X's
+    if (fd_.get() < 0) {
+      throw IoError((dir.empty() ? "." : dir) + ": cannot create a scratch file to " + purpose + ": " +
+                    errno_text(errno));
+    }
+  }
+  ~InflatedFile() { ::unlink(path_.c_str()); }
+  InflatedFile(const InflatedFile&) = delete;
+  InflatedFile& operator=(const InflatedFile&) = delete;
+
+  const std::string& path() const { return path_; }
+  int fd() const { return fd_.get(); }
+
+ private:
+  std::string path_;
+  Fd fd_;
+};
+
+void write_fully(int fd, const unsigned char* bytes, size_t size, const std::string& where) {
+  for (size_t done = 0; done < size;) {
+    const ssize_t n = ::write(fd, bytes + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int err = errno;
+      const std::string text = errno_text(err);
+      throw IoError(where + ": write failed: " + (err == ENOSPC || err == EDQUOT ? "disk full (" + text + ")" : text));
+    }
+    done += static_cast<size_t>(n);
+  }
+}
+
+// pread may return less than asked; only 0 (end of file) or an error end the loop early.
+void pread_fully(int fd, unsigned char* out, size_t size, int64_t offset, const std::string& where) {
+  for (size_t done = 0; done < size;) {
+    const int64_t at = offset + static_cast<int64_t>(done);
+    const ssize_t n = ::pread(fd, out + done, size - done, static_cast<off_t>(at));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw IoError(where + ": read failed at byte " + std::to_string(at) + ": " + errno_text(errno));
+    if (n == 0) {
+      throw IoError(where + ": short read: the file ends at byte " + std::to_string(at) + ", before byte " +
+                    std::to_string(offset + static_cast<int64_t>(size)) + " (was it truncated after opening?)");
+    }
+    done += static_cast<size_t>(n);
+  }
+}
+
+// ---------------------------------------------------------------- raw values in a file
+
+struct RawData {
+  int64_t offset = 0;  // byte of node (0, 0, 0)
+  ScalarType type = ScalarType::uint8;
+  bool big_endian = false;
+  std::string name;       // how messages name the volume
+  std::string read_name;  // how read errors name the file read (an inflated copy differs)
+};
+
+// Raw values at a byte offset of one file: each box is read with pread on a descriptor opened
+// once, which needs no lock between threads.
+class RawBoxReader final : public BoxReader {
+ public:
+  RawBoxReader(Fd fd, RawData data, const VolumeInfo& info, std::unique_ptr<InflatedFile> scratch)
+      : scratch_(std::move(scratch)), fd_(std::move(fd)), data_(std::move(data)) {
+    info_ = info;
+  }
+
+  void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                float* out) const override {
+    check_box(lo, size, info_, data_.name);
+    const int64_t total = size[0] * size[1] * size[2];
+    if (total == 0) return;
+    const int64_t run = run_length(size);
+    const size_t elem = static_cast<size_t>(info_.element_bytes);
+    std::vector<unsigned char> stage(std::min(static_cast<size_t>(run) * elem, kStageBytes));
+    const auto& d = info_.dims;
+    for (int64_t done = 0; done < total; done += run) {
+      const int64_t y = lo[1] + done / size[0] % size[1];
+      const int64_t z = lo[2] + done / (size[0] * size[1]);
+      read_run((z * d[1] + y) * d[0] + lo[0], run, out + done, stage);
+    }
+    check_finite(out, lo, size, data_.name);
+  }
+
+ private:
+  // Nodes of the box that are contiguous in the file: a row, or whole planes when the box spans
+  // whole rows, or the whole box when it also spans whole planes.
+  int64_t run_length(const std::array<int64_t, 3>& size) const {
+    if (size[0] != info_.dims[0]) return size[0];
+    if (size[1] != info_.dims[1]) return size[0] * size[1];
+    return size[0] * size[1] * size[2];
+  }
+
+  // COUNT nodes from node index FIRST, through STAGE in pieces when they do not fit.
+  void read_run(int64_t first, int64_t count, float* out, std::vector<unsigned char>& stage) const {
+    const int64_t elem = info_.element_bytes;
+    const int64_t piece = static_cast<int64_t>(stage.size()) / elem;
+    for (int64_t i = 0; i < count; i += piece) {
+      const int64_t n = std::min(piece, count - i);
+      pread_fully(fd_.get(), stage.data(), static_cast<size_t>(n * elem), data_.offset + (first + i) * elem,
+                  data_.read_name);
+      decode_scalars(data_.type, data_.big_endian, stage.data(), static_cast<size_t>(n), out + i);
+    }
+  }
+
+  std::unique_ptr<InflatedFile> scratch_;  // the inflated copy being read, if any
+  Fd fd_;
+  RawData data_;
+};
+
+std::unique_ptr<BoxReader> open_raw(const std::string& path, const RawLayout& layout) {
+  check_raw_file(path, layout);
+  const VolumeInfo info = info_of(layout.type, layout.dims, {1, 1, 1}, {0, 0, 0});
+  return std::make_unique<RawBoxReader>(open_read_only(path, path), RawData{0, layout.type, false, path, path},
+                                        info, nullptr);
+}
+
+// Inflated once into SCRATCH_DIR, with bounded memory, then read like raw NRRD data.
+std::unique_ptr<BoxReader> open_gzip_nrrd(const NrrdLayout& layout, const VolumeInfo& info,
+                                          const std::string& scratch_dir) {
+  auto scratch = std::make_unique<InflatedFile>(scratch_dir, "inflate " + layout.where);
+  const std::string copy = layout.where + ": inflated copy " + scratch->path();
+  stream_nrrd_data(layout, [&](const unsigned char* bytes, size_t size) {
+    write_fully(scratch->fd(), bytes, size, copy);
+  });
+  Fd fd = open_read_only(scratch->path(), copy);
+  RawData data{0, layout.type, layout.big_endian, layout.where, copy};
+  return std::make_unique<RawBoxReader>(std::move(fd), std::move(data), info, std::move(scratch));
+}
+
+std::unique_ptr<BoxReader> open_nrrd(const std::string& path, const std::string& scratch_dir) {
+  const NrrdLayout layout = read_nrrd_layout(path);  // also checks the file holds the data
+  const VolumeInfo info = info_of(layout.type, layout.dims, layout.spacing, layout.origin);
+  if (layout.encoding == NrrdEncoding::gzip) return open_gzip_nrrd(layout, info, scratch_dir);
+  RawData data{layout.data_offset, layout.type, layout.big_endian, layout.where, layout.where};
+  return std::make_unique<RawBoxReader>(open_read_only(layout.data_path, layout.where), std::move(data), info,
+                                        nullptr);
+}
+
+// ---------------------------------------------------------------- HDF5
+
+// HDF5 selects the box as a hyperslab and converts to float itself, undoing chunking and
+// filters; every call holds hdf5_mutex(), so concurrent boxes are read one after the other.
+class Hdf5BoxReader final : public BoxReader {
+ public:
+  Hdf5BoxReader(Hdf5Handle file, Hdf5Handle dataset, std::string where, const VolumeInfo& info)
+      : file_(std::move(file)), dataset_(std::move(dataset)), where_(std::move(where)) {
+    info_ = info;
+  }
+  ~Hdf5BoxReader() override {
+    const std::lock_guard lock(hdf5_mutex());
+    dataset_.close();
+    file_.close();
+  }
+  Hdf5BoxReader(const Hdf5BoxReader&) = delete;
+  Hdf5BoxReader& operator=(const Hdf5BoxReader&) = delete;
+
+  void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                float* out) const override {
+    check_box(lo, size, info_, where_);
+    if (size[0] * size[1] * size[2] == 0) return;
+    read_hyperslab(lo, size, out);
+    check_finite(out, lo, size, where_);
+  }
+
+ private:
+  void read_hyperslab(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const {
+    const hsize_t start[3] = {static_cast<hsize_t>(lo[2]), static_cast<hsize_t>(lo[1]),
+                              static_cast<hsize_t>(lo[0])};
+    const hsize_t count[3] = {static_cast<hsize_t>(size[2]), static_cast<hsize_t>(size[1]),
+                              static_cast<hsize_t>(size[0])};
+    const std::lock_guard lock(hdf5_mutex());  // declared first, so released after the handles close
+    const Hdf5Handle file_space(H5Dget_space(dataset_.get()), H5Sclose);
+    const Hdf5Handle memory_space(H5Screate_simple(3, count, nullptr), H5Sclose);
+    const std::string box = " box of size " + xyz_text(size) + " at (x,y,z) = " + xyz_text(lo);
+    if (!file_space || !memory_space ||
+        H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr) < 0)
+      throw IoError(where_ + ": cannot select the" + box + ": " + hdf5_error_detail());
+    if (H5Dread(dataset_.get(), H5T_NATIVE_FLOAT, memory_space.get(), file_space.get(), H5P_DEFAULT, out) < 0)
+      throw IoError(where_ + ": cannot read the" + box + ": " + hdf5_error_detail());
+  }
+
+  Hdf5Handle file_;
+  Hdf5Handle dataset_;
+  std::string where_;
+};
+
+// "uint16", "int32", "float64", ...: the dataset's type as stored. The caller holds hdf5_mutex().
+void set_hdf5_type(hid_t dataset, const std::string& where, VolumeInfo& info) {
+  const Hdf5Handle type(H5Dget_type(dataset), H5Tclose);
+  if (!type) throw IoError(where + ": cannot read the type: " + hdf5_error_detail());
+  info.is_integer = H5Tget_class(type.get()) == H5T_INTEGER;
+  info.element_bytes = static_cast<int>(H5Tget_size(type.get()));
+  const bool is_unsigned = info.is_integer && H5Tget_sign(type.get()) == H5T_SGN_NONE;
+  info.type = std::string(info.is_integer ? (is_unsigned ? "uint" : "int") : "float") +
+              std::to_string(8 * info.element_bytes);
+}
+
+std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string& dataset) {
+  const std::lock_guard lock(hdf5_mutex());  // declared first, so released after the handles close
+  Hdf5Handle f = open_hdf5_file(file);
+  Hdf5Handle ds = open_hdf5_dataset(f.get(), file, dataset);
+  const std::string where = file + ":" + dataset;
+  VolumeInfo info;
+  info.dims = hdf5_dataset_dims(ds.get(), where);  // also checks the type is numeric
+  checked_node_count(info.dims, static_cast<int>(sizeof(float)), where);
+  read_hdf5_geometry(ds.get(), where, info.spacing, info.origin);
+  set_hdf5_type(ds.get(), where, info);
+  return std::make_unique<Hdf5BoxReader>(std::move(f), std::move(ds), where, info);
+}
+
+}  // namespace
+
+std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir) {
+  const VolumeLocation at = locate_volume(source);
+  switch (at.format) {
+    case VolumeLocation::Format::hdf5: return open_hdf5(at.file, at.dataset);
+    case VolumeLocation::Format::nrrd: return open_nrrd(at.file, scratch_dir);
+    case VolumeLocation::Format::raw: break;
+  }
+  return open_raw(at.file, at.layout);
+}
+
+}  // namespace isotope

@@ -1,0 +1,46 @@
+#pragma once
+// Random access to sub-boxes of a volume on disk, for volumes larger than memory: a reader is
+// opened once and then asked for many boxes (a tile plus its halo), from several threads.
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "io/volume/volume_reader.h"
+
+namespace isotope {
+
+// What a reader knows about its volume without reading any value.
+struct VolumeInfo {
+  std::array<int64_t, 3> dims{0, 0, 0};
+  std::array<double, 3> spacing{1, 1, 1};
+  std::array<double, 3> origin{0, 0, 0};
+  std::string type;         // element type as stored in the file: "uint8", "int16", "float32", ...
+  int element_bytes = 0;    // bytes per element in the file
+  bool is_integer = false;  // integer elements (stored losslessly as float when |v| <= 2^24)
+};
+
+class BoxReader {
+ public:
+  virtual ~BoxReader() = default;
+  const VolumeInfo& info() const { return info_; }
+  // Nodes lo .. lo+size-1 per axis (must lie inside info().dims, else std::invalid_argument),
+  // x fastest then y then z, converted to float, into out[size[0]*size[1]*size[2]].
+  // Safe to call concurrently from several threads. Throws IoError naming the file on a short
+  // read, and naming the global (x, y, z) of the first NaN or infinite value in the box.
+  virtual void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                        float* out) const = 0;
+
+ protected:
+  VolumeInfo info_;
+};
+
+// Same inputs as read_volume: raw (layout from the name or the overrides), FILE.h5:/dataset,
+// FILE.h5 holding a single 3-D dataset, .nrrd/.nhdr. Checks at open what needs no value: the
+// file size against dims * type for raw data, the dataset's existence, rank and type for HDF5.
+// gzip-encoded NRRD cannot be read at random: it is inflated once, streaming, into a temporary
+// raw file inside SCRATCH_DIR, removed when the reader is destroyed or the open fails.
+// Throws IoError naming the file and what is wrong.
+std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir);
+
+}  // namespace isotope

@@ -1,0 +1,28 @@
+#pragma once
+// Opens what a user names on the command line: "vol.raw", "vol.nrrd" or "file.h5:/path/to/dataset".
+#include <optional>
+#include <string>
+
+#include "isotope/volume.h"
+#include "io/volume/raw_reader.h"
+#include "isotope/source.h"  // VolumeSpec
+
+namespace isotope {
+
+// Throws IoError with a message naming the file and what is wrong.
+Volume read_volume(const VolumeSpec& source);
+
+// Where a source's values are, decided from the spec and the overrides without reading them.
+struct VolumeLocation {
+  enum class Format { raw, hdf5, nrrd };
+  Format format = Format::raw;
+  std::string file;
+  std::string dataset;  // hdf5: the dataset, found in the file when the spec names none
+  RawLayout layout;     // raw: dims and type from the overrides or the file name
+};
+
+// What read_volume reads. Throws IoError as read_volume does when the spec names no readable
+// volume (missing file, raw layout unknown, HDF5 file without exactly one 3-D dataset).
+VolumeLocation locate_volume(const VolumeSpec& source);
+
+}  // namespace isotope

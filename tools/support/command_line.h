@@ -1,0 +1,49 @@
+#pragma once
+// What the isotope command's subcommands share: extraction options and inputs read as the command
+// line spells them (through the library's one parser and one opener), numbers in range, and
+// progress on a terminal.
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "isotope/extract.h"  // parse_real: numbers as users type them
+#include "isotope/source.h"
+
+namespace CLI {
+class Validator;
+}
+
+namespace isotope::tools {
+
+// The largest --threads any command accepts: a usage error beyond, with the range in its message.
+inline constexpr int kMaxThreads = 4096;
+
+// A CLI11 check of one extraction option (--NAME) by the parser every face shares
+// (isotope/extract.h): a value out of range is a usage error at parse time, in the same words as
+// `isotope serve` uses.
+CLI::Validator extract_option_check(std::string name);
+// parse_extract_options() with an OptionError turned into a usage error (exit 2) naming --OPTION.
+ExtractOptions parse_command_line_options(const std::vector<std::pair<std::string, std::string>>& given);
+
+// Opens INPUT for extraction as every command does (isotope/source.h): --dims and --type as typed
+// ("" = from the file name), --cache-mb for a store, the allocator kept for bricks, and with
+// PROGRESS the preprocessing bar and a line when the volume is read. --dims or --type that do not
+// apply (a store) or do not parse are usage errors.
+Source open_input(const std::string& path, const std::string& dims, const std::string& type, int64_t cache_mb,
+                  bool progress);
+
+// Wall time since START.
+inline double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Progress and timing lines go to stderr only when it is a terminal and --quiet is not given.
+bool progress_enabled(bool quiet);
+
+// A one-line bar on stderr ("isotope: preprocessing  42%"), redrawn in place, ended at 100%.
+std::function<void(double)> progress_bar(std::string label);
+
+}  // namespace isotope::tools

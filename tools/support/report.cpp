@@ -1,0 +1,205 @@
+// The extraction report and summary line (tools/support/report.h).
+#include "tools/support/report.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <string_view>
+
+#include "io/file/atomic_file.h"
+
+namespace isotope::tools {
+
+namespace {
+
+constexpr ChangeKind kChangeKinds[] = {ChangeKind::lost,           ChangeKind::appeared,       ChangeKind::merged,
+                                       ChangeKind::split,          ChangeKind::rearranged,     ChangeKind::handles_closed,
+                                       ChangeKind::handles_opened, ChangeKind::euler_changed};
+
+int64_t count_of(const ComponentComparison& c, ChangeKind k) {
+  return std::count_if(c.changes.begin(), c.changes.end(), [k](const ComponentChange& ch) { return ch.kind == k; });
+}
+
+nlohmann::ordered_json component_json(const ComponentStats& c) {
+  nlohmann::ordered_json j;
+  j["triangles"] = c.triangles;
+  j["vertices"] = c.vertices;
+  j["euler_characteristic"] = c.euler_characteristic;
+  j["closed"] = c.closed;
+  j["genus"] = c.genus ? nlohmann::ordered_json(*c.genus) : nlohmann::ordered_json(nullptr);
+  j["bbox_min"] = c.bbox_min;
+  j["bbox_max"] = c.bbox_max;
+  j["area"] = c.area;
+  j["volume"] = c.volume ? nlohmann::ordered_json(*c.volume) : nlohmann::ordered_json(nullptr);
+  if (c.closed) j["encloses"] = c.encloses_inside ? "inside" : "outside";
+  return j;
+}
+
+nlohmann::ordered_json components_json(const std::vector<ComponentStats>& components) {
+  nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  for (const ComponentStats& c : components) list.push_back(component_json(c));
+  return list;
+}
+
+// What the adaptive mesh did to the full-resolution surface, group by group.
+nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tolerance, double seconds) {
+  nlohmann::ordered_json j;
+  int64_t triangles = 0, euler = 0;
+  for (const ComponentStats& s : c.full_components) triangles += s.triangles, euler += s.euler_characteristic;
+  j["full"] = {{"triangles", triangles},
+               {"components", c.full_components.size()},
+               {"euler_characteristic", euler}};
+  nlohmann::ordered_json counts;
+  for (ChangeKind k : kChangeKinds) counts[std::string(to_string(k))] = count_of(c, k);
+  counts["unchanged"] = c.matched_unchanged.size();
+  j["summary"] = counts;
+  nlohmann::ordered_json changes = nlohmann::ordered_json::array();
+  for (const ComponentChange& ch : c.changes)
+    changes.push_back({{"kind", std::string(to_string(ch.kind))},
+                       {"full", ch.full},
+                       {"adaptive", ch.adaptive},
+                       {"genus_change", ch.genus_change},
+                       {"euler_change", ch.euler_change}});
+  j["changes"] = changes;
+  j["match_tolerance"] = tolerance;
+  j["seconds"] = seconds;
+  j["samples_matched"] = {{"full", c.full_samples_matched}, {"full_of", c.full_samples},
+                          {"adaptive", c.adaptive_samples_matched}, {"adaptive_of", c.adaptive_samples}};
+  j["full_components"] = components_json(c.full_components);
+  return j;
+}
+
+}  // namespace
+
+std::string comparison_line(const ComponentComparison& c) {
+  std::string line = "against full resolution (" + std::to_string(c.full_components.size()) + " components): ";
+  bool any = false;
+  for (ChangeKind k : kChangeKinds) {
+    const int64_t n = count_of(c, k);
+    if (n == 0) continue;
+    line += (any ? ", " : "") + std::to_string(n) + " " + std::string(to_string(k));
+    any = true;
+  }
+  return line + (any ? "" : "no change") + "; " + std::to_string(c.matched_unchanged.size()) + " unchanged";
+}
+
+void describe(const SourceInfo& info, ExtractionRun& run) {
+  run.data_dims = info.dims;
+  run.spacing = info.spacing;
+  run.lattice_k = info.lattice_k;
+  run.read_seconds = info.read_seconds;
+  run.preprocess_seconds = info.preprocess_seconds;
+  run.input_bytes = info.input_bytes;
+  run.hierarchy_built = info.hierarchy_built;
+  for (int t = 0; t < 3; ++t) {
+    run.preprocess.critical_paper[t] = info.critical_paper[t];
+    run.preprocess.critical_exact[t] = info.critical_exact[t];
+  }
+  run.preprocess.seconds = info.preprocess_seconds;
+  if (!info.store) return;
+  run.cache = {info.bricks_read, info.bytes_read, info.cache_hits, info.cache_peak_bytes};
+  run.cache_mb = info.cache_mb;
+  run.cache_budget_bytes = info.cache_budget_bytes;
+  run.cache_brick_bytes = info.cache_brick_bytes;
+  run.store_bytes = info.store_bytes;
+}
+
+nlohmann::ordered_json report_json(const ExtractionRun& run) {
+  const MeshTopology& t = run.topology;
+  nlohmann::ordered_json j;
+  j["triangles"] = t.triangles;
+  j["vertices"] = t.vertices;
+  j["edges"] = t.edges;
+  j["components"] = t.components;
+  j["euler_characteristic"] = t.euler_characteristic;
+  j["boundary_edges"] = t.boundary_edges;
+  j["nonmanifold_edges"] = t.nonmanifold_edges;
+  j["seconds"] = run.total_seconds();
+  j["threads"] = run.threads;
+  j["peak_rss_mb"] = run.peak_rss_mb;
+  j["bytes_read"] = run.cache_mb > 0 ? run.cache.bytes_read : run.input_bytes;
+  j["bricks_read"] = run.cache.bricks_read;
+  j["cache_hits"] = run.cache.hits;
+
+  j["input"] = run.input;
+  j["output"] = run.output;
+  j["iso"] = run.options.iso;
+  j["eps"] = run.options.eps;
+  j["error"] = std::string(to_string(run.options.error));
+  j["topology"] = std::string(to_string(run.options.topology));
+  if (run.options.topology == TopologyMode::simplify) {
+    j["weight"] = std::string(to_string(run.options.weight));
+    j["delta"] = run.options.delta;
+  }
+  if (run.options.focus) {
+    j["focus"] = run.options.focus->point;
+    j["radius"] = run.options.focus->radius;
+  }
+  if (run.options.max_triangles > 0) {
+    j["max_triangles"] = run.options.max_triangles;
+    j["chosen_eps"] = run.extract.chosen_eps;
+    j["next_eps"] = run.extract.next_eps;
+    j["next_triangles"] = run.extract.next_triangles;
+  }
+  if (run.extract.chosen_delta >= 0) {
+    j["chosen_delta"] = run.extract.chosen_delta;
+    j["delta_floor_triangles"] = run.extract.delta_floor_triangles;
+    j["tets_dropped"] = run.extract.tets_simplified;
+  }
+  j["data_dims"] = run.data_dims;
+  j["lattice_k"] = run.lattice_k;
+  j["lattice_side"] = (int64_t{1} << run.lattice_k) + 1;
+
+  j["read_seconds"] = run.read_seconds;
+  j["preprocess_seconds"] = run.preprocess_seconds;
+  j["extract_seconds"] = run.extract_seconds;
+  j["measure_seconds"] = run.measure_seconds;
+
+  const PreprocessStats& p = run.preprocess;
+  if (!run.hierarchy_built) j["preprocess"] = nullptr;
+  else j["preprocess"] = {
+      {"seconds", p.seconds},
+      {"critical_paper", {{"cube", p.critical_paper[0]}, {"octahedron", p.critical_paper[1]}, {"diamond", p.critical_paper[2]}}},
+      {"critical_exact", {{"cube", p.critical_exact[0]}, {"octahedron", p.critical_exact[1]}, {"diamond", p.critical_exact[2]}}},
+  };
+  j["extract"] = {
+      {"seconds", run.extract.seconds},
+      {"tets_visited", run.extract.tets_visited},
+      {"tets_emitted", run.extract.tets_emitted},
+      {"tets_simplified", run.extract.tets_simplified},
+  };
+  j["per_component"] = components_json(run.components);
+  if (run.comparison) j["compare_full"] = comparison_json(*run.comparison, run.compare_tolerance, run.compare_seconds);
+  if (run.cache_mb > 0)
+    j["cache"] = {{"budget_mb", run.cache_mb},
+                  {"effective_budget_mb", static_cast<double>(run.cache_budget_bytes) / (1 << 20)},
+                  {"brick_mb", static_cast<double>(run.cache_brick_bytes) / (1 << 20)},
+                  {"peak_decoded_mb", static_cast<double>(run.cache.peak_bytes) / (1 << 20)},
+                  {"store_bytes", run.store_bytes}};
+  return j;
+}
+
+std::string summary_line(const ExtractionRun& run) {
+  const MeshTopology& t = run.topology;
+  std::string chosen = run.options.max_triangles > 0 ? "; eps " + std::to_string(run.extract.chosen_eps) : "";
+  if (run.extract.chosen_delta >= 0) chosen += ", delta " + std::to_string(run.extract.chosen_delta);
+  char buf[640];
+  std::snprintf(buf, sizeof buf,
+                "%s: %lld triangles, %lld vertices, %lld component%s, chi %lld, %lld boundary / %lld "
+                "non-manifold edges; preprocess %.3f s, extract %.3f s%s",
+                run.output.c_str(), static_cast<long long>(t.triangles), static_cast<long long>(t.vertices),
+                static_cast<long long>(t.components), t.components == 1 ? "" : "s",
+                static_cast<long long>(t.euler_characteristic), static_cast<long long>(t.boundary_edges),
+                static_cast<long long>(t.nonmanifold_edges), run.preprocess_seconds, run.extract_seconds,
+                chosen.c_str());
+  return buf;
+}
+
+void write_json_file(const nlohmann::ordered_json& json, const std::string& path) {
+  const std::string text = json.dump(2) + "\n";
+  AtomicFile file(path);
+  file.write(text.data(), text.size());
+  file.commit();
+}
+
+}  // namespace isotope::tools

@@ -1,0 +1,61 @@
+#pragma once
+// What one extraction produced, as a JSON report (extract --report) and a one-line summary.
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <nlohmann/json_fwd.hpp>
+#include <string>
+#include <vector>
+
+#include "engine/topology/component_report.h"
+#include "engine/extract/extract.h"
+#include "isotope/mesh.h"
+#include "engine/hierarchy/multires_volume.h"
+#include "engine/extract/options.h"
+#include "io/store/brick_cache.h"
+#include "isotope/source.h"
+
+namespace isotope::tools {
+
+struct ExtractionRun {
+  std::string input;
+  std::string output;
+  ExtractOptions options;
+  std::array<int64_t, 3> data_dims{0, 0, 0};
+  std::array<double, 3> spacing{1, 1, 1};
+  int lattice_k = 0;
+  PreprocessStats preprocess;
+  bool hierarchy_built = true;  // raw input at eps 0 needs none (isotope/source.h)
+  ExtractStats extract;
+  MeshTopology topology;
+  std::vector<ComponentStats> components;        // with --report
+  std::optional<ComponentComparison> comparison;  // with --compare-full
+  double compare_tolerance = 0;
+  double compare_seconds = 0;  // --compare-full: the full-resolution extraction and the matching
+  int threads = 1;
+  double peak_rss_mb = 0;
+  BrickCacheStats cache;        // store input: what the brick cache read and served
+  int64_t cache_mb = 0;         // store input: its budget (0: not a store)
+  uint64_t cache_budget_bytes = 0;  // store input: the budget in effect (BrickCache::kMinBricks)
+  uint64_t cache_brick_bytes = 0;   // store input: a brick decoded whole, the cache's largest entry
+  uint64_t store_bytes = 0;     // store input: the file's size
+  uint64_t input_bytes = 0;     // other input: the values read (as float)
+  double read_seconds = 0, preprocess_seconds = 0, extract_seconds = 0, measure_seconds = 0;
+  double total_seconds() const { return read_seconds + preprocess_seconds + extract_seconds + measure_seconds; }
+};
+
+// Fills what the run's report says of the input (SourceInfo, isotope/source.h): dimensions,
+// spacing, lattice, preprocessing and its timings, and for a store the cache's budget and what it
+// has read so far.
+void describe(const SourceInfo& info, ExtractionRun& run);
+
+// The report: the counts the issue asks for at top level, then inputs, timings, engine stats.
+nlohmann::ordered_json report_json(const ExtractionRun& run);
+// "MESH.ply: 1234 triangles, 620 vertices, 1 component, chi 2, ..." for stdout.
+std::string summary_line(const ExtractionRun& run);
+// "against full resolution (12 components): 3 lost, 1 merged; 8 unchanged" for stdout.
+std::string comparison_line(const ComponentComparison& c);
+// Pretty-printed, atomically (temporary file + rename); throws IoError.
+void write_json_file(const nlohmann::ordered_json& json, const std::string& path);
+
+}  // namespace isotope::tools
