@@ -31,10 +31,10 @@
 #include "bench/bench_support.h"
 #include "engine/core/fields.h"
 #include "engine/hierarchy/store_layout.h"
-#include "isotope/volume.h"
+#include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
-#include "io/store/store_writer.h"
+#include "isotope/volume.h"
 
 namespace {
 
@@ -98,7 +98,6 @@ const isotope::BoxReader& reader_of(Input d) {
   throw std::logic_error("unknown input");
 }
 
-
 // THREADS = 1 or the machine's core count, held for the whole timed loop.
 tbb::global_control thread_cap(int threads) {
   return tbb::global_control(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
@@ -118,8 +117,8 @@ void set_rate_counters(benchmark::State& state, const isotope::VolumeInfo& info,
   state.counters["voxels_per_second"] = benchmark::Counter(
       static_cast<double>(info.dims[0] * info.dims[1] * info.dims[2]) * iterations, benchmark::Counter::kIsRate);
   state.counters["size_ratio"] = output_bytes / static_cast<double>(input);
-  state.counters["threads"] = static_cast<double>(
-      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  state.counters["threads"] =
+      static_cast<double>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
 // ---- Ceiling: read + compress the same bytes in the same tiles ---------------------------------
@@ -153,8 +152,7 @@ constexpr int64_t kBrickWidth = int64_t{1} << isotope::StoreLayout::kDefaultBric
 // One band-0 tile as the converter reads it: C^3 bricks of 32^3 plus a halo of two nodes, clipped
 // to the volume, in one read_box. Each brick's core is narrowed to the element type and compressed
 // on its own, as the store compresses bricks; returns the compressed bytes of the tile.
-size_t read_and_compress_tile(const isotope::BoxReader& reader, isotope::ScalarType type, int64_t c,
-                              const Box3& tile) {
+size_t read_and_compress_tile(const isotope::BoxReader& reader, isotope::ScalarType type, int64_t c, const Box3& tile) {
   const auto& dims = reader.info().dims;
   const int64_t t = kBrickWidth;
   Box3 lo{}, size{}, core_hi{};
@@ -264,8 +262,8 @@ void register_benchmarks() {
           ->UseRealTime()
           ->MinTime(0.5);
       for (const int64_t tile_bricks : {1, 4}) {
-        const std::string name = "BM_ConvertCeiling/" + std::string(input_name(d)) + "/tile:" +
-                                 std::to_string(tile_bricks * kBrickWidth) + threads_name;
+        const std::string name = "BM_ConvertCeiling/" + std::string(input_name(d)) +
+                                 "/tile:" + std::to_string(tile_bricks * kBrickWidth) + threads_name;
         benchmark::RegisterBenchmark(name.c_str(), BM_ConvertCeiling, d, tile_bricks, threads)
             ->Unit(benchmark::kMillisecond)
             ->UseRealTime()

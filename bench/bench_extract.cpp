@@ -24,33 +24,33 @@
 #include <string>
 #include <vector>
 
-#include "engine/hierarchy/critical_table.h"
-#include "engine/hierarchy/diamond.h"
-#include "engine/extract/extract.h"
 #include "bench/bench_support.h"
 #include "engine/core/fields.h"
-#include "isotope/mesh.h"
-#include "engine/hierarchy/multires_volume.h"
+#include "engine/extract/extract.h"
 #include "engine/extract/options.h"
+#include "engine/hierarchy/critical_table.h"
+#include "engine/hierarchy/diamond.h"
+#include "engine/hierarchy/multires_volume.h"
 #include "engine/hierarchy/record.h"
-#include "isotope/volume.h"
-#include "io/volume/box_reader.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
-#include "io/volume/raw_reader.h"
 #include "io/store/store_format.h"
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
+#include "io/volume/box_reader.h"
+#include "io/volume/raw_reader.h"
+#include "isotope/mesh.h"
+#include "isotope/volume.h"
 
 namespace {
 
 using isotope::ExtractOptions;
-using isotope::bench::prepare;
 using isotope::ExtractStats;
 using isotope::Mesh;
 using isotope::MultiresVolume;
 using isotope::TopologyMode;
 using isotope::Volume;
+using isotope::bench::prepare;
 
 // Minimum wall time of each timed benchmark. The heavy cases (257^3 at eps 0, preprocessing) run
 // one or two iterations either way; the light ones still get hundreds. Kept short so the whole
@@ -138,7 +138,6 @@ const MultiresVolume& multires_of(Dataset d) {
   throw std::logic_error("unknown dataset");
 }
 
-
 // ---- Stores, each converted once per process -------------------------------------------------
 
 const std::filesystem::path& store_dir() {
@@ -197,7 +196,6 @@ uint64_t decoded_bytes_of(Dataset d, double eps) {
   return bytes;
 }
 
-
 void set_triangle_counters(benchmark::State& state, int64_t total_triangles) {
   const auto t = static_cast<double>(total_triangles);
   state.counters["triangles"] = benchmark::Counter(t, benchmark::Counter::kAvgIterations);
@@ -207,9 +205,9 @@ void set_triangle_counters(benchmark::State& state, int64_t total_triangles) {
 // The data's voxels per wall-clock second, whatever the extraction touched: a coarse eps
 // "processes" the same volume faster, which is the point of adaptivity.
 void set_voxel_rate(benchmark::State& state, const std::array<int64_t, 3>& dims) {
-  state.counters["voxels_per_second"] = benchmark::Counter(
-      static_cast<double>(dims[0] * dims[1] * dims[2]) * static_cast<double>(state.iterations()),
-      benchmark::Counter::kIsRate);
+  state.counters["voxels_per_second"] =
+      benchmark::Counter(static_cast<double>(dims[0] * dims[1] * dims[2]) * static_cast<double>(state.iterations()),
+                         benchmark::Counter::kIsRate);
 }
 
 // oneTBB capped at THREADS for as long as the result lives: the whole timed loop.
@@ -218,8 +216,8 @@ tbb::global_control thread_cap(int threads) {
 }
 
 void set_thread_counter(benchmark::State& state) {
-  state.counters["threads"] = static_cast<double>(
-      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  state.counters["threads"] =
+      static_cast<double>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
 // ---- Benchmarks -------------------------------------------------------------------------------
@@ -273,7 +271,8 @@ enum class PagedBudget { full, eighth, eighth_reached };
 // A brick's core decoded (io/store/brick_cache.h): values and the bounds word of every node.
 uint64_t store_decoded_bytes(const isotope::StoreReader& store) {
   const isotope::StoreLayout& l = store.layout();
-  return static_cast<uint64_t>(l.brick_count()) * static_cast<uint64_t>(l.brick_nodes() * (sizeof(float) + sizeof(uint64_t)));
+  return static_cast<uint64_t>(l.brick_count()) *
+         static_cast<uint64_t>(l.brick_nodes() * (sizeof(float) + sizeof(uint64_t)));
 }
 
 void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget which, int threads) {
@@ -395,16 +394,14 @@ void BM_Preprocess(benchmark::State& state, Dataset d, int threads) {
     state.ResumeTiming();
   }
   state.counters["voxels_per_second"] = benchmark::Counter(
-      static_cast<double>(volume->node_count()) * static_cast<double>(state.iterations()),
-      benchmark::Counter::kIsRate);
+      static_cast<double>(volume->node_count()) * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
   state.counters["lattice_nodes"] = static_cast<double>(lattice_nodes);
   set_thread_counter(state);
 }
 
 // is_critical_pattern() over every pattern of the three polyhedron types (2^8 + 2^6 + 2^10).
 void BM_CriticalTableLookup(benchmark::State& state) {
-  constexpr isotope::PolyhedronType types[] = {isotope::PolyhedronType::cube,
-                                               isotope::PolyhedronType::octahedron,
+  constexpr isotope::PolyhedronType types[] = {isotope::PolyhedronType::cube, isotope::PolyhedronType::octahedron,
                                                isotope::PolyhedronType::diamond};
   int64_t patterns = 0;
   for (const auto type : types) patterns += int64_t{1} << (isotope::ring_size(type) + 2);
@@ -507,8 +504,7 @@ void register_benchmarks() {
           ->Unit(benchmark::kMillisecond)
           ->UseRealTime()
           ->MinTime(kMinSeconds);
-  benchmark::RegisterBenchmark("BM_CriticalTableLookup", BM_CriticalTableLookup)
-      ->Unit(benchmark::kMicrosecond);
+  benchmark::RegisterBenchmark("BM_CriticalTableLookup", BM_CriticalTableLookup)->Unit(benchmark::kMicrosecond);
 }
 
 }  // namespace

@@ -1,9 +1,9 @@
 // From an array in memory (a simulation's field) to a mesh: a sphere of radius 0.6 sampled on a
 // 65^3 grid, extracted at full resolution and coarse, both with their topology measured.
-#include <isotope/isotope.h>
-
 #include <cmath>
 #include <cstdio>
+
+#include <isotope/isotope.h>
 
 int main(int argc, char** argv) {
   const int n = 65;

@@ -1,9 +1,9 @@
 // From a file to a mesh: extract_file VOLUME ISO MESH.ply [EPS]. VOLUME is anything isotope reads
 // (NAME_XxYxZ_TYPE.raw, FILE.h5:/dataset, .nrrd, a store made by `isotope convert`).
-#include <isotope/isotope.h>
-
 #include <cstdio>
 #include <cstdlib>
+
+#include <isotope/isotope.h>
 
 int main(int argc, char** argv) {
   if (argc < 4) return std::fprintf(stderr, "usage: extract_file VOLUME ISO MESH.ply [EPS]\n"), 2;

@@ -6,8 +6,8 @@
 #include <string>
 
 #include "fuzz/fuzz_temp_file.h"
-#include "isotope/error.h"
 #include "io/volume/nrrd_reader.h"
+#include "isotope/error.h"
 
 namespace {
 struct RemoveAtExit {

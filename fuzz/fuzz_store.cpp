@@ -16,10 +16,10 @@
 #include "engine/extract/options.h"
 #include "fuzz/fuzz_temp_file.h"
 #include "io/store/brick_cache.h"
-#include "isotope/error.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_format.h"
 #include "io/store/store_reader.h"
+#include "isotope/error.h"
 
 namespace {
 

@@ -12,7 +12,8 @@ namespace isotope::fuzz {
 
 inline std::string temp_path(const std::string& suffix) {
   const char* dir = std::getenv("TMPDIR");
-  return std::string(dir != nullptr && *dir != 0 ? dir : "/tmp") + "/isotope-fuzz-" + std::to_string(::getpid()) + suffix;
+  return std::string(dir != nullptr && *dir != 0 ? dir : "/tmp") + "/isotope-fuzz-" + std::to_string(::getpid()) +
+         suffix;
 }
 
 inline void write_whole(const std::string& path, const uint8_t* data, size_t size) {

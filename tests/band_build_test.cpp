@@ -5,8 +5,8 @@
 
 #include <cstring>
 
-#include "engine/hierarchy/band_tile.h"
 #include "engine/core/fields.h"
+#include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
@@ -58,8 +58,8 @@ int64_t check_banded(const Volume& volume, int brick_bits) {
                                        std::min(g[2], in.nodes[2] - 1)})];
                 }
                 tile.values()[static_cast<size_t>((z * s[1] + y) * s[0] + x)] = v;
-                if (j > 0 && x + 1 < s[0] && y + 1 < s[1] && z + 1 < s[2] && g[0] < in.nodes[0] &&
-                    g[1] < in.nodes[1] && g[2] < in.nodes[2])
+                if (j > 0 && x + 1 < s[0] && y + 1 < s[1] && z + 1 < s[2] && g[0] < in.nodes[0] && g[1] < in.nodes[1] &&
+                    g[2] < in.nodes[2])
                   tile.children()[static_cast<size_t>((z * (s[1] - 1) + y) * (s[0] - 1) + x)] = in.children[in.at(g)];
               }
           CriticalCounts counts = {{0, 0, 0}, {0, 0, 0}};

@@ -1,6 +1,8 @@
 // The box reader: any box of any source (raw, HDF5 contiguous or chunked and compressed, NRRD
 // attached, detached, big-endian or gzip) equals the same nodes of read_volume, also when read
 // from several threads at once, and every bad box or file is rejected with a message that says where.
+#include "io/volume/box_reader.h"
+
 #include <gtest/gtest.h>
 #include <hdf5.h>
 #include <zlib.h>
@@ -21,9 +23,8 @@
 #include <thread>
 #include <vector>
 
-#include "io/volume/box_reader.h"
-#include "isotope/error.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/error.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
@@ -56,11 +57,10 @@ using BoxReaderTest = testing::TempDirTest;
 // Every element of a float32 file with its bytes reversed.
 Bytes swapped_floats(const Bytes& little) {
   Bytes out = little;
-  for (size_t i = 0; i + 4 <= out.size(); i += 4) std::reverse(out.begin() + static_cast<std::ptrdiff_t>(i),
-                                                               out.begin() + static_cast<std::ptrdiff_t>(i + 4));
+  for (size_t i = 0; i + 4 <= out.size(); i += 4)
+    std::reverse(out.begin() + static_cast<std::ptrdiff_t>(i), out.begin() + static_cast<std::ptrdiff_t>(i + 4));
   return out;
 }
-
 
 // "NRRD0004", the fields of a 3-D volume, EXTRA fields, and the blank line that ends the header.
 std::string nrrd_header(const std::string& sizes, const std::string& type, const std::string& encoding,
@@ -97,8 +97,8 @@ struct Box {
 
 std::string box_text(const Box& b) {
   return "box lo (" + std::to_string(b.lo[0]) + "," + std::to_string(b.lo[1]) + "," + std::to_string(b.lo[2]) +
-         ") size (" + std::to_string(b.size[0]) + "," + std::to_string(b.size[1]) + "," +
-         std::to_string(b.size[2]) + ")";
+         ") size (" + std::to_string(b.size[0]) + "," + std::to_string(b.size[1]) + "," + std::to_string(b.size[2]) +
+         ")";
 }
 
 int64_t box_nodes(const Box& b) { return b.size[0] * b.size[1] * b.size[2]; }
@@ -133,22 +133,22 @@ std::vector<Box> test_boxes(const Xyz& d, uint64_t seed) {
   std::mt19937_64 rng(seed);
   const Xyz corner = {std::min<int64_t>(d[0], 5), std::min<int64_t>(d[1], 6), std::min<int64_t>(d[2], 7)};
   std::vector<Box> boxes = {
-      {{0, 0, 0}, d},                                      // whole volume: one contiguous run
-      {{0, 0, 0}, {1, 1, 1}},                              // first node
-      {{d[0] - 1, d[1] - 1, d[2] - 1}, {1, 1, 1}},         // last node
-      {{d[0] / 2, d[1] / 3, d[2] / 4}, {1, 1, 1}},         // one inner node
-      {{0, d[1] / 2, d[2] / 2}, {d[0], 1, 1}},             // one whole row
-      {{1, d[1] - 1, 0}, {d[0] - 2, 1, 1}},                // part of a row
-      {{0, 0, d[2] / 2}, {d[0], d[1], 1}},                 // one whole plane
-      {{0, 0, 1}, {d[0], d[1], d[2] - 2}},                 // whole planes
-      {{0, 1, 2}, {d[0], d[1] - 2, 3}},                    // whole rows, part of planes
-      {{d[0] / 2, 0, 0}, {1, d[1], d[2]}},                 // an x = const slice: a node per row
-      {{0, 0, 0}, {d[0], d[1], 1}},                        // face z = 0
-      {{0, 0, d[2] - 1}, {d[0], d[1], 1}},                 // face z = max
-      {{0, 0, 0}, {d[0], 1, d[2]}},                        // face y = 0
-      {{0, d[1] - 1, 0}, {d[0], 1, d[2]}},                 // face y = max
-      {{0, 0, 0}, {1, d[1], d[2]}},                        // face x = 0
-      {{d[0] - 1, 0, 0}, {1, d[1], d[2]}},                 // face x = max
+      {{0, 0, 0}, d},                                                    // whole volume: one contiguous run
+      {{0, 0, 0}, {1, 1, 1}},                                            // first node
+      {{d[0] - 1, d[1] - 1, d[2] - 1}, {1, 1, 1}},                       // last node
+      {{d[0] / 2, d[1] / 3, d[2] / 4}, {1, 1, 1}},                       // one inner node
+      {{0, d[1] / 2, d[2] / 2}, {d[0], 1, 1}},                           // one whole row
+      {{1, d[1] - 1, 0}, {d[0] - 2, 1, 1}},                              // part of a row
+      {{0, 0, d[2] / 2}, {d[0], d[1], 1}},                               // one whole plane
+      {{0, 0, 1}, {d[0], d[1], d[2] - 2}},                               // whole planes
+      {{0, 1, 2}, {d[0], d[1] - 2, 3}},                                  // whole rows, part of planes
+      {{d[0] / 2, 0, 0}, {1, d[1], d[2]}},                               // an x = const slice: a node per row
+      {{0, 0, 0}, {d[0], d[1], 1}},                                      // face z = 0
+      {{0, 0, d[2] - 1}, {d[0], d[1], 1}},                               // face z = max
+      {{0, 0, 0}, {d[0], 1, d[2]}},                                      // face y = 0
+      {{0, d[1] - 1, 0}, {d[0], 1, d[2]}},                               // face y = max
+      {{0, 0, 0}, {1, d[1], d[2]}},                                      // face x = 0
+      {{d[0] - 1, 0, 0}, {1, d[1], d[2]}},                               // face x = max
       {{d[0] - corner[0], d[1] - corner[1], d[2] - corner[2]}, corner},  // the far corner
   };
   for (int i = 0; i < 24; ++i) boxes.push_back(random_box(d, rng));
@@ -163,8 +163,8 @@ void expect_boxes_match(const BoxReader& r, const Volume& expected, uint64_t see
     const std::vector<float> got = read(r, b);
     const std::vector<float> want = cut(expected, b);
     const auto diff = std::mismatch(got.begin(), got.end(), want.begin());
-    EXPECT_TRUE(diff.first == got.end()) << "first difference at box index " << diff.first - got.begin()
-                                         << ": read " << *diff.first << ", expected " << *diff.second;
+    EXPECT_TRUE(diff.first == got.end()) << "first difference at box index " << diff.first - got.begin() << ": read "
+                                         << *diff.first << ", expected " << *diff.second;
   }
 }
 
@@ -445,8 +445,8 @@ TEST_F(BoxReaderTest, ConcurrentHdf5ReadsEqualSequentialReadsAlongsideReadVolume
 
 TEST_F(BoxReaderTest, NanInABoxIsNamedByItsGlobalCoordinates) {
   std::vector<float> values(9 * 8 * 7, 1.5f);
-  values[(5 * 8 + 4) * 9 + 3] = std::numeric_limits<float>::quiet_NaN();    // (3, 4, 5)
-  values[(6 * 8 + 7) * 9 + 8] = std::numeric_limits<float>::infinity();     // (8, 7, 6)
+  values[(5 * 8 + 4) * 9 + 3] = std::numeric_limits<float>::quiet_NaN();  // (3, 4, 5)
+  values[(6 * 8 + 7) * 9 + 8] = std::numeric_limits<float>::infinity();   // (8, 7, 6)
   const std::string raw = path("nan_9x8x7_float32.raw");
   write_file(raw, "", bytes_of(values, std::endian::little));
   const std::string h5 = path("nan.h5");
@@ -487,9 +487,14 @@ TEST_F(BoxReaderTest, BoxOutsideTheVolumeIsAnInvalidArgument) {
   const auto raw = open_reader(kNeghip, dir_.string());
   const auto h5 = open_reader((kData / "neghip.h5").string(), dir_.string());
   const Box outside[] = {
-      {{-1, 0, 0}, {2, 2, 2}}, {{0, -1, 0}, {2, 2, 2}}, {{0, 0, -1}, {2, 2, 2}},    // before the start
-      {{65, 0, 0}, {2, 1, 1}}, {{0, 60, 0}, {1, 7, 1}}, {{0, 0, 0}, {1, 1, 67}},    // past the end
-      {{66, 0, 0}, {1, 1, 1}}, {{0, 0, 0}, {1, -1, 1}},                              // no such node, negative size
+      {{-1, 0, 0}, {2, 2, 2}},
+      {{0, -1, 0}, {2, 2, 2}},
+      {{0, 0, -1}, {2, 2, 2}},  // before the start
+      {{65, 0, 0}, {2, 1, 1}},
+      {{0, 60, 0}, {1, 7, 1}},
+      {{0, 0, 0}, {1, 1, 67}},  // past the end
+      {{66, 0, 0}, {1, 1, 1}},
+      {{0, 0, 0}, {1, -1, 1}},  // no such node, negative size
       {{0, 0, std::numeric_limits<int64_t>::max()}, {1, 1, std::numeric_limits<int64_t>::max()}},  // overflow
   };
   std::vector<float> sink(64);

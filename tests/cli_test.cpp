@@ -3,8 +3,8 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <sys/wait.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -12,8 +12,8 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <nlohmann/json.hpp>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 #include <string>
@@ -45,8 +45,7 @@ class Cli : public ::testing::Test {
  protected:
   void SetUp() override {
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    root_ = fs::temp_directory_path() /
-            ("isotope_cli_" + std::to_string(getpid()) + "_" + info->name());
+    root_ = fs::temp_directory_path() / ("isotope_cli_" + std::to_string(getpid()) + "_" + info->name());
     fs::remove_all(root_);
     fs::create_directories(root_ / "logs");
     fs::create_directories(work());
@@ -61,7 +60,8 @@ class Cli : public ::testing::Test {
 
   Result run(const std::string& args) {
     const fs::path out = root_ / "logs" / "stdout", err = root_ / "logs" / "stderr";
-    const std::string cmd = quote(ISOTOPE_BINARY) + " " + args + " >" + quote(out.string()) + " 2>" + quote(err.string());
+    const std::string cmd =
+        quote(ISOTOPE_BINARY) + " " + args + " >" + quote(out.string()) + " 2>" + quote(err.string());
     const int status = std::system(cmd.c_str());
     Result r;
     r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -113,9 +113,7 @@ class Cli : public ::testing::Test {
     EXPECT_EQ(listing(), before) << "a file was left behind by: " << args;
   }
 
-  std::string outputs() const {
-    return " -o " + quote(in_work("out.ply")) + " --report " + quote(in_work("out.json"));
-  }
+  std::string outputs() const { return " -o " + quote(in_work("out.ply")) + " --report " + quote(in_work("out.json")); }
 
   fs::path root_;
 };
@@ -126,14 +124,19 @@ TEST_F(Cli, HelpOfEveryCommandExitsZeroAndNamesItsOptions) {
   const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
       {"--help", {"extract", "convert", "info", "verify", "generate", "sweep", "bench", "demo", "--version"}},
       {"bench --help",
-       {"--quick", "--json", "--threads", "--dataset", "--data", "--work-dir", "--cache-mb", "--scale", "--scale-size", "--quiet"}},
-      {"sweep --help", {"--iso", "--eps", "--delta", "--weight", "--csv", "--plot", "--threads", "--cache-mb", "--quiet"}},
+       {"--quick", "--json", "--threads", "--dataset", "--data", "--work-dir", "--cache-mb", "--scale", "--scale-size",
+        "--quiet"}},
+      {"sweep --help",
+       {"--iso", "--eps", "--delta", "--weight", "--csv", "--plot", "--threads", "--cache-mb", "--quiet"}},
       {"convert --help", {"--memory-mb", "--threads", "--zstd-level", "--quantize", "--dims", "--type", "--quiet"}},
       {"info --help", {"STORE", "--json"}},
       {"verify --help", {"STORE", "--threads", "--quiet"}},
-      {"extract --help", {"--iso", "--eps", "--error", "--topology", "simplify", "--weight", "--delta", "--report",
-                          "--compare-full", "--dims", "--type", "--output", "--quiet"}},
-      {"generate --help", {"--size", "--shift", "--seed", "--output", "--type", "uint16", "algebraic", "linked-tori", "nested-spheres", "noise"}},
+      {"extract --help",
+       {"--iso", "--eps", "--error", "--topology", "simplify", "--weight", "--delta", "--report", "--compare-full",
+        "--dims", "--type", "--output", "--quiet"}},
+      {"generate --help",
+       {"--size", "--shift", "--seed", "--output", "--type", "uint16", "algebraic", "linked-tori", "nested-spheres",
+        "noise"}},
       {"demo --help", {"--out", "--data"}},
   };
   for (const auto& [args, words] : cases) {
@@ -295,8 +298,9 @@ TEST_F(Cli, AnOutputThatIsTheInputOrTheOtherOutputIsRefusedAndNothingChanges) {
   fs::create_symlink(vol, in_work("link.raw"));
   expect_failure("convert " + quote(vol) + " " + quote(in_work("link.raw")), 1, "is the same file as INPUT");
   expect_failure("sweep " + quote(vol) + " --iso 0 --csv " + quote(vol), 1, "is the same file as INPUT");
-  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(in_work("m.ply")) + " --report " + quote(in_work("m.ply")),
-                 1, "is the same file as -o");
+  expect_failure(
+      "extract " + quote(vol) + " --iso 0 -o " + quote(in_work("m.ply")) + " --report " + quote(in_work("m.ply")), 1,
+      "is the same file as -o");
   EXPECT_EQ(slurp(vol), bytes);
   ASSERT_EQ(::mkfifo(in_work("pipe.ply").c_str(), 0644), 0);
   expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(in_work("pipe.ply")), 1, "is a FIFO");
@@ -329,8 +333,8 @@ TEST_F(Cli, AFullDiskFailsWithAMessageAndLeavesEveryOutputAsItWas) {
     EXPECT_EQ(slurp(mesh), "old mesh");
     EXPECT_EQ(slurp(report), "old report");
   }
-  const std::string cmd = limit + quote(ISOTOPE_BINARY) + " convert " + quote(vol) + " " + quote(store) + " -q 2>" +
-                          quote(in_work("err"));
+  const std::string cmd =
+      limit + quote(ISOTOPE_BINARY) + " convert " + quote(vol) + " " + quote(store) + " -q 2>" + quote(in_work("err"));
   const int status = std::system(("bash -c " + quote(cmd)).c_str());
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 1);
@@ -350,8 +354,9 @@ TEST_F(Cli, InvalidNumbersAreUsageErrors) {
   expect_failure("generate sphere --size 9 -o " + quote(in_work("x.vtk")), 2);
   expect_failure("generate sphere --size 9 --shift 1,2,3 -o " + quote(in_work("x.raw")), 2);
   // Ranges named in the message, in numbers a person reads.
-  for (const char* command : {"extract " , "sweep "}) {
-    const Result r = run(command + quote(vol) + " --iso 0 --threads -1" + (std::string(command) == "sweep " ? "" : outputs()));
+  for (const char* command : {"extract ", "sweep "}) {
+    const Result r =
+        run(command + quote(vol) + " --iso 0 --threads -1" + (std::string(command) == "sweep " ? "" : outputs()));
     EXPECT_EQ(r.code, 2) << command;
     EXPECT_NE(r.err.find("--threads"), std::string::npos) << r.err;
     EXPECT_NE(r.err.find("0 to 4096"), std::string::npos) << r.err;
@@ -395,7 +400,8 @@ TEST_F(Cli, ConvertInfoVerifyAndExtractFromTheStore) {
   EXPECT_NE(v.out.find("ok"), std::string::npos);
   for (const std::string eps : {"0", "8"}) {
     ASSERT_EQ(run("extract " + quote(raw) + " --iso 128.5 --eps " + eps + " -q -o " + quote(in_work("a.ply"))).code, 0);
-    ASSERT_EQ(run("extract " + quote(store) + " --iso 128.5 --eps " + eps + " -q -o " + quote(in_work("b.ply"))).code, 0);
+    ASSERT_EQ(run("extract " + quote(store) + " --iso 128.5 --eps " + eps + " -q -o " + quote(in_work("b.ply"))).code,
+              0);
     EXPECT_EQ(slurp(work() / "a.ply"), slurp(work() / "b.ply")) << "eps " << eps;
   }
 }
@@ -433,7 +439,8 @@ TEST_F(Cli, ConvertFailuresLeaveNothing) {
 // delta and eps, and the report says which and what was dropped; with --delta, delta is the user's.
 TEST_F(Cli, SimplifyBudgetChoosesDeltaAndSaysSo) {
   const std::string raw = kData + "/hydrogen_64x64x64_float32.raw";
-  const Result refused = run("extract " + quote(raw) + " --iso 0.001 --max-triangles 12000 -q -o " + quote(in_work("p.ply")));
+  const Result refused =
+      run("extract " + quote(raw) + " --iso 0.001 --max-triangles 12000 -q -o " + quote(in_work("p.ply")));
   EXPECT_EQ(refused.code, 1);
   EXPECT_NE(refused.err.find("simplify with a budget and no delta"), std::string::npos) << refused.err;
   const nlohmann::json r = extract_report(quote(raw) + " --iso 0.001 --max-triangles 12000 --topology simplify");
@@ -442,7 +449,8 @@ TEST_F(Cli, SimplifyBudgetChoosesDeltaAndSaysSo) {
   EXPECT_GT(r["chosen_delta"].get<double>(), 0);
   EXPECT_GT(r["tets_dropped"].get<int64_t>(), 0);
   EXPECT_LE(r["delta_floor_triangles"].get<int64_t>(), 6000);
-  const nlohmann::json given = extract_report(quote(raw) + " --iso 0.001 --max-triangles 12000 --topology simplify --delta 1");
+  const nlohmann::json given =
+      extract_report(quote(raw) + " --iso 0.001 --max-triangles 12000 --topology simplify --delta 1");
   EXPECT_FALSE(given.contains("chosen_delta")) << "a delta given is used as it is";
 }
 
@@ -488,7 +496,8 @@ TEST_F(Cli, StoreExtractIsTheSameFileForAnyThreadsAndCache) {
     for (int threads : {1, 2, 8}) {
       uint64_t bytes_read[2] = {};  // with the budget below one brick, and above the store
       for (int cache_mb : {1, 4096}) {
-        const std::string what = opts + " --threads " + std::to_string(threads) + " --cache-mb " + std::to_string(cache_mb);
+        const std::string what =
+            opts + " --threads " + std::to_string(threads) + " --cache-mb " + std::to_string(cache_mb);
         const nlohmann::json r = extract_report(quote(store) + " --iso 100 " + what);
         ASSERT_FALSE(r.empty()) << what;
         EXPECT_EQ(r["threads"].get<int>(), threads) << what;
@@ -560,7 +569,8 @@ TEST_F(Cli, SimplifyFromAStoreAndItsArguments) {
   const std::string raw = kData + "/neghip_66x66x66_uint8.raw", store = in_work("neghip.isotope");
   ASSERT_EQ(run("convert -q " + quote(raw) + " " + quote(store)).code, 0);
   const auto extract = [&](const std::string& input, const std::string& options, const std::string& name) {
-    const Result r = run("extract " + quote(input) + " --iso 32.5 --eps 16 -q " + options + " -o " + quote(in_work(name)));
+    const Result r =
+        run("extract " + quote(input) + " --iso 32.5 --eps 16 -q " + options + " -o " + quote(in_work(name)));
     EXPECT_EQ(r.code, 0) << options << "\n" << r.err;
     return slurp(work() / name);
   };
@@ -587,7 +597,8 @@ TEST_F(Cli, SimplifyFromAStoreAndItsArguments) {
   EXPECT_EQ(plain["bytes_read"], compared["bytes_read"]);
   EXPECT_GT(compared["compare_full"]["seconds"].get<double>(), 0);
   EXPECT_EQ(compared["compare_full"]["full"]["triangles"], extract_report(quote(store) + " --iso 32.5")["triangles"]);
-  const nlohmann::json r = extract_report(quote(store) + " --iso 32.5 --eps 16 --topology simplify --weight gradient --delta 40");
+  const nlohmann::json r =
+      extract_report(quote(store) + " --iso 32.5 --eps 16 --topology simplify --weight gradient --delta 40");
   EXPECT_EQ(r["topology"], "simplify");
   EXPECT_EQ(r["weight"], "gradient");
   EXPECT_EQ(r["delta"], 40.0);
@@ -730,7 +741,8 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
     ++inputs[input];
     EXPECT_GE(row["runs"].get<int>(), input == "convert+extract" ? 1 : 3) << row;
     EXPECT_GT(row["peak_rss_bytes"].get<uint64_t>(), 0u) << row;
-    EXPECT_NEAR(row["speedup_vs_baseline"].get<double>(), baseline.at({name, row["threads"].get<int>()}) / seconds, 1e-9);
+    EXPECT_NEAR(row["speedup_vs_baseline"].get<double>(), baseline.at({name, row["threads"].get<int>()}) / seconds,
+                1e-9);
     EXPECT_NEAR(row["share_of_full"].get<double>(), static_cast<double>(triangles) / static_cast<double>(full), 1e-12);
     if (row["eps"] == 0) {
       EXPECT_EQ(triangles, full) << row;
@@ -759,8 +771,12 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
   // Per dataset: the baseline on 1 and 2 threads; six extraction cases in memory and from a warm
   // store; five from a cold one and mode none on one thread; one shot at eps 0 on 1 and 2 threads
   // and coarse; convert + extract.
-  EXPECT_EQ(inputs, (std::map<std::string, int>{{"raw", 4}, {"memory", 12}, {"store-warm", 12}, {"store-cold", 12},
-                                                {"one-shot", 6}, {"convert+extract", 2}}));
+  EXPECT_EQ(inputs, (std::map<std::string, int>{{"raw", 4},
+                                                {"memory", 12},
+                                                {"store-warm", 12},
+                                                {"store-cold", 12},
+                                                {"one-shot", 6},
+                                                {"convert+extract", 2}}));
 
   // scikit-image on the same files: the triangles of marching cubes, fewer than our tetrahedra's.
   ASSERT_EQ(j["peers"].size(), 2u);
@@ -799,7 +815,8 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
   expect_failure("bench --quick --json " + quote(in_work("missing/b.json")), 1, "missing");
   // A volume missing from --data is an error before anything runs, not a row left out.
   fs::create_directories(in_work("empty"));
-  expect_failure("bench -q --dataset neghip --data " + quote(in_work("empty")), 1, "neghip_66x66x66_uint8.raw: not found");
+  expect_failure("bench -q --dataset neghip --data " + quote(in_work("empty")), 1,
+                 "neghip_66x66x66_uint8.raw: not found");
 }
 
 // Ctrl-C while bench converts its store (or, if that was quick, at its next run): exit 1, and

@@ -2,6 +2,8 @@
 // rounding commutes with saturation, and the meshes of the compact hierarchy differ from those of
 // the exact records only by refining more: none with the bound is the same mesh, every other mode
 // within 5% of the triangles and with the same topology where preserve keeps it.
+#include "engine/hierarchy/compact_record.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,12 +13,11 @@
 #include <limits>
 #include <random>
 
-#include "engine/hierarchy/compact_record.h"
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
-#include "isotope/mesh.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "isotope/mesh.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -83,7 +84,8 @@ TEST(CompactRecord, MeshesRefineOnlyMoreAndStayWithinFivePercent) {
     const Hierarchy compact = Hierarchy::build(c.volume);
     const auto [lo, hi] = std::minmax_element(c.volume.values.begin(), c.volume.values.end());
     for (double rel : {0.002, 0.01, 0.05, 0.2})
-      for (TopologyMode mode : {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve, TopologyMode::simplify})
+      for (TopologyMode mode :
+           {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve, TopologyMode::simplify})
         for (ErrorIndicator error : {ErrorIndicator::bound, ErrorIndicator::surplus}) {
           ExtractOptions o;
           o.iso = c.iso, o.eps = rel * (*hi - *lo), o.topology = mode, o.error = error;

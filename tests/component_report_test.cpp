@@ -1,5 +1,7 @@
 // Per-component measures (exact on hand-made meshes, within discretisation error on the analytic
 // fields) and the full-versus-adaptive comparison on meshes whose change is known by construction.
+#include "engine/topology/component_report.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,9 +11,8 @@
 #include <stdexcept>
 #include <vector>
 
-#include "engine/topology/component_report.h"
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
@@ -34,8 +35,18 @@ Mesh unit_cube() {
   std::vector<std::array<float, 3>> p;
   for (int i = 0; i < 8; ++i)
     p.push_back({static_cast<float>(i & 1), static_cast<float>((i >> 1) & 1), static_cast<float>((i >> 2) & 1)});
-  return make_mesh(p, {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
-                       {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}});
+  return make_mesh(p, {{0, 2, 3},
+                       {0, 3, 1},
+                       {4, 5, 7},
+                       {4, 7, 6},
+                       {0, 1, 5},
+                       {0, 5, 4},
+                       {2, 6, 7},
+                       {2, 7, 3},
+                       {0, 4, 6},
+                       {0, 6, 2},
+                       {1, 3, 7},
+                       {1, 7, 5}});
 }
 
 Mesh unit_tetrahedron() {

@@ -3,8 +3,8 @@
 // process needs for a tiny volume, and the store it writes does not depend on the budget.
 // Each isotope run is a child process, so that its peak RSS is its own (wait4's rusage): not the
 // generator's, nor this test's.
-#include <gtest/gtest.h>
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <spawn.h>
 #include <sys/resource.h>
 #include <sys/wait.h>

@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <map>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
@@ -75,8 +75,8 @@ void expect_crack_free(const Volume& v, float iso, const std::string& name) {
       o.eps = rel * (hi - lo);
       o.topology = mode;
       const Mesh m = extract(mv, o);
-      const std::string what = name + " iso " + std::to_string(iso) + " eps " + std::to_string(o.eps) + " " +
-                               std::string(to_string(mode));
+      const std::string what =
+          name + " iso " + std::to_string(iso) + " eps " + std::to_string(o.eps) + " " + std::string(to_string(mode));
       EXPECT_GT(m.triangles.size(), 0u) << what;
       EXPECT_EQ(measure_topology(m).nonmanifold_edges, 0) << what;
       EXPECT_EQ(testing::interior_boundary_edges(m, v), 0) << what;

@@ -3,13 +3,12 @@
 // docs/DESIGN.md), and progress reports, made from any worker, reach the caller in order. Also run
 // under TSan.
 #include <gtest/gtest.h>
-
 #include <tbb/global_control.h>
 
 #include <vector>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
@@ -23,7 +22,8 @@ Mesh extract_with_threads(const Volume& v, const ExtractOptions& o, size_t threa
 
 TEST(Determinism, OneThreadAndAllThreadsGiveTheSameMesh) {
   const Volume volumes[] = {generate_noise(33, 5), testing::crop(generate_algebraic(40), {40, 33, 37}),
-                            testing::crop(generate_noise(9, 3), {2, 9, 5}), testing::load_shared(testing::shared_volumes()[3])};
+                            testing::crop(generate_noise(9, 3), {2, 9, 5}),
+                            testing::load_shared(testing::shared_volumes()[3])};
   for (const Volume& v : volumes)
     for (double eps : {0.0, 0.02, 0.3, 8.0}) {
       ExtractOptions o;

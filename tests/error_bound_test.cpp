@@ -11,8 +11,8 @@
 #include <numeric>
 #include <string>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"

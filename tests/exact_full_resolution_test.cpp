@@ -2,7 +2,6 @@
 // over every finest tetrahedron (same triangles), whatever the mode, indicator or dimensions.
 // And the baseline itself, built in slabs on several threads, is the one-walk mesh bit for bit.
 #include <gtest/gtest.h>
-
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -12,11 +11,11 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/kuhn.h"
-#include "engine/mesh/marching_tetrahedra.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/mesh/marching_tetrahedra.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -37,7 +36,8 @@ void expect_exact_at_eps0(const Volume& volume, float iso, const std::string& wh
       o.topology = mode;
       const Mesh m = extract(mv, o);
       const auto adaptive = triangle_set(m);
-      ASSERT_EQ(adaptive.size(), full.size()) << what << " iso " << iso << " " << to_string(err) << " " << to_string(mode);
+      ASSERT_EQ(adaptive.size(), full.size())
+          << what << " iso " << iso << " " << to_string(err) << " " << to_string(mode);
       EXPECT_TRUE(adaptive == full) << what << " iso " << iso;
       const Mesh one_shot = extract(volume, o);
       EXPECT_TRUE(one_shot.positions == m.positions && one_shot.triangles == m.triangles)
@@ -77,8 +77,8 @@ TEST(ExactAtEpsZero, BlocksOfAnySizeAndBlocksCutByTheDataBox) {
            {2, 2, 2}, {3, 3, 3}, {3, 2, 3}, {5, 4, 3}, {9, 9, 9}, {10, 17, 9}, {21, 13, 18}}) {
     const Volume v = testing::crop(noise, dims);
     for (float iso : {-0.2f, 0.0f, 0.3f})
-      expect_exact_at_eps0(v, iso, "noise " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
-                                       std::to_string(dims[2]));
+      expect_exact_at_eps0(
+          v, iso, "noise " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
   }
 }
 
@@ -246,7 +246,8 @@ TEST(FullResolutionSlabs, RealVolumeWithAOneLayerLastSlabGivesTheOneWalkMesh) {
 
 TEST(FullResolutionSlabs, VolumeTwoNodesThickGivesTheOneWalkMesh) {
   const Volume v = testing::make_volume({400, 300, 2}, [](int64_t x, int64_t y, int64_t z) {
-    return std::sin(0.05 * static_cast<double>(x)) * std::cos(0.07 * static_cast<double>(y)) + 0.3 * static_cast<double>(z) - 0.1;
+    return std::sin(0.05 * static_cast<double>(x)) * std::cos(0.07 * static_cast<double>(y)) +
+           0.3 * static_cast<double>(z) - 0.1;
   });
   expect_same_mesh_on_any_threads(v, 0.0f, "400x300x2");
 }
@@ -257,11 +258,11 @@ TEST(FullResolutionSlabs, SurfaceInTheSharedPlaneGivesTheOneWalkMesh) {
   const std::array<int64_t, 3> dims{65, 48, 129};
   const int64_t z0 = full_resolution_slab_layers(dims);
   ASSERT_LT(z0, dims[2] - 1);
-  const Volume ramp = testing::make_volume(dims, [&](int64_t, int64_t, int64_t z) { return static_cast<double>(z - z0); });
+  const Volume ramp =
+      testing::make_volume(dims, [&](int64_t, int64_t, int64_t z) { return static_cast<double>(z - z0); });
   for (float iso : {0.0f, -0.5f, 0.5f}) expect_same_mesh_on_any_threads(ramp, iso, "ramp z - z0");
-  const Volume holes = testing::make_volume(dims, [&](int64_t x, int64_t y, int64_t z) {
-    return z == z0 && (x + 2 * y) % 3 != 0 ? -1.0 : 1.0;
-  });
+  const Volume holes = testing::make_volume(
+      dims, [&](int64_t x, int64_t y, int64_t z) { return z == z0 && (x + 2 * y) % 3 != 0 ? -1.0 : 1.0; });
   expect_same_mesh_on_any_threads(holes, 0.0f, "plane of holes");
   const Volume ties = testing::make_volume(dims, [&](int64_t x, int64_t y, int64_t z) {
     return z == z0 ? ((x * 7 + y * 3) % 5 == 0 ? 1.0 : 0.0) : std::abs(z - z0) == 1 ? -1.0 : 0.5;

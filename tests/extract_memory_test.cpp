@@ -4,8 +4,8 @@
 // here (a tiny store's extraction), and the mesh does not depend on the budget.
 // Each isotope run is a child process, so that its peak RSS is its own (wait4's rusage): not the
 // generator's, nor this test's.
-#include <gtest/gtest.h>
 #include <fcntl.h>
+#include <gtest/gtest.h>
 #include <spawn.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -47,8 +47,8 @@ constexpr double kCoarseEps = 256;
 // memory in use stays within the budget plus those few bricks per thread"):
 //  - every PagedVolume::Pager pins its last 32 bricks (io/store/paged_volume.h, Pager::pinned_),
 //    evicted or not; one reader per running piece (plus, counted here to be safe, the top-level
-//    traversal's, which lets go before the pieces run). Keep this equal to the size of pinned_: raising it raises what a
-//    paged extraction may hold beyond --cache-mb, and this test is where that should show;
+//    traversal's, which lets go before the pieces run). Keep this equal to the size of pinned_: raising it raises what
+//    a paged extraction may hold beyond --cache-mb, and this test is where that should show;
 constexpr int64_t kPinnedPerReader = 32;
 //  - per thread, the brick being decoded before its admission, and the thread's decode scratch
 //    kept for reuse (io/store/store_format.cpp, decode_section: the inflated section and one field).
@@ -115,8 +115,8 @@ class ExtractMemory : public testing::TempDirTest {
     e.report = json::parse(slurp(report_path), nullptr, /*allow_exceptions=*/false);
     if (e.report.is_discarded() || !e.report.contains("triangles")) {
       ADD_FAILURE() << name << ": no report";
-      e.report = json{{"vertices", 0}, {"triangles", 0}, {"bricks_read", 0}, {"bytes_read", 0},
-                      {"peak_rss_mb", 0}, {"cache", {{"peak_decoded_mb", 0}}}};
+      e.report = json{{"vertices", 0},   {"triangles", 0},   {"bricks_read", 0},
+                      {"bytes_read", 0}, {"peak_rss_mb", 0}, {"cache", {{"peak_decoded_mb", 0}}}};
     }
     return e;
   }
@@ -190,10 +190,9 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
       const int64_t extra_bricks = kPinnedPerReader * (threads + 1) + kDecodePerThread * threads;
       // The budget in effect: at least BrickCache::kMinBricks bricks, which is above 8 MB here.
       const double budget_mb = small.report.at("cache").at("effective_budget_mb").get<double>();
-      const double limit_mb = mb_of_kb(baseline_kb[threads]) + budget_mb +
-                              static_cast<double>(extra_bricks) * brick_mb +
-                              kMeshFactor * static_cast<double>(small.mesh_bytes()) / (1 << 20) +
-                              static_cast<double>(kMarginMb);
+      const double limit_mb =
+          mb_of_kb(baseline_kb[threads]) + budget_mb + static_cast<double>(extra_bricks) * brick_mb +
+          kMeshFactor * static_cast<double>(small.mesh_bytes()) / (1 << 20) + static_cast<double>(kMarginMb);
       const double rss_mb = mb_of_kb(small.child.max_rss_kb);
       report(key + "_rss_mb", rss_mb);
       report(key + "_report_peak_rss_mb", small.report.at("peak_rss_mb").get<double>());
@@ -208,9 +207,8 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
       // It really paged: bricks were evicted and read again.
       EXPECT_GT(small.bricks_read(), huge.bricks_read()) << key;
       EXPECT_LE(small.report.at("cache").at("peak_decoded_mb").get<double>(), budget_mb + 2 * brick_mb) << key;
-      EXPECT_TRUE(same_bytes(small.mesh, huge.mesh))
-          << key << ": the mesh extracted with --cache-mb " << kBudgetMb << " differs from the one with "
-          << kHugeBudgetMb;
+      EXPECT_TRUE(same_bytes(small.mesh, huge.mesh)) << key << ": the mesh extracted with --cache-mb " << kBudgetMb
+                                                     << " differs from the one with " << kHugeBudgetMb;
       fs::remove(small.mesh);
     }
     fs::remove(huge.mesh);

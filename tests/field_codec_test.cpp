@@ -2,6 +2,8 @@
 // denormals), integer fields shrink to their narrowest byte width, constant fields to one value,
 // the byte layout is the one docs/FORMAT.md specifies, and hostile bytes (every truncation,
 // random corruption) become an IoError, never a crash or a read outside the buffer.
+#include "io/store/field_codec.h"
+
 #include <gtest/gtest.h>
 #include <zstd.h>
 
@@ -19,9 +21,8 @@
 #include <string>
 #include <vector>
 
-#include "io/store/field_codec.h"
-#include "isotope/error.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/error.h"
 #include "tests/io_error_of.h"
 
 namespace isotope {
@@ -66,8 +67,7 @@ bool same_bits(const Floats& a, const Floats& b) {
 // Round trip; returns the encoding for checks of its mode and size.
 Bytes expect_round_trip(const Floats& values) {
   const Bytes bytes = encode(values);
-  EXPECT_TRUE(same_bits(decode(bytes, values.size()), values))
-      << values.size() << " values, mode " << int{bytes.at(0)};
+  EXPECT_TRUE(same_bits(decode(bytes, values.size()), values)) << values.size() << " values, mode " << int{bytes.at(0)};
   return bytes;
 }
 
@@ -163,16 +163,16 @@ TEST(FieldCodecRoundTrip, EmptyFieldIsAFloatHeaderAlone) {
 }
 
 TEST(FieldCodecRoundTrip, SingleValuesOfEveryKind) {
-  for (float v : {0.0f, -0.0f, 1.0f, -7.0f, 0.5f, 3.25f, kInf, -kInf, from_bits(0x7fc00001u),
-                  from_bits(0x00000001u), 1e30f}) {
+  for (float v :
+       {0.0f, -0.0f, 1.0f, -7.0f, 0.5f, 3.25f, kInf, -kInf, from_bits(0x7fc00001u), from_bits(0x00000001u), 1e30f}) {
     const Bytes bytes = expect_round_trip({v});
     EXPECT_EQ(mode_of(bytes), kConstant) << v;  // one value is a constant field
   }
 }
 
 TEST(FieldCodecRoundTrip, ConstantFieldsKeepTheirExactBits) {
-  for (uint32_t bits : {0x00000000u, 0x80000000u, 0x7f800000u, 0xff800000u, 0x7fc12345u, 0xffa00001u,
-                        0x00000003u, 0x42280000u}) {
+  for (uint32_t bits :
+       {0x00000000u, 0x80000000u, 0x7f800000u, 0xff800000u, 0x7fc12345u, 0xffa00001u, 0x00000003u, 0x42280000u}) {
     const Bytes bytes = expect_round_trip(Floats(kBrick, from_bits(bits)));
     EXPECT_EQ(mode_of(bytes), kConstant) << std::hex << bits;
     EXPECT_EQ(bytes.size(), kConstantSize);
@@ -204,8 +204,8 @@ TEST(FieldCodecRoundTrip, HalfIntegersWithInfinityUseMultiplierTwo) {
 
 TEST(FieldCodecRoundTrip, InfinityBesidesTheLargestAndSmallestCodes) {
   const float big = 1 << 29;  // |2v| = 2^30, the largest integer-mode value
-  for (const Floats& v : {Floats{kInf, 3, kInf}, Floats{-big, big, kInf, -big, kInf, big},
-                          Floats{big, kInf, -big}, Floats{-0.5f, kInf, -big, 0.5f}}) {
+  for (const Floats& v : {Floats{kInf, 3, kInf}, Floats{-big, big, kInf, -big, kInf, big}, Floats{big, kInf, -big},
+                          Floats{-0.5f, kInf, -big, 0.5f}}) {
     const Bytes bytes = expect_round_trip(v);
     EXPECT_EQ(mode_of(bytes), kInteger);
   }
@@ -213,8 +213,8 @@ TEST(FieldCodecRoundTrip, InfinityBesidesTheLargestAndSmallestCodes) {
 
 TEST(FieldCodecRoundTrip, IntegersBeyondTwoToTheThirtyFallBackToFloat) {
   const float beyond = std::nextafter(float{1 << 29}, kInf);  // 2^29 + 64: 2v > 2^30
-  for (const Floats& v : {Floats{1, 2, beyond}, Floats{1, 2, -beyond}, Floats{0, 3e9f, -3e9f, 1},
-                          Floats{1, 2, 1e38f}, Floats{0.5f, beyond}, Floats{kInf, -beyond}}) {
+  for (const Floats& v : {Floats{1, 2, beyond}, Floats{1, 2, -beyond}, Floats{0, 3e9f, -3e9f, 1}, Floats{1, 2, 1e38f},
+                          Floats{0.5f, beyond}, Floats{kInf, -beyond}}) {
     const Bytes bytes = expect_round_trip(v);
     EXPECT_EQ(mode_of(bytes), kFloat);
   }
@@ -236,11 +236,11 @@ TEST(FieldCodecRoundTrip, RepeatingFloatsRoundTripAsWords) {
 
 // A value that breaks integer mode anywhere in an integer field sends the field to float mode.
 TEST(FieldCodecRoundTrip, SpecialValuesAmongIntegersKeepTheirBits) {
-  const std::vector<uint32_t> specials = {
-      0x80000000u,                                          // -0.0
-      0xff800000u,                                          // -inf
-      0x7fc00001u, 0xffc12345u, 0x7f800001u, 0xffbfffffu,  // NaNs, quiet and signalling
-      0x00000001u, 0x807fffffu, 0x00400000u};              // denormals
+  const std::vector<uint32_t> specials = {0x80000000u,  // -0.0
+                                          0xff800000u,  // -inf
+                                          0x7fc00001u, 0xffc12345u, 0x7f800001u,
+                                          0xffbfffffu,                             // NaNs, quiet and signalling
+                                          0x00000001u, 0x807fffffu, 0x00400000u};  // denormals
   for (uint32_t bits : specials) {
     for (size_t at : {size_t{0}, size_t{17}, size_t{299}}) {
       Floats v = smooth_uint8(300);
@@ -267,8 +267,8 @@ TEST(FieldCodecRoundTrip, LargestBrickOfEveryKind) {
 }
 
 TEST(FieldCodecRoundTrip, ConcatenatedFieldsDecodeOneAfterAnother) {
-  const std::vector<Floats> fields = {smooth_uint8(500), Floats(500, 1.0f), random_floats(500),
-                                      half_integers_with_inf(500), {}};
+  const std::vector<Floats> fields = {
+      smooth_uint8(500), Floats(500, 1.0f), random_floats(500), half_integers_with_inf(500), {}};
   Bytes all = {0xAB};  // encode_field appends: what is already there stays
   for (const Floats& f : fields) encode_field(f, all);
   EXPECT_EQ(all[0], 0xAB);
@@ -290,8 +290,8 @@ TEST(FieldCodecLayout, ConstantIsModeCountAndBits) {
 TEST(FieldCodecLayout, SparseSpikesAreOffsetsFromTheMinimum) {
   // Offsets 0,0,0,5,0,0,0,5 have lower byte entropy than their deltas 0,0,0,10,9,0,0,10.
   EXPECT_EQ(encode({0, 0, 0, 5, 0, 0, 0, 5}), (Bytes{2, 8, 0, 0, 0, 0, 0, 0, 0,  // mode, count
-                                                     1, 1, 0,                 // multiplier, width, flags
-                                                     0, 0, 0, 0, 6, 0, 0, 0,  // min code, +inf code
+                                                     1, 1, 0,                    // multiplier, width, flags
+                                                     0, 0, 0, 0, 6, 0, 0, 0,     // min code, +inf code
                                                      0, 0, 0, 5, 0, 0, 0, 5}));
 }
 
@@ -306,17 +306,17 @@ TEST(FieldCodecLayout, DeltasWrapWithinTheWidth) {
 TEST(FieldCodecLayout, HalfIntegerDeltasWithInfinity) {
   // codes 1, 4 (+inf), 3 with m = 2: offsets 0, 3, 2, zigzag deltas 0, 6, 1.
   EXPECT_EQ(encode({0.5f, kInf, 1.5f}), (Bytes{2, 3, 0, 0, 0, 0, 0, 0, 0,  //
-                                                2, 1, 3,                    // flags: has +inf | delta
-                                                1, 0, 0, 0, 4, 0, 0, 0,     //
-                                                0, 6, 1}));
+                                               2, 1, 3,                    // flags: has +inf | delta
+                                               1, 0, 0, 0, 4, 0, 0, 0,     //
+                                               0, 6, 1}));
 }
 
 TEST(FieldCodecLayout, WidthTwoDeltasInBytePlanes) {
   // offsets 0, 300, 301, 302, 303: zigzag deltas 0, 600, 2, 2, 2, low bytes first.
-  EXPECT_EQ(encode({0, 300, 301, 302, 303}), (Bytes{2, 5, 0, 0, 0, 0, 0, 0, 0,   //
-                                                    1, 2, 2,                     //
-                                                    0, 0, 0, 0, 0x30, 1, 0, 0,   // +inf code 304
-                                                    0, 0x58, 2, 2, 2, 0, 2, 0, 0, 0}));
+  EXPECT_EQ(encode({0, 300, 301, 302, 303}), (Bytes{2, 5,    0, 0, 0,    0, 0, 0, 0,  //
+                                                    1, 2,    2,                       //
+                                                    0, 0,    0, 0, 0x30, 1, 0, 0,     // +inf code 304
+                                                    0, 0x58, 2, 2, 2,    0, 2, 0, 0, 0}));
 }
 
 TEST(FieldCodecLayout, FloatBytePlanesWhenNothingRepeats) {
@@ -330,7 +330,7 @@ TEST(FieldCodecLayout, FloatLittleEndianWordsWhenValuesRepeat) {
   const Bytes tenth = {0xcd, 0xcc, 0xcc, 0x3d}, minus_zero = {0, 0, 0, 0x80};
   Floats v;
   Bytes expected = {3, 9, 0, 0, 0, 0, 0, 0, 0, 0};  // flags: words
-  for (int i = 0; i < 9; ++i) {  // v[8] repeats v[6]
+  for (int i = 0; i < 9; ++i) {                     // v[8] repeats v[6]
     v.push_back(i % 2 ? -0.0f : 0.1f);
     const Bytes& word = i % 2 ? minus_zero : tenth;
     expected.insert(expected.end(), word.begin(), word.end());
@@ -366,8 +366,7 @@ TEST(FieldCodecSize, FloatFieldsCompressNoWorseThanRawFloats) {
     smooth[i] = std::sin(x * 0.1f) * std::cos(y * 0.13f) + 0.01f * z;
     repeating[i] = smooth[i / 8 * 8];
   }
-  for (const Floats& v : {smooth, repeating})
-    EXPECT_LE(zstd_size(encode(v)), zstd_size(raw_bytes(v)) + 64);
+  for (const Floats& v : {smooth, repeating}) EXPECT_LE(zstd_size(encode(v)), zstd_size(raw_bytes(v)) + 64);
 }
 
 // The values of a real uint8 scan, in 32^3 Morton bricks as the store keeps them.
@@ -398,9 +397,8 @@ std::vector<Floats> valid_fields() {
   Floats offsets(400, 0.0f), wide(400);
   for (size_t i = 0; i < 400; i += 37) offsets[i] = 9;
   for (size_t i = 0; i < wide.size(); ++i) wide[i] = static_cast<float>((i * 2654435761u) % 100000000);
-  return {{},           Floats(400, 3.0f),          smooth_uint8(400), uint16_ramp(400),
-          offsets,      half_integers_with_inf(400), wide,              random_floats(400),
-          Floats(400, 0.1f * 3)};
+  return {{},   Floats(400, 3.0f),  smooth_uint8(400),    uint16_ramp(400), offsets, half_integers_with_inf(400),
+          wide, random_floats(400), Floats(400, 0.1f * 3)};
 }
 
 TEST(FieldCodecHostile, EveryTruncationThrows) {
@@ -410,10 +408,8 @@ TEST(FieldCodecHostile, EveryTruncationThrows) {
       const auto block = std::make_unique<uint8_t[]>(std::max<size_t>(len, 1));
       std::copy_n(bytes.begin(), len, block.get());
       Floats out(field.size());
-      const std::string message =
-          io_error_of([&] { decode_field(block.get(), block.get() + len, out); });
-      ASSERT_NE(message.find("truncated"), std::string::npos)
-          << len << " of " << bytes.size() << " bytes: " << message;
+      const std::string message = io_error_of([&] { decode_field(block.get(), block.get() + len, out); });
+      ASSERT_NE(message.find("truncated"), std::string::npos) << len << " of " << bytes.size() << " bytes: " << message;
     }
   }
 }
@@ -447,8 +443,7 @@ TEST(FieldCodecHostile, UnknownModeWidthMultiplierOrFlagsAreNamed) {
   EXPECT_EQ(message_with(ints, 0, 0), "field codec: unknown field mode 0");
   EXPECT_EQ(message_with(ints, 0, 4), "field codec: unknown field mode 4");
   EXPECT_EQ(message_with(ints, kCommonHeader, 3), "field codec: integer multiplier 3, expected 1 or 2");
-  EXPECT_EQ(message_with(ints, kCommonHeader + 1, 3),
-            "field codec: integer width 3, expected 1, 2 or 4");
+  EXPECT_EQ(message_with(ints, kCommonHeader + 1, 3), "field codec: integer width 3, expected 1, 2 or 4");
   EXPECT_EQ(message_with(ints, kCommonHeader + 2, 4), "field codec: unknown integer flags 4");
   EXPECT_EQ(message_with(floats, kCommonHeader, 2), "field codec: unknown float flags 2");
 }
@@ -485,7 +480,7 @@ TEST(FieldCodecHostile, RandomCorruptionThrowsIoErrorOrDecodes) {
         for (int k = 1 + static_cast<int>(rng() % 4); k > 0; --k)
           if (!bytes.empty()) bytes[pick()] = static_cast<uint8_t>(rng());
         break;
-      case 2: bytes.resize(pick()); break;                                          // cut
+      case 2: bytes.resize(pick()); break;                                            // cut
       default: bytes.resize(bytes.size() + rng() % 64, static_cast<uint8_t>(rng()));  // extend
     }
     const auto block = std::make_unique<uint8_t[]>(std::max<size_t>(bytes.size(), 1));

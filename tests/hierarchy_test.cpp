@@ -18,7 +18,7 @@ namespace {
 using TetKey = std::vector<int64_t>;
 
 struct Recursion {
-  std::map<int64_t, std::set<TetKey>> tets_of;     // refinement vertex -> its tetrahedra
+  std::map<int64_t, std::set<TetKey>> tets_of;  // refinement vertex -> its tetrahedra
   std::map<int64_t, std::pair<int64_t, int64_t>> edge_of;
   std::map<int64_t, std::set<int>> levels_of;
   std::set<TetKey> leaves;
@@ -36,7 +36,10 @@ TetKey key(const Lattice& l, const std::array<Coord, 4>& t) {
 Recursion recurse(const Lattice& l) {
   Recursion r;
   std::function<void(std::array<Coord, 4>, int)> visit = [&](std::array<Coord, 4> t, int level) {
-    if (level == l.max_level()) { r.leaves.insert(key(l, t)); return; }
+    if (level == l.max_level()) {
+      r.leaves.insert(key(l, t));
+      return;
+    }
     Coord v;
     for (int i = 0; i < 3; ++i) v[i] = (t[0][i] + t[1][i]) / 2;
     if (longest_edge_midpoint(t) != v) ++r.longest_edge_mismatches;

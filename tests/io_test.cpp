@@ -1,14 +1,13 @@
 // The I/O boundary: readers agree with each other on the shared volumes, every bad input
 // becomes an IoError naming the file, and writers are atomic and round-trip exactly.
-#include <gtest/gtest.h>
 #include <fcntl.h>
+#include <gtest/gtest.h>
+#include <hdf5.h>
 #include <linux/fs.h>
 #include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <unistd.h>
-
-#include <hdf5.h>
 
 #include <algorithm>
 #include <array>
@@ -27,13 +26,13 @@
 #include <vector>
 
 #include "io/file/atomic_file.h"
-#include "io/volume/hdf5_reader.h"
-#include "isotope/error.h"
 #include "io/mesh/ply_writer.h"
-#include "io/volume/raw_reader.h"
 #include "io/store/store_reader.h"
+#include "io/volume/hdf5_reader.h"
+#include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
 #include "io/volume/volume_writer.h"
+#include "isotope/error.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
 
@@ -216,9 +215,8 @@ TEST(ParseRawName, AcceptsTheShortTypeAliases) {
 
 TEST(ParseRawName, ReturnsNulloptWhenTheNameDoesNotSay) {
   for (const char* name : {"lobster.raw", "lobster_uint8.raw", "lobster_301x324_uint8.raw",
-                           "lobster_301x324x56x2_uint8.raw", "lobster_301x324x56_int32.raw",
-                           "lobster_301x324x56.raw", "lobster_0x324x56_uint8.raw",
-                           "lobster_-1x324x56_uint8.raw", "lobster_+1x324x56_uint8.raw",
+                           "lobster_301x324x56x2_uint8.raw", "lobster_301x324x56_int32.raw", "lobster_301x324x56.raw",
+                           "lobster_0x324x56_uint8.raw", "lobster_-1x324x56_uint8.raw", "lobster_+1x324x56_uint8.raw",
                            "lobster_1xx2_uint8.raw", "lobster_1x2x3x_uint8.raw", "lobster_ 1x2x3_uint8.raw",
                            "lobster_99999999999999999999x1x1_uint8.raw", "_uint8.raw", ""}) {
     EXPECT_FALSE(parse_raw_name(name).has_value()) << name;
@@ -278,14 +276,17 @@ TEST_F(IoTest, NonRegularInputsAreRefused) {
     s.path = spec;
     return s;
   };
-  const auto refused = [](const std::string& msg) { return msg.find("is a FIFO, not a regular file") != std::string::npos; };
+  const auto refused = [](const std::string& msg) {
+    return msg.find("is a FIFO, not a regular file") != std::string::npos;
+  };
   EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("v_2x2x2_uint8.raw"))); }));
   EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("v.nrrd"))); }));
   EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("v.h5") + ":/data")); }));
   EXPECT_PRED1(refused, io_error_of([&] { StoreReader store(path("v.isotope")); }));
   EXPECT_FALSE(is_store_file(path("v.isotope")));
   {
-    std::ofstream(path("d.nhdr")) << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: pipe\n";
+    std::ofstream(path("d.nhdr"))
+        << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: pipe\n";
   }
   EXPECT_PRED1(refused, io_error_of([&] { read_volume(source(path("d.nhdr"))); }));
 }
@@ -427,8 +428,8 @@ TEST_F(IoTest, Hdf5ChunkedGzipUint16ReadsExactlyWithAttributes) {
   for (size_t i = 0; i < v.size(); ++i) v[i] = static_cast<uint16_t>((i * 7919u) % 65536u);
   {
     H5Builder b(p);
-    const hid_t ds = b.add("/scan/volume", H5T_STD_U16LE, H5T_NATIVE_UINT16,
-                           {hsize_t(nz), hsize_t(ny), hsize_t(nx)}, v.data(), {3, 4, 5});
+    const hid_t ds = b.add("/scan/volume", H5T_STD_U16LE, H5T_NATIVE_UINT16, {hsize_t(nz), hsize_t(ny), hsize_t(nx)},
+                           v.data(), {3, 4, 5});
     b.attribute(ds, "spacing", {0.5, 2.0, 3.0});
     b.attribute(ds, "origin", {-1.0, 0.0, 4.5});
   }
@@ -513,8 +514,7 @@ TEST_F(IoTest, ReadVolumeAsksForDimsAndTypeWhenTheNameSaysNothing) {
   const std::string msg = io_error_of([&] { read_volume({p, {}, {}}); });
   EXPECT_CONTAINS(msg, p);
   EXPECT_CONTAINS(msg, "pass --dims and --type");
-  EXPECT_CONTAINS(io_error_of([&] { read_volume({p, std::array<int64_t, 3>{2, 2, 2}, {}}); }),
-                  "cannot tell the type");
+  EXPECT_CONTAINS(io_error_of([&] { read_volume({p, std::array<int64_t, 3>{2, 2, 2}, {}}); }), "cannot tell the type");
   EXPECT_EQ(read_volume({p, std::array<int64_t, 3>{2, 2, 2}, ScalarType::uint8}).values.size(), 8u);
 }
 
@@ -631,13 +631,15 @@ TEST_F(IoTest, WriteRawUint16NamedByConventionReadsBackThroughReadVolume) {
 
 TEST_F(IoTest, WriteRawEveryTypeRoundTripsThroughReadRaw) {
   const Volume v = sample_volume();
-  for (const ScalarType t : {ScalarType::uint8, ScalarType::uint16, ScalarType::int16, ScalarType::float32, ScalarType::float64}) {
+  for (const ScalarType t :
+       {ScalarType::uint8, ScalarType::uint16, ScalarType::int16, ScalarType::float32, ScalarType::float64}) {
     const std::string p = path("v.raw");
     const RawEncoding e = write_raw(v, p, t);
     EXPECT_EQ(fs::file_size(p), 60u * static_cast<size_t>(scalar_type_size(t))) << scalar_type_name(t);
     const Volume back = read_raw(p, RawLayout{v.dims, t});
     for (size_t i = 0; i < v.values.size(); ++i)
-      EXPECT_EQ(back.values[i], e.is_mapped() ? std::round(e.code(v.values[i])) : v.values[i]) << scalar_type_name(t) << " " << i;
+      EXPECT_EQ(back.values[i], e.is_mapped() ? std::round(e.code(v.values[i])) : v.values[i])
+          << scalar_type_name(t) << " " << i;
   }
   const RawEncoding e = raw_encoding(v, ScalarType::int16);
   EXPECT_EQ(e.code(e.min), -32768.0);
@@ -787,17 +789,25 @@ TEST_F(IoTest, AnOutputThatIsAnInputOrAnotherOutputIsRefused) {
   fs::create_hard_link(path("in.raw"), path("hard.raw"));
   fs::create_symlink(path("in.raw"), path("soft.raw"));
   for (const char* same : {"in.raw", "hard.raw", "soft.raw"})
-    EXPECT_CONTAINS(io_error_of([&] { check_outputs({{"INPUT", path("in.raw")}}, {{"-o", path(same)}}); }),
+    EXPECT_CONTAINS(io_error_of([&] {
+                      check_outputs({{"INPUT", path("in.raw")}}, {{"-o", path(same)}});
+                    }),
                     "is the same file as INPUT")
         << same;
   // FILE.h5:/dataset names FILE.h5.
   write_values(path("v.h5"), std::vector<uint8_t>{0});
-  EXPECT_CONTAINS(io_error_of([&] { check_outputs({{"INPUT", path("v.h5") + ":/volume"}}, {{"OUTPUT", path("v.h5")}}); }),
+  EXPECT_CONTAINS(io_error_of([&] {
+                    check_outputs({{"INPUT", path("v.h5") + ":/volume"}}, {{"OUTPUT", path("v.h5")}});
+                  }),
                   "is the same file as INPUT");
   // Two outputs, existing or not, through a link or not.
-  EXPECT_CONTAINS(io_error_of([&] { check_outputs({}, {{"-o", path("m.ply")}, {"--report", path("./m.ply")}}); }),
+  EXPECT_CONTAINS(io_error_of([&] {
+                    check_outputs({}, {{"-o", path("m.ply")}, {"--report", path("./m.ply")}});
+                  }),
                   "--report " + path("./m.ply") + ": is the same file as -o");
-  EXPECT_CONTAINS(io_error_of([&] { check_outputs({}, {{"-o", path("soft.raw")}, {"--report", path("in.raw")}}); }),
+  EXPECT_CONTAINS(io_error_of([&] {
+                    check_outputs({}, {{"-o", path("soft.raw")}, {"--report", path("in.raw")}});
+                  }),
                   "is the same file as -o");
   // Distinct files pass, and a missing input is left to its reader.
   EXPECT_NO_THROW(check_outputs({{"INPUT", path("in.raw")}, {"INPUT", path("missing.raw")}},
@@ -859,9 +869,8 @@ TEST_F(IoTest, PlyWrittenParsesBackToTheSameMesh) {
   const ParsedPly ply = parse_ply(p, m.positions.size(), m.triangles.size());
   EXPECT_EQ(ply.header, (std::vector<std::string>{
                             "ply", "format binary_little_endian 1.0", "comment written by isotope",
-                            "element vertex 70000", "property float x", "property float y",
-                            "property float z", "element face 69998",
-                            "property list uchar int vertex_indices", "end_header"}));
+                            "element vertex 70000", "property float x", "property float y", "property float z",
+                            "element face 69998", "property list uchar int vertex_indices", "end_header"}));
   EXPECT_TRUE(ply.mesh.positions == m.positions);
   EXPECT_TRUE(ply.mesh.triangles == m.triangles);
   EXPECT_TRUE(std::all_of(ply.face_counts.begin(), ply.face_counts.end(), [](uint8_t c) { return c == 3; }));

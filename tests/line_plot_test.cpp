@@ -1,6 +1,8 @@
 // Line plots (tools/support/line_plot.h): a PNG of the requested size, log axes that survive eps = 0,
 // atomic replacement, concurrent callers, no output on the terminal, and PLplot's fatal errors
 // turned into IoError instead of exit().
+#include "tools/support/line_plot.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -18,7 +20,6 @@
 #include <vector>
 
 #include "isotope/error.h"
-#include "tools/support/line_plot.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"

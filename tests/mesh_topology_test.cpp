@@ -1,11 +1,10 @@
 // measure_topology (isotope/mesh.h), what every topology claim is checked with: counts on
 // small meshes worked out by hand, and the same counts on any number of threads.
 #include <gtest/gtest.h>
-
 #include <tbb/global_control.h>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "isotope/mesh.h"
 
 namespace isotope {

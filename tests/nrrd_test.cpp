@@ -17,10 +17,10 @@
 #include <string>
 #include <vector>
 
-#include "isotope/error.h"
 #include "io/volume/nrrd_reader.h"
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/error.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
@@ -52,8 +52,7 @@ std::string header(const std::vector<std::string>& fields, const std::string& ma
 // The header of a 3-D volume; EXTRA fields follow the required ones.
 std::string volume_header(const std::string& sizes, const std::string& type, const std::string& encoding,
                           const std::vector<std::string>& extra = {}) {
-  std::vector<std::string> fields = {"dimension: 3", "sizes: " + sizes, "type: " + type,
-                                     "encoding: " + encoding};
+  std::vector<std::string> fields = {"dimension: 3", "sizes: " + sizes, "type: " + type, "encoding: " + encoding};
   fields.insert(fields.end(), extra.begin(), extra.end());
   return header(fields);
 }
@@ -68,8 +67,7 @@ std::string nrrd_error(const std::string& p, const std::string& text, const Byte
   return io_error_of([&] { read_nrrd(p); });
 }
 
-const Bytes kSmallData = {0,  1,  2,  3,  4,  5,  6,  7,  8,  9,  10, 11,
-                          12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23};
+const Bytes kSmallData = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23};
 const std::string kSmallHeader = volume_header("2 3 4", "uchar", "raw");
 
 // ---------------------------------------------------------------- shared volumes
@@ -126,8 +124,7 @@ TEST_F(NrrdTest, BigEndianUint16AndFloat32Decode) {
 
   const std::vector<float> floats = {0.5f, -3.25f, 1e-20f, 6.5e7f, -0.0f, 42.0f};
   const std::string f32 = path("f32.nrrd");
-  write_file(f32, volume_header("1 2 3", "float", "raw", {"endian: big"}),
-             bytes_of(floats, std::endian::big));
+  write_file(f32, volume_header("1 2 3", "float", "raw", {"endian: big"}), bytes_of(floats, std::endian::big));
   EXPECT_EQ(read_nrrd(f32).values, floats);
 }
 
@@ -146,8 +143,7 @@ TEST_F(NrrdTest, EverySupportedTypeDecodesInEitherByteOrder) {
     EXPECT_EQ(read_nrrd(u16).values, (std::vector<float>{7, 65000}));
 
     const std::string f64 = path("f64.nrrd");
-    write_file(f64, volume_header("1 2 1", "double", "raw", {endian}),
-               bytes_of(std::vector<double>{0.1, -2.5}, order));
+    write_file(f64, volume_header("1 2 1", "double", "raw", {endian}), bytes_of(std::vector<double>{0.1, -2.5}, order));
     EXPECT_EQ(read_nrrd(f64).values, (std::vector<float>{0.1f, -2.5f}));
   }
 }
@@ -182,8 +178,7 @@ TEST_F(NrrdTest, EveryMagicVersionFromOneToFiveIsAccepted) {
     const std::string magic = std::string("NRRD000") + version;
     SCOPED_TRACE(magic);
     const std::string p = path("v.nrrd");
-    write_file(p, header({"dimension: 3", "sizes: 2 3 4", "type: uchar", "encoding: raw"}, magic),
-               kSmallData);
+    write_file(p, header({"dimension: 3", "sizes: 2 3 4", "type: uchar", "encoding: raw"}, magic), kSmallData);
     EXPECT_EQ(read_nrrd(p).values.size(), kSmallData.size());
   }
 }
@@ -202,8 +197,8 @@ TEST_F(NrrdTest, SpaceDirectionsAndOriginMapToSpacingAndOrigin) {
   const std::string p = path("space.nrrd");
   write_file(p,
              volume_header("2 3 4", "uchar", "raw",
-                           {"space: right-anterior-superior",
-                            "space directions: (0.5,0,0) (0, 2,0) ( 0,0,3.25 )", "space origin: (-1,0,7.5)"}),
+                           {"space: right-anterior-superior", "space directions: (0.5,0,0) (0, 2,0) ( 0,0,3.25 )",
+                            "space origin: (-1,0,7.5)"}),
              kSmallData);
   const Volume v = read_nrrd(p);
   EXPECT_EQ(v.spacing, (std::array<double, 3>{0.5, 2, 3.25}));
@@ -212,8 +207,7 @@ TEST_F(NrrdTest, SpaceDirectionsAndOriginMapToSpacingAndOrigin) {
 
 TEST_F(NrrdTest, RotatedSpaceDirectionsKeepOnlyTheirLengths) {
   const std::string p = path("rotated.nrrd");
-  write_file(p, volume_header("2 3 4", "uchar", "raw", {"space directions: (0,3,4) (-2,0,0) (0,0,-1.5)"}),
-             kSmallData);
+  write_file(p, volume_header("2 3 4", "uchar", "raw", {"space directions: (0,3,4) (-2,0,0) (0,0,-1.5)"}), kSmallData);
   EXPECT_EQ(read_nrrd(p).spacing, (std::array<double, 3>{5, 2, 1.5}));
 }
 
@@ -229,11 +223,9 @@ TEST_F(NrrdTest, BadGeometryFieldsAreRejected) {
   EXPECT_CONTAINS(error_with("space directions: (1,0,0) (0,0,0) (0,0,1)"), "nonzero lengths");
   EXPECT_CONTAINS(error_with("space directions: (1,0) (0,1) (0,0)"), "must be 3 vectors");
   EXPECT_CONTAINS(error_with("space origin: (1,2)"), "space origin '(1,2)'");
-  const std::string both =
-      nrrd_error(p,
-                 volume_header("2 3 4", "uchar", "raw",
-                               {"spacings: 1 1 1", "space directions: (1,0,0) (0,1,0) (0,0,1)"}),
-                 kSmallData);
+  const std::string both = nrrd_error(
+      p, volume_header("2 3 4", "uchar", "raw", {"spacings: 1 1 1", "space directions: (1,0,0) (0,1,0) (0,0,1)"}),
+      kSmallData);
   EXPECT_CONTAINS(both, "both 'spacings' and 'space directions'");
 }
 
@@ -287,8 +279,8 @@ TEST_F(NrrdTest, WrongMagicIsRejected) {
   for (const std::string magic : {"NRRD0006", "NRRD0000", "NRRD00041", "nrrd0004", "P5", ""}) {
     SCOPED_TRACE(magic);
     const std::string p = path("magic.nrrd");
-    const std::string msg = nrrd_error(
-        p, header({"dimension: 3", "sizes: 2 3 4", "type: uchar", "encoding: raw"}, magic), kSmallData);
+    const std::string msg =
+        nrrd_error(p, header({"dimension: 3", "sizes: 2 3 4", "type: uchar", "encoding: raw"}, magic), kSmallData);
     EXPECT_CONTAINS(msg, p);
     EXPECT_CONTAINS(msg, "not an NRRD file");
   }
@@ -307,8 +299,7 @@ TEST_F(NrrdTest, UnsupportedTypeIsRejectedByName) {
   for (const std::string type : {"int64", "signed char", "int", "uint32", "block"}) {
     SCOPED_TRACE(type);
     const std::string p = path("type.nrrd");
-    const std::string msg =
-        nrrd_error(p, volume_header("2 3 4", type, "raw", {"endian: little"}), kSmallData);
+    const std::string msg = nrrd_error(p, volume_header("2 3 4", type, "raw", {"endian: little"}), kSmallData);
     EXPECT_CONTAINS(msg, p);
     EXPECT_CONTAINS(msg, "type '" + type + "' not supported");
   }
@@ -342,17 +333,14 @@ TEST_F(NrrdTest, MalformedFieldValuesAreRejected) {
   const std::string p = path("malformed.nrrd");
   EXPECT_CONTAINS(nrrd_error(p, volume_header("2 3", "uchar", "raw"), kSmallData),
                   "sizes '2 3' must be 3 integers >= 1");
-  EXPECT_CONTAINS(nrrd_error(p, volume_header("2 0 4", "uchar", "raw"), kSmallData),
-                  "must be 3 integers >= 1");
-  EXPECT_CONTAINS(nrrd_error(p, volume_header("2 x 4", "uchar", "raw"), kSmallData),
-                  "must be 3 integers >= 1");
+  EXPECT_CONTAINS(nrrd_error(p, volume_header("2 0 4", "uchar", "raw"), kSmallData), "must be 3 integers >= 1");
+  EXPECT_CONTAINS(nrrd_error(p, volume_header("2 x 4", "uchar", "raw"), kSmallData), "must be 3 integers >= 1");
   EXPECT_CONTAINS(nrrd_error(p, volume_header("2 3 4", "short", "raw", {"endian: middle"}), kSmallData),
                   "endian 'middle' must be little or big");
   EXPECT_CONTAINS(nrrd_error(p, volume_header("2 3 4", "uchar", "raw", {"no separator"}), kSmallData),
                   "header line 'no separator' is not 'field: value'");
-  EXPECT_CONTAINS(
-      nrrd_error(p, volume_header("99999999999 99999999999 99999999999", "uchar", "raw"), kSmallData),
-      "too large");
+  EXPECT_CONTAINS(nrrd_error(p, volume_header("99999999999 99999999999 99999999999", "uchar", "raw"), kSmallData),
+                  "too large");
 }
 
 TEST_F(NrrdTest, AttachedDataWithoutBlankLineIsRejected) {
@@ -420,9 +408,8 @@ TEST_F(NrrdTest, EveryCutOfAGzipStreamIsRejected) {
   for (size_t cut = 0; cut < packed.size(); ++cut) {
     SCOPED_TRACE(cut);
     const std::string p = path("cut_gz.nrrd");
-    const std::string msg =
-        nrrd_error(p, volume_header("2 3 4", "uchar", "gzip"),
-                   Bytes(packed.begin(), packed.begin() + static_cast<std::ptrdiff_t>(cut)));
+    const std::string msg = nrrd_error(p, volume_header("2 3 4", "uchar", "gzip"),
+                                       Bytes(packed.begin(), packed.begin() + static_cast<std::ptrdiff_t>(cut)));
     EXPECT_CONTAINS(msg, "truncated");
   }
 }
@@ -464,8 +451,8 @@ TEST_F(NrrdTest, NanInDataIsRejectedWithItsCoordinates) {
   std::vector<float> values(3 * 3 * 2, 1.0f);
   values[(0 * 3 + 2) * 3 + 1] = std::numeric_limits<float>::quiet_NaN();  // (x,y,z) = (1,2,0)
   const std::string p = path("nan.nrrd");
-  const std::string msg = nrrd_error(p, volume_header("3 3 2", "float", "raw", {"endian: big"}),
-                                     bytes_of(values, std::endian::big));
+  const std::string msg =
+      nrrd_error(p, volume_header("3 3 2", "float", "raw", {"endian: big"}), bytes_of(values, std::endian::big));
   EXPECT_CONTAINS(msg, p);
   EXPECT_CONTAINS(msg, "(1,2,0)");
   EXPECT_CONTAINS(msg, "not finite");

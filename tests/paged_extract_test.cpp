@@ -19,16 +19,16 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
-#include "isotope/mesh.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
-#include "io/volume/box_reader.h"
 #include "io/store/brick_cache.h"
-#include "isotope/error.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
+#include "io/volume/box_reader.h"
+#include "isotope/error.h"
+#include "isotope/mesh.h"
 #include "tests/byte_files.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
@@ -283,8 +283,8 @@ void expect_same_bytes(const std::string& name, const Volume& v, float iso, cons
       const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
       for (uint64_t budget : {kTinyBudget, sizes.total / 8, kHugeBudget}) {
         const PagedRun r = run_paged(store, budget, o);
-        const std::string what = name + " " + describe(o) + " threads " + std::to_string(threads) + " budget " +
-                                 std::to_string(budget);
+        const std::string what =
+            name + " " + describe(o) + " threads " + std::to_string(threads) + " budget " + std::to_string(budget);
         ASSERT_TRUE(same_mesh(expected, r.mesh)) << what;
         EXPECT_EQ(r.stats.chosen_eps, expected_stats.chosen_eps) << what;
         EXPECT_EQ(r.stats.next_eps, expected_stats.next_eps) << what;

@@ -3,7 +3,6 @@
 // NAME.expect lists, `isotope COMMAND FILE` must exit 1 with "isotope: error: " and the expected
 // part of the message, write nothing, and leave the file as it was. docs/RELIABILITY.md lists them.
 #include <gtest/gtest.h>
-
 #include <unistd.h>
 
 #include <algorithm>
@@ -79,8 +78,8 @@ TEST_P(Reject, GivesItsMessageExitsOneAndWritesNothing) {
     const tools::ChildRun r = tools::run_child(argv, path("log"));
     EXPECT_EQ(r.code, 1) << name << " " << command << ": " << r.output;
     EXPECT_NE(r.output.find("isotope: error: "), std::string::npos) << r.output;
-    EXPECT_NE(r.output.find(message), std::string::npos) << name << " " << command << ": expected '" << message
-                                                          << "' in: " << r.output;
+    EXPECT_NE(r.output.find(message), std::string::npos)
+        << name << " " << command << ": expected '" << message << "' in: " << r.output;
     std::set<std::string> left;
     for (const auto& e : fs::directory_iterator(dir)) left.insert(e.path().filename().string());
     EXPECT_EQ(left, std::set<std::string>{name}) << command << " wrote into the input's folder";

@@ -3,10 +3,10 @@
 // be exactly the mesh that extraction gives for the same options, however many ask at once.
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <httplib.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
-#include <httplib.h>
 
 #include <cmath>
 #include <cstdio>
@@ -18,19 +18,19 @@
 #include <thread>
 #include <vector>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
-#include "isotope/mesh.h"
-#include "isotope/error.h"
+#include "engine/extract/extract.h"
 #include "io/mesh/mesh_wire.h"
+#include "isotope/error.h"
+#include "isotope/mesh.h"
+#include "isotope/source.h"
 #include "tests/child_process.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
-#include "isotope/source.h"
-#include "tools/support/peak_memory.h"
 #include "tools/serve/serve_request.h"
 #include "tools/serve/supersession.h"
 #include "tools/serve/viewer_server.h"
+#include "tools/support/peak_memory.h"
 
 namespace isotope {
 namespace {
@@ -52,9 +52,15 @@ std::string bad_request_message(const std::multimap<std::string, std::string>& q
 }
 
 TEST(ServeRequest, TakesWhatExtractTakes) {
-  const auto r = parse_extract_request(query({{"iso", "0.25"}, {"eps", "1/64"}, {"topology", "simplify"},
-                                              {"delta", "0.5"}, {"weight", "gradient"}, {"error", "surplus"},
-                                              {"focus", "1,2.5,-3"}, {"radius", "4"}, {"client", "a-Z_9"},
+  const auto r = parse_extract_request(query({{"iso", "0.25"},
+                                              {"eps", "1/64"},
+                                              {"topology", "simplify"},
+                                              {"delta", "0.5"},
+                                              {"weight", "gradient"},
+                                              {"error", "surplus"},
+                                              {"focus", "1,2.5,-3"},
+                                              {"radius", "4"},
+                                              {"client", "a-Z_9"},
                                               {"seq", "17"}}));
   EXPECT_EQ(r.options.iso, 0.25f);
   EXPECT_EQ(r.options.eps, 1.0 / 64);
@@ -216,8 +222,8 @@ class Serve : public testing::TempDirTest {
     return text;
   }
   static std::string url(const ExtractOptions& o) {
-    std::string u = "/api/extract?iso=" + exact(o.iso) + "&eps=" + exact(o.eps) +
-                    "&topology=" + std::string(to_string(o.topology));
+    std::string u =
+        "/api/extract?iso=" + exact(o.iso) + "&eps=" + exact(o.eps) + "&topology=" + std::string(to_string(o.topology));
     if (o.topology == TopologyMode::simplify) u += "&delta=" + exact(o.delta);
     return u;
   }
@@ -344,11 +350,11 @@ TEST_F(Serve, BadParametersGet400WithAMessage) {
 TEST_F(Serve, NoUrlReachesAFileOutsideTheStore) {
   std::ofstream(path("secret.txt")) << "root:x:0:0:secret\n";
   const std::string secret = path("secret.txt");
-  for (const std::string& target : std::vector<std::string>
-       {"/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/..%2f..%2fetc%2fpasswd", "//etc/passwd",
-        "/api/../../etc/passwd", "/viewer.js/../../../etc/passwd", "/%2fetc%2fpasswd", "/..%5c..%5cetc%5cpasswd",
-        "/" + secret, "/.." + secret, "/%2e%2e" + secret, "/hydrogen.isotope", "/" + store_,
-        "/api/info/../../" + secret, "/api/extract/../../etc/passwd", "/index.html%00.txt"}) {
+  for (const std::string& target : std::vector<std::string>{
+           "/../../etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/..%2f..%2fetc%2fpasswd", "//etc/passwd",
+           "/api/../../etc/passwd", "/viewer.js/../../../etc/passwd", "/%2fetc%2fpasswd", "/..%5c..%5cetc%5cpasswd",
+           "/" + secret, "/.." + secret, "/%2e%2e" + secret, "/hydrogen.isotope", "/" + store_,
+           "/api/info/../../" + secret, "/api/extract/../../etc/passwd", "/index.html%00.txt"}) {
     SCOPED_TRACE(target);
     const auto res = get(target);
     ASSERT_TRUE(res);
@@ -439,9 +445,12 @@ TEST_F(Serve, ACrowdIsAnsweredOrRefusedWithBoundedMemory) {
   int ok = 0, busy = 0;
   for (auto& a : answers) {
     const auto [status, detail] = a.get();
-    if (status == 200) ++ok;
-    else if (status == 503 && detail == "1") ++busy;
-    else ADD_FAILURE() << "status " << status << " " << detail;
+    if (status == 200)
+      ++ok;
+    else if (status == 503 && detail == "1")
+      ++busy;
+    else
+      ADD_FAILURE() << "status " << status << " " << detail;
   }
   const double grown_mb = static_cast<double>(tools::peak_rss_bytes()) / (1 << 20) - before_mb;
   testing::report("serve_crowd_ok", ok);
@@ -498,8 +507,10 @@ TEST_F(Serve, OnlyAStoreIsServed) {
 }
 
 TEST(ServeHost, LoopbackIsRecognised) {
-  for (const std::string h : {"127.0.0.1", "127.1.2.3", "localhost", "::1"}) EXPECT_TRUE(tools::is_loopback_host(h)) << h;
-  for (const std::string h : {"0.0.0.0", "::", "192.168.1.2", "example.org"}) EXPECT_FALSE(tools::is_loopback_host(h)) << h;
+  for (const std::string h : {"127.0.0.1", "127.1.2.3", "localhost", "::1"})
+    EXPECT_TRUE(tools::is_loopback_host(h)) << h;
+  for (const std::string h : {"0.0.0.0", "::", "192.168.1.2", "example.org"})
+    EXPECT_FALSE(tools::is_loopback_host(h)) << h;
 }
 
 }  // namespace

@@ -10,11 +10,11 @@
 #include <string>
 #include <vector>
 
-#include "engine/topology/component_report.h"
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
-#include "isotope/mesh.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/topology/component_report.h"
+#include "isotope/mesh.h"
 #include "test_support.h"
 
 namespace isotope {
@@ -63,7 +63,6 @@ Volume sample_field(F f) {
 }
 
 double len(double x, double y, double z) { return std::sqrt(x * x + y * y + z * z); }
-
 
 // Fields with features of known size (values -0.1 or -0.3 far from everything).
 // A sphere of radius 0.45, a small Gaussian blob of peak 0.05 above the isovalue 0 (weight ~0.15:
@@ -118,7 +117,9 @@ const std::vector<Case>& cases() {
     for (const auto& shared : testing::shared_volumes()) {
       if (shared.name != "neghip" && shared.name != "hydrogen") continue;
       const float range = shared.name == "hydrogen" ? 1.0f : 255.0f;
-      c.push_back({shared.name, testing::load_shared(shared), {shared.isovalues[0], shared.isovalues[1]},
+      c.push_back({shared.name,
+                   testing::load_shared(shared),
+                   {shared.isovalues[0], shared.isovalues[1]},
                    {0.01 * range, 0.05 * range, 0.2 * range}});
     }
     return c;
@@ -136,7 +137,8 @@ void for_each_setting(F f) {
       const double top = max_weight(mv, w);
       ASSERT_GT(top, 0) << c.name << " has no critical point";
       for (float iso : c.isovalues)
-        for (double eps : c.eps) f(c.name + " iso " + std::to_string(iso) + " eps " + std::to_string(eps), mv, w, top, iso, eps);
+        for (double eps : c.eps)
+          f(c.name + " iso " + std::to_string(iso) + " eps " + std::to_string(eps), mv, w, top, iso, eps);
     }
   }
 }
@@ -144,24 +146,24 @@ void for_each_setting(F f) {
 // delta = 0 keeps every critical point: the preserve mesh, bit for bit, for every weight.
 TEST(Simplify, DeltaZeroIsPreserve) {
   int compared = 0;
-  for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double, float iso,
-                       double eps) {
-    const Mesh preserve = extract(mv, options(iso, eps, TopologyMode::preserve));
-    ExtractStats stats;
-    const Mesh simplify = extract(mv, options(iso, eps, TopologyMode::simplify, 0, w), &stats);
-    EXPECT_EQ(simplify.triangles, preserve.triangles) << what;
-    EXPECT_EQ(simplify.positions, preserve.positions) << what;
-    EXPECT_EQ(stats.tets_simplified, 0) << what;
-    ++compared;
-  });
+  for_each_setting(
+      [&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double, float iso, double eps) {
+        const Mesh preserve = extract(mv, options(iso, eps, TopologyMode::preserve));
+        ExtractStats stats;
+        const Mesh simplify = extract(mv, options(iso, eps, TopologyMode::simplify, 0, w), &stats);
+        EXPECT_EQ(simplify.triangles, preserve.triangles) << what;
+        EXPECT_EQ(simplify.positions, preserve.positions) << what;
+        EXPECT_EQ(stats.tets_simplified, 0) << what;
+        ++compared;
+      });
   EXPECT_GE(compared, 90);
 }
 
 // A delta above the largest weight of the volume drops every critical point: the none mesh.
 TEST(Simplify, DeltaAboveEveryWeightIsNone) {
   int differs_from_preserve = 0;
-  for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double top,
-                       float iso, double eps) {
+  for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double top, float iso,
+                       double eps) {
     const double delta = std::nextafter(top, std::numeric_limits<double>::infinity());
     const Mesh none = extract(mv, options(iso, eps, TopologyMode::none));
     const Mesh simplify = extract(mv, options(iso, eps, TopologyMode::simplify, delta, w));
@@ -178,8 +180,8 @@ TEST(Simplify, DeltaAboveEveryWeightIsNone) {
 // 4 times it, in factors of 4.
 TEST(Simplify, TrianglesFallAsDeltaGrows) {
   int steps = 0, falls = 0;
-  for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double top,
-                       float iso, double eps) {
+  for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double top, float iso,
+                       double eps) {
     size_t previous = extract(mv, options(iso, eps, TopologyMode::preserve)).triangles.size();
     for (int k = 12; k >= -2; k -= 2) {
       const double delta = std::ldexp(top, -k);
@@ -200,8 +202,8 @@ TEST(Simplify, TrianglesFallAsDeltaGrows) {
 // a change of components or Euler characteristic always comes with such tetrahedra.
 TEST(Simplify, EveryTopologyChangeIsExplainedByADroppedCriticalPoint) {
   int topology_changes = 0, unchanged = 0;
-  for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double top,
-                       float iso, double eps) {
+  for_each_setting([&](const std::string& what, const MultiresVolume& mv, SimplificationWeight w, double top, float iso,
+                       double eps) {
     const Mesh preserve = extract(mv, options(iso, eps, TopologyMode::preserve));
     const MeshTopology p = measure_topology(preserve);
     for (int k = 8; k >= 0; k -= 2) {
@@ -307,7 +309,6 @@ TEST(SimplifyFeatures, ThinHandleClosesWhileTheThickOneStays) {
   EXPECT_EQ(extract(mv, options(0, eps, TopologyMode::simplify, 1.0)).triangles, none.triangles);
   EXPECT_NE(measure_topology(none).euler_characteristic, 0);
 }
-
 
 // The paper's lobster in spirit, on the noisiest shared surface: hydrogen at iso 0.001, 73
 // components and Euler characteristic -58 at full resolution. preserve keeps all of them (and the

@@ -3,6 +3,7 @@
 // meshes; the file does not depend on threads or the memory budget; every corruption is caught,
 // named, and never crashes, by verify and by the reads an extraction makes.
 #include <gtest/gtest.h>
+#include <hdf5.h>
 
 #include <algorithm>
 #include <atomic>
@@ -14,20 +15,18 @@
 #include <limits>
 #include <random>
 
-#include <hdf5.h>
-
-#include "engine/hierarchy/compact_record.h"
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
+#include "engine/extract/extract.h"
+#include "engine/extract/traversal.h"
+#include "engine/hierarchy/compact_record.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
-#include "engine/extract/traversal.h"
-#include "io/volume/box_reader.h"
 #include "io/store/brick_cache.h"
-#include "isotope/error.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
+#include "io/volume/box_reader.h"
+#include "isotope/error.h"
 #include "tbb/global_control.h"
 #include "tests/byte_files.h"
 #include "tests/io_error_of.h"
@@ -117,7 +116,8 @@ class Store : public TempDirTest {
           const auto h = reader.locate(traversal::pack(c));
           const DiamondBounds b = reader.bounds(h, kAll);
           const DiamondTopology t = reader.topology(h, kAll);
-          if ((std::memcmp(&b, &expected.bounds, sizeof b) != 0 || std::memcmp(&t, &expected.topology, sizeof t) != 0) &&
+          if ((std::memcmp(&b, &expected.bounds, sizeof b) != 0 ||
+               std::memcmp(&t, &expected.topology, sizeof t) != 0) &&
               ++mismatches < 5)
             ADD_FAILURE() << "record at " << x << " " << y << " " << z << " is not the exact one rounded";
         }
@@ -126,10 +126,9 @@ class Store : public TempDirTest {
 };
 
 TEST_F(Store, RoundTripIsExactOnOddDimensionsAndAnyBrickSize) {
-  const std::vector<Volume> volumes = {testing::crop(generate_noise(70, 3), {30, 19, 23}),
-                                       testing::crop(generate_noise(70, 4), {41, 9, 70}),
-                                       testing::crop(generate_algebraic(40), {40, 33, 37}),
-                                       testing::crop(generate_noise(9, 5), {2, 9, 5})};
+  const std::vector<Volume> volumes = {
+      testing::crop(generate_noise(70, 3), {30, 19, 23}), testing::crop(generate_noise(70, 4), {41, 9, 70}),
+      testing::crop(generate_algebraic(40), {40, 33, 37}), testing::crop(generate_noise(9, 5), {2, 9, 5})};
   for (const Volume& v : volumes)
     for (int bits : {kMinBrickBits, 4, kMaxBrickBits}) {
       ConvertOptions o;
@@ -153,8 +152,8 @@ TEST_F(Store, IntegerStoresAreAtMostOneAndAHalfTimesTheirInput) {
     const std::string raw = std::string(ISOTOPE_TEST_DATA) + "/" + name, store = path("s.isotope");
     const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir_.string());
     convert_to_store(*input, store, {});
-    const double ratio = static_cast<double>(std::filesystem::file_size(store)) /
-                         static_cast<double>(std::filesystem::file_size(raw));
+    const double ratio =
+        static_cast<double>(std::filesystem::file_size(store)) / static_cast<double>(std::filesystem::file_size(raw));
     RecordProperty(name, std::to_string(ratio));
     EXPECT_LE(ratio, 1.5) << name;
     EXPECT_EQ(StoreReader(store).header().source_type, "uint8");
@@ -168,8 +167,9 @@ TEST_F(Store, ExtractionFromStoreEqualsInMemory) {
     Volume volume;
     std::vector<float> isovalues;
   };
-  std::vector<Case> cases = {{testing::crop(generate_noise(40, 11), {40, 35, 29}), {-0.3f, 0.0f, 0.25f}},
-                             {testing::crop(generate_algebraic(40, {5.0 / 32, 3.0 / 32, 0}), {37, 40, 33}), {0.0f, 0.1f}}};
+  std::vector<Case> cases = {
+      {testing::crop(generate_noise(40, 11), {40, 35, 29}), {-0.3f, 0.0f, 0.25f}},
+      {testing::crop(generate_algebraic(40, {5.0 / 32, 3.0 / 32, 0}), {37, 40, 33}), {0.0f, 0.1f}}};
   for (const auto& shared : testing::shared_volumes())
     cases.push_back({testing::load_shared(shared), {shared.isovalues[0], shared.isovalues[1], shared.isovalues[2]}});
   int compared = 0;
@@ -347,7 +347,8 @@ TEST_F(Store, CoarseExtractionReadsWhatItStopsIn) {
   const uint64_t none_bytes = bytes_read(coarse), preserve_bytes = bytes_read(preserve);
   ExtractOptions full;
   const uint64_t full_bytes = bytes_read(full);
-  RecordProperty("coarse_none_share", std::to_string(static_cast<double>(none_bytes) / static_cast<double>(bricks_bytes)));
+  RecordProperty("coarse_none_share",
+                 std::to_string(static_cast<double>(none_bytes) / static_cast<double>(bricks_bytes)));
   EXPECT_LT(none_bytes * 10, bricks_bytes) << "a coarse none extraction reads under a tenth of the store";
   EXPECT_LT(none_bytes, preserve_bytes) << "none reads no critical interval";
   EXPECT_LT(none_bytes, full_bytes);
@@ -415,7 +416,8 @@ TEST_F(StoreCorruption, FirstBadBrickIsNamedWhateverTheThreads) {
   // The first at the end of the first half, which a second thread starting on the second half
   // would pass last.
   const int64_t first = count / 2 - 1;
-  for (const int64_t i : {first, first + 1, count - 1}) bytes[reader.entry(i).offset + reader.entry(i).bytes[0] / 2] ^= 0x5a;
+  for (const int64_t i : {first, first + 1, count - 1})
+    bytes[reader.entry(i).offset + reader.entry(i).bytes[0] / 2] ^= 0x5a;
   for (const size_t threads : {size_t{1}, size_t{2}, size_t{8}}) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
     for (int run = 0; run < 10; ++run)
@@ -424,8 +426,8 @@ TEST_F(StoreCorruption, FirstBadBrickIsNamedWhateverTheThreads) {
 }
 
 TEST_F(StoreCorruption, TruncationWrongMagicAndVersion) {
-  for (size_t size : {size_t{0}, size_t{7}, size_t{100}, kHeaderBytes - 1, kHeaderBytes, kHeaderBytes + 1, good_.size() / 2,
-                      good_.size() - 1}) {
+  for (size_t size : {size_t{0}, size_t{7}, size_t{100}, kHeaderBytes - 1, kHeaderBytes, kHeaderBytes + 1,
+                      good_.size() / 2, good_.size() - 1}) {
     auto bytes = good_;
     bytes.resize(size);
     const std::string m = verify_message(bytes);
@@ -472,8 +474,9 @@ void rewrite_brick(const std::string& path, int64_t index, const std::function<v
   for (int64_t i = 0; i < layout.brick_count(); ++i) dir[static_cast<size_t>(i)] = store.entry(i);
   std::vector<int64_t> order(dir.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int64_t>(i);
-  std::sort(order.begin(), order.end(),
-            [&](int64_t x, int64_t y) { return dir[static_cast<size_t>(x)].offset < dir[static_cast<size_t>(y)].offset; });
+  std::sort(order.begin(), order.end(), [&](int64_t x, int64_t y) {
+    return dir[static_cast<size_t>(x)].offset < dir[static_cast<size_t>(y)].offset;
+  });
   testing::Bytes out(file.begin(), file.begin() + kHeaderBytes);
   for (int64_t i : order) {
     BrickEntry& e = dir[static_cast<size_t>(i)];
@@ -492,7 +495,8 @@ void rewrite_brick(const std::string& path, int64_t index, const std::function<v
   }
   StoreHeader h = store.header();
   for (const Band& band_j : layout.bands()) {
-    const std::vector<BrickEntry> mine(dir.begin() + band_j.first_brick, dir.begin() + band_j.first_brick + band_j.brick_count());
+    const std::vector<BrickEntry> mine(dir.begin() + band_j.first_brick,
+                                       dir.begin() + band_j.first_brick + band_j.brick_count());
     const std::vector<uint8_t> directory = encode_directory(mine);
     BandDirectory& d = h.bands[static_cast<size_t>(band_j.scale)];
     d.offset = out.size();
@@ -510,7 +514,8 @@ TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
   testing::write_file(bad_, "", good_);
   const StoreLayout layout = StoreReader(bad_).layout();
   // Node (2, 0, 0) of band 1: Morton 8, all-even, so no record of its own bounds it in this band.
-  rewrite_brick(bad_, layout.brick_index(1, {0, 0, 0}), [](const BrickView& b) { const_cast<float*>(b.values)[8] += 1; });
+  rewrite_brick(bad_, layout.brick_index(1, {0, 0, 0}),
+                [](const BrickView& b) { const_cast<float*>(b.values)[8] += 1; });
   EXPECT_EQ(load_message(read_bytes(bad_)), "") << "the edit must keep the store readable";
   EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "differs from band 0");
 
@@ -528,9 +533,10 @@ TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
 // be. Every reader path (the extraction's, verify's) refuses each with a message naming it.
 TEST_F(StoreCorruption, HeaderFieldsOutOfTheirRangesAreRefusedUnderAValidChecksum) {
   const StoreHeader good = StoreReader([&] {
-    testing::write_file(bad_, "", good_);
-    return bad_;
-  }()).header();
+                             testing::write_file(bad_, "", good_);
+                             return bad_;
+                           }())
+                               .header();
   const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
   const std::vector<std::pair<std::function<void(StoreHeader&)>, std::string>> edits = {
       {[&](StoreHeader& h) { h.spacing[1] = nan; }, "spacing"},
@@ -539,9 +545,9 @@ TEST_F(StoreCorruption, HeaderFieldsOutOfTheirRangesAreRefusedUnderAValidChecksu
       {[&](StoreHeader& h) { h.spacing[2] = inf; }, "spacing"},
       {[&](StoreHeader& h) { h.origin[0] = nan; }, "origin"},
       {[&](StoreHeader& h) { h.origin[1] = -inf; }, "origin"},
-      {[&](StoreHeader& h) { h.value_scale = 2; }, "value mapping"},    // lossless: the identity only
+      {[&](StoreHeader& h) { h.value_scale = 2; }, "value mapping"},  // lossless: the identity only
       {[&](StoreHeader& h) { h.value_offset = 1; }, "value mapping"},
-      {[&](StoreHeader& h) { h.brick_bits = 8; }, "brick size"},        // 712 MB a brick in format 2
+      {[&](StoreHeader& h) { h.brick_bits = 8; }, "brick size"},  // 712 MB a brick in format 2
       {[&](StoreHeader& h) { h.brick_bits = 2; }, "brick size"},
       {[&](StoreHeader& h) { h.dims[0] = int64_t{1} << 40; }, "dimensions"},
       {[&](StoreHeader& h) { h.value_min = nan; }, "value range"},
@@ -606,7 +612,8 @@ TEST_F(StoreCorruption, RandomizedCorruptionIsAlwaysCaught) {
         break;
       }
       case 2: bytes.resize(rng() % bytes.size()); break;
-      default: bytes.insert(bytes.begin() + static_cast<std::ptrdiff_t>(rng() % bytes.size()), static_cast<uint8_t>(rng()));
+      default:
+        bytes.insert(bytes.begin() + static_cast<std::ptrdiff_t>(rng() % bytes.size()), static_cast<uint8_t>(rng()));
     }
     const std::string m = verify_message(bytes);
     EXPECT_NE(m, "") << "iteration " << it << " went unnoticed";

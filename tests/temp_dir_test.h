@@ -25,8 +25,8 @@ class TempDirTest : public ::testing::Test {
     static std::atomic<int> serial{0};
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
     dir_ = std::filesystem::temp_directory_path() /
-           ("isotope_" + std::string(info->test_suite_name()) + "_" + std::to_string(::getpid()) + "_" +
-            info->name() + "_" + std::to_string(serial++));
+           ("isotope_" + std::string(info->test_suite_name()) + "_" + std::to_string(::getpid()) + "_" + info->name() +
+            "_" + std::to_string(serial++));
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
   }

@@ -1,9 +1,9 @@
 #include "tests/test_support.h"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <cmath>
 
 #include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
@@ -78,7 +78,10 @@ int64_t vertices_outside_box(const Mesh& mesh, const Volume& v) {
     for (int a = 0; a < 3; ++a) {
       const double lo = v.origin[a], hi = v.origin[a] + v.spacing[a] * static_cast<double>(v.dims[a] - 1);
       const double tol = 1e-5 * std::max(1.0, std::fabs(hi - lo));
-      if (p[a] < lo - tol || p[a] > hi + tol) { ++n; break; }
+      if (p[a] < lo - tol || p[a] > hi + tol) {
+        ++n;
+        break;
+      }
     }
   return n;
 }
@@ -97,7 +100,8 @@ Volume crop(const Volume& v, std::array<int64_t, 3> dims) {
 
 std::string write_store(const Volume& v, const std::string& dir, const std::string& name,
                         const ConvertOptions& options) {
-  const std::string dims = std::to_string(v.dims[0]) + "x" + std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
+  const std::string dims =
+      std::to_string(v.dims[0]) + "x" + std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
   const std::string raw = dir + "/" + name + "_" + dims + "_float32.raw";
   std::ofstream(raw, std::ios::binary)
       .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));

@@ -5,9 +5,9 @@
 #include <vector>
 
 #include "engine/extract/extract.h"
+#include "io/store/store_writer.h"
 #include "isotope/mesh.h"
 #include "isotope/volume.h"
-#include "io/store/store_writer.h"
 
 namespace isotope::testing {
 

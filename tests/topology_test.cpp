@@ -7,13 +7,13 @@
 #include <string>
 #include <vector>
 
+#include "engine/core/fields.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/critical_rule.h"
 #include "engine/hierarchy/critical_table.h"
 #include "engine/hierarchy/diamond.h"
-#include "engine/extract/extract.h"
-#include "engine/core/fields.h"
-#include "isotope/mesh.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "isotope/mesh.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -31,7 +31,8 @@ std::vector<SweepVolume> sweep_volumes() {
   std::vector<SweepVolume> v;
   for (uint64_t seed = 1; seed <= 6; ++seed) {
     v.push_back({"noise17 seed " + std::to_string(seed), generate_noise(17, seed), {-0.3f, -0.1f, 0.1f, 0.3f}});
-    v.push_back({"noise 21x19x23 seed " + std::to_string(seed), crop(generate_noise(23, 100 + seed), {21, 19, 23}),
+    v.push_back({"noise 21x19x23 seed " + std::to_string(seed),
+                 crop(generate_noise(23, 100 + seed), {21, 19, 23}),
                  {-0.3f, -0.1f, 0.1f, 0.3f}});
   }
   v.push_back({"algebraic 33", generate_algebraic(33), {-0.2f, 0.0f, 0.2f}});
@@ -44,7 +45,10 @@ std::vector<SweepVolume> sweep_volumes() {
 struct Tally {
   int cases = 0, kept = 0;
   double rate() const { return cases ? static_cast<double>(kept) / cases : 1.0; }
-  void add(bool k) { ++cases; kept += k; }
+  void add(bool k) {
+    ++cases;
+    kept += k;
+  }
 };
 
 struct Sweep {
@@ -69,11 +73,10 @@ struct Sweep {
       all[m].add(kept);
       if (!none_kept) hard[m].add(kept);
       if (mode == TopologyMode::preserve && !kept)
-        preserve_failures.push_back(name + " iso " + std::to_string(iso) + " eps " + std::to_string(eps) + " " +
-                                    std::string(to_string(err)) + ": components " + std::to_string(t.components) +
-                                    " vs " + std::to_string(ref.components) + ", chi " +
-                                    std::to_string(t.euler_characteristic) + " vs " +
-                                    std::to_string(ref.euler_characteristic));
+        preserve_failures.push_back(
+            name + " iso " + std::to_string(iso) + " eps " + std::to_string(eps) + " " + std::string(to_string(err)) +
+            ": components " + std::to_string(t.components) + " vs " + std::to_string(ref.components) + ", chi " +
+            std::to_string(t.euler_characteristic) + " vs " + std::to_string(ref.euler_characteristic));
     }
   }
 };
@@ -105,9 +108,9 @@ TEST(TopologyPreservation, ExactRuleKeepsComponentsAndEulerCharacteristicEverywh
   EXPECT_GE(sweep.hard[0].cases, 50);
 }
 
-// The design notes' smallest case (docs/METHOD.md, "What the tests measured"): a 3x3x3 grid whose root cube diamond the paper calls regular,
-// although refining it splits one component into two at iso 0.8585. Every finer vertex has
-// zero surplus, so the field at full resolution is the once-refined one.
+// The design notes' smallest case (docs/METHOD.md, "What the tests measured"): a 3x3x3 grid whose root cube diamond the
+// paper calls regular, although refining it splits one component into two at iso 0.8585. Every finer vertex has zero
+// surplus, so the field at full resolution is the once-refined one.
 Volume paper_counterexample() {
   const Lattice lattice = Lattice::enclosing({3, 3, 3});
   Volume v;

@@ -21,8 +21,9 @@ Command add_bench_command(CLI::App& app) {
   cmd->add_option("--threads", a->threads, "Threads for the parallel rows (0 = all cores)")
       ->check(CLI::Range(0, kMaxThreads))
       ->capture_default_str();
-  cmd->add_option("--dataset", a->datasets, "Run only this dataset (repeatable): algebraic65, algebraic257, bolt,\n"
-                                            "hydrogen, ironProt, neghip, embryo, noise384, noise513, sphere512")
+  cmd->add_option("--dataset", a->datasets,
+                  "Run only this dataset (repeatable): algebraic65, algebraic257, bolt,\n"
+                  "hydrogen, ironProt, neghip, embryo, noise384, noise513, sphere512")
       ->type_name("NAME");
   cmd->add_option("--data", a->data, "Directory of the shared volumes (a volume missing there is an error)")
       ->type_name("DIR")

@@ -11,12 +11,12 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
-#include "isotope/mesh.h"
+#include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "io/mesh/ply_writer.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/mesh.h"
 #include "tools/commands.h"
 #include "tools/support/paper_table1.h"
 #include "tools/support/report.h"
@@ -50,7 +50,7 @@ struct Row {
   Cell cell[3];  // by kModes
 };
 struct Table {
-  std::string name;   // file prefix
+  std::string name;  // file prefix
   std::string title;
   ErrorIndicator error = ErrorIndicator::bound;
   bool paper_columns = false;
@@ -65,7 +65,6 @@ struct Case {
   const Eps* eps = nullptr;
   bool paper_columns = false;
 };
-
 
 std::string file_label(const char* label) {
   std::string s = label;
@@ -168,8 +167,8 @@ std::vector<Table> run_case(const Case& c, const std::filesystem::path& out, boo
         const Mesh mesh = extract(mv, o, nullptr);
         row.cell[m].seconds = seconds_since(t0);
         row.cell[m].topology = measure_topology(mesh);
-        const std::string file = c.name + "_" + std::string(to_string(e)) + "_eps" + file_label(row.eps.label) +
-                                 "_" + std::string(to_string(kModes[m])) + ".ply";
+        const std::string file = c.name + "_" + std::string(to_string(e)) + "_eps" + file_label(row.eps.label) + "_" +
+                                 std::string(to_string(kModes[m])) + ".ply";
         write_ply(mesh, (out / file).string());
       }
       t.rows.push_back(row);
@@ -239,11 +238,13 @@ void print_note(const std::vector<Table>& tables) {
       nonmanifold_rows += nonmanifold ? 1 : 0;
     }
   }
-  appendf(note, "\nNote. Over the %d rows with eps > 0 (%zu tables), preserve kept the eps = 0 components and Euler "
-              "characteristic in %d, paper (the paper's critical intervals) in %d and none in %d. ",
-              rows, tables.size(), kept[2], kept[1], kept[0]);
+  appendf(note,
+          "\nNote. Over the %d rows with eps > 0 (%zu tables), preserve kept the eps = 0 components and Euler "
+          "characteristic in %d, paper (the paper's critical intervals) in %d and none in %d. ",
+          rows, tables.size(), kept[2], kept[1], kept[0]);
   appendf(note, "At eps = 0 the three modes give %s. ",
-              eps0_agree ? "the same full-resolution triangle count in every table" : "DIFFERENT triangle counts (see the tables)");
+          eps0_agree ? "the same full-resolution triangle count in every table"
+                     : "DIFFERENT triangle counts (see the tables)");
 
   // Per volume (its tables are adjacent, one per error indicator).
   for (size_t i = 0; i < tables.size();) {
@@ -272,13 +273,15 @@ void print_note(const std::vector<Table>& tables) {
       ratios += buf;
     }
     const Table& t = tables[i];
-    appendf(note, "%s: the modes give different triangle counts in %d of %d rows; topology lost by none in %d, by paper in %d, "
-                "by preserve in %d; at eps = %s preserve has %s the triangles of none",
-                t.name.c_str(), parted, vol_rows, lost[0], lost[1], lost[2], t.rows.back().eps.label, ratios.c_str());
+    appendf(
+        note,
+        "%s: the modes give different triangle counts in %d of %d rows; topology lost by none in %d, by paper in %d, "
+        "by preserve in %d; at eps = %s preserve has %s the triangles of none",
+        t.name.c_str(), parted, vol_rows, lost[0], lost[1], lost[2], t.rows.back().eps.label, ratios.c_str());
     if (t.paper_columns) {
       appendf(note, " (the paper printed %.1fx at eps = 1, and %d triangles at eps = 0 where we extract %lld)",
-                  static_cast<double>(kTable1Paper[4].with) / kTable1Paper[4].without, kTable1Paper[0].without,
-                  static_cast<long long>(t.rows[0].cell[0].topology.triangles));
+              static_cast<double>(kTable1Paper[4].with) / kTable1Paper[4].without, kTable1Paper[0].without,
+              static_cast<long long>(t.rows[0].cell[0].topology.triangles));
     }
     appendf(note, ". ");
     i = j;
@@ -296,8 +299,7 @@ int run_demo(const DemoArgs& a) {
   std::vector<Case> cases;
   cases.push_back({"algebraic", "Paper Table 1: algebraic function, 65^3, iso 0 (triangles / components / chi)",
                    generate_algebraic(65), 0.0f, kTable1Eps, true});
-  cases.push_back({"algebraic_shifted",
-                   "Algebraic function with the singularity moved by (5/32, 3/32, 0), 65^3, iso 0",
+  cases.push_back({"algebraic_shifted", "Algebraic function with the singularity moved by (5/32, 3/32, 0), 65^3, iso 0",
                    generate_algebraic(65, {0.15625, 0.09375, 0.0}), 0.0f, kTable1Eps, false});
   const std::filesystem::path real = std::filesystem::path(a.data) / "ironProt_68x68x68_uint8.raw";
   std::error_code ec;

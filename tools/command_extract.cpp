@@ -3,6 +3,8 @@
 // Nothing is written before the mesh exists, and the writers are atomic, so a failure
 // leaves no output file behind.
 
+#include <oneapi/tbb/global_control.h>
+
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
@@ -13,17 +15,16 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
-#include <oneapi/tbb/global_control.h>
 #include <string>
 #include <thread>
 
-#include "engine/topology/component_report.h"
 #include "engine/extract/extract.h"
-#include "isotope/mesh.h"
+#include "engine/topology/component_report.h"
 #include "io/file/atomic_file.h"
-#include "isotope/error.h"
 #include "io/mesh/ply_writer.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/error.h"
+#include "isotope/mesh.h"
 #include "isotope/source.h"
 #include "tools/commands.h"
 #include "tools/support/peak_memory.h"
@@ -75,8 +76,10 @@ int run_extract(const ExtractArgs& a) {
   // same words, ranges and relations as `isotope serve` and `isotope sweep`.
   std::vector<std::pair<std::string, std::string>> given = {
       {"iso", a.iso}, {"eps", a.eps}, {"error", a.error}, {"topology", a.topology}};
-  for (const auto& [name, text] : {std::pair<const char*, const std::string&>{"weight", a.weight}, {"delta", a.delta},
-                                   {"focus", a.focus}, {"radius", a.radius}})
+  for (const auto& [name, text] : {std::pair<const char*, const std::string&>{"weight", a.weight},
+                                   {"delta", a.delta},
+                                   {"focus", a.focus},
+                                   {"radius", a.radius}})
     if (!text.empty()) given.emplace_back(name, text);
   if (a.max_triangles > 0) given.emplace_back("max-triangles", std::to_string(a.max_triangles));
   run.options = parse_command_line_options(given);
@@ -88,7 +91,8 @@ int run_extract(const ExtractArgs& a) {
   if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6) {
     char shown[32];
     std::snprintf(shown, sizeof shown, "%g", a.compare_voxels);  // 1e-300, not 0.000000
-    throw CLI::ValidationError("--compare-voxels", std::string("must be a number of voxel spacings in [0.0005, 1e6], got ") + shown);
+    throw CLI::ValidationError("--compare-voxels",
+                               std::string("must be a number of voxel spacings in [0.0005, 1e6], got ") + shown);
   }
 
   // Fail before the (possibly long) extraction when the outputs cannot be written; creates nothing.
@@ -237,8 +241,9 @@ Command add_extract_command(CLI::App& app) {
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
       ->check(CLI::Range(0, kMaxThreads))
       ->capture_default_str();
-  cmd->add_option("--cache-mb", a->cache_mb,
-                  "Store input: memory for decoded bricks, in MB (at least 16 bricks, under 1 MB); the store may be far larger")
+  cmd->add_option(
+         "--cache-mb", a->cache_mb,
+         "Store input: memory for decoded bricks, in MB (at least 16 bricks, under 1 MB); the store may be far larger")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_option("--focus", a->focus,

@@ -84,7 +84,8 @@ int run_generate(const GenerateArgs& a, CLI::App* cmd) {
   const bool h5 = ends_with(a.output, ".h5") || ends_with(a.output, ".hdf5");
   if (!raw && !h5) throw CLI::ValidationError("-o", "the output must end in .raw or .h5/.hdf5: " + a.output);
   const ScalarType type = *parse_scalar_type(a.type);
-  if (h5 && type != ScalarType::float32) throw CLI::ValidationError("--type", "HDF5 output is float32; --type applies to .raw");
+  if (h5 && type != ScalarType::float32)
+    throw CLI::ValidationError("--type", "HDF5 output is float32; --type applies to .raw");
   check_name_matches(a, type);
   if (cmd->count("--shift") > 0 && a.shape != "algebraic") {
     throw CLI::ValidationError("--shift", "only the algebraic field takes --shift");
@@ -116,7 +117,8 @@ int run_generate(const GenerateArgs& a, CLI::App* cmd) {
   }
   if (!a.quiet) {
     const std::string layout = layout_text(v.dims, type);
-    std::printf("%s: %s field, %s%s\n", a.output.c_str(), a.shape.c_str(), layout.c_str(), h5 ? ", dataset /volume" : "");
+    std::printf("%s: %s field, %s%s\n", a.output.c_str(), a.shape.c_str(), layout.c_str(),
+                h5 ? ", dataset /volume" : "");
     print_encoding(encoding);
     if (raw && !parse_raw_name(a.output)) {
       std::printf("note: the name does not carry the layout; extract it with --dims %s --type %s\n",
@@ -139,8 +141,11 @@ Command add_generate_command(CLI::App& app) {
                   "nested-spheres (3, chi 6) | noise (sum of random Gaussians, in [-1,1])")
       ->required()
       ->check(CLI::IsMember(kShapes));
-  cmd->add_option("--size", a->size, "Nodes per axis")->check(CLI::Range(int64_t{2}, int64_t{4097}))->capture_default_str();
-  cmd->add_option("--shift", a->shift, "algebraic: move the singularity to (X,Y,Z); fractions allowed, e.g. 5/32,3/32,0")
+  cmd->add_option("--size", a->size, "Nodes per axis")
+      ->check(CLI::Range(int64_t{2}, int64_t{4097}))
+      ->capture_default_str();
+  cmd->add_option("--shift", a->shift,
+                  "algebraic: move the singularity to (X,Y,Z); fractions allowed, e.g. 5/32,3/32,0")
       ->type_name("X,Y,Z")
       ->check(CLI::Validator(
           [](std::string& s) -> std::string {
@@ -148,7 +153,9 @@ Command add_generate_command(CLI::App& app) {
           },
           ""));
   cmd->add_option("--seed", a->seed, "noise: random seed")->capture_default_str();
-  cmd->add_option("--bumps", a->bumps, "noise: number of Gaussians")->check(CLI::Range(1, 100000))->capture_default_str();
+  cmd->add_option("--bumps", a->bumps, "noise: number of Gaussians")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
   cmd->add_option("-o,--output", a->output, "Output: FILE.raw (--type, x fastest) or FILE.h5 (float32 dataset /volume)")
       ->required()
       ->type_name("FILE");

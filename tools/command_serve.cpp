@@ -1,20 +1,21 @@
 // isotope serve: a store in the browser (docs/SERVE.md). The server runs until Ctrl-C; a watcher
 // thread turns the interrupt flag into a stop, so the listening socket is closed cleanly.
+#include <oneapi/tbb/global_control.h>
+
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <iostream>
 #include <memory>
-#include <oneapi/tbb/global_control.h>
 #include <optional>
 #include <string>
 #include <thread>
 
 #include "isotope/error.h"
 #include "tools/commands.h"
-#include "tools/support/interrupt_guard.h"
 #include "tools/serve/viewer_server.h"
+#include "tools/support/interrupt_guard.h"
 
 namespace isotope::tools {
 namespace {
@@ -35,7 +36,8 @@ int run_serve(const ServeArgs& a) {
   ViewerServer server({a.store, a.cache_mb, !a.quiet});
   const int port = server.bind(a.host, a.port);
   if (!is_loopback_host(a.host))
-    std::fprintf(stderr, "isotope: warning: listening on %s, not loopback: anyone who reaches port %d can see this store\n",
+    std::fprintf(stderr,
+                 "isotope: warning: listening on %s, not loopback: anyone who reaches port %d can see this store\n",
                  a.host.c_str(), port);
   const std::string shown_host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
   std::cout << "isotope: serving " << a.store << " on http://" << shown_host << ":" << port << "/" << std::endl;

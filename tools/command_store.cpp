@@ -1,5 +1,6 @@
 // isotope convert | info | verify: making, describing and checking stores (docs/FORMAT.md).
 #include <malloc.h>
+#include <oneapi/tbb/global_control.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -9,19 +10,18 @@
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <oneapi/tbb/global_control.h>
 #include <optional>
 #include <string>
 
 #include "engine/extract/traversal.h"
 #include "io/file/atomic_file.h"
-#include "io/volume/box_reader.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
-#include "isotope/error.h"
-#include "io/volume/raw_reader.h"
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
+#include "io/volume/box_reader.h"
+#include "io/volume/raw_reader.h"
+#include "isotope/error.h"
 #include "tools/commands.h"
 #include "tools/support/interrupt_guard.h"
 
@@ -62,13 +62,12 @@ int run_convert(const ConvertArgs& a) {
   const ConvertStats s = convert(input, a.output, options);
   if (!a.quiet) {
     const auto& d = s.dims;
-    std::printf("%s: %lldx%lldx%lld %s, %lld bricks, %.1f MB (%.3fx the input's %.1f MB); %.2f s, %.1f MB/s\n",
-                a.output.c_str(), static_cast<long long>(d[0]), static_cast<long long>(d[1]),
-                static_cast<long long>(d[2]), s.type.c_str(), static_cast<long long>(s.bricks),
-                static_cast<double>(s.output_bytes) / 1e6,
-                static_cast<double>(s.output_bytes) / static_cast<double>(s.input_bytes),
-                static_cast<double>(s.input_bytes) / 1e6, s.seconds,
-                static_cast<double>(s.input_bytes) / 1e6 / s.seconds);
+    std::printf(
+        "%s: %lldx%lldx%lld %s, %lld bricks, %.1f MB (%.3fx the input's %.1f MB); %.2f s, %.1f MB/s\n",
+        a.output.c_str(), static_cast<long long>(d[0]), static_cast<long long>(d[1]), static_cast<long long>(d[2]),
+        s.type.c_str(), static_cast<long long>(s.bricks), static_cast<double>(s.output_bytes) / 1e6,
+        static_cast<double>(s.output_bytes) / static_cast<double>(s.input_bytes),
+        static_cast<double>(s.input_bytes) / 1e6, s.seconds, static_cast<double>(s.input_bytes) / 1e6 / s.seconds);
   }
   return 0;
 }
@@ -95,8 +94,10 @@ nlohmann::ordered_json info_json(const StoreReader& store) {
   j["value_range"] = {h.value_min, h.value_max};
   j["quantize_bits"] = h.quantize_bits;
   if (h.quantize_bits != 0) j["quantization_step"] = h.value_scale;
-  j["critical_paper"] = {{"cube", h.critical_paper[0]}, {"octahedron", h.critical_paper[1]}, {"diamond", h.critical_paper[2]}};
-  j["critical_exact"] = {{"cube", h.critical_exact[0]}, {"octahedron", h.critical_exact[1]}, {"diamond", h.critical_exact[2]}};
+  j["critical_paper"] = {
+      {"cube", h.critical_paper[0]}, {"octahedron", h.critical_paper[1]}, {"diamond", h.critical_paper[2]}};
+  j["critical_exact"] = {
+      {"cube", h.critical_exact[0]}, {"octahedron", h.critical_exact[1]}, {"diamond", h.critical_exact[2]}};
   // The largest simplification weights, in data units: a delta above one drops every critical
   // point (the none mesh), so they bound what --delta is worth trying. The record of the roots'
   // refinement vertex, the lattice's centre, is saturated over every vertex below it: all of them.
@@ -106,10 +107,12 @@ nlohmann::ordered_json info_json(const StoreReader& store) {
     const PagedVolume volume(cache);
     PagedVolume::Reader reader = volume.reader();
     const int64_t c = layout.lattice().n / 2;
-    weights = reader.topology(reader.locate(traversal::pack({c, c, c})), RecordFields{false, false, true, false}).weight;
+    weights =
+        reader.topology(reader.locate(traversal::pack({c, c, c})), RecordFields{false, false, true, false}).weight;
   }
   const double code = h.quantize_bits != 0 ? h.value_scale : 1.0;
-  j["largest_weights"] = {{"interval", weights[0] * code}, {"gradient", weights[1] * code * code}, {"size", weights[2]}};
+  j["largest_weights"] = {
+      {"interval", weights[0] * code}, {"gradient", weights[1] * code * code}, {"size", weights[2]}};
   // Where the bytes are: per band, and per section (docs/FORMAT.md): what each mode reads.
   nlohmann::ordered_json bands = nlohmann::ordered_json::array();
   std::array<uint64_t, kSections> sections{};
@@ -118,10 +121,12 @@ nlohmann::ordered_json info_json(const StoreReader& store) {
     for (int64_t i = b.first_brick; i < b.first_brick + b.brick_count(); ++i)
       for (int k = 0; k < kSections; ++k) mine[static_cast<size_t>(k)] += store.entry(i).bytes[static_cast<size_t>(k)];
     uint64_t bytes = 0;
-    for (int k = 0; k < kSections; ++k) bytes += mine[static_cast<size_t>(k)], sections[static_cast<size_t>(k)] += mine[static_cast<size_t>(k)];
+    for (int k = 0; k < kSections; ++k)
+      bytes += mine[static_cast<size_t>(k)], sections[static_cast<size_t>(k)] += mine[static_cast<size_t>(k)];
     bands.push_back({{"scale", b.scale}, {"nodes", b.nodes}, {"bricks", b.brick_count()}, {"bytes", bytes}});
   }
-  j["section_bytes"] = {{"core", sections[0]}, {"exact", sections[1]}, {"weights", sections[2]}, {"extra", sections[3]}};
+  j["section_bytes"] = {
+      {"core", sections[0]}, {"exact", sections[1]}, {"weights", sections[2]}, {"extra", sections[3]}};
   j["band_detail"] = bands;
   return j;
 }
@@ -131,7 +136,8 @@ void print_info(const nlohmann::ordered_json& j) {
     return std::to_string(d[0].get<int64_t>()) + "x" + std::to_string(d[1].get<int64_t>()) + "x" +
            std::to_string(d[2].get<int64_t>());
   };
-  std::printf("store        %s (format version %d)\n", j["file"].get<std::string>().c_str(), j["format_version"].get<int>());
+  std::printf("store        %s (format version %d)\n", j["file"].get<std::string>().c_str(),
+              j["format_version"].get<int>());
   std::printf("volume       %s %s, spacing %g %g %g\n", dims(j["dims"]).c_str(), j["type"].get<std::string>().c_str(),
               j["spacing"][0].get<double>(), j["spacing"][1].get<double>(), j["spacing"][2].get<double>());
   std::printf("hierarchy    lattice %lld^3, %d levels, %zu bands\n", j["lattice_side"].get<long long>(),
@@ -140,12 +146,14 @@ void print_info(const nlohmann::ordered_json& j) {
   std::printf("size         %.2f MB, %.3fx the input (%.2f MB); zstd level %d\n", j["file_bytes"].get<double>() / 1e6,
               j["size_ratio"].get<double>(), j["input_bytes"].get<double>() / 1e6, j["zstd_level"].get<int>());
   const auto& sb = j["section_bytes"];
-  std::printf("sections     core %.2f MB, exact intervals %.2f MB, weights %.2f MB, paper intervals and surplus %.2f MB\n",
-              sb["core"].get<double>() / 1e6, sb["exact"].get<double>() / 1e6, sb["weights"].get<double>() / 1e6,
-              sb["extra"].get<double>() / 1e6);
+  std::printf(
+      "sections     core %.2f MB, exact intervals %.2f MB, weights %.2f MB, paper intervals and surplus %.2f MB\n",
+      sb["core"].get<double>() / 1e6, sb["exact"].get<double>() / 1e6, sb["weights"].get<double>() / 1e6,
+      sb["extra"].get<double>() / 1e6);
   std::printf("values       %g .. %g", j["value_range"][0].get<double>(), j["value_range"][1].get<double>());
   if (j["quantize_bits"].get<int>() != 0)
-    std::printf(", quantized to %d bits (step %g)", j["quantize_bits"].get<int>(), j["quantization_step"].get<double>());
+    std::printf(", quantized to %d bits (step %g)", j["quantize_bits"].get<int>(),
+                j["quantization_step"].get<double>());
   else
     std::printf(", lossless");
   std::printf("\n");
@@ -161,16 +169,20 @@ void print_info(const nlohmann::ordered_json& j) {
 
 Command add_convert_command(CLI::App& app) {
   auto a = std::make_shared<ConvertArgs>();
-  CLI::App* cmd = app.add_subcommand("convert", "Convert a volume into a store for out-of-core extraction (bounded memory)");
+  CLI::App* cmd =
+      app.add_subcommand("convert", "Convert a volume into a store for out-of-core extraction (bounded memory)");
   cmd->add_option("INPUT", a->input,
                   "Volume: NAME_XxYxZ_TYPE.raw, any .raw with --dims/--type, FILE.h5:/path/to/dataset, or .nrrd/.nhdr")
       ->required();
   cmd->add_option("OUTPUT", a->output, "Store to write (e.g. volume.isotope)")->required();
-  cmd->add_option("--memory-mb", a->memory_mb, "Memory budget in MB: tiles in flight and level-to-level scratch; what does not fit goes to "
+  cmd->add_option("--memory-mb", a->memory_mb,
+                  "Memory budget in MB: tiles in flight and level-to-level scratch; what does not fit goes to "
                   "unlinked scratch files beside the output")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
-  cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, kMaxThreads))->capture_default_str();
+  cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
+      ->check(CLI::Range(0, kMaxThreads))
+      ->capture_default_str();
   cmd->add_option("--zstd-level", a->zstd_level, "zstd compression level of the bricks (1..19)")
       ->check(CLI::Range(1, 19))
       ->capture_default_str();
@@ -185,12 +197,14 @@ Command add_convert_command(CLI::App& app) {
       ->check(CLI::Range(kMinBrickBits, kMaxBrickBits))
       ->capture_default_str()
       ->type_name("B");
-  cmd->add_option("--dims", a->dims, "Raw input: nodes per axis, e.g. 301x324x56 (overrides the file name)")->type_name("XxYxZ");
+  cmd->add_option("--dims", a->dims, "Raw input: nodes per axis, e.g. 301x324x56 (overrides the file name)")
+      ->type_name("XxYxZ");
   cmd->add_option("--type", a->type, "Raw input: value type (overrides the file name)")
       ->check(CLI::IsMember({"uint8", "uint16", "int16", "float32", "float64"}));
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");
   return [a] {
-    if (!a->dims.empty() && !parse_dims(a->dims)) throw CLI::ValidationError("--dims", "must look like 64x64x32, got '" + a->dims + "'");
+    if (!a->dims.empty() && !parse_dims(a->dims))
+      throw CLI::ValidationError("--dims", "must look like 64x64x32, got '" + a->dims + "'");
     return run_convert(*a);
   };
 }
@@ -204,8 +218,10 @@ Command add_info_command(CLI::App& app) {
   return [path, json] {
     const StoreReader store(*path);
     const nlohmann::ordered_json j = info_json(store);
-    if (*json) std::cout << j.dump(2) << std::endl;
-    else print_info(j);
+    if (*json)
+      std::cout << j.dump(2) << std::endl;
+    else
+      print_info(j);
     return 0;
   };
 }
@@ -221,7 +237,8 @@ Command add_verify_command(CLI::App& app) {
   return [path, quiet, threads] {
     std::optional<tbb::global_control> limit;
     if (*threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(*threads));
-    const VerifyStats s = verify_store(*path, progress_enabled(*quiet) ? progress_bar("verifying") : ProgressCallback{});
+    const VerifyStats s =
+        verify_store(*path, progress_enabled(*quiet) ? progress_bar("verifying") : ProgressCallback{});
     if (!*quiet)
       std::printf("%s: ok, %lld bricks, %.2f MB\n", path->c_str(), static_cast<long long>(s.bricks),
                   static_cast<double>(s.compressed_bytes) / 1e6);

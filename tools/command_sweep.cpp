@@ -1,23 +1,24 @@
 // isotope sweep: one table (and optionally a CSV and a PNG plot) of what eps, the topology mode
 // and delta do to one isosurface: triangles, components, Euler characteristic and time for every
 // combination, so that a user sees the trade-off before choosing.
+#include <oneapi/tbb/global_control.h>
+
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
-#include <oneapi/tbb/global_control.h>
 #include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "engine/extract/extract.h"
-#include "isotope/mesh.h"
 #include "io/file/atomic_file.h"
-#include "tools/support/line_plot.h"
-#include "tools/commands.h"
+#include "isotope/mesh.h"
 #include "isotope/source.h"
+#include "tools/commands.h"
+#include "tools/support/line_plot.h"
 
 namespace isotope::tools {
 namespace {

@@ -9,9 +9,8 @@
 #include <new>
 
 #include "isotope/error.h"
-#include "tools/commands.h"
 #include "isotope/version.h"
-
+#include "tools/commands.h"
 
 // Under AddressSanitizer (CI): fontconfig, which PLplot's cairo driver reaches through pango
 // for `sweep --plot`, keeps a process-lifetime cache that LeakSanitizer reports as leaked. It

@@ -8,8 +8,11 @@
 // marching_cubes on the same file (python3-skimage, run here), VTK's Flying Edges (quoted,
 // measured on the development machine) and the paper's Table 1. Then issue 17's targets, row by
 // row, met or missed. `--scale` runs the large-volume row instead.
+#include "bench/suite/bench_suite.h"
+
 #include <fcntl.h>
 #include <malloc.h>
+#include <oneapi/tbb/global_control.h>
 #include <unistd.h>
 #include <zstd.h>
 
@@ -24,32 +27,29 @@
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <oneapi/tbb/global_control.h>
 #include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
-#include "engine/extract/extract.h"
 #include "engine/core/fields.h"
-#include "engine/hierarchy/hierarchy.h"
 #include "engine/core/parallel.h"
+#include "engine/extract/extract.h"
+#include "engine/hierarchy/hierarchy.h"
 #include "io/file/atomic_file.h"
-#include "isotope/error.h"
-#include "io/volume/raw_reader.h"
 #include "io/file/temp_dir.h"
+#include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
 #include "io/volume/volume_writer.h"
-#include "tools/support/child_run.h"
-#include "bench/suite/bench_suite.h"
+#include "isotope/error.h"
 #include "isotope/source.h"
+#include "isotope/version.h"
+#include "tools/support/child_run.h"
 #include "tools/support/command_line.h"
 #include "tools/support/interrupt_guard.h"
 #include "tools/support/paper_table1.h"
 #include "tools/support/peak_memory.h"
 #include "tools/support/report.h"
-#include "isotope/version.h"
-
 
 namespace isotope::bench {
 using namespace isotope::tools;
@@ -58,7 +58,6 @@ namespace {
 namespace fs = std::filesystem;
 using json = nlohmann::ordered_json;
 
-
 // ---- The suite -------------------------------------------------------------------------------
 
 struct DatasetSpec {
@@ -66,8 +65,8 @@ struct DatasetSpec {
   const char* description;
   const char* file;  // in --data; nullptr: generated (and written as a float32 raw file for the process rows)
   float iso;
-  bool quick;        // part of --quick
-  bool in_memory;    // also the hierarchy in memory (a one-shot extraction's path)
+  bool quick;      // part of --quick
+  bool in_memory;  // also the hierarchy in memory (a one-shot extraction's path)
   Volume (*generate)();
 };
 
@@ -109,8 +108,8 @@ constexpr Reference kFlyingEdges[] = {
 
 // Store sizes of format version 2 (README, measured the day it landed; embryo and algebraic 257^3
 // by this bench's predecessor), over the raw input: issue 17 asks for no larger.
-const std::map<std::string, double> kFormat2Ratio = {{"bolt", 0.268},   {"neghip", 0.804},      {"ironProt", 0.819},
-                                                      {"hydrogen", 0.956}, {"embryo", 0.547},   {"algebraic257", 1.285}};
+const std::map<std::string, double> kFormat2Ratio = {{"bolt", 0.268},     {"neghip", 0.804}, {"ironProt", 0.819},
+                                                     {"hydrogen", 0.956}, {"embryo", 0.547}, {"algebraic257", 1.285}};
 
 // The paper's speed claim (Sec. 4.6, quoting its ref. [6]): extraction and drawing together.
 constexpr double kPaperTrianglesPerSecondOne = 300000, kPaperTrianglesPerSecondMany = 800000;
@@ -141,7 +140,8 @@ struct Row {
 
 class ThreadCap {
  public:
-  explicit ThreadCap(int threads) : control_(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads)) {}
+  explicit ThreadCap(int threads)
+      : control_(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads)) {}
 
  private:
   tbb::global_control control_;
@@ -199,7 +199,8 @@ Summary parse_summary(const std::string& output) {
   long long triangles = 0;
   if (at == std::string::npos || start == std::string::npos || pre == std::string::npos ||
       std::sscanf(output.c_str() + start + 2, "%lld", &triangles) != 1 ||
-      std::sscanf(output.c_str() + pre, "; preprocess %lf s, extract %lf s", &s.preprocess_seconds, &s.extract_seconds) != 2)
+      std::sscanf(output.c_str() + pre, "; preprocess %lf s, extract %lf s", &s.preprocess_seconds,
+                  &s.extract_seconds) != 2)
     throw IoError("isotope extract printed no summary line the benchmark can read: " + output);
   s.triangles = triangles;
   return s;
@@ -433,7 +434,8 @@ class Suite {
     std::vector<double> times, process;
     double total = 0;
     uint64_t peak = 0;
-    while (times.size() < cold_policy_.min_runs || (total < cold_policy_.min_seconds && times.size() < cold_policy_.max_runs)) {
+    while (times.size() < cold_policy_.min_runs ||
+           (total < cold_policy_.min_seconds && times.size() < cold_policy_.max_runs)) {
       if (before) before();
       fs::remove(mesh);  // replacing the last run's mesh would time freeing its pages too
       const ChildRun c = child(args, work_);
@@ -454,8 +456,13 @@ class Suite {
   Row cold_row(const DatasetSpec& spec, const std::string& store, const ExtractOptions& o, int threads) {
     Row r = row(spec, "store-cold", std::string(to_string(o.topology)).c_str(), o.eps, threads);
     r.delta = o.delta;
-    std::vector<std::string> args = {"extract", store, "--iso=" + number(o.iso), "--eps=" + number(o.eps),
-                                     "--topology=" + std::string(to_string(o.topology)), "--threads", std::to_string(threads)};
+    std::vector<std::string> args = {"extract",
+                                     store,
+                                     "--iso=" + number(o.iso),
+                                     "--eps=" + number(o.eps),
+                                     "--topology=" + std::string(to_string(o.topology)),
+                                     "--threads",
+                                     std::to_string(threads)};
     if (o.topology == TopologyMode::simplify) args.push_back("--delta=" + number(o.delta));
     extract_processes(r, args, work_ / "cold.ply", false, [&] { evict_from_page_cache(store); });
     // Once more with a report, untimed: the bytes read (the same in every cold run).
@@ -509,10 +516,10 @@ class Suite {
     Row r = row(spec, "convert+extract", "none", d.coarse_eps, threads_);
     const std::string other = (work_ / "again.isotope").string();
     const ChildRun conv = child({"convert", raw, other, "--threads", std::to_string(threads_), "-q"}, work_);
-    const ChildRun ext = child({"extract", other, "--iso=" + number(spec.iso), "--eps=" + number(d.coarse_eps),
-                                "--topology=none", "--threads", std::to_string(threads_), "-q", "-o",
-                                (work_ / "two.ply").string()},
-                               work_);
+    const ChildRun ext =
+        child({"extract", other, "--iso=" + number(spec.iso), "--eps=" + number(d.coarse_eps), "--topology=none",
+               "--threads", std::to_string(threads_), "-q", "-o", (work_ / "two.ply").string()},
+              work_);
     fs::remove(other);
     fs::remove(work_ / "two.ply");
     r.seconds = r.process_seconds = conv.seconds + ext.seconds;
@@ -529,11 +536,11 @@ class Suite {
     say(spec, "a 10% budget in simplify mode");
     const int64_t budget = static_cast<int64_t>(kCoarseShare * static_cast<double>(d.full_triangles));
     evict_from_page_cache(store);
-    const ChildRun c = child({"extract", store, "--iso=" + number(spec.iso), "--max-triangles", std::to_string(budget),
-                              "--topology", "simplify", "--threads", std::to_string(threads_), "-q", "-o",
-                              (work_ / "preview.ply").string(), "--report", (work_ / "preview.json").string(),
-                              "--compare-full"},
-                             work_);
+    const ChildRun c =
+        child({"extract", store, "--iso=" + number(spec.iso), "--max-triangles", std::to_string(budget), "--topology",
+               "simplify", "--threads", std::to_string(threads_), "-q", "-o", (work_ / "preview.ply").string(),
+               "--report", (work_ / "preview.json").string(), "--compare-full"},
+              work_);
     std::ifstream in(work_ / "preview.json");
     const auto report = nlohmann::json::parse(in);
     fs::remove(work_ / "preview.ply");
@@ -571,18 +578,19 @@ class Suite {
         "    times.append(time.perf_counter() - t)\n"
         "times.sort()\n"
         "print(times[len(times) // 2], len(f))\n";
-    const std::string dtype = layout.type == ScalarType::uint8    ? "uint8"
-                              : layout.type == ScalarType::uint16 ? "<u2"
-                              : layout.type == ScalarType::int16  ? "<i2"
+    const std::string dtype = layout.type == ScalarType::uint8     ? "uint8"
+                              : layout.type == ScalarType::uint16  ? "<u2"
+                              : layout.type == ScalarType::int16   ? "<i2"
                               : layout.type == ScalarType::float64 ? "<f8"
                                                                    : "<f4";
     const std::string runs = a_.quick ? "3" : "5";
     // Debian's interpreter, which python3-skimage installs into (a python3 earlier on PATH, from
     // pyenv or a virtual environment, may not have it).
     const std::string python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-    const ChildRun r = run_child({python, "-c", script, raw, std::to_string(layout.dims[0]), std::to_string(layout.dims[1]),
-                                  std::to_string(layout.dims[2]), dtype, number(spec.iso), runs},
-                                 (work_ / "peer.log").string());
+    const ChildRun r =
+        run_child({python, "-c", script, raw, std::to_string(layout.dims[0]), std::to_string(layout.dims[1]),
+                   std::to_string(layout.dims[2]), dtype, number(spec.iso), runs},
+                  (work_ / "peer.log").string());
     fs::remove(work_ / "peer.log");
     json j = {{"dataset", spec.name}};
     double seconds = 0;
@@ -672,40 +680,44 @@ std::string mode_label(const Row& r) {
 }
 
 void print_datasets(const std::vector<DatasetResult>& ds) {
-  std::printf("\nDatasets (coarse eps: the finest eps whose 'none' mesh has at most %.0f%% of the full triangles;\n"
-              "simplify: interval weight, delta = %.0f%% of the value range; convert: a process on all threads with the\n"
-              "default --memory-mb; its ceiling: zstd -3 on all threads over the values as float32, in memory)\n",
-              kCoarseShare * 100, kDeltaOfRange * 100);
+  std::printf(
+      "\nDatasets (coarse eps: the finest eps whose 'none' mesh has at most %.0f%% of the full triangles;\n"
+      "simplify: interval weight, delta = %.0f%% of the value range; convert: a process on all threads with the\n"
+      "default --memory-mb; its ceiling: zstd -3 on all threads over the values as float32, in memory)\n",
+      kCoarseShare * 100, kDeltaOfRange * 100);
   std::printf("%-13s %-12s %8s %11s %10s %9s %8s %8s %9s %9s %8s %8s %9s\n", "dataset", "dims", "iso", "triangles",
               "coarse eps", "store MB", "/ raw", "(v2)", "build s", "convert s", "ceil s", "% ceil", "conv MB");
   for (const DatasetResult& d : ds) {
-    const std::string dims = std::to_string(d.dims[0]) + "x" + std::to_string(d.dims[1]) + "x" + std::to_string(d.dims[2]);
+    const std::string dims =
+        std::to_string(d.dims[0]) + "x" + std::to_string(d.dims[1]) + "x" + std::to_string(d.dims[2]);
     char pre[32] = "-", v2[32] = "-";
     if (d.preprocess_seconds >= 0) std::snprintf(pre, sizeof pre, "%.2f", d.preprocess_seconds);
     const auto old = kFormat2Ratio.find(d.spec->name);
     if (old != kFormat2Ratio.end()) std::snprintf(v2, sizeof v2, "%.3f", old->second);
-    std::printf("%-13s %-12s %8g %11lld %10.4g %9s %8.3f %8s %9s %9.2f %8.3f %7.0f%% %9.0f\n", d.spec->name, dims.c_str(),
-                static_cast<double>(d.spec->iso), static_cast<long long>(d.full_triangles), d.coarse_eps,
-                mb(d.store_bytes).c_str(), static_cast<double>(d.store_bytes) / static_cast<double>(d.raw_bytes), v2, pre,
-                d.convert_seconds, d.ceiling_seconds, 100 * d.ceiling_seconds / d.convert_seconds, d.convert_peak_mb);
+    std::printf("%-13s %-12s %8g %11lld %10.4g %9s %8.3f %8s %9s %9.2f %8.3f %7.0f%% %9.0f\n", d.spec->name,
+                dims.c_str(), static_cast<double>(d.spec->iso), static_cast<long long>(d.full_triangles), d.coarse_eps,
+                mb(d.store_bytes).c_str(), static_cast<double>(d.store_bytes) / static_cast<double>(d.raw_bytes), v2,
+                pre, d.convert_seconds, d.ceiling_seconds, 100 * d.ceiling_seconds / d.convert_seconds,
+                d.convert_peak_mb);
   }
 }
 
 void print_rows(const std::vector<Row>& rows) {
-  std::printf("\nExtraction (median wall time; 'vs base': the baseline's time on as many threads over this row's.\n"
-              "memory: the hierarchy in memory; store-warm: one brick cache kept across runs; store-cold: a new process\n"
-              "with the store dropped from the page cache, the extraction it reports; one-shot: a process extracting\n"
-              "from the raw file (ms: hierarchy and extraction); process ms: the whole process, mesh written;\n"
-              "read MB: compressed bytes read from the store, per run)\n");
+  std::printf(
+      "\nExtraction (median wall time; 'vs base': the baseline's time on as many threads over this row's.\n"
+      "memory: the hierarchy in memory; store-warm: one brick cache kept across runs; store-cold: a new process\n"
+      "with the store dropped from the page cache, the extraction it reports; one-shot: a process extracting\n"
+      "from the raw file (ms: hierarchy and extraction); process ms: the whole process, mesh written;\n"
+      "read MB: compressed bytes read from the store, per run)\n");
   std::printf("%-13s %-15s %-15s %9s %3s %10s %7s %9s %9s %9s %8s %8s %8s\n", "dataset", "input", "mode", "eps", "thr",
               "triangles", "% full", "ms", "proc ms", "tri/s", "vs base", "peak MB", "read MB");
   std::string last;
   for (const Row& r : rows) {
     if (r.dataset != last && !last.empty()) std::printf("\n");
     last = r.dataset;
-    std::printf("%-13s %-15s %-15s %9.4g %3d %10lld %7.2f %9s %9s %9s %7.2fx %8s %8s\n", r.dataset.c_str(), r.input.c_str(),
-                mode_label(r).c_str(), r.eps, r.threads, static_cast<long long>(r.triangles), 100 * r.share,
-                ms(r.seconds).c_str(), r.process_seconds > 0 ? ms(r.process_seconds).c_str() : "-",
+    std::printf("%-13s %-15s %-15s %9.4g %3d %10lld %7.2f %9s %9s %9s %7.2fx %8s %8s\n", r.dataset.c_str(),
+                r.input.c_str(), mode_label(r).c_str(), r.eps, r.threads, static_cast<long long>(r.triangles),
+                100 * r.share, ms(r.seconds).c_str(), r.process_seconds > 0 ? ms(r.process_seconds).c_str() : "-",
                 si(static_cast<double>(r.triangles) / r.seconds).c_str(), r.speedup, mb(r.peak_rss).c_str(),
                 r.bytes_read ? mb(r.bytes_read).c_str() : "-");
   }
@@ -714,7 +726,8 @@ void print_rows(const std::vector<Row>& rows) {
 const Row* find_row(const std::vector<Row>& rows, const std::string& dataset, const std::string& input,
                     const std::string& mode, bool coarse, int threads) {
   for (const Row& r : rows)
-    if (r.dataset == dataset && r.input == input && r.mode == mode && (r.eps > 0) == coarse && r.threads == threads) return &r;
+    if (r.dataset == dataset && r.input == input && r.mode == mode && (r.eps > 0) == coarse && r.threads == threads)
+      return &r;
   return nullptr;
 }
 
@@ -740,11 +753,13 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
       const Row* cold = find_row(rows, name, "store-cold", "none", true, n);
       const Row* cold0 = find_row(rows, name, "store-cold", "preserve", false, n);
       if (cold && cold->share <= kCoarseShare) {
-        std::snprintf(buf, sizeof buf, "%s vs baseline, %d thread%s", ratio(cold->speedup).c_str(), n, n == 1 ? "" : "s");
+        std::snprintf(buf, sizeof buf, "%s vs baseline, %d thread%s", ratio(cold->speedup).c_str(), n,
+                      n == 1 ? "" : "s");
         add("coarse (<= 10%) from a cold store >= 10x the baseline", name, buf, cold->speedup >= 10);
         if (cold0) {
           const double x = cold0->seconds / cold->seconds;
-          std::snprintf(buf, sizeof buf, "%s faster than eps 0 cold, %d thread%s", ratio(x).c_str(), n, n == 1 ? "" : "s");
+          std::snprintf(buf, sizeof buf, "%s faster than eps 0 cold, %d thread%s", ratio(x).c_str(), n,
+                        n == 1 ? "" : "s");
           add("coarse from a cold store >= 5x eps 0 from it", name, buf, x >= 5);
         }
         if (n == threads) {
@@ -773,8 +788,8 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
         continue;
       const Row* z = find_row(rows, name, c.input, "preserve", false, c.threads);
       if (!z) continue;
-      std::snprintf(buf, sizeof buf, "%s, %s, %d thr: coarse %s ms, eps 0 %s ms", c.input.c_str(), c.mode.c_str(), c.threads,
-                    ms(c.seconds).c_str(), ms(z->seconds).c_str());
+      std::snprintf(buf, sizeof buf, "%s, %s, %d thr: coarse %s ms, eps 0 %s ms", c.input.c_str(), c.mode.c_str(),
+                    c.threads, ms(c.seconds).c_str(), ms(z->seconds).c_str());
       add("coarse never slower than eps 0", name, buf, c.seconds <= z->seconds);
     }
     // One shot at eps 0 against scikit-image (load included for both: our whole process).
@@ -791,16 +806,17 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
     const Row* coarse_shot = find_row(rows, name, "one-shot", "none", true, threads);
     const Row* two = find_row(rows, name, "convert+extract", "none", true, threads);
     if (named && coarse_shot && two) {
-      std::snprintf(buf, sizeof buf, "one shot %s ms, convert + extract %s ms", ms(coarse_shot->process_seconds).c_str(),
-                    ms(two->process_seconds).c_str());
-      add("coarse one-shot cheaper than convert + extract", name, buf, coarse_shot->process_seconds < two->process_seconds);
+      std::snprintf(buf, sizeof buf, "one shot %s ms, convert + extract %s ms",
+                    ms(coarse_shot->process_seconds).c_str(), ms(two->process_seconds).c_str());
+      add("coarse one-shot cheaper than convert + extract", name, buf,
+          coarse_shot->process_seconds < two->process_seconds);
     }
     // End to end, 2 threads against 1 at eps 0.
     const Row* one = find_row(rows, name, "one-shot", "preserve", false, 1);
     if (one && shot && threads > 1) {
       const double x = one->process_seconds / shot->process_seconds;
-      std::snprintf(buf, sizeof buf, "%s (%s ms on 1 thread, %s ms on %d)", ratio(x).c_str(), ms(one->process_seconds).c_str(),
-                    ms(shot->process_seconds).c_str(), threads);
+      std::snprintf(buf, sizeof buf, "%s (%s ms on 1 thread, %s ms on %d)", ratio(x).c_str(),
+                    ms(one->process_seconds).c_str(), ms(shot->process_seconds).c_str(), threads);
       add("eps 0 end to end: all threads >= 1.7x one", name, buf, x >= 1.7);
     }
     // Convert at 50% of its ceiling; the store no larger than format 2's.
@@ -818,7 +834,8 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
     // eps 0 gives the baseline's mesh, and at least its speed (issue 6).
     for (const Row& r : rows)
       if (r.dataset == name && r.eps == 0 && r.mode != "baseline" && (r.input == "memory" || r.input == "store-warm")) {
-        std::snprintf(buf, sizeof buf, "%s, %s, %d thr: %s", r.input.c_str(), r.mode.c_str(), r.threads, ratio(r.speedup).c_str());
+        std::snprintf(buf, sizeof buf, "%s, %s, %d thr: %s", r.input.c_str(), r.mode.c_str(), r.threads,
+                      ratio(r.speedup).c_str());
         add("eps 0 at least as fast as the baseline, same triangles", name, buf, r.speedup >= 1 && r.share == 1.0);
       }
   }
@@ -849,8 +866,9 @@ json print_targets(const std::vector<Target>& targets) {
 }
 
 json flying_edges(const std::vector<Row>& rows, int threads) {
-  std::printf("\nVTK 9.1 Flying Edges, quoted (full resolution, wall time without loading, measured on the development\n"
-              "machine; marching cubes: about 2.7x fewer triangles than our tetrahedra on embryo), beside our eps 0\n");
+  std::printf(
+      "\nVTK 9.1 Flying Edges, quoted (full resolution, wall time without loading, measured on the development\n"
+      "machine; marching cubes: about 2.7x fewer triangles than our tetrahedra on embryo), beside our eps 0\n");
   std::printf("%-24s %10s %10s %12s %14s %14s %14s\n", "volume", "VTK 1t ms", "VTK 2t ms", "VTK tri", "ours eps 0 1t",
               ("ours eps 0 " + std::to_string(threads) + "t").c_str(), "ours coarse");
   json out = json::array();
@@ -860,15 +878,20 @@ json flying_edges(const std::vector<Row>& rows, int threads) {
     if (!e1) e1 = find_row(rows, ref.dataset, "store-warm", "preserve", false, 1);
     if (!en) en = find_row(rows, ref.dataset, "store-warm", "preserve", false, threads);
     const Row* c = find_row(rows, ref.dataset, "memory", "none", true, threads);
-    auto cell = [](const Row* r) { return r ? ms(r->seconds) + " (" + si(static_cast<double>(r->triangles)) + ")" : std::string("-"); };
-    std::printf("%-24s %10.0f %10s %12s %14s %14s %14s\n", ref.what, ref.ms_one, ref.ms_two > 0 ? ms(ref.ms_two / 1e3).c_str() : "-",
-                ref.triangles ? si(static_cast<double>(ref.triangles)).c_str() : "-", cell(e1).c_str(), cell(en).c_str(),
-                cell(c).c_str());
+    auto cell = [](const Row* r) {
+      return r ? ms(r->seconds) + " (" + si(static_cast<double>(r->triangles)) + ")" : std::string("-");
+    };
+    std::printf("%-24s %10.0f %10s %12s %14s %14s %14s\n", ref.what, ref.ms_one,
+                ref.ms_two > 0 ? ms(ref.ms_two / 1e3).c_str() : "-",
+                ref.triangles ? si(static_cast<double>(ref.triangles)).c_str() : "-", cell(e1).c_str(),
+                cell(en).c_str(), cell(c).c_str());
     json j = {{"volume", ref.what}, {"vtk_ms_one_thread", ref.ms_one}};
     if (ref.ms_two > 0) j["vtk_ms_two_threads"] = ref.ms_two;
     if (ref.triangles) j["vtk_triangles"] = ref.triangles;
     auto row_ms = [](const Row* r) { return r ? json(r->seconds * 1e3) : json(); };
-    j["ours"] = e1 ? json{{"eps0_1_thread_ms", row_ms(e1)}, {"eps0_all_threads_ms", row_ms(en)}, {"triangles", e1->triangles},
+    j["ours"] = e1 ? json{{"eps0_1_thread_ms", row_ms(e1)},
+                          {"eps0_all_threads_ms", row_ms(en)},
+                          {"triangles", e1->triangles},
                           {"coarse_none_all_threads_ms", row_ms(c)}}
                    : json();
     out.push_back(j);
@@ -877,10 +900,12 @@ json flying_edges(const std::vector<Row>& rows, int threads) {
 }
 
 void print_peers(const json& peers, const std::vector<Row>& rows, int threads) {
-  std::printf("\nscikit-image measure.marching_cubes on the same file (run here: python3 -c, numpy.fromfile and marching_cubes\n"
-              "timed in the interpreter, imports excluded; process: the whole python3 run), beside our one-shot process\n");
-  std::printf("%-13s %14s %12s %14s %16s %16s\n", "dataset", "skimage ms", "skimage tri", "skimage proc", "ours proc 1t",
-              ("ours proc " + std::to_string(threads) + "t").c_str());
+  std::printf(
+      "\nscikit-image measure.marching_cubes on the same file (run here: python3 -c, numpy.fromfile and "
+      "marching_cubes\n"
+      "timed in the interpreter, imports excluded; process: the whole python3 run), beside our one-shot process\n");
+  std::printf("%-13s %14s %12s %14s %16s %16s\n", "dataset", "skimage ms", "skimage tri", "skimage proc",
+              "ours proc 1t", ("ours proc " + std::to_string(threads) + "t").c_str());
   for (const auto& p : peers) {
     const std::string name = p["dataset"];
     const Row* one = find_row(rows, name, "one-shot", "preserve", false, 1);
@@ -899,29 +924,34 @@ void print_previews(const std::vector<DatasetResult>& ds) {
   for (const DatasetResult& d : ds) {
     if (d.preview.is_null()) continue;
     const json& p = d.preview;
-    std::printf("\nA 10%% preview of %s in simplify mode, delta chosen (--max-triangles %lld --topology simplify, cold store):\n"
-                "  %lld triangles, eps %g, delta %g; %lld of %lld components kept; extraction %s ms, process %s ms\n"
-                "  against full resolution: %s\n",
-                d.spec->name, static_cast<long long>(p["budget"].get<int64_t>()), static_cast<long long>(p["triangles"].get<int64_t>()),
-                p["chosen_eps"].get<double>(), p["chosen_delta"].get<double>(), static_cast<long long>(p["components"].get<int64_t>()),
-                static_cast<long long>(p["full_components"].get<int64_t>()), ms(p["extract_seconds"].get<double>()).c_str(),
-                ms(p["process_seconds"].get<double>()).c_str(), p["changes"].dump().c_str());
+    std::printf(
+        "\nA 10%% preview of %s in simplify mode, delta chosen (--max-triangles %lld --topology simplify, cold "
+        "store):\n"
+        "  %lld triangles, eps %g, delta %g; %lld of %lld components kept; extraction %s ms, process %s ms\n"
+        "  against full resolution: %s\n",
+        d.spec->name, static_cast<long long>(p["budget"].get<int64_t>()),
+        static_cast<long long>(p["triangles"].get<int64_t>()), p["chosen_eps"].get<double>(),
+        p["chosen_delta"].get<double>(), static_cast<long long>(p["components"].get<int64_t>()),
+        static_cast<long long>(p["full_components"].get<int64_t>()), ms(p["extract_seconds"].get<double>()).c_str(),
+        ms(p["process_seconds"].get<double>()).c_str(), p["changes"].dump().c_str());
   }
 }
 
 void print_table1(const json& t) {
   if (t.empty()) return;
   std::printf("\nPaper's Table 1 (algebraic function 65^3, iso 0, error indicator: bound; one thread)\n");
-  std::printf("%-6s | %-16s | %-30s | %-30s\n", "eps", "paper: w/o  with", "ours without: triangles  ms", "ours with: triangles  ms");
+  std::printf("%-6s | %-16s | %-30s | %-30s\n", "eps", "paper: w/o  with", "ours without: triangles  ms",
+              "ours with: triangles  ms");
   for (const auto& r : t) {
     std::printf("%-6s | %7d %8d | %20lld %8s | %20lld %8s\n", r["eps"].get<std::string>().c_str(),
                 r["paper"]["without"].get<int>(), r["paper"]["with"].get<int>(),
                 r["without"]["triangles"].get<long long>(), ms(r["without"]["seconds"].get<double>()).c_str(),
                 r["with"]["triangles"].get<long long>(), ms(r["with"]["seconds"].get<double>()).c_str());
   }
-  std::printf("The paper's eps scale is not stated (docs/METHOD.md): compare the shape of the columns. Its speed claim\n"
-              "(Sec. 4.6): %s triangles/s extracted and drawn on one processor, %s on a multiprocessor (2000).\n",
-              si(kPaperTrianglesPerSecondOne).c_str(), si(kPaperTrianglesPerSecondMany).c_str());
+  std::printf(
+      "The paper's eps scale is not stated (docs/METHOD.md): compare the shape of the columns. Its speed claim\n"
+      "(Sec. 4.6): %s triangles/s extracted and drawn on one processor, %s on a multiprocessor (2000).\n",
+      si(kPaperTrianglesPerSecondOne).c_str(), si(kPaperTrianglesPerSecondMany).c_str());
 }
 
 // ---- JSON ------------------------------------------------------------------------------------
@@ -938,9 +968,15 @@ json rows_json(const std::vector<Row>& rows) {
   for (const Row& r : rows) {
     json j = {{"dataset", r.dataset}, {"input", r.input}, {"mode", r.mode}, {"eps", r.eps}};
     if (r.mode == "simplify") j["delta"] = r.delta;
-    j.update({{"threads", r.threads}, {"triangles", r.triangles}, {"share_of_full", r.share}, {"seconds", r.seconds},
-              {"runs", r.runs}, {"triangles_per_second", static_cast<double>(r.triangles) / r.seconds},
-              {"speedup_vs_baseline", r.speedup}, {"peak_rss_bytes", r.peak_rss}, {"bytes_read", r.bytes_read}});
+    j.update({{"threads", r.threads},
+              {"triangles", r.triangles},
+              {"share_of_full", r.share},
+              {"seconds", r.seconds},
+              {"runs", r.runs},
+              {"triangles_per_second", static_cast<double>(r.triangles) / r.seconds},
+              {"speedup_vs_baseline", r.speedup},
+              {"peak_rss_bytes", r.peak_rss},
+              {"bytes_read", r.bytes_read}});
     if (r.process_seconds > 0) j["process_seconds"] = r.process_seconds;
     out.push_back(j);
   }
@@ -950,9 +986,14 @@ json rows_json(const std::vector<Row>& rows) {
 json datasets_json(const std::vector<DatasetResult>& ds) {
   json out = json::array();
   for (const DatasetResult& d : ds) {
-    json j = {{"name", d.spec->name}, {"description", d.spec->description}, {"dims", d.dims}, {"iso", d.spec->iso},
-              {"value_range", {d.value_min, d.value_max}}, {"full_triangles", d.full_triangles},
-              {"coarse_eps", d.coarse_eps}, {"delta", d.delta}};
+    json j = {{"name", d.spec->name},
+              {"description", d.spec->description},
+              {"dims", d.dims},
+              {"iso", d.spec->iso},
+              {"value_range", {d.value_min, d.value_max}},
+              {"full_triangles", d.full_triangles},
+              {"coarse_eps", d.coarse_eps},
+              {"delta", d.delta}};
     j["preprocess_seconds"] = d.preprocess_seconds >= 0 ? json(d.preprocess_seconds) : json();
     j["convert_seconds"] = d.convert_seconds;
     j["convert_voxels_per_second"] = static_cast<double>(d.voxels()) / d.convert_seconds;
@@ -973,7 +1014,9 @@ json datasets_json(const std::vector<DatasetResult>& ds) {
 // coarse with --cache-mb 256 from the cold store, each a process measured whole.
 int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
   const int64_t n = a.scale_size;
-  const std::string raw = (work / ("algebraic_" + std::to_string(n) + "x" + std::to_string(n) + "x" + std::to_string(n) + "_uint8.raw")).string();
+  const std::string raw =
+      (work / ("algebraic_" + std::to_string(n) + "x" + std::to_string(n) + "x" + std::to_string(n) + "_uint8.raw"))
+          .string();
   if (progress) std::fprintf(stderr, "isotope: bench --scale: writing %s\n", raw.c_str());
   const auto start = std::chrono::steady_clock::now();
   {
@@ -988,7 +1031,8 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
         for (int64_t x = 0; x < n; ++x) {
           const double px = -1 + h * static_cast<double>(x);
           const double f = algebraic_function(px, py, pz);
-          slab[static_cast<size_t>(y * n + x)] = static_cast<uint8_t>(std::lround(std::clamp((f + 2) / 3.5, 0.0, 1.0) * 255));
+          slab[static_cast<size_t>(y * n + x)] =
+              static_cast<uint8_t>(std::lround(std::clamp((f + 2) / 3.5, 0.0, 1.0) * 255));
         }
       });
       out.write(slab.data(), slab.size());
@@ -1005,30 +1049,40 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
   const uint64_t store_bytes = fs::file_size(store);
   if (progress) std::fprintf(stderr, "isotope: bench --scale: extracting\n");
   evict_from_page_cache(store);
-  const ChildRun ext = child({"extract", store, "--iso", iso, "--max-triangles", "1000000", "--topology", "none",
-                              "--cache-mb", "256", "-q", "-o", (work / "scale.ply").string(), "--report",
-                              (work / "scale.json").string()},
-                             work);
+  const ChildRun ext =
+      child({"extract", store, "--iso", iso, "--max-triangles", "1000000", "--topology", "none", "--cache-mb", "256",
+             "-q", "-o", (work / "scale.ply").string(), "--report", (work / "scale.json").string()},
+            work);
   std::ifstream in(work / "scale.json");
   const auto report = nlohmann::json::parse(in);
-  std::printf("isotope bench --scale: %s, %u hardware threads\n", cpu_model().c_str(), std::thread::hardware_concurrency());
-  std::printf("volume       %lld^3 uint8 (%.2f GB), the algebraic function; written in %.1f s\n", static_cast<long long>(n),
-              static_cast<double>(n * n * n) / 1e9, write_seconds);
-  std::printf("convert      --memory-mb 1024: %.1f s (%.1f M voxels/s), peak RSS %.0f MB, store %.2f GB (%.3f of the raw)\n",
-              conv.seconds, static_cast<double>(n * n * n) / conv.seconds / 1e6, static_cast<double>(conv.max_rss_kb) / 1024,
-              static_cast<double>(store_bytes) / 1e9, static_cast<double>(store_bytes) / static_cast<double>(n * n * n));
-  std::printf("extract      --cache-mb 256, coarse (at most 1M triangles, mode none, eps %g), cold store: %.2f s process,\n"
-              "             %.2f s extraction, %lld triangles, peak RSS %.0f MB, %.1f MB read (%.2f%% of the store)\n",
-              report.at("chosen_eps").get<double>(), ext.seconds, report.at("extract_seconds").get<double>(),
-              static_cast<long long>(report.at("triangles").get<int64_t>()), static_cast<double>(ext.max_rss_kb) / 1024,
-              report.at("bytes_read").get<double>() / 1e6, 100 * report.at("bytes_read").get<double>() / static_cast<double>(store_bytes));
+  std::printf("isotope bench --scale: %s, %u hardware threads\n", cpu_model().c_str(),
+              std::thread::hardware_concurrency());
+  std::printf("volume       %lld^3 uint8 (%.2f GB), the algebraic function; written in %.1f s\n",
+              static_cast<long long>(n), static_cast<double>(n * n * n) / 1e9, write_seconds);
+  std::printf(
+      "convert      --memory-mb 1024: %.1f s (%.1f M voxels/s), peak RSS %.0f MB, store %.2f GB (%.3f of the raw)\n",
+      conv.seconds, static_cast<double>(n * n * n) / conv.seconds / 1e6, static_cast<double>(conv.max_rss_kb) / 1024,
+      static_cast<double>(store_bytes) / 1e9, static_cast<double>(store_bytes) / static_cast<double>(n * n * n));
+  std::printf(
+      "extract      --cache-mb 256, coarse (at most 1M triangles, mode none, eps %g), cold store: %.2f s process,\n"
+      "             %.2f s extraction, %lld triangles, peak RSS %.0f MB, %.1f MB read (%.2f%% of the store)\n",
+      report.at("chosen_eps").get<double>(), ext.seconds, report.at("extract_seconds").get<double>(),
+      static_cast<long long>(report.at("triangles").get<int64_t>()), static_cast<double>(ext.max_rss_kb) / 1024,
+      report.at("bytes_read").get<double>() / 1e6,
+      100 * report.at("bytes_read").get<double>() / static_cast<double>(store_bytes));
   if (!a.json.empty())
     write_json_file(json{{"scale_size", n},
                          {"write_seconds", write_seconds},
-                         {"convert", {{"seconds", conv.seconds}, {"peak_rss_mb", static_cast<double>(conv.max_rss_kb) / 1024},
-                                      {"memory_mb", 1024}, {"store_bytes", store_bytes}}},
-                         {"extract", {{"process_seconds", ext.seconds}, {"peak_rss_mb", static_cast<double>(ext.max_rss_kb) / 1024},
-                                      {"cache_mb", 256}, {"report", report}}}},
+                         {"convert",
+                          {{"seconds", conv.seconds},
+                           {"peak_rss_mb", static_cast<double>(conv.max_rss_kb) / 1024},
+                           {"memory_mb", 1024},
+                           {"store_bytes", store_bytes}}},
+                         {"extract",
+                          {{"process_seconds", ext.seconds},
+                           {"peak_rss_mb", static_cast<double>(ext.max_rss_kb) / 1024},
+                           {"cache_mb", 256},
+                           {"report", report}}}},
                     a.json);
   return 0;
 }
@@ -1066,7 +1120,8 @@ int run_suite(const SuiteOptions& a) {
   // The data must be there: a missing volume is an error, not a row silently left out.
   for (const DatasetSpec* spec : specs)
     if (spec->file && !fs::is_regular_file(fs::path(a.data) / spec->file))
-      throw IoError((fs::path(a.data) / spec->file).string() + ": not found (pass --data DIR, or --dataset to choose others)");
+      throw IoError((fs::path(a.data) / spec->file).string() +
+                    ": not found (pass --data DIR, or --dataset to choose others)");
   Suite suite(a, work.path(), progress);
   const auto start = std::chrono::steady_clock::now();
   for (const DatasetSpec* spec : specs) {
@@ -1097,8 +1152,8 @@ int run_suite(const SuiteOptions& a) {
   if (progress) std::fprintf(stderr, "\r\033[K");
   const double total = seconds_since(start);
 
-  std::printf("isotope bench%s: %s, %u hardware threads, %d used; %.1f s\n", a.quick ? " --quick" : "", cpu_model().c_str(),
-              std::thread::hardware_concurrency(), suite.threads(), total);
+  std::printf("isotope bench%s: %s, %u hardware threads, %d used; %.1f s\n", a.quick ? " --quick" : "",
+              cpu_model().c_str(), std::thread::hardware_concurrency(), suite.threads(), total);
   print_datasets(suite.datasets());
   print_rows(suite.rows());
   print_peers(suite.peers(), suite.rows(), suite.threads());
@@ -1113,9 +1168,13 @@ int run_suite(const SuiteOptions& a) {
     json j;
     j["isotope_version"] = ISOTOPE_VERSION_STRING;
     j["suite"] = a.quick ? "quick" : "full";
-    j["machine"] = {{"cpu", cpu_model()}, {"hardware_threads", std::thread::hardware_concurrency()}, {"threads", suite.threads()}};
-    j["policy"] = {{"min_runs", suite.policy().min_runs}, {"max_runs", suite.policy().max_runs},
-                   {"min_seconds", suite.policy().min_seconds}, {"statistic", "median"}, {"cache_mb", a.cache_mb}};
+    j["machine"] = {
+        {"cpu", cpu_model()}, {"hardware_threads", std::thread::hardware_concurrency()}, {"threads", suite.threads()}};
+    j["policy"] = {{"min_runs", suite.policy().min_runs},
+                   {"max_runs", suite.policy().max_runs},
+                   {"min_seconds", suite.policy().min_seconds},
+                   {"statistic", "median"},
+                   {"cache_mb", a.cache_mb}};
     j["seconds"] = total;
     j["datasets"] = datasets_json(suite.datasets());
     j["rows"] = rows_json(suite.rows());

@@ -66,7 +66,8 @@ double algebraic_function(double x, double y, double z) {
 }
 
 Volume generate_algebraic(int64_t size, std::array<double, 3> shift) {
-  return sample(size, [shift](const Point& p) { return algebraic_function(p[0] - shift[0], p[1] - shift[1], p[2] - shift[2]); });
+  return sample(
+      size, [shift](const Point& p) { return algebraic_function(p[0] - shift[0], p[1] - shift[1], p[2] - shift[2]); });
 }
 
 Volume generate_sphere(int64_t size) {

@@ -4,6 +4,9 @@
 // libtbb is not instrumented and TSan would report TBB's own task hand-offs as races, hiding
 // any of ours. Both honour tbb::global_control's max_allowed_parallelism, so one thread runs
 // the same body serially.
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
@@ -12,16 +15,13 @@
 #include <thread>
 #include <vector>
 
-#include <tbb/global_control.h>
-#include <tbb/parallel_for.h>
-
 namespace isotope {
 
 // Calls body(i) for every i in [begin, end), in any order, possibly concurrently.
 template <class Body>
 void parallel_for(int64_t begin, int64_t end, const Body& body) {
-  const auto threads = static_cast<int64_t>(
-      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const auto threads =
+      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
   if (threads <= 1 || end - begin <= 1) {
     for (int64_t i = begin; i < end; ++i) body(i);
     return;
@@ -53,8 +53,8 @@ void parallel_for(int64_t begin, int64_t end, const Body& body) {
 // neighbours, e.g. bricks in a cache of bounded size.
 template <class Body>
 void parallel_for_in_order(int64_t begin, int64_t end, const Body& body) {
-  const auto threads = static_cast<int64_t>(
-      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const auto threads =
+      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
   std::atomic<int64_t> next{begin};
   parallel_for(int64_t{0}, std::min(threads, std::max<int64_t>(end - begin, 1)), [&](int64_t) {
     for (int64_t i = next++; i < end; i = next++) body(i);

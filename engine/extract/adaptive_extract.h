@@ -7,12 +7,12 @@
 #include <stdexcept>
 #include <vector>
 
+#include "engine/core/parallel.h"
 #include "engine/extract/extract.h"
 #include "engine/extract/finest_extract.h"
-#include "engine/core/parallel.h"
-#include "engine/mesh/piece_weld.h"
 #include "engine/extract/traversal.h"
 #include "engine/extract/triangle_budget.h"
+#include "engine/mesh/piece_weld.h"
 
 namespace isotope {
 
@@ -69,7 +69,8 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     }
     return mesh;
   };
-  if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) return finish(extract_finest(source, rule, &total));
+  if (in_codes.eps == 0 && finest_extract_applies(source.lattice()))
+    return finish(extract_finest(source, rule, &total));
   std::vector<Piece> pieces;
   {  // scoped: a paged source's reader lets its bricks go before the pieces run
     Traversal<Source> top(source, rule);

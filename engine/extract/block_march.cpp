@@ -1,7 +1,7 @@
 #include "engine/extract/block_march.h"
 
-#include "engine/hierarchy/kuhn.h"
 #include "engine/extract/traversal.h"
+#include "engine/hierarchy/kuhn.h"
 
 namespace isotope {
 namespace {
@@ -32,11 +32,17 @@ std::array<ParityTets, 8> make_parity_tets() {
 
 }  // namespace
 
-void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells,
-                 float iso, EdgeMemo& memo, MeshBuilder& builder) {
+void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells, float iso,
+                 EdgeMemo& memo, MeshBuilder& builder) {
   static const std::array<ParityTets, 8> kTets = make_parity_tets();
-  const int64_t offset[8] = {0, 1, stride, stride + 1, stride * stride, stride * stride + 1,
-                             stride * stride + stride, stride * stride + stride + 1};
+  const int64_t offset[8] = {0,
+                             1,
+                             stride,
+                             stride + 1,
+                             stride * stride,
+                             stride * stride + 1,
+                             stride * stride + stride,
+                             stride * stride + stride + 1};
   memo.start(base);
   for (int64_t z = 0; z < cells[2]; ++z)
     for (int64_t y = 0; y < cells[1]; ++y)

@@ -14,7 +14,7 @@ namespace isotope {
 // node (x, y, z) of the box (0 <= x <= cells[0]) has value f[(z * stride + y) * stride + x].
 // Cells are walked z slowest, then y, then x; each cell's six Kuhn tetrahedra
 // (engine/hierarchy/kuhn.h, cell_tetrahedra) in their order. The memo must hold a box of stride - 1 cells.
-void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells,
-                 float iso, EdgeMemo& memo, MeshBuilder& builder);
+void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells, float iso,
+                 EdgeMemo& memo, MeshBuilder& builder);
 
 }  // namespace isotope

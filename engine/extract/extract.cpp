@@ -2,10 +2,10 @@
 
 #include <algorithm>
 #include <cassert>
-#include <string>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "engine/extract/adaptive_extract.h"
@@ -32,7 +32,8 @@ class InMemory {
     float value(const Coord& c, int /*band*/) const { return mv_.value(c); }
     bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
       for (int64_t z = 0; z <= n[2]; ++z)
-        for (int64_t y = 0; y <= n[1]; ++y) mv_.value_row(lo[0], lo[1] + y, lo[2] + z, n[0] + 1, f + (z * stride + y) * stride);
+        for (int64_t y = 0; y <= n[1]; ++y)
+          mv_.value_row(lo[0], lo[1] + y, lo[2] + z, n[0] + 1, f + (z * stride + y) * stride);
       return true;
     }
     using Handle = int64_t;  // the record's slot
@@ -89,7 +90,6 @@ class ArraySource {
   Lattice lattice_;
 };
 
-
 }  // namespace
 
 void validate_volume(const Volume& volume) {
@@ -100,7 +100,8 @@ void validate_volume(const Volume& volume) {
     throw std::invalid_argument("volume holds " + std::to_string(volume.values.size()) +
                                 " values, its dimensions need " + std::to_string(volume.node_count()));
   for (size_t i = 0; i < volume.values.size(); ++i)
-    if (!std::isfinite(volume.values[i])) throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
+    if (!std::isfinite(volume.values[i]))
+      throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
 }
 
 bool needs_hierarchy(const ExtractOptions& options) { return options.eps != 0 || options.max_triangles > 0; }

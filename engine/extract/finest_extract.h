@@ -65,7 +65,8 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
         ++seen;
         const Coord centre{x0 + side / 2, y0 + side / 2, z0 + side / 2};
         if constexpr (RecordReader<decltype(reader)>)
-          if (!rule.in_range(reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
+          if (!rule.in_range(
+                  reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
             continue;
         const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
         const Coord lo{x0, y0, z0};

@@ -4,10 +4,10 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "engine/hierarchy/kuhn.h"
-#include "engine/mesh/marching_tetrahedra.h"
 #include "engine/extract/slab_march.h"
 #include "engine/extract/traversal.h"
+#include "engine/hierarchy/kuhn.h"
+#include "engine/mesh/marching_tetrahedra.h"
 
 namespace isotope {
 namespace {
@@ -27,8 +27,9 @@ void march_layers(const Volume& volume, float iso, int64_t z_begin, int64_t z_en
         for (int c = 0; c < 8; ++c) above += volume.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)) > iso;
         if (above == 0 || above == 8) continue;
         for (const Tet& t : cell_tetrahedra({x, y, z}))
-          builder.add_tet(t, {volume.at(t[0][0], t[0][1], t[0][2]), volume.at(t[1][0], t[1][1], t[1][2]),
-                              volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])},
+          builder.add_tet(t,
+                          {volume.at(t[0][0], t[0][1], t[0][2]), volume.at(t[1][0], t[1][1], t[1][2]),
+                           volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])},
                           traversal::orientation(t) > 0);
       }
 }

@@ -45,8 +45,8 @@ int64_t triangle_budget(std::string_view text) {
   int64_t v = 0;
   const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
   if (ec != std::errc() || end != text.data() + text.size() || v < 0 || v > kMaxTriangleBudget)
-    throw OptionError("max-triangles", "must be an integer in 0 .. " + std::to_string(kMaxTriangleBudget) +
-                                           ", got " + quoted(text));
+    throw OptionError("max-triangles",
+                      "must be an integer in 0 .. " + std::to_string(kMaxTriangleBudget) + ", got " + quoted(text));
   return v;
 }
 
@@ -124,7 +124,8 @@ ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, st
   if (o.topology != TopologyMode::simplify && (has("delta") || has("weight")))
     throw OptionError(has("delta") ? "delta" : "weight", "applies to topology simplify only");
   if (has("focus") != has("radius"))
-    throw OptionError(has("focus") ? "radius" : "focus", has("focus") ? "is required with focus" : "is required with radius");
+    throw OptionError(has("focus") ? "radius" : "focus",
+                      has("focus") ? "is required with focus" : "is required with radius");
   o.validate();
   return o;
 }
@@ -143,7 +144,8 @@ void ExtractOptions::validate() const {
   if (focus) {
     if (!std::isfinite(focus->point[0]) || !std::isfinite(focus->point[1]) || !std::isfinite(focus->point[2]))
       throw OptionError("focus", "must be a finite point");
-    if (!(focus->radius > 0) || !std::isfinite(focus->radius)) throw OptionError("radius", "must be a finite number > 0");
+    if (!(focus->radius > 0) || !std::isfinite(focus->radius))
+      throw OptionError("radius", "must be a finite number > 0");
   }
 }
 

@@ -7,8 +7,8 @@
 #include <utility>
 #include <vector>
 
-#include "engine/mesh/edge_vertex_map.h"
 #include "engine/core/parallel.h"
+#include "engine/mesh/edge_vertex_map.h"
 
 namespace isotope {
 namespace {
@@ -57,7 +57,8 @@ class SlabMerger {
       std::iota(remap_.begin(), remap_.end(), 0u);
     } else {
       remap_.assign(s.mesh.positions.size(), EdgeVertexMap::kAbsent);
-      for (const PlaneVertex& v : s.bottom) remap_[v.local] = previous_top_.find_or_insert(v.key, EdgeVertexMap::kAbsent);
+      for (const PlaneVertex& v : s.bottom)
+        remap_[v.local] = previous_top_.find_or_insert(v.key, EdgeVertexMap::kAbsent);
       for (size_t k = 0; k < remap_.size(); ++k)
         if (remap_[k] == EdgeVertexMap::kAbsent) {
           remap_[k] = static_cast<uint32_t>(out_.positions.size());

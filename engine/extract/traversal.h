@@ -12,12 +12,12 @@
 #include <utility>
 #include <vector>
 
+#include "engine/extract/options.h"
+#include "engine/extract/traversal_source.h"
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/lattice.h"
-#include "engine/mesh/marching_tetrahedra.h"
-#include "engine/extract/options.h"
 #include "engine/hierarchy/record.h"
-#include "engine/extract/traversal_source.h"
+#include "engine/mesh/marching_tetrahedra.h"
 
 namespace isotope {
 
@@ -156,7 +156,9 @@ template <TraversalSource Source>
 class Traversal {
  public:
   Traversal(const Source& source, const SplitRule& rule)
-      : reader_(source.reader()), lattice_(source.lattice()), rule_(rule),
+      : reader_(source.reader()),
+        lattice_(source.lattice()),
+        rule_(rule),
         builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing()) {
     for (int i = 0; i < 3; ++i) {
       box_max_[i] = source.data_dims()[i] - 1;
@@ -184,8 +186,10 @@ class Traversal {
   }
 
   void run(const Piece& p) {
-    if (p.emit_only) emit(p.tet, p.level, p.positive);
-    else visit_by_levels(p.tet, p.level, p.positive);
+    if (p.emit_only)
+      emit(p.tet, p.level, p.positive);
+    else
+      visit_by_levels(p.tet, p.level, p.positive);
   }
 
   // What the traversal decides about one tetrahedron, without descending: used by the budget

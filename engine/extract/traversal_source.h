@@ -44,8 +44,8 @@ concept ValueReader = requires(R& r, const Coord& c, int band) {
 // names it), topology() its critical intervals and weights (those `read` names); prefetch() is a
 // hint that bounds() will be asked for soon.
 template <class R>
-concept RecordReader = ValueReader<R> && requires(R& r, traversal::Packed v, const typename R::Handle& h,
-                                                  const RecordFields& read) {
+concept RecordReader = ValueReader<R> &&
+    requires(R& r, traversal::Packed v, const typename R::Handle& h, const RecordFields& read) {
   { r.locate(v) } -> std::convertible_to<typename R::Handle>;
   { r.bounds(h, read) } -> std::convertible_to<DiamondBounds>;
   { r.topology(h, read) } -> std::convertible_to<DiamondTopology>;

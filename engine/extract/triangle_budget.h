@@ -21,9 +21,9 @@
 namespace isotope {
 
 struct BudgetChoice {
-  double eps = 0;             // in the source's value units (codes, for a quantized store)
+  double eps = 0;  // in the source's value units (codes, for a quantized store)
   int64_t triangles = 0;
-  double next_eps = 0;        // the next finer step, and its triangles (0: eps is full resolution)
+  double next_eps = 0;  // the next finer step, and its triangles (0: eps is full resolution)
   int64_t next_triangles = 0;
   int64_t steps = 0;
 };
@@ -40,9 +40,8 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
 template <TraversalSource Source>
 BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
   return choose_cut_for_budget(source, rule, max_triangles,
-                               [](traversal::Traversal<Source>& walk, const traversal::PackedTet& t, int level, double* key) {
-                                 return walk.judge(t, level, key);
-                               });
+                               [](traversal::Traversal<Source>& walk, const traversal::PackedTet& t, int level,
+                                  double* key) { return walk.judge(t, level, key); });
 }
 
 // Simplify mode with a budget and no delta (engine/extract/options.h, ExtractOptions::auto_delta): at
@@ -53,12 +52,14 @@ BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitR
 template <TraversalSource Source>
 BudgetChoice choose_delta_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
   using Walk = traversal::Traversal<Source>;
-  return choose_cut_for_budget(source, rule, max_triangles, [&](Walk& walk, const traversal::PackedTet& t, int level, double* key) {
-    double error_key = 0;
-    const auto fate = walk.judge_topology(t, level, &error_key, key);
-    if (fate == Walk::Fate::split_key && std::isinf(error_key)) *key = std::numeric_limits<double>::infinity();
-    return fate;
-  });
+  return choose_cut_for_budget(source, rule, max_triangles,
+                               [&](Walk& walk, const traversal::PackedTet& t, int level, double* key) {
+                                 double error_key = 0;
+                                 const auto fate = walk.judge_topology(t, level, &error_key, key);
+                                 if (fate == Walk::Fate::split_key && std::isinf(error_key))
+                                   *key = std::numeric_limits<double>::infinity();
+                                 return fate;
+                               });
 }
 
 template <TraversalSource Source, class Key>
@@ -99,12 +100,12 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
   split_group(kInf);  // what the topology mode refines whatever eps is
   if (count > max_triangles) {
     const TopologyMode mode = rule.options().topology;
-    throw std::runtime_error("a budget of " + std::to_string(max_triangles) +
-                             " triangles is below the coarsest mesh this topology mode allows (" +
-                             std::to_string(count) + " triangles)" +
-                             (mode == TopologyMode::preserve || mode == TopologyMode::paper
-                                  ? "; topology mode simplify with a budget and no delta drops the smallest features to fit"
-                                  : ""));
+    throw std::runtime_error(
+        "a budget of " + std::to_string(max_triangles) +
+        " triangles is below the coarsest mesh this topology mode allows (" + std::to_string(count) + " triangles)" +
+        (mode == TopologyMode::preserve || mode == TopologyMode::paper
+             ? "; topology mode simplify with a budget and no delta drops the smallest features to fit"
+             : ""));
   }
   BudgetChoice choice;
   choice.triangles = count;

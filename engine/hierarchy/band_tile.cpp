@@ -7,7 +7,8 @@
 
 namespace isotope {
 
-std::pair<Box3, Box3> BandTile::window_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi) {
+std::pair<Box3, Box3> BandTile::window_of(const StoreLayout& layout, int band, const Box3& core_lo,
+                                          const Box3& core_hi) {
   const int64_t top = layout.lattice().n >> band;
   Box3 lo, hi;
   for (int a = 0; a < 3; ++a) {
@@ -18,8 +19,13 @@ std::pair<Box3, Box3> BandTile::window_of(const StoreLayout& layout, int band, c
 }
 
 BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi, Buffers buffers)
-    : layout_(layout), j_(band), core_lo_(core_lo), core_hi_(core_hi), values_(std::move(buffers.values)),
-      records_(std::move(buffers.records)), children_(std::move(buffers.children)) {
+    : layout_(layout),
+      j_(band),
+      core_lo_(core_lo),
+      core_hi_(core_hi),
+      values_(std::move(buffers.values)),
+      records_(std::move(buffers.records)),
+      children_(std::move(buffers.children)) {
   top_ = layout.lattice().n >> band;
   std::tie(lo_, hi_) = window_of(layout, band, core_lo, core_hi);
   for (int a = 0; a < 3; ++a) {
@@ -27,8 +33,10 @@ BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, con
     cells_[a] = std::max<int64_t>(1, size_[a] - 1);
     next_lo_[a] = core_lo[a] / 2;
     next_hi_[a] = core_hi[a] / 2;
-    if (band == layout.lattice().k) next_hi_[a] = next_lo_[a];  // no band above the corners
-    else if (core_hi[a] == layout.band(band).nodes[a]) next_hi_[a] = layout.band(band + 1).nodes[a];
+    if (band == layout.lattice().k)
+      next_hi_[a] = next_lo_[a];  // no band above the corners
+    else if (core_hi[a] == layout.band(band).nodes[a])
+      next_hi_[a] = layout.band(band + 1).nodes[a];
   }
   // Grown, never cleared: every entry read is written first (values by the caller, records by
   // build() before any parent reads them, children by the caller where they exist), and
@@ -106,8 +114,10 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
   for (int i = 0; i < d.ring_count; ++i) t.ring[i] = value_offset(d.ring[i]);
   for_each_child(d, l, [&](const Coord& u) {
     const Box3 gu{u[0] >> j_, u[1] >> j_, u[2] >> j_};
-    if (scale_of(u, l) == j_) t.same[t.same_count++] = index(gu, size_) - base;
-    else t.cube[t.cube_count++] = index(gu, cells_) - cell_base;
+    if (scale_of(u, l) == j_)
+      t.same[t.same_count++] = index(gu, size_) - base;
+    else
+      t.cube[t.cube_count++] = index(gu, cells_) - cell_base;
   });
   t.ready = true;
   return t;
@@ -134,7 +144,8 @@ void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCount
   Saturation sat;
   for (int i = 0; i < t.same_count; ++i) sat.add(records_[static_cast<size_t>(base + t.same[i])], range, topology);
   const int64_t cell_base = index(g, cells_);
-  for (int i = 0; i < t.cube_count; ++i) sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range, topology);
+  for (int i = 0; i < t.cube_count; ++i)
+    sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range, topology);
   records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology);
 }
 
@@ -142,7 +153,9 @@ void BandTile::find_constant_blocks() {
   for (int a = 0; a < 3; ++a) blocks_[a] = (size_[a] + 3) / 4;
   const auto count = static_cast<size_t>(blocks_[0] * blocks_[1] * blocks_[2]);
   std::vector<float> lo(count, INFINITY), hi(count, -INFINITY);
-  auto block = [&](int64_t bx, int64_t by, int64_t bz) { return static_cast<size_t>((bz * blocks_[1] + by) * blocks_[0] + bx); };
+  auto block = [&](int64_t bx, int64_t by, int64_t bz) {
+    return static_cast<size_t>((bz * blocks_[1] + by) * blocks_[0] + bx);
+  };
   for (int64_t z = 0; z < size_[2]; ++z)
     for (int64_t y = 0; y < size_[1]; ++y) {
       const float* row = values_.data() + (z * size_[1] + y) * size_[0];
@@ -214,8 +227,8 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
         for (int64_t y = first[1]; y <= last[1]; y += 2) {
           const bool core_yz = y >= core_first[1] && y <= core_last[1] && z >= core_first[2] && z <= core_last[2];
           const bool box_yz = y >= box_first[1] && y <= box_last[1] && z >= box_first[2] && z <= box_last[2];
-          const bool trivial_yz = trivial && y >= trivial_first[1] && y <= trivial_last[1] && z >= trivial_first[2] &&
-                                  z <= trivial_last[2];
+          const bool trivial_yz =
+              trivial && y >= trivial_first[1] && y <= trivial_last[1] && z >= trivial_first[2] && z <= trivial_last[2];
           for (int64_t x = first[0]; x <= last[0]; x += 2) {
             if (trivial_yz && x >= trivial_first[0] && x <= trivial_last[0] &&
                 constant_[static_cast<size_t>((((z - lo_[2]) >> 2) * blocks_[1] + ((y - lo_[1]) >> 2)) * blocks_[0] +
@@ -228,8 +241,10 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
             }
             const bool core = core_yz && x >= core_first[0] && x <= core_last[0];
             CriticalCounts& c = core ? counts : halo_counts;
-            if (box_yz && x >= box_first[0] && x <= box_last[0]) build_fast({x, y, z}, template_for({x, y, z}), c, topology);
-            else builder.build({x << j_, y << j_, z << j_}, c, topology);
+            if (box_yz && x >= box_first[0] && x <= box_last[0])
+              build_fast({x, y, z}, template_for({x, y, z}), c, topology);
+            else
+              builder.build({x << j_, y << j_, z << j_}, c, topology);
           }
         }
     }

@@ -13,10 +13,10 @@
 #include <vector>
 
 #include "engine/hierarchy/diamond.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "engine/hierarchy/record.h"
 #include "engine/hierarchy/record_builder.h"
 #include "engine/hierarchy/store_layout.h"
+#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 
@@ -59,9 +59,7 @@ class BandTile {
   // G_j coordinates: node_value() anywhere in the window, node_record() of computed scale-j nodes.
   float node_value(const Box3& g) const { return values_[static_cast<size_t>(index(g, size_))]; }
   const Record& node_record(const Box3& g) const { return records_[static_cast<size_t>(index(g, size_))]; }
-  const Record& child_record(const Box3& cell) const {
-    return children_[static_cast<size_t>(index(cell, cells_))];
-  }
+  const Record& child_record(const Box3& cell) const { return children_[static_cast<size_t>(index(cell, cells_))]; }
   // What band j+1 needs from this tile, for its nodes g in [next_lo, next_hi) (G_{j+1} units):
   // the value at 2g and the record of the cube centre 2g + 1, its cell g's child. The last tile
   // along an axis also covers band j+1's nodes one step beyond band j's grid.
@@ -95,9 +93,9 @@ class BandTile {
     PolyhedronType type = PolyhedronType::cube;
     DiamondShape shape;
     int ring_count = 0, same_count = 0, cube_count = 0;
-    int64_t a = 0, b = 0, ring[8] = {};   // into values_
-    int64_t same[8] = {};                 // into records_: children of scale j
-    int64_t cube[8] = {};                 // into children_: scale j-1 cube centres
+    int64_t a = 0, b = 0, ring[8] = {};  // into values_
+    int64_t same[8] = {};                // into records_: children of scale j
+    int64_t cube[8] = {};                // into children_: scale j-1 cube centres
   };
   const DiamondTemplate& template_for(const Box3& g);
   bool inside_data_box(const Box3& g) const;

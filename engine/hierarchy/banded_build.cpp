@@ -7,7 +7,8 @@ std::vector<Box3> in_morton_order(const Box3& count) {
   for (int64_t z = 0; z < count[2]; ++z)
     for (int64_t y = 0; y < count[1]; ++y)
       for (int64_t x = 0; x < count[0]; ++x)
-        order.push_back({morton_encode(static_cast<uint64_t>(x), static_cast<uint64_t>(y), static_cast<uint64_t>(z)), {x, y, z}});
+        order.push_back(
+            {morton_encode(static_cast<uint64_t>(x), static_cast<uint64_t>(y), static_cast<uint64_t>(z)), {x, y, z}});
   std::sort(order.begin(), order.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Box3> out;
   out.reserve(order.size());

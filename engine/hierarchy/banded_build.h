@@ -19,9 +19,9 @@
 #include <utility>
 #include <vector>
 
-#include "engine/hierarchy/band_tile.h"
 #include "engine/core/parallel.h"
 #include "engine/core/progress.h"
+#include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/store_layout.h"
 
 namespace isotope {
@@ -39,7 +39,9 @@ class BandHandover {
   static uint64_t count(const Box3& n) { return static_cast<uint64_t>(n[0] * n[1] * n[2]); }
   static uint64_t bytes(const Box3& n) { return count(n) * (sizeof(float) + sizeof(Record)); }
   const Box3& nodes() const { return nodes_; }
-  uint64_t at(int64_t x, int64_t y, int64_t z) const { return static_cast<uint64_t>((z * nodes_[1] + y) * nodes_[0] + x); }
+  uint64_t at(int64_t x, int64_t y, int64_t z) const {
+    return static_cast<uint64_t>((z * nodes_[1] + y) * nodes_[0] + x);
+  }
 
   virtual void write_row(int64_t x0, int64_t y, int64_t z, const float* values, const Record* children, int64_t n) = 0;
   virtual void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const = 0;
@@ -52,7 +54,8 @@ class BandHandover {
 class MemoryHandover : public BandHandover {
  public:
   explicit MemoryHandover(const Box3& nodes)
-      : BandHandover(nodes), values_(std::make_unique_for_overwrite<float[]>(count(nodes))),
+      : BandHandover(nodes),
+        values_(std::make_unique_for_overwrite<float[]>(count(nodes))),
         children_(std::make_unique_for_overwrite<Record[]>(count(nodes))) {}
   void write_row(int64_t x0, int64_t y, int64_t z, const float* values, const Record* children, int64_t n) override {
     std::copy(values, values + n, values_.get() + at(x0, y, z));
@@ -72,7 +75,7 @@ class MemoryHandover : public BandHandover {
 
 struct BandedBuildOptions {
   uint64_t memory_bytes = uint64_t{1} << 30;  // tiles in flight; a hand-over beyond a quarter of it may go elsewhere
-  bool topology = true;  // false: the records' range and errors only (BandTile::build)
+  bool topology = true;                       // false: the records' range and errors only (BandTile::build)
   ProgressCallback progress;
   std::function<void()> check_cancel;  // called between batches; throws to stop
   // Where a band's hand-over goes; by default (or when this returns null) into memory.
@@ -129,10 +132,13 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   // Tiles of c^3 bricks: larger tiles compute fewer halo records twice and read their input in
   // fewer, longer calls. The largest c that keeps every thread busy within three quarters of the
   // budget, and gives every thread a few tiles of band 0.
-  const auto threads = static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const auto threads =
+      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
   const auto budget = static_cast<int64_t>(options.memory_bytes / 4 * 3);
   const Box3& bricks0 = layout.band(0).bricks;
-  auto tiles = [&](int64_t c) { return ((bricks0[0] + c - 1) / c) * ((bricks0[1] + c - 1) / c) * ((bricks0[2] + c - 1) / c); };
+  auto tiles = [&](int64_t c) {
+    return ((bricks0[0] + c - 1) / c) * ((bricks0[1] + c - 1) / c) * ((bricks0[2] + c - 1) / c);
+  };
   int64_t c = std::max<int64_t>(1, int64_t{64} >> layout.brick_bits());  // tiles up to 64^3 nodes
   while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes) < threads || tiles(c) < 4 * threads)) c /= 2;
   const int in_flight =
@@ -185,8 +191,10 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
         }
         TileResult<Payload> r;
         BandTile tile(layout, band.scale, lo, hi, std::move(buffers[slot]));
-        if (in) fill_from_handover(tile, *in);
-        else fill_from_input(tile, layout, read);
+        if (in)
+          fill_from_handover(tile, *in);
+        else
+          fill_from_input(tile, layout, read);
         tile.build(r.counts, options.topology);
         if (next) write_next(tile, *next);
         if (band.scale == 0) value_range(tile, layout, r.lo, r.hi);

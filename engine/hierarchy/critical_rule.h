@@ -16,7 +16,10 @@ struct IsoInterval {
   float length() const { return empty() ? 0.0f : hi - lo; }
   void hull(const IsoInterval& o) {
     if (o.empty()) return;
-    if (empty()) { *this = o; return; }
+    if (empty()) {
+      *this = o;
+      return;
+    }
     lo = lo < o.lo ? lo : o.lo;
     hi = hi > o.hi ? hi : o.hi;
   }

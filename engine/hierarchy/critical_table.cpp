@@ -21,7 +21,10 @@ int count_components(int ring, uint32_t pattern) {
   auto join = [&](int u, int w) {
     if (((pattern >> u) & 1u) != ((pattern >> w) & 1u)) return;  // step 2: '+'/'-' edges go
     const int ru = find(parent, u), rw = find(parent, w);
-    if (ru != rw) { parent[ru] = rw; --components; }
+    if (ru != rw) {
+      parent[ru] = rw;
+      --components;
+    }
   };
   for (int i = 0; i < ring; ++i) {  // step 1: the polyhedron's edges
     join(0, 2 + i);
@@ -62,8 +65,6 @@ int critical_pattern_count(PolyhedronType type) {
   return n;
 }
 
-int pattern_components(PolyhedronType type, uint32_t pattern) {
-  return count_components(ring_size(type), pattern);
-}
+int pattern_components(PolyhedronType type, uint32_t pattern) { return count_components(ring_size(type), pattern); }
 
 }  // namespace isotope

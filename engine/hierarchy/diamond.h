@@ -12,12 +12,14 @@ namespace isotope {
 
 enum class PolyhedronType : uint8_t { cube = 0, octahedron = 1, diamond = 2 };
 
-constexpr int ring_size(PolyhedronType t) { return t == PolyhedronType::cube ? 6 : t == PolyhedronType::octahedron ? 4 : 8; }
+constexpr int ring_size(PolyhedronType t) {
+  return t == PolyhedronType::cube ? 6 : t == PolyhedronType::octahedron ? 4 : 8;
+}
 
 struct Diamond {
-  Coord v{}, a{}, b{};     // refinement vertex and the endpoints of its refinement edge
+  Coord v{}, a{}, b{};  // refinement vertex and the endpoints of its refinement edge
   PolyhedronType type = PolyhedronType::cube;
-  int level = 0;           // level of the tetrahedra bisected at v
+  int level = 0;  // level of the tetrahedra bisected at v
   int ring_count = 0;
   std::array<Coord, 8> ring{};  // in cycle order; may lie outside the lattice (cut diamonds)
 };

@@ -93,7 +93,8 @@ Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int
     throw std::invalid_argument("volume holds " + std::to_string(volume.values.size()) +
                                 " values, its dimensions need " + std::to_string(volume.node_count()));
   for (size_t i = 0; i < volume.values.size(); ++i)
-    if (!std::isfinite(volume.values[i])) throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
+    if (!std::isfinite(volume.values[i]))
+      throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
   const auto start = std::chrono::steady_clock::now();
   Hierarchy h = allocate(volume.dims, brick_bits, fields);
   h.set_geometry(volume.origin, volume.spacing);

@@ -9,18 +9,18 @@
 // Fields a mode does not read need not be held (engine/extract/options.h, RecordFields).
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <atomic>
+#include <bit>
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
 
-#include "engine/hierarchy/compact_record.h"
+#include "engine/core/progress.h"
 #include "engine/extract/extract.h"
+#include "engine/extract/options.h"
+#include "engine/hierarchy/compact_record.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/multires_volume.h"
-#include "engine/extract/options.h"
-#include "engine/core/progress.h"
 #include "engine/hierarchy/record.h"
 #include "engine/hierarchy/store_layout.h"
 #include "isotope/volume.h"
@@ -41,7 +41,9 @@ struct BrickView {
 };
 
 inline uint32_t interval_word(Bf16 lo, Bf16 hi) { return uint32_t{lo} | uint32_t{hi} << 16; }
-inline uint64_t weights_word(const Bf16 (&w)[3]) { return uint64_t{w[0]} | uint64_t{w[1]} << 16 | uint64_t{w[2]} << 32; }
+inline uint64_t weights_word(const Bf16 (&w)[3]) {
+  return uint64_t{w[0]} | uint64_t{w[1]} << 16 | uint64_t{w[2]} << 32;
+}
 
 // The topology of a node from the words held (fields not held read as "never critical").
 inline DiamondTopology topology_of(uint32_t exact, uint32_t paper, uint64_t weights) {
@@ -123,8 +125,11 @@ class Hierarchy {
 
   BrickView brick(int64_t index) const {
     const auto at = static_cast<size_t>(index * indexer_->brick_nodes());
-    return {values_.get() + at, bounds_.get() + at, surplus_ ? surplus_.get() + at : nullptr,
-            exact_ ? exact_.get() + at : nullptr, paper_ ? paper_.get() + at : nullptr,
+    return {values_.get() + at,
+            bounds_.get() + at,
+            surplus_ ? surplus_.get() + at : nullptr,
+            exact_ ? exact_.get() + at : nullptr,
+            paper_ ? paper_.get() + at : nullptr,
             weights_ ? weights_.get() + at : nullptr};
   }
   float* values(int64_t index) { return values_.get() + index * indexer_->brick_nodes(); }

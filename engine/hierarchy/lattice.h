@@ -8,9 +8,9 @@ namespace isotope {
 using Coord = std::array<int64_t, 3>;
 
 struct Lattice {
-  int k = 0;        // levels of the hierarchy: 0 .. 3k
-  int64_t n = 1;    // 2^k cells per axis
-  int64_t side = 2; // n + 1 nodes per axis
+  int k = 0;         // levels of the hierarchy: 0 .. 3k
+  int64_t n = 1;     // 2^k cells per axis
+  int64_t side = 2;  // n + 1 nodes per axis
 
   static Lattice enclosing(const std::array<int64_t, 3>& dims);  // smallest with n >= max(dims) - 1
   int max_level() const { return 3 * k; }
@@ -27,7 +27,10 @@ inline Lattice Lattice::enclosing(const std::array<int64_t, 3>& dims) {
   int64_t need = 1;
   for (int64_t d : dims) need = d - 1 > need ? d - 1 : need;
   Lattice l;
-  while (l.n < need) { l.n *= 2; ++l.k; }
+  while (l.n < need) {
+    l.n *= 2;
+    ++l.k;
+  }
   l.side = l.n + 1;
   return l;
 }

@@ -83,9 +83,8 @@ MultiresVolume MultiresVolume::allocate(const std::array<int64_t, 3>& dims, cons
   mv.values_.resize(static_cast<size_t>(mv.layout_.size));
   int64_t records = 0;
   for (int j = 0; j <= mv.lattice_.k; ++j) {
-    mv.scale_layout_.emplace_back(std::array<int64_t, 3>{(mv.record_extent(0, j) >> j) + 1,
-                                                         (mv.record_extent(1, j) >> j) + 1,
-                                                         (mv.record_extent(2, j) >> j) + 1});
+    mv.scale_layout_.emplace_back(std::array<int64_t, 3>{
+        (mv.record_extent(0, j) >> j) + 1, (mv.record_extent(1, j) >> j) + 1, (mv.record_extent(2, j) >> j) + 1});
     mv.scale_offset_.push_back(records);
     records += mv.scale_layout_.back().size;
   }
@@ -100,8 +99,8 @@ MultiresVolume MultiresVolume::build(const Volume& volume, const ProgressCallbac
   MultiresVolume mv = allocate(volume.dims, volume.spacing, volume.origin);
   std::vector<std::array<int64_t, 3>> scale_nodes;
   for (int j = 0; j <= mv.lattice_.k; ++j)
-    scale_nodes.push_back({(mv.record_extent(0, j) >> j) + 1, (mv.record_extent(1, j) >> j) + 1,
-                           (mv.record_extent(2, j) >> j) + 1});
+    scale_nodes.push_back(
+        {(mv.record_extent(0, j) >> j) + 1, (mv.record_extent(1, j) >> j) + 1, (mv.record_extent(2, j) >> j) + 1});
   VolumeGrid grid(mv);
   const RecordBuilder<VolumeGrid> builder(grid);
   grid.copy_values(volume);

@@ -7,11 +7,11 @@
 #include <cstdint>
 #include <vector>
 
-#include "engine/hierarchy/brick_layout.h"
-#include "isotope/detail/huge_page_allocator.h"
-#include "engine/hierarchy/lattice.h"
 #include "engine/core/progress.h"
+#include "engine/hierarchy/brick_layout.h"
+#include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/record.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/volume.h"
 
 namespace isotope {
@@ -96,8 +96,8 @@ class MultiresVolume {
   Lattice lattice_;
   int scale_of(const Coord& v) const { return isotope::scale_of(v, lattice_); }
 
-  BrickLayout layout_;                       // values: the data box
-  std::vector<BrickLayout> scale_layout_;    // records: one layout per scale 0..k
+  BrickLayout layout_;                     // values: the data box
+  std::vector<BrickLayout> scale_layout_;  // records: one layout per scale 0..k
   std::vector<int64_t> scale_offset_;
   std::array<int64_t, 3> data_dims_{};
   std::array<double, 3> spacing_{1, 1, 1};

@@ -29,7 +29,7 @@ inline float round_up(double d) {
     // The next float up: for the non-negative finite floats errors and weights are, the next bit
     // pattern (std::nextafter is a library call, and this runs for every record).
     f = f >= 0 && f < std::numeric_limits<float>::max() ? std::bit_cast<float>(std::bit_cast<uint32_t>(f) + 1)
-                                                         : std::nextafter(f, std::numeric_limits<float>::infinity());
+                                                        : std::nextafter(f, std::numeric_limits<float>::infinity());
   }
   return f;
 }
@@ -119,7 +119,8 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
           for (int col = 0; col < 3; ++col) mc[row][col] = col == c ? r[row] : m[row][col];
         const double gc = (mc[0][0] * (mc[1][1] * mc[2][2] - mc[1][2] * mc[2][1]) -
                            mc[0][1] * (mc[1][0] * mc[2][2] - mc[1][2] * mc[2][0]) +
-                           mc[0][2] * (mc[1][0] * mc[2][1] - mc[1][1] * mc[2][0])) / det;
+                           mc[0][2] * (mc[1][0] * mc[2][1] - mc[1][1] * mc[2][0])) /
+                          det;
         g2 += gc * gc;
       }
       w.gradient = std::max(w.gradient, std::sqrt(g2));
@@ -160,8 +161,14 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
       sat.weight[2] = std::max(sat.weight[2], round_up(w.size));
     }
   }
-  if (!sat.exact.empty()) { r.topology.exact_lo = sat.exact.lo; r.topology.exact_hi = sat.exact.hi; }
-  if (!sat.paper.empty()) { r.topology.paper_lo = sat.paper.lo; r.topology.paper_hi = sat.paper.hi; }
+  if (!sat.exact.empty()) {
+    r.topology.exact_lo = sat.exact.lo;
+    r.topology.exact_hi = sat.exact.hi;
+  }
+  if (!sat.paper.empty()) {
+    r.topology.paper_lo = sat.paper.lo;
+    r.topology.paper_hi = sat.paper.hi;
+  }
   r.topology.weight = sat.weight;
   return r;
 }
@@ -223,8 +230,8 @@ class RecordBuilder {
     const Diamond d = diamond_of(v, lattice_);
     DiamondValues dv;
     DiamondBounds range;
-    const bool inside_box =
-        read_polyhedron(d, lattice_, grid_.data_dims(), [&](const Coord& c) { return grid_.value(c); }, dv, range);
+    const bool inside_box = read_polyhedron(
+        d, lattice_, grid_.data_dims(), [&](const Coord& c) { return grid_.value(c); }, dv, range);
     Saturation sat;
     for_each_child(d, lattice_, [&](const Coord& u) {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node

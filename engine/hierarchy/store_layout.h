@@ -18,9 +18,9 @@ using Box3 = std::array<int64_t, 3>;  // per-axis counts or coordinates on a ban
 
 struct Band {
   int scale = 0;
-  std::array<int64_t, 3> nodes{};    // G_j nodes per axis: 0 .. record_extent >> j
-  std::array<int64_t, 3> bricks{};   // bricks per axis
-  int64_t first_brick = 0;           // directory index of its brick (0, 0, 0)
+  std::array<int64_t, 3> nodes{};   // G_j nodes per axis: 0 .. record_extent >> j
+  std::array<int64_t, 3> bricks{};  // bricks per axis
+  int64_t first_brick = 0;          // directory index of its brick (0, 0, 0)
   int64_t brick_count() const { return bricks[0] * bricks[1] * bricks[2]; }
 };
 

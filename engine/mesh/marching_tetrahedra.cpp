@@ -61,7 +61,6 @@ bool before(const Coord& p, const Coord& q) {
   return p[2] != q[2] ? p[2] < q[2] : p[1] != q[1] ? p[1] < q[1] : p[0] < q[0];
 }
 
-
 }  // namespace
 
 MeshBuilder::MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin,
@@ -97,7 +96,8 @@ uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coor
   const double t = (static_cast<double>(iso_) - fp) / (fq - fp);
   std::array<float, 3> pos;
   for (int a = 0; a < 3; ++a)
-    pos[a] = static_cast<float>(origin_[a] + spacing_[a] * (static_cast<double>(p[a]) + t * static_cast<double>(q[a] - p[a])));
+    pos[a] = static_cast<float>(origin_[a] +
+                                spacing_[a] * (static_cast<double>(p[a]) + t * static_cast<double>(q[a] - p[a])));
   mesh_.positions.push_back(pos);
   if (keep_keys_) keys_.push_back(key);
   return fresh;

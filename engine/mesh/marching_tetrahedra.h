@@ -7,8 +7,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "engine/mesh/edge_vertex_map.h"
 #include "engine/hierarchy/lattice.h"
+#include "engine/mesh/edge_vertex_map.h"
 #include "isotope/mesh.h"
 
 namespace isotope {

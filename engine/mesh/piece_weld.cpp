@@ -1,8 +1,8 @@
 #include "engine/mesh/piece_weld.h"
 
+#include "engine/core/parallel.h"
 #include "engine/mesh/edge_vertex_map.h"
 #include "engine/mesh/marching_tetrahedra.h"
-#include "engine/core/parallel.h"
 
 namespace isotope {
 namespace {
@@ -19,8 +19,8 @@ bool on_boundary(const Tet& t, const Coord& s) {
       v[i] = 2 * (t[f[2]][i] - a[i]);
       w[i] = s[i] - 2 * a[i];
     }
-    const int64_t d = w[0] * (u[1] * v[2] - u[2] * v[1]) - w[1] * (u[0] * v[2] - u[2] * v[0]) +
-                      w[2] * (u[0] * v[1] - u[1] * v[0]);
+    const int64_t d =
+        w[0] * (u[1] * v[2] - u[2] * v[1]) - w[1] * (u[0] * v[2] - u[2] * v[0]) + w[2] * (u[0] * v[1] - u[1] * v[0]);
     if (d == 0) return true;
   }
   return false;

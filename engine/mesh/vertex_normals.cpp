@@ -1,6 +1,6 @@
-#include "isotope/mesh.h"
-
 #include <cmath>
+
+#include "isotope/mesh.h"
 
 namespace isotope {
 

@@ -434,8 +434,8 @@ Sampling make_sampling(const Mesh& full, const MeshComponents& fc, const Mesh& a
     throw std::invalid_argument("compare_components: tolerance " + std::to_string(tolerance) +
                                 " is too small for the meshes' extent " + std::to_string(extent));
   s.thin.size = std::max(s.thin.size, extent * 0x1.0p-20);  // Grid::packed
-  const double budget = std::clamp(static_cast<double>(full.triangles.size() + adaptive.triangles.size()),
-                                   kMinLatticeBudget, 0x1.0p30);
+  const double budget =
+      std::clamp(static_cast<double>(full.triangles.size() + adaptive.triangles.size()), kMinLatticeBudget, 0x1.0p30);
   while (lattice_points(full, s.lattice) + lattice_points(adaptive, s.lattice) > budget) s.lattice *= 2;
   return s;
 }
@@ -502,10 +502,11 @@ std::optional<std::vector<int>> mutual_best(const std::vector<int>& f, const std
     int pick = -1;
     double top = 0, second = 0;
     for (const int o : others) {
-      const double share =
-          static_cast<double>(self_is_full ? hits(self, o, 0) : hits(o, self, 1)) / queries;
-      if (share > top) second = top, top = share, pick = o;
-      else second = std::max(second, share);
+      const double share = static_cast<double>(self_is_full ? hits(self, o, 0) : hits(o, self, 1)) / queries;
+      if (share > top)
+        second = top, top = share, pick = o;
+      else
+        second = std::max(second, share);
     }
     return top >= 2 * second ? pick : -1;  // a clear favourite, or none
   };
@@ -531,8 +532,10 @@ void classify_groups(ComponentComparison& r, const std::vector<std::pair<int32_t
   std::vector<std::vector<int>> full_of(nf + na), adaptive_of(nf + na);
   for (size_t i = 0; i < nf + na; ++i) {
     const uint32_t root = sets.find(static_cast<uint32_t>(i));
-    if (i < nf) full_of[root].push_back(static_cast<int>(i));
-    else adaptive_of[root].push_back(static_cast<int>(i - nf));
+    if (i < nf)
+      full_of[root].push_back(static_cast<int>(i));
+    else
+      adaptive_of[root].push_back(static_cast<int>(i - nf));
   }
   std::vector<uint8_t> done(nf + na, 0);
   for (size_t i = 0; i < nf + na; ++i) {
@@ -625,7 +628,9 @@ ComponentComparison compare_components(const Mesh& full, const MeshComponents& f
   // Groups taken as pairs (step 4a) are added in group order; restore the documented order.
   std::sort(r.matched_unchanged.begin(), r.matched_unchanged.end());
   std::stable_sort(r.changes.begin(), r.changes.end(), [](const ComponentChange& x, const ComponentChange& y) {
-    auto key = [](const ComponentChange& c) { return c.full.empty() ? std::pair{1, c.adaptive[0]} : std::pair{0, c.full[0]}; };
+    auto key = [](const ComponentChange& c) {
+      return c.full.empty() ? std::pair{1, c.adaptive[0]} : std::pair{0, c.full[0]};
+    };
     return key(x) < key(y);
   });
   return r;

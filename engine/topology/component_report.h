@@ -35,9 +35,9 @@
 //     many: rearranged) and one-to-one pairs by their topology (see ChangeKind). A many-to-many
 //     group with as many components on each side is first tried as one-to-one pairs: when every
 //     component has a clear favourite (the largest share of its samples, at least twice the
-//     next) that picks it back, each pair is classified alone. Noise specks a voxel or two apart otherwise relate to each other's
-//     counterparts and read as "rearranged" where nothing changed (hydrogen at iso 0.001,
-//     preserve); a join moved from A-B to B-C still reads as rearranged.
+//     next) that picks it back, each pair is classified alone. Noise specks a voxel or two apart otherwise relate to
+//     each other's counterparts and read as "rearranged" where nothing changed (hydrogen at iso 0.001, preserve); a
+//     join moved from A-B to B-C still reads as rearranged.
 // Limits: components within `tolerance` of each other over a large share of their area (e.g. two
 // walls of a shell thinner than the tolerance) cannot be told apart. If the lattice points would
 // outnumber the triangles of both meshes (and 4 M), their spacing is doubled until they do not,

@@ -1,11 +1,10 @@
-#include "isotope/mesh.h"
-
 #include <algorithm>
 #include <atomic>
 #include <numeric>
 #include <vector>
 
 #include "engine/core/parallel.h"
+#include "isotope/mesh.h"
 
 namespace isotope {
 namespace {

@@ -19,8 +19,8 @@ namespace isotope {
 inline constexpr int kDefaultBrickBits = 4;  // bricks of 16^3 nodes
 
 struct ConvertOptions {
-  int64_t memory_mb = 1024;  // tiles in flight and band scratch; scratch beyond a quarter of it goes to disk
-  int zstd_level = 3;        // 1 .. 19
+  int64_t memory_mb = 1024;            // tiles in flight and band scratch; scratch beyond a quarter of it goes to disk
+  int zstd_level = 3;                  // 1 .. 19
   int brick_bits = kDefaultBrickBits;  // bricks of 2^B nodes per axis, B in 3 .. 6
   // 0: values as read (lossless). 8 or 16: float values as codes 0 .. 2^bits-1 over the data
   // range; the hierarchy is built on the codes, and half a code step, the rounding error, is
@@ -32,7 +32,7 @@ struct ConvertOptions {
 
 struct ConvertStats {
   std::array<int64_t, 3> dims{0, 0, 0};
-  std::string type;           // the input's element type, as the store's header keeps it
+  std::string type;  // the input's element type, as the store's header keeps it
   double seconds = 0;
   uint64_t input_bytes = 0;   // element data of the input
   uint64_t output_bytes = 0;  // the store file

@@ -18,7 +18,7 @@ struct Mesh {
 
 // Combinatorial measures of a triangle mesh: what "same topology" is checked against.
 struct MeshTopology {
-  int64_t vertices = 0;              // vertices referenced by at least one triangle
+  int64_t vertices = 0;  // vertices referenced by at least one triangle
   int64_t triangles = 0;
   int64_t edges = 0;                 // distinct undirected edges
   int64_t components = 0;            // connected through shared vertices

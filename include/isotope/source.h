@@ -53,14 +53,14 @@ struct SourceInfo {
   std::array<int64_t, 3> dims{0, 0, 0};
   std::array<double, 3> spacing{1, 1, 1};
   std::array<double, 3> origin{0, 0, 0};
-  int lattice_k = 0;                     // the hierarchy's lattice has 2^k cells per axis
-  double read_seconds = 0;               // opening (a volume: reading it whole)
-  double preprocess_seconds = 0;         // a volume: building its hierarchy, so far
-  bool hierarchy_built = false;          // a store: always (by convert)
+  int lattice_k = 0;              // the hierarchy's lattice has 2^k cells per axis
+  double read_seconds = 0;        // opening (a volume: reading it whole)
+  double preprocess_seconds = 0;  // a volume: building its hierarchy, so far
+  bool hierarchy_built = false;   // a store: always (by convert)
   // Critical points per diamond type (cube, octahedron, diamond): the paper's rule at f(v), and
   // the exact rule for some isovalue. A store's header keeps them; a volume has them once built.
   std::array<int64_t, 3> critical_paper{0, 0, 0}, critical_exact{0, 0, 0};
-  uint64_t input_bytes = 0;              // a volume: its values in memory (as float)
+  uint64_t input_bytes = 0;  // a volume: its values in memory (as float)
   // A store: its size, the cache's budget as asked and in effect, a decoded brick's bytes, and
   // what the cache has read (compressed bytes, bricks), served from memory, and held at most.
   uint64_t store_bytes = 0;

@@ -39,9 +39,7 @@ void require_directory(const std::string& path, const std::string& dir) {
 
 std::string temp_name(const std::string& path, const std::string& dir, unsigned serial) {
   const std::string name = fs::path(path).filename().string();
-  return (fs::path(dir) / ("." + name + ".tmp." + std::to_string(::getpid()) + "." +
-                           std::to_string(serial)))
-      .string();
+  return (fs::path(dir) / ("." + name + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(serial))).string();
 }
 
 // Makes the rename itself durable; failure here only weakens crash safety, so it is ignored.
@@ -71,8 +69,8 @@ std::string output_target(const std::string& path) {
     if (::lstat(target.c_str(), &st) != 0) return target.string();  // a new file
     if (S_ISREG(st.st_mode)) return target.string();
     if (!S_ISLNK(st.st_mode))
-      throw IoError(path + ": " + (target.string() == path ? "is " : "names '" + target.string() + "', ") + kind_of(st.st_mode) +
-                    "; isotope writes regular files only and never replaces anything else");
+      throw IoError(path + ": " + (target.string() == path ? "is " : "names '" + target.string() + "', ") +
+                    kind_of(st.st_mode) + "; isotope writes regular files only and never replaces anything else");
     if (links == 40) throw IoError(path + ": too many levels of symbolic links");
     std::error_code ec;
     const fs::path next = fs::read_symlink(target, ec);
@@ -123,8 +121,8 @@ void check_outputs(const std::vector<NamedPath>& inputs, const std::vector<Named
                       s.named->path + "; isotope does not overwrite its input");
     for (size_t j = 0; j < i; ++j)
       if (same(out[i], out[j]))
-        throw IoError(out[i].named->what + " " + out[i].named->path + ": is the same file as " + out[j].named->what + " " +
-                      out[j].named->path + "; each output needs its own file");
+        throw IoError(out[i].named->what + " " + out[i].named->path + ": is the same file as " + out[j].named->what +
+                      " " + out[j].named->path + "; each output needs its own file");
   }
 }
 

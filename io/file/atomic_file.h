@@ -42,12 +42,12 @@ class AtomicFile {
   void write(const void* data, size_t bytes);  // throws IoError (e.g. disk full)
   // Overwrites bytes already written (a header completed last); the next write() appends.
   void write_at(uint64_t offset, const void* data, size_t bytes);
-  uint64_t size() const { return size_; }      // bytes written so far
+  uint64_t size() const { return size_; }  // bytes written so far
   // Flushes, fsyncs and closes the temporary file: what can fail for lack of disk fails here.
   // Several outputs of one command are all finished before the first is committed, so that a
   // failure leaves every target as it was (tools/command_extract.cpp).
-  void finish();                               // throws IoError; a second call does nothing
-  void commit();                               // finish() if not yet, then rename; throws IoError
+  void finish();  // throws IoError; a second call does nothing
+  void commit();  // finish() if not yet, then rename; throws IoError
   const std::string& temp_path() const { return temp_path_; }
   const std::string& path() const { return path_; }  // as named
 

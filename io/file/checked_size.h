@@ -12,7 +12,7 @@ namespace isotope {
 
 // A * B, or nothing when it does not fit in T.
 template <class T>
-  requires std::is_integral_v<T>
+requires std::is_integral_v<T>
 constexpr std::optional<T> checked_mul(T a, T b) {
   T product;
   if (__builtin_mul_overflow(a, b, &product)) return std::nullopt;
@@ -20,6 +20,8 @@ constexpr std::optional<T> checked_mul(T a, T b) {
 }
 
 // Whether the SIZE bytes at OFFSET lie inside [0, END): never forms OFFSET + SIZE, so it cannot wrap.
-constexpr bool range_within(uint64_t offset, uint64_t size, uint64_t end) { return offset <= end && size <= end - offset; }
+constexpr bool range_within(uint64_t offset, uint64_t size, uint64_t end) {
+  return offset <= end && size <= end - offset;
+}
 
 }  // namespace isotope

@@ -20,10 +20,10 @@ inline void require_regular_file(const std::string& path, const std::string& whe
   if (!fs::exists(st)) throw IoError(where + ": no such file");
   if (fs::is_directory(st)) throw IoError(where + ": is a directory, not " + kind);
   if (fs::is_regular_file(st)) return;
-  const char* what = fs::is_fifo(st)                                             ? "a FIFO"
-                     : fs::is_block_file(st) || fs::is_character_file(st)        ? "a device"
-                     : fs::is_socket(st)                                         ? "a socket"
-                                                                                 : "a special file";
+  const char* what = fs::is_fifo(st)                                      ? "a FIFO"
+                     : fs::is_block_file(st) || fs::is_character_file(st) ? "a device"
+                     : fs::is_socket(st)                                  ? "a socket"
+                                                                          : "a special file";
   throw IoError(where + ": is " + what + ", not a regular file");
 }
 

@@ -38,8 +38,8 @@ void ScratchFile::write(const void* data, size_t bytes, uint64_t offset) const {
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) {
       const int err = n < 0 ? errno : ENOSPC;
-      throw IoError("cannot write scratch data in '" + directory_ + "': " +
-                    (err == ENOSPC || err == EDQUOT ? "disk full" : std::strerror(err)));
+      throw IoError("cannot write scratch data in '" + directory_ +
+                    "': " + (err == ENOSPC || err == EDQUOT ? "disk full" : std::strerror(err)));
     }
     p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
   }
@@ -55,7 +55,9 @@ void ScratchFile::read(void* data, size_t bytes, uint64_t offset) const {
   while (bytes > 0) {
     const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));
     if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw IoError("cannot read scratch data in '" + directory_ + "'" + (n < 0 ? std::string(": ") + std::strerror(errno) : ""));
+    if (n <= 0)
+      throw IoError("cannot read scratch data in '" + directory_ + "'" +
+                    (n < 0 ? std::string(": ") + std::strerror(errno) : ""));
     p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
   }
 }

@@ -15,7 +15,7 @@ namespace isotope {
 class ScratchFile {
  public:
   explicit ScratchFile(const std::string& directory);  // a file; throws IoError
-  explicit ScratchFile(uint64_t memory_bytes);          // in memory, this size
+  explicit ScratchFile(uint64_t memory_bytes);         // in memory, this size
   ~ScratchFile();
   ScratchFile(const ScratchFile&) = delete;
   ScratchFile& operator=(const ScratchFile&) = delete;

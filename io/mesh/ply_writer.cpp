@@ -16,7 +16,7 @@ namespace isotope {
 namespace {
 
 constexpr size_t kBlockItems = size_t{1} << 16;  // items per buffered write
-constexpr size_t kWindowBlocks = 8;               // blocks encoded at once, in parallel
+constexpr size_t kWindowBlocks = 8;              // blocks encoded at once, in parallel
 
 template <typename T>
 unsigned char* put_le(unsigned char* p, T value) {
@@ -36,10 +36,11 @@ void check_mesh(const Mesh& mesh, const std::string& path) {
 
 std::string header(const Mesh& mesh) {
   return "ply\nformat binary_little_endian 1.0\ncomment written by isotope\n"
-         "element vertex " + std::to_string(mesh.positions.size()) +
+         "element vertex " +
+         std::to_string(mesh.positions.size()) +
          "\nproperty float x\nproperty float y\nproperty float z\n"
-         "element face " + std::to_string(mesh.triangles.size()) +
-         "\nproperty list uchar int vertex_indices\nend_header\n";
+         "element face " +
+         std::to_string(mesh.triangles.size()) + "\nproperty list uchar int vertex_indices\nend_header\n";
 }
 
 // Encodes `items` into fixed-size records a window of blocks at a time, the blocks of a window on

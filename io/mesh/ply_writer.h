@@ -2,8 +2,8 @@
 // Binary little-endian PLY: float x,y,z per vertex; uchar-counted int indices per face.
 #include <string>
 
-#include "isotope/mesh.h"
 #include "io/file/atomic_file.h"
+#include "isotope/mesh.h"
 
 namespace isotope {
 

@@ -22,7 +22,8 @@ T* new_array(std::vector<std::unique_ptr<char[]>>& owner, int64_t n, T fill) {
 CachedBrick::~CachedBrick() = default;
 
 BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
-    : store_(store), budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
+    : store_(store),
+      budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
       pool_(std::make_shared<BrickPool>(core_bytes(store.layout()))),
       slots_(new Slot[static_cast<size_t>(store.layout().brick_count())]) {}
 

@@ -62,15 +62,15 @@ class CachedBrick {
   std::atomic<uint64_t*> weights_{nullptr};
   std::mutex mutex_;  // while a section is decoded into it
   std::atomic<uint64_t> bytes_{0};
-  std::shared_ptr<void> core_block_;     // values and bounds, from the pool
+  std::shared_ptr<void> core_block_;            // values and bounds, from the pool
   std::vector<std::unique_ptr<char[]>> extra_;  // the other fields' arrays
 };
 
 struct BrickCacheStats {
-  int64_t bricks_read = 0;   // misses: bricks read, checked and decoded
-  uint64_t bytes_read = 0;   // compressed bytes read, core and other sections
-  int64_t hits = 0;          // lookups served from memory
-  uint64_t peak_bytes = 0;   // most decoded bytes held at once
+  int64_t bricks_read = 0;  // misses: bricks read, checked and decoded
+  uint64_t bytes_read = 0;  // compressed bytes read, core and other sections
+  int64_t hits = 0;         // lookups served from memory
+  uint64_t peak_bytes = 0;  // most decoded bytes held at once
 };
 
 class BrickCache {
@@ -94,7 +94,7 @@ class BrickCache {
 
   const StoreReader& store() const { return store_; }
   uint64_t budget_bytes() const { return budget_; }  // as given, raised to kMinBricks bricks
-  uint64_t brick_bytes() const;  // a brick decoded whole, every field: the largest entry
+  uint64_t brick_bytes() const;                      // a brick decoded whole, every field: the largest entry
   BrickCacheStats stats() const;
 
  private:
@@ -113,7 +113,7 @@ class BrickCache {
   std::shared_ptr<CachedBrick> decode(int64_t index);
   std::shared_ptr<CachedBrick> resident(int64_t index);
   void admit(int64_t index, uint64_t bytes);
-  void evict_to_budget(int64_t keep);  // under clock_mutex_; CLOCK, sparing brick `keep`
+  void evict_to_budget(int64_t keep);                            // under clock_mutex_; CLOCK, sparing brick `keep`
   void grow(int64_t index, CachedBrick& brick, uint64_t bytes);  // a brick took more memory
 
   const StoreReader& store_;
@@ -123,7 +123,7 @@ class BrickCache {
   static constexpr size_t kStripes = 64;
   std::mutex slot_locks_[kStripes];  // short: a pointer copy
   std::mutex load_locks_[kStripes];  // long: one brick's read and decode, so it is done once
-  mutable std::mutex clock_mutex_;  // the resident list and the hand; taken on misses only
+  mutable std::mutex clock_mutex_;   // the resident list and the hand; taken on misses only
   std::vector<int64_t> resident_;
   size_t hand_ = 0;
   uint64_t resident_bytes_ = 0, peak_bytes_ = 0;

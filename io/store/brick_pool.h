@@ -18,8 +18,8 @@ class BrickPool {
   BrickPool& operator=(const BrickPool&) = delete;
 
   size_t block_bytes() const { return block_; }
-  void* allocate();          // thread-safe; throws std::bad_alloc
-  void release(void* block); // thread-safe
+  void* allocate();           // thread-safe; throws std::bad_alloc
+  void release(void* block);  // thread-safe
 
  private:
   size_t block_;

@@ -43,8 +43,8 @@ struct Reader {
 
   void need(size_t n, const char* what) const {
     if (static_cast<size_t>(end - p) < n)
-      throw IoError(std::string("field codec: truncated ") + what + " (need " + std::to_string(n) +
-                    " bytes, have " + std::to_string(end - p) + ")");
+      throw IoError(std::string("field codec: truncated ") + what + " (need " + std::to_string(n) + " bytes, have " +
+                    std::to_string(end - p) + ")");
   }
   uint8_t u8(const char* what) {
     need(1, what);
@@ -78,8 +78,7 @@ void append_planes(size_t n, WordOf word_of, std::vector<uint8_t>& out) {
   uint8_t* planes = out.data() + start;
   for (size_t i = 0; i < n; ++i) {
     const uint32_t w = word_of(i);
-    for (int b = 0; b < W; ++b)
-      planes[static_cast<size_t>(b) * n + i] = static_cast<uint8_t>(w >> (8 * b));
+    for (int b = 0; b < W; ++b) planes[static_cast<size_t>(b) * n + i] = static_cast<uint8_t>(w >> (8 * b));
   }
 }
 
@@ -91,8 +90,7 @@ void append_words(size_t n, WordOf word_of, std::vector<uint8_t>& out) {
   uint8_t* bytes = out.data() + start;
   for (size_t i = 0; i < n; ++i) {
     const uint32_t w = word_of(i);
-    for (int b = 0; b < 4; ++b)
-      bytes[4 * i + static_cast<size_t>(b)] = static_cast<uint8_t>(w >> (8 * b));
+    for (int b = 0; b < 4; ++b) bytes[4 * i + static_cast<size_t>(b)] = static_cast<uint8_t>(w >> (8 * b));
   }
 }
 
@@ -132,7 +130,7 @@ std::optional<IntegerPlan> plan_integer(std::span<const float> values) {
       has_inf = true;
       continue;
     }
-    const float twice = v * 2;  // exact for every value that passes the range test
+    const float twice = v * 2;                                       // exact for every value that passes the range test
     if (!(std::fabs(twice) <= kMaxTwiceValue)) return std::nullopt;  // also NaN and -inf
     const auto c = static_cast<int32_t>(twice);
     if (static_cast<float>(c) != twice || (c == 0 && std::signbit(v))) return std::nullopt;
@@ -207,8 +205,8 @@ bool deltas_pay_off(size_t n, OffsetOf offset_of) {
 
 // Appends the integer header after the count, then W byte planes of offsets or of their deltas.
 template <int W, class OffsetOf>
-void append_integer(size_t n, OffsetOf offset_of, const IntegerPlan& plan, uint32_t min_code,
-                    uint32_t inf_code, std::vector<uint8_t>& out) {
+void append_integer(size_t n, OffsetOf offset_of, const IntegerPlan& plan, uint32_t min_code, uint32_t inf_code,
+                    std::vector<uint8_t>& out) {
   const bool delta = deltas_pay_off<W>(n, offset_of);
   put_u8(out, static_cast<uint8_t>(plan.multiplier));
   put_u8(out, static_cast<uint8_t>(W));
@@ -260,8 +258,8 @@ void decode_codes(const uint8_t* planes, uint32_t min_code, uint32_t inf_code, b
 }
 
 template <bool Delta>
-void decode_codes(int width, const uint8_t* planes, uint32_t min_code, uint32_t inf_code, bool has_inf,
-                  float scale, std::span<float> values) {
+void decode_codes(int width, const uint8_t* planes, uint32_t min_code, uint32_t inf_code, bool has_inf, float scale,
+                  std::span<float> values) {
   switch (width) {
     case 1: decode_codes<1, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
     case 2: decode_codes<2, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
@@ -302,8 +300,7 @@ bool planes_pay_off(std::span<const float> values) {
   for (size_t i = kRepeatWindow; i < values.size(); ++i) {
     const auto bits = std::bit_cast<uint32_t>(values[i]);
     bool seen = false;
-    for (size_t lag = 1; lag <= kRepeatWindow; ++lag)
-      seen |= std::bit_cast<uint32_t>(values[i - lag]) == bits;
+    for (size_t lag = 1; lag <= kRepeatWindow; ++lag) seen |= std::bit_cast<uint32_t>(values[i - lag]) == bits;
     repeats += seen;
   }
   return repeats * kRepeatRarity < values.size();
@@ -330,8 +327,8 @@ const uint8_t* decode_float(Reader r, std::span<float> values) {
   } else {
     for (size_t i = 0; i < n; ++i) {
       const uint8_t* b = bytes + 4 * i;
-      values[i] = std::bit_cast<float>(uint32_t{b[0]} | uint32_t{b[1]} << 8 | uint32_t{b[2]} << 16 |
-                                       uint32_t{b[3]} << 24);
+      values[i] =
+          std::bit_cast<float>(uint32_t{b[0]} | uint32_t{b[1]} << 8 | uint32_t{b[2]} << 16 | uint32_t{b[3]} << 24);
     }
   }
   return r.p;

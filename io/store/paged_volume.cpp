@@ -4,8 +4,8 @@
 #include <atomic>
 #include <cmath>
 
-#include "engine/extract/adaptive_extract.h"
 #include "engine/core/parallel.h"
+#include "engine/extract/adaptive_extract.h"
 #include "engine/hierarchy/record_builder.h"
 
 namespace isotope {
@@ -23,8 +23,12 @@ void store(T* p, T v) {
 }  // namespace
 
 PagedVolume::PagedVolume(BrickCache& cache)
-    : cache_(cache), layout_(cache.store().layout()), header_(cache.store().header()), indexer_(layout_),
-      value_offset_(header_.value_offset), value_scale_(header_.value_scale) {
+    : cache_(cache),
+      layout_(cache.store().layout()),
+      header_(cache.store().header()),
+      indexer_(layout_),
+      value_offset_(header_.value_offset),
+      value_scale_(header_.value_scale) {
   for (int i = 0; i < 256; ++i) spread_[static_cast<size_t>(i)] = spread_bits_3(i);
   // Templates from a reference vertex of each class on a large lattice, far from its faces: at
   // scale 0 the shape does not depend on the lattice, and the leaves (children of edge
@@ -54,15 +58,16 @@ Coord PagedVolume::Pager::band0_node(int64_t index, uint32_t m) const {
   const StoreLayout& layout = volume_->layout_;
   const Band& band = layout.band(0);
   const int64_t i = index - band.first_brick, t = layout.brick_width();
-  return {(i % band.bricks[0]) * t + compact_bits_3(m), (i / band.bricks[0] % band.bricks[1]) * t + compact_bits_3(m >> 1),
+  return {(i % band.bricks[0]) * t + compact_bits_3(m),
+          (i / band.bricks[0] % band.bricks[1]) * t + compact_bits_3(m >> 1),
           (i / (band.bricks[0] * band.bricks[1])) * t + compact_bits_3(m >> 2)};
 }
 
 float PagedVolume::Pager::value_at(const Coord& c) {
   const auto& dims = volume_->layout_.dims();
   uint32_t m = 0;
-  const int64_t index =
-      volume_->indexer_.locate(0, std::min(c[0], dims[0] - 1), std::min(c[1], dims[1] - 1), std::min(c[2], dims[2] - 1), &m);
+  const int64_t index = volume_->indexer_.locate(0, std::min(c[0], dims[0] - 1), std::min(c[1], dims[1] - 1),
+                                                 std::min(c[2], dims[2] - 1), &m);
   return brick(index).values()[m];
 }
 
@@ -75,7 +80,8 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
   const Diamond d = diamond_of(v, lattice);
   DiamondValues dv;
   DiamondBounds range;
-  const bool inside = read_polyhedron(d, lattice, layout.dims(), [&](const Coord& c) { return value_at(c); }, dv, range);
+  const bool inside = read_polyhedron(
+      d, lattice, layout.dims(), [&](const Coord& c) { return value_at(c); }, dv, range);
   const bool surplus = home->surplus() != nullptr;
   Saturation sat;
   for_each_child(d, lattice, [&](const Coord& u) {
@@ -86,7 +92,8 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
     const int64_t ci = volume_->indexer_.locate(0, u[0], u[1], u[2], &cm);
     const PackedBounds p = bounds_of(bounds_word(ci, cm));
     Record c;
-    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound, surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
+    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
+                surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
     if (topology) {
       RecordFields held{home->exact() != nullptr, home->paper() != nullptr, home->weights() != nullptr, false};
       c.topology = this->topology(ci, cm, held);
@@ -137,7 +144,8 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v) {
     const int64_t ci = pv.indexer_.locate(0, u[0], u[1], u[2], &cm);
     const PackedBounds p = bounds_of(bounds_word(ci, cm));
     Record c;
-    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound, surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
+    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
+                surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
     sat.add(c, range, false);
   }
   const double eta = std::fabs(static_cast<double>(f[2]) - 0.5 * (static_cast<double>(f[0]) + f[1]));
@@ -173,7 +181,8 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
   if (!b->has(read)) volume_->cache_.require(*b, index, read);
   constexpr uint32_t kNever = 0x3f80u;  // [1, 0): empty
   auto words = [&] {
-    return std::array<uint64_t, 3>{read.exact ? load(b->exact() + m) : kNever, read.paper ? load(b->paper() + m) : kNever,
+    return std::array<uint64_t, 3>{read.exact ? load(b->exact() + m) : kNever,
+                                   read.paper ? load(b->paper() + m) : kNever,
                                    read.weights ? load(b->weights() + m) : 0};
   };
   std::array<uint64_t, 3> w = words();
@@ -188,8 +197,10 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
 
 void PagedVolume::Pager::prefetch(int64_t index, uint32_t m) {
   const Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
-  if (p.index == index) __builtin_prefetch(p.brick->bounds() + m);
-  else volume_->cache_.prefetch(index);
+  if (p.index == index)
+    __builtin_prefetch(p.brick->bounds() + m);
+  else
+    volume_->cache_.prefetch(index);
 }
 
 Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats) {
@@ -203,7 +214,8 @@ Hierarchy load_hierarchy(const PagedVolume& volume, const RecordFields& fields) 
   out.set_geometry(h.origin, h.spacing);
   out.set_value_map(h.value_offset, h.value_scale);
   PreprocessStats stats;
-  for (int t = 0; t < 3; ++t) stats.critical_paper[t] = h.critical_paper[t], stats.critical_exact[t] = h.critical_exact[t];
+  for (int t = 0; t < 3; ++t)
+    stats.critical_paper[t] = h.critical_paper[t], stats.critical_exact[t] = h.critical_exact[t];
   out.set_stats(stats);
   const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
   parallel_for(int64_t{0}, layout.brick_count(), [&](int64_t index) {

@@ -14,8 +14,8 @@
 #include <type_traits>
 #include <utility>
 
-#include "io/store/field_codec.h"
 #include "io/file/checked_size.h"
+#include "io/store/field_codec.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -89,7 +89,6 @@ float get_field(const BrickView& b, Field f, uint32_t m) {
   return 0;
 }
 
-
 // zstd contexts kept per thread: ZSTD_compress and ZSTD_decompress make and initialize a context
 // per call, which for small bricks cost more than the (de)compression itself (at level 3, hundreds
 // of KB of tables cleared per brick).
@@ -155,11 +154,13 @@ StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& 
   Reader r(bytes + kStoreMagic.size());
   const auto version = r.get<uint32_t>();
   if (version != kStoreVersion)
-    throw IoError(file + ": store format version " + std::to_string(version) + " is not supported (this isotope reads version " +
-                  std::to_string(kStoreVersion) + (version < kStoreVersion ? "; convert the volume again" : "") + ")");
+    throw IoError(file + ": store format version " + std::to_string(version) +
+                  " is not supported (this isotope reads version " + std::to_string(kStoreVersion) +
+                  (version < kStoreVersion ? "; convert the volume again" : "") + ")");
   uint64_t sum;
   std::memcpy(&sum, bytes + kHeaderChecksumAt, sizeof sum);
-  if (sum != store_checksum(bytes, kHeaderChecksumAt)) throw IoError(file + ": header checksum mismatch (corrupt header)");
+  if (sum != store_checksum(bytes, kHeaderChecksumAt))
+    throw IoError(file + ": header checksum mismatch (corrupt header)");
   if (r.get<uint32_t>() != kHeaderBytes) throw IoError(file + ": header size field is wrong");
   StoreHeader h;
   for (int64_t& d : h.dims) d = r.get<int64_t>();
@@ -195,10 +196,12 @@ StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& 
   for (int64_t d : h.dims)
     if (d < 2 || d > (int64_t{1} << 19) + 1) throw IoError(file + ": header holds impossible dimensions");
   for (int a = 0; a < 3; ++a) {
-    if (!std::isfinite(h.spacing[a]) || !(h.spacing[a] > 0)) throw IoError(file + ": header holds a spacing that is not a positive number");
+    if (!std::isfinite(h.spacing[a]) || !(h.spacing[a] > 0))
+      throw IoError(file + ": header holds a spacing that is not a positive number");
     if (!std::isfinite(h.origin[a])) throw IoError(file + ": header holds an origin that is not finite");
   }
-  if (h.brick_bits < kMinBrickBits || h.brick_bits > kMaxBrickBits) throw IoError(file + ": header holds an impossible brick size");
+  if (h.brick_bits < kMinBrickBits || h.brick_bits > kMaxBrickBits)
+    throw IoError(file + ": header holds an impossible brick size");
   if (h.zstd_level < 1 || h.zstd_level > 19) throw IoError(file + ": header holds an impossible zstd level");
   if (h.quantize_bits != 0 && h.quantize_bits != 8 && h.quantize_bits != 16)
     throw IoError(file + ": header holds an impossible quantization");
@@ -231,15 +234,18 @@ std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries) {
 
 std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
                                          uint64_t area_end, const std::string& file) {
-  if (size != d.bytes || size != static_cast<uint64_t>(count) * kEntryBytes) throw IoError(file + ": directory is truncated");
-  if (store_checksum(bytes, size) != d.checksum) throw IoError(file + ": directory checksum mismatch (corrupt directory)");
+  if (size != d.bytes || size != static_cast<uint64_t>(count) * kEntryBytes)
+    throw IoError(file + ": directory is truncated");
+  if (store_checksum(bytes, size) != d.checksum)
+    throw IoError(file + ": directory checksum mismatch (corrupt directory)");
   std::vector<BrickEntry> entries(static_cast<size_t>(count));
   Reader r(bytes);
   for (BrickEntry& e : entries) {
     e.offset = r.get<uint64_t>();
     for (uint32_t& b : e.bytes) b = r.get<uint32_t>();
     if (e.offset < kHeaderBytes || !range_within(e.offset, e.total(), area_end))
-      throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " points outside the brick area");
+      throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) +
+                    " points outside the brick area");
     for (uint32_t b : e.bytes)
       if (b != 0 && b <= kChecksumBytes)
         throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) + " gives a section no room");
@@ -270,9 +276,9 @@ BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& bric
   BrickFields out;
   out.values.assign(brick.values, brick.values + nodes);
   if (!stores_records(layout, band)) return out;
-  static constexpr Field kOrder[BrickFields::count] = {Field::lo,      Field::hi,       Field::bound, Field::exact_lo,
-                                                        Field::exact_hi, Field::w0,      Field::w1,    Field::w2,
-                                                        Field::paper_lo, Field::paper_hi, Field::surplus};
+  static constexpr Field kOrder[BrickFields::count] = {Field::lo,       Field::hi,       Field::bound,  Field::exact_lo,
+                                                       Field::exact_hi, Field::w0,       Field::w1,     Field::w2,
+                                                       Field::paper_lo, Field::paper_hi, Field::surplus};
   for (int f = 0; f < BrickFields::count; ++f)
     for (uint32_t m = 0; m < nodes; ++m)
       if ((m & 7) != 0) out.records[static_cast<size_t>(f)].push_back(get_field(brick, kOrder[f], m));
@@ -307,7 +313,8 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
     raw.clear();
     for (const Field f : fields) encode_field(field_of(f), raw);
     frame.resize(std::max(frame.size(), ZSTD_compressBound(raw.size())));  // grown, never cleared again
-    const size_t n = ZSTD_compressCCtx(compression_context(), frame.data(), frame.size(), raw.data(), raw.size(), zstd_level);
+    const size_t n =
+        ZSTD_compressCCtx(compression_context(), frame.data(), frame.size(), raw.data(), raw.size(), zstd_level);
     if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
     std::vector<uint8_t>& bytes = out[static_cast<size_t>(s)];
     bytes.resize(kChecksumBytes + n);
@@ -329,7 +336,8 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
   if (size <= kChecksumBytes) throw IoError(where + ": a section is missing");
   uint64_t sum;
   std::memcpy(&sum, bytes, sizeof sum);
-  if (store_checksum(bytes + kChecksumBytes, size - kChecksumBytes) != sum) throw IoError(where + ": checksum mismatch (corrupt brick)");
+  if (store_checksum(bytes + kChecksumBytes, size - kChecksumBytes) != sum)
+    throw IoError(where + ": checksum mismatch (corrupt brick)");
   const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
   const uint32_t record_count = nodes - nodes / 8;
   // Generous: a field never takes more than 4 bytes per value plus a header.
@@ -339,12 +347,15 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
     throw IoError(where + ": impossible uncompressed size");
   thread_local std::vector<uint8_t> raw;
   raw.resize(declared);
-  const size_t n = ZSTD_decompressDCtx(decompression_context(), raw.data(), raw.size(), bytes + kChecksumBytes, size - kChecksumBytes);
+  const size_t n = ZSTD_decompressDCtx(decompression_context(), raw.data(), raw.size(), bytes + kChecksumBytes,
+                                       size - kChecksumBytes);
   if (ZSTD_isError(n)) throw IoError(where + ": cannot decompress (" + ZSTD_getErrorName(n) + ")");
   if (n != raw.size()) throw IoError(where + ": decompressed size differs from the frame's");
   // The words the section's fields fill part by part start at zero.
   switch (s) {
-    case Section::core: if (records) std::fill_n(out.bounds, nodes, 0); break;
+    case Section::core:
+      if (records) std::fill_n(out.bounds, nodes, 0);
+      break;
     case Section::exact: std::fill_n(out.exact, nodes, 0); break;
     case Section::weights: std::fill_n(out.weights, nodes, 0); break;
     case Section::extra: std::fill_n(out.paper, nodes, 0), std::fill_n(out.surplus, nodes, 0); break;

@@ -20,10 +20,10 @@ inline constexpr std::array<char, 8> kStoreMagic = {'I', 'S', 'O', 'S', 'T', 'O'
 inline constexpr uint32_t kStoreVersion = 3;
 inline constexpr size_t kHeaderBytes = 1024;
 inline constexpr size_t kEntryBytes = 24;
-inline constexpr size_t kBandTableAt = 256;                   // the header's table of band directories
+inline constexpr size_t kBandTableAt = 256;                    // the header's table of band directories
 inline constexpr size_t kHeaderChecksumAt = kHeaderBytes - 8;  // XXH64 of the header's bytes before it
-inline constexpr size_t kChecksumBytes = 8;                   // each section starts with the XXH64 of its frame
-inline constexpr int kMaxBands = 20;        // k <= 19: dims up to 2^19 + 1
+inline constexpr size_t kChecksumBytes = 8;                    // each section starts with the XXH64 of its frame
+inline constexpr int kMaxBands = 20;                           // k <= 19: dims up to 2^19 + 1
 inline constexpr int kMinBrickBits = 3, kMaxBrickBits = 6;
 
 // A brick's sections, in file order.
@@ -41,14 +41,14 @@ struct StoreHeader {
   std::array<double, 3> spacing{1, 1, 1};
   std::array<double, 3> origin{0, 0, 0};
   int brick_bits = StoreLayout::kDefaultBrickBits;
-  int lattice_k = 0;                 // redundant with dims, checked
-  std::string source_type;           // element type of the input, e.g. "uint16" (at most 15 chars)
+  int lattice_k = 0;        // redundant with dims, checked
+  std::string source_type;  // element type of the input, e.g. "uint16" (at most 15 chars)
   double value_min = 0, value_max = 0;
   int64_t brick_count = 0;
   std::array<int64_t, 3> critical_paper{0, 0, 0}, critical_exact{0, 0, 0};
-  uint64_t input_bytes = 0;          // size of the input's element data, for the ratio
+  uint64_t input_bytes = 0;  // size of the input's element data, for the ratio
   int zstd_level = 0;
-  int quantize_bits = 0;             // 0: lossless; else values are codes, value = offset + scale * code
+  int quantize_bits = 0;  // 0: lossless; else values are codes, value = offset + scale * code
   double value_offset = 0, value_scale = 1;
   std::array<BandDirectory, kMaxBands> bands{};
 };
@@ -59,8 +59,8 @@ struct StoreHeader {
 inline constexpr float kQuantizationError = 0.5f;
 
 struct BrickEntry {
-  uint64_t offset = 0;                       // of the first section
-  std::array<uint32_t, kSections> bytes{};   // each section's size, 0: none
+  uint64_t offset = 0;                      // of the first section
+  std::array<uint32_t, kSections> bytes{};  // each section's size, 0: none
   uint64_t section_offset(Section s) const {
     uint64_t at = offset;
     for (int i = 0; i < static_cast<int>(s); ++i) at += bytes[static_cast<size_t>(i)];

@@ -84,7 +84,8 @@ StoreReader::StoreReader(const std::string& path) : path_(path) {
       at = d.offset + d.bytes;
     }
     if (area_end_ < kHeaderBytes) throw IoError(path + ": the directories overlap the header");
-    if (at != file_bytes_) throw IoError(path + ": " + std::to_string(file_bytes_ - at) + " unexpected bytes after the directories");
+    if (at != file_bytes_)
+      throw IoError(path + ": " + std::to_string(file_bytes_ - at) + " unexpected bytes after the directories");
     directories_ = std::make_unique<LazyDirectory[]>(static_cast<size_t>(header_.lattice_k + 1));
   } catch (...) {
     ::close(fd_);
@@ -133,7 +134,8 @@ void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& whi
   for_each_run(which, [&](int s, int end) {
     const uint64_t begin = e.section_offset(static_cast<Section>(s));
     const uint64_t stop = e.section_offset(static_cast<Section>(end));
-    if (stop > begin) ::posix_fadvise(fd_, static_cast<off_t>(begin), static_cast<off_t>(stop - begin), POSIX_FADV_WILLNEED);
+    if (stop > begin)
+      ::posix_fadvise(fd_, static_cast<off_t>(begin), static_cast<off_t>(stop - begin), POSIX_FADV_WILLNEED);
   });
 }
 
@@ -152,7 +154,8 @@ uint64_t StoreReader::read_brick(int64_t index, const std::array<bool, kSections
     uint64_t at = 0;
     for (int k = s; k < end; ++k) {
       const uint32_t size = e.bytes[static_cast<size_t>(k)];
-      decode_section(layout_, band, static_cast<Section>(k), bytes.data() + at, size, out, values, describe_brick(index));
+      decode_section(layout_, band, static_cast<Section>(k), bytes.data() + at, size, out, values,
+                     describe_brick(index));
       at += size;
     }
   });
@@ -163,9 +166,15 @@ namespace {
 
 struct FullBrick {
   explicit FullBrick(int64_t n)
-      : values(static_cast<size_t>(n)), bounds(static_cast<size_t>(n)), surplus(static_cast<size_t>(n)),
-        exact(static_cast<size_t>(n)), paper(static_cast<size_t>(n)), weights(static_cast<size_t>(n)) {}
-  BrickView view() { return {values.data(), bounds.data(), surplus.data(), exact.data(), paper.data(), weights.data()}; }
+      : values(static_cast<size_t>(n)),
+        bounds(static_cast<size_t>(n)),
+        surplus(static_cast<size_t>(n)),
+        exact(static_cast<size_t>(n)),
+        paper(static_cast<size_t>(n)),
+        weights(static_cast<size_t>(n)) {}
+  BrickView view() {
+    return {values.data(), bounds.data(), surplus.data(), exact.data(), paper.data(), weights.data()};
+  }
   std::vector<float> values;
   std::vector<uint64_t> bounds;
   std::vector<uint16_t> surplus;
@@ -186,13 +195,15 @@ std::string check_brick(const StoreReader& store, int64_t index, FullBrick& bric
     for (int64_t y = 0; y < t; ++y)
       for (int64_t x = 0; x < t; ++x) {
         const uint32_t m = brick_morton(x, y, z, layout.brick_bits());
-        const bool in_grid = b[0] * t + x < band.nodes[0] && b[1] * t + y < band.nodes[1] && b[2] * t + z < band.nodes[2];
+        const bool in_grid =
+            b[0] * t + x < band.nodes[0] && b[1] * t + y < band.nodes[1] && b[2] * t + z < band.nodes[2];
         const float v = brick.values[m];
         // Named only when something is wrong: a string per node made verify spend most of its time
         // formatting names nobody read.
-        const auto node = [&, g = Box3{b[0] * t + x, b[1] * t + y, b[2] * t + z}] {  // a copy: clang 14 captures no binding
-          return "node " + std::to_string(g[0]) + " " + std::to_string(g[1]) + " " + std::to_string(g[2]) + ": ";
-        };
+        const auto node =
+            [&, g = Box3{b[0] * t + x, b[1] * t + y, b[2] * t + z}] {  // a copy: clang 14 captures no binding
+              return "node " + std::to_string(g[0]) + " " + std::to_string(g[1]) + " " + std::to_string(g[2]) + ": ";
+            };
         if (!in_grid && v != 0.0f) return node() + "a value outside the grid is not zero";
         if (in_grid && !std::isfinite(v)) return node() + "value is not finite";
         if (!records || (m & 7) == 0) continue;
@@ -202,13 +213,14 @@ std::string check_brick(const StoreReader& store, int64_t index, FullBrick& bric
           if (!zero) return node() + "a record outside the grid is not zero";
           continue;
         }
-        const DiamondBounds r{bf16_to_float(bounds_of(brick.bounds[m]).lo), bf16_to_float(bounds_of(brick.bounds[m]).hi),
-                              bounds_of(brick.bounds[m]).bound, bf16_to_float(brick.surplus[m])};
+        const DiamondBounds r{bf16_to_float(bounds_of(brick.bounds[m]).lo),
+                              bf16_to_float(bounds_of(brick.bounds[m]).hi), bounds_of(brick.bounds[m]).bound,
+                              bf16_to_float(brick.surplus[m])};
         const DiamondTopology top = topology_of(brick.exact[m], brick.paper[m], brick.weights[m]);
         if (!(r.lo <= v && v <= r.hi)) return node() + "value outside its record's range";
         if (!(r.error_surplus >= 0) || !(r.error_bound >= 0)) return node() + "error indicators are negative or NaN";
-        if (std::isnan(top.exact_lo) || std::isnan(top.exact_hi) || std::isnan(top.paper_lo) || std::isnan(top.paper_hi) ||
-            !(top.weight[0] >= 0) || !(top.weight[1] >= 0) || !(top.weight[2] >= 0))
+        if (std::isnan(top.exact_lo) || std::isnan(top.exact_hi) || std::isnan(top.paper_lo) ||
+            std::isnan(top.paper_hi) || !(top.weight[0] >= 0) || !(top.weight[1] >= 0) || !(top.weight[2] >= 0))
           return node() + "critical intervals or weights are NaN or negative";
       }
   return {};
@@ -294,7 +306,8 @@ VerifyStats verify_store(const std::string& path, const ProgressCallback& progre
         const int64_t t = layout.brick_width();
         float blo = INFINITY, bhi = -INFINITY;
         for (uint32_t m = 0; m < static_cast<uint32_t>(layout.brick_nodes()); ++m) {
-          const Box3 g{b[0] * t + compact_bits_3(m), b[1] * t + compact_bits_3(m >> 1), b[2] * t + compact_bits_3(m >> 2)};
+          const Box3 g{b[0] * t + compact_bits_3(m), b[1] * t + compact_bits_3(m >> 1),
+                       b[2] * t + compact_bits_3(m >> 2)};
           if (g[0] >= layout.dims()[0] || g[1] >= layout.dims()[1] || g[2] >= layout.dims()[2]) continue;
           blo = std::min(blo, brick->values[m]);
           bhi = std::max(bhi, brick->values[m]);

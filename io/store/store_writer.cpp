@@ -11,20 +11,21 @@
 #include <string>
 #include <vector>
 
+#include "engine/core/parallel.h"
+#include "engine/extract/extract.h"  // validate_volume
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/compact_record.h"
-#include "engine/core/parallel.h"
 #include "io/file/atomic_file.h"
-#include "isotope/error.h"
 #include "io/file/scratch_file.h"
 #include "io/store/store_format.h"
 #include "io/volume/volume_box_reader.h"
-#include "engine/extract/extract.h"  // validate_volume
+#include "isotope/error.h"
 
 namespace isotope {
 
-static_assert(kDefaultBrickBits == StoreLayout::kDefaultBrickBits, "isotope/convert.h names the store layout's default");
+static_assert(kDefaultBrickBits == StoreLayout::kDefaultBrickBits,
+              "isotope/convert.h names the store layout's default");
 namespace {
 
 // A band's hand-over (engine/hierarchy/banded_build.h) in two unlinked scratch files beside the output, for
@@ -93,7 +94,6 @@ class QuantizingReader : public BoxReader {
   float max_code_ = 255;
 };
 
-
 // The fields of the brick whose first node is `origin` (G_j units) of a built tile, as the store
 // holds them: values, and for bands that store records each field rounded as the compact record
 // (engine/hierarchy/compact_record.h). Band 0 and the corners: values only.
@@ -144,8 +144,7 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
 class FileSink {
  public:
   FileSink(const StoreLayout& layout, AtomicFile& out, int zstd_level)
-      : layout_(layout), out_(out), zstd_level_(zstd_level),
-        entries_(static_cast<size_t>(layout.brick_count())) {}
+      : layout_(layout), out_(out), zstd_level_(zstd_level), entries_(static_cast<size_t>(layout.brick_count())) {}
 
   using Sections = std::array<std::vector<uint8_t>, kSections>;
   Sections process(int band, const Box3& b, const BandTile& tile) const {
@@ -173,7 +172,10 @@ class FileSink {
 class Converter {
  public:
   Converter(const BoxReader& input, const std::string& output, const ConvertOptions& options)
-      : input_(quantized_or(input, options)), options_(options), layout_(input.info().dims, options.brick_bits), out_(output),
+      : input_(quantized_or(input, options)),
+        options_(options),
+        layout_(input.info().dims, options.brick_bits),
+        out_(output),
         scratch_dir_(std::filesystem::absolute(output).parent_path().string()) {}
 
   ConvertStats run() {
@@ -275,8 +277,7 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
   if (options.brick_bits < kMinBrickBits || options.brick_bits > kMaxBrickBits)
     throw IoError("--brick-bits must be " + std::to_string(kMinBrickBits) + ".." + std::to_string(kMaxBrickBits));
   for (int64_t d : input.info().dims)
-    if (d < 2 || d > (int64_t{1} << 19) + 1)
-      throw IoError("volume dimensions must be 2 .. 524289 nodes per axis");
+    if (d < 2 || d > (int64_t{1} << 19) + 1) throw IoError("volume dimensions must be 2 .. 524289 nodes per axis");
   Converter converter(input, output, options);
   return converter.run();
 }

@@ -5,9 +5,9 @@
 #include <cstdint>
 #include <string>
 
-#include "isotope/convert.h"
 #include "engine/hierarchy/store_layout.h"
 #include "io/volume/box_reader.h"
+#include "isotope/convert.h"
 
 namespace isotope {
 

@@ -14,11 +14,11 @@
 #include <utility>
 #include <vector>
 
-#include "io/volume/hdf5_handle.h"
 #include "io/file/input_file.h"
-#include "isotope/error.h"
+#include "io/volume/hdf5_handle.h"
 #include "io/volume/nrrd_reader.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -37,8 +37,8 @@ std::string xyz_text(const std::array<int64_t, 3>& v) {
 }
 
 // A size of 0 is inside (it reads nothing). lo + size is never formed, so it cannot overflow.
-void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
-               const VolumeInfo& info, const std::string& where) {
+void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, const VolumeInfo& info,
+               const std::string& where) {
   for (int axis = 0; axis < 3; ++axis) {
     if (lo[axis] < 0 || size[axis] < 0 || size[axis] > info.dims[axis] - lo[axis]) {
       throw std::invalid_argument(where + ": box of size " + xyz_text(size) + " at (x,y,z) = " + xyz_text(lo) +
@@ -156,8 +156,7 @@ class RawBoxReader final : public BoxReader {
     info_ = info;
   }
 
-  void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
-                float* out) const override {
+  void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override {
     check_box(lo, size, info_, data_.name);
     const int64_t total = size[0] * size[1] * size[2];
     if (total == 0) return;
@@ -202,8 +201,8 @@ class RawBoxReader final : public BoxReader {
 std::unique_ptr<BoxReader> open_raw(const std::string& path, const RawLayout& layout) {
   check_raw_file(path, layout);
   const VolumeInfo info = info_of(layout.type, layout.dims, {1, 1, 1}, {0, 0, 0});
-  return std::make_unique<RawBoxReader>(open_read_only(path, path), RawData{0, layout.type, false, path, path},
-                                        info, nullptr);
+  return std::make_unique<RawBoxReader>(open_read_only(path, path), RawData{0, layout.type, false, path, path}, info,
+                                        nullptr);
 }
 
 // Inflated once into SCRATCH_DIR, with bounded memory, then read like raw NRRD data.
@@ -211,9 +210,8 @@ std::unique_ptr<BoxReader> open_gzip_nrrd(const NrrdLayout& layout, const Volume
                                           const std::string& scratch_dir) {
   auto scratch = std::make_unique<InflatedFile>(scratch_dir, "inflate " + layout.where);
   const std::string copy = layout.where + ": inflated copy " + scratch->path();
-  stream_nrrd_data(layout, [&](const unsigned char* bytes, size_t size) {
-    write_fully(scratch->fd(), bytes, size, copy);
-  });
+  stream_nrrd_data(layout,
+                   [&](const unsigned char* bytes, size_t size) { write_fully(scratch->fd(), bytes, size, copy); });
   Fd fd = open_read_only(scratch->path(), copy);
   RawData data{0, layout.type, layout.big_endian, layout.where, copy};
   return std::make_unique<RawBoxReader>(std::move(fd), std::move(data), info, std::move(scratch));
@@ -224,8 +222,7 @@ std::unique_ptr<BoxReader> open_nrrd(const std::string& path, const std::string&
   const VolumeInfo info = info_of(layout.type, layout.dims, layout.spacing, layout.origin);
   if (layout.encoding == NrrdEncoding::gzip) return open_gzip_nrrd(layout, info, scratch_dir);
   RawData data{layout.data_offset, layout.type, layout.big_endian, layout.where, layout.where};
-  return std::make_unique<RawBoxReader>(open_read_only(layout.data_path, layout.where), std::move(data), info,
-                                        nullptr);
+  return std::make_unique<RawBoxReader>(open_read_only(layout.data_path, layout.where), std::move(data), info, nullptr);
 }
 
 // ---------------------------------------------------------------- HDF5
@@ -246,8 +243,7 @@ class Hdf5BoxReader final : public BoxReader {
   Hdf5BoxReader(const Hdf5BoxReader&) = delete;
   Hdf5BoxReader& operator=(const Hdf5BoxReader&) = delete;
 
-  void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
-                float* out) const override {
+  void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override {
     check_box(lo, size, info_, where_);
     if (size[0] * size[1] * size[2] == 0) return;
     read_hyperslab(lo, size, out);
@@ -256,8 +252,7 @@ class Hdf5BoxReader final : public BoxReader {
 
  private:
   void read_hyperslab(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const {
-    const hsize_t start[3] = {static_cast<hsize_t>(lo[2]), static_cast<hsize_t>(lo[1]),
-                              static_cast<hsize_t>(lo[0])};
+    const hsize_t start[3] = {static_cast<hsize_t>(lo[2]), static_cast<hsize_t>(lo[1]), static_cast<hsize_t>(lo[0])};
     const hsize_t count[3] = {static_cast<hsize_t>(size[2]), static_cast<hsize_t>(size[1]),
                               static_cast<hsize_t>(size[0])};
     const std::lock_guard lock(hdf5_mutex());  // declared first, so released after the handles close
@@ -283,8 +278,8 @@ void set_hdf5_type(hid_t dataset, const std::string& where, VolumeInfo& info) {
   info.is_integer = H5Tget_class(type.get()) == H5T_INTEGER;
   info.element_bytes = static_cast<int>(H5Tget_size(type.get()));
   const bool is_unsigned = info.is_integer && H5Tget_sign(type.get()) == H5T_SGN_NONE;
-  info.type = std::string(info.is_integer ? (is_unsigned ? "uint" : "int") : "float") +
-              std::to_string(8 * info.element_bytes);
+  info.type =
+      std::string(info.is_integer ? (is_unsigned ? "uint" : "int") : "float") + std::to_string(8 * info.element_bytes);
 }
 
 std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string& dataset) {

@@ -28,8 +28,7 @@ class BoxReader {
   // x fastest then y then z, converted to float, into out[size[0]*size[1]*size[2]].
   // Safe to call concurrently from several threads. Throws IoError naming the file on a short
   // read, and naming the global (x, y, z) of the first NaN or infinite value in the box.
-  virtual void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
-                        float* out) const = 0;
+  virtual void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const = 0;
 
  protected:
   VolumeInfo info_;

@@ -19,8 +19,7 @@ class Hdf5Handle {
  public:
   using Closer = herr_t (*)(hid_t);
   Hdf5Handle(hid_t id, Closer closer) : id_(id), closer_(closer) {}
-  Hdf5Handle(Hdf5Handle&& other) noexcept
-      : id_(std::exchange(other.id_, H5I_INVALID_HID)), closer_(other.closer_) {}
+  Hdf5Handle(Hdf5Handle&& other) noexcept : id_(std::exchange(other.id_, H5I_INVALID_HID)), closer_(other.closer_) {}
   Hdf5Handle& operator=(Hdf5Handle&&) = delete;
   Hdf5Handle(const Hdf5Handle&) = delete;
   Hdf5Handle& operator=(const Hdf5Handle&) = delete;

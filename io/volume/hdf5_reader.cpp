@@ -4,15 +4,15 @@
 
 #include <algorithm>
 #include <cmath>
-#include <filesystem>
 #include <cstdint>
+#include <filesystem>
 #include <mutex>
 #include <new>
 
-#include "io/volume/hdf5_handle.h"
 #include "io/file/input_file.h"
-#include "isotope/error.h"
+#include "io/volume/hdf5_handle.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -87,7 +87,8 @@ void read_xyz_attribute(hid_t ds, const char* name, const std::string& where, bo
   if (H5Aread(attr.get(), H5T_NATIVE_DOUBLE, v.data()) < 0)
     throw IoError(bad + "cannot be read: " + hdf5_error_detail());
   for (double c : v) {
-    if (!std::isfinite(c) || (positive && c <= 0)) throw IoError(bad + (positive ? "must be finite and > 0" : "must be finite"));
+    if (!std::isfinite(c) || (positive && c <= 0))
+      throw IoError(bad + (positive ? "must be finite and > 0" : "must be finite"));
   }
   value = v;
 }
@@ -110,8 +111,8 @@ Hdf5Handle open_hdf5_dataset(hid_t file_id, const std::string& file, const std::
   Hdf5Handle ds(H5Dopen2(file_id, dataset.c_str(), H5P_DEFAULT), H5Dclose);
   if (ds) return ds;
   const auto found = datasets_3d(file_id, file);
-  throw IoError(file + ": no dataset '" + dataset + "'; 3-D datasets in the file: " +
-                (found.empty() ? "none" : join(found)));
+  throw IoError(file + ": no dataset '" + dataset +
+                "'; 3-D datasets in the file: " + (found.empty() ? "none" : join(found)));
 }
 
 std::array<int64_t, 3> hdf5_dataset_dims(hid_t ds, const std::string& where) {

@@ -21,8 +21,8 @@
 #include <vector>
 
 #include "io/file/input_file.h"
-#include "isotope/error.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -221,8 +221,7 @@ void set_spacings(NrrdHeader& h, const std::string& v, const std::string& path) 
   std::array<double, 3> s{};
   for (size_t axis = 0; axis < 3; ++axis) {
     s[axis] = parse_double(w[axis]).value_or(0);
-    if (!std::isfinite(s[axis]) || s[axis] <= 0)
-      bad_field(path, "spacings", v, "must be 3 finite numbers > 0");
+    if (!std::isfinite(s[axis]) || s[axis] <= 0) bad_field(path, "spacings", v, "must be 3 finite numbers > 0");
   }
   h.spacings = s;
 }
@@ -244,9 +243,9 @@ void set_space_directions(NrrdHeader& h, const std::string& v, const std::string
 
 void set_space_origin(NrrdHeader& h, const std::string& v, const std::string& path) {
   const auto vectors = parse_vectors(v);
-  const bool valid = vectors && vectors->size() == 1 &&
-                     std::all_of(vectors->front().begin(), vectors->front().end(),
-                                 [](double d) { return std::isfinite(d); });
+  const bool valid =
+      vectors && vectors->size() == 1 &&
+      std::all_of(vectors->front().begin(), vectors->front().end(), [](double d) { return std::isfinite(d); });
   if (!valid) bad_field(path, "space origin", v, "must be one vector (x,y,z) of finite numbers");
   h.origin = vectors->front();
 }
@@ -322,8 +321,7 @@ void apply_line(NrrdHeader& h, const std::string& line, const std::string& path)
   const size_t colon = line.find(": ");
   const size_t key_value = line.find(":=");
   if (key_value != std::string::npos && key_value < colon) return;  // "key:=value": nothing isotope uses
-  if (colon == std::string::npos)
-    throw IoError(path + ": header line " + quoted(line) + " is not 'field: value'");
+  if (colon == std::string::npos) throw IoError(path + ": header line " + quoted(line) + " is not 'field: value'");
   const std::string key = field_key(line.substr(0, colon));
   for (const Field& field : kFields) {
     if (key == field.key) return field.set(h, trim(line.substr(colon + 2)), path);
@@ -354,8 +352,7 @@ void check_header(const NrrdHeader& h, const std::string& path) {
   if (!h.type) missing_field(path, "type");
   if (!h.encoding) missing_field(path, "encoding");
   if (!h.big_endian && scalar_type_size(*h.type) > 1)
-    throw IoError(path + ": header has no 'endian' field, required for " + scalar_type_name(*h.type) +
-                  " data");
+    throw IoError(path + ": header has no 'endian' field, required for " + scalar_type_name(*h.type) + " data");
   if (h.spacings && h.direction_lengths)
     throw IoError(path + ": header has both 'spacings' and 'space directions'; NRRD allows one");
   if (h.byte_skip == -1 && *h.encoding != NrrdEncoding::raw)
@@ -382,8 +379,7 @@ struct RawSource {
 class GzipSource {
  public:
   GzipSource(std::FILE* file, const std::string& where) : file_(file), where_(where) {
-    if (inflateInit2(&zs_, 16 + MAX_WBITS) != Z_OK)
-      throw IoError(where + ": cannot start gzip decompression");
+    if (inflateInit2(&zs_, 16 + MAX_WBITS) != Z_OK) throw IoError(where + ": cannot start gzip decompression");
   }
   ~GzipSource() { inflateEnd(&zs_); }
   GzipSource(const GzipSource&) = delete;
@@ -463,21 +459,19 @@ void stream_blocks(Source& source, int64_t total, const NrrdBlockSink& sink, con
 void skip_lines(std::FILE* f, int64_t lines, const std::string& where) {
   for (int64_t i = 0; i < lines; ++i) {
     int c = 0;
-    while ((c = std::fgetc(f)) != EOF && c != '\n') {}
+    while ((c = std::fgetc(f)) != EOF && c != '\n') {
+    }
     if (c == EOF)
-      throw IoError(where + ": data truncated: file ends within the " + std::to_string(lines) +
-                    " lines to skip");
+      throw IoError(where + ": data truncated: file ends within the " + std::to_string(lines) + " lines to skip");
   }
 }
 
 // Bytes from the current position to the end of the file; 0 when a skip went past the end.
 int64_t remaining_bytes(std::FILE* f, const std::string& where) {
   const long here = std::ftell(f);
-  if (here < 0 || std::fseek(f, 0, SEEK_END) != 0)
-    throw IoError(where + ": cannot seek: " + std::strerror(errno));
+  if (here < 0 || std::fseek(f, 0, SEEK_END) != 0) throw IoError(where + ": cannot seek: " + std::strerror(errno));
   const long end = std::ftell(f);
-  if (end < 0 || std::fseek(f, here, SEEK_SET) != 0)
-    throw IoError(where + ": cannot seek: " + std::strerror(errno));
+  if (end < 0 || std::fseek(f, here, SEEK_SET) != 0) throw IoError(where + ": cannot seek: " + std::strerror(errno));
   return std::max<int64_t>(0, end - here);
 }
 
@@ -488,19 +482,16 @@ void seek_data(std::FILE* f, const NrrdHeader& h, int64_t data_bytes, const std:
   if (*h.encoding == NrrdEncoding::gzip) {
     // Deflate expands at most 1032:1 (zlib FAQ), so fewer compressed bytes cannot hold the data.
     if (remaining_bytes(f, where) < data_bytes / 1032)
-      throw IoError(where + ": data truncated: too little gzip data for " + std::to_string(data_bytes) +
-                    " bytes");
+      throw IoError(where + ": data truncated: too little gzip data for " + std::to_string(data_bytes) + " bytes");
     return;
   }
   // "byte skip: -1" puts the data at the very end of the file, whatever precedes them.
-  const int64_t skip =
-      h.byte_skip >= 0 ? h.byte_skip : std::max<int64_t>(0, remaining_bytes(f, where) - data_bytes);
+  const int64_t skip = h.byte_skip >= 0 ? h.byte_skip : std::max<int64_t>(0, remaining_bytes(f, where) - data_bytes);
   if (std::fseek(f, static_cast<long>(skip), SEEK_CUR) != 0)
     throw IoError(where + ": cannot skip " + std::to_string(skip) + " bytes: " + std::strerror(errno));
   const int64_t left = remaining_bytes(f, where);
   if (left < data_bytes)
-    throw IoError(where + ": data truncated: " + std::to_string(left) + " of " + std::to_string(data_bytes) +
-                  " bytes");
+    throw IoError(where + ": data truncated: " + std::to_string(left) + " of " + std::to_string(data_bytes) + " bytes");
 }
 
 // ---------------------------------------------------------------- files

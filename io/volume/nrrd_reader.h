@@ -8,8 +8,8 @@
 #include <functional>
 #include <string>
 
-#include "isotope/volume.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/volume.h"
 
 namespace isotope {
 
@@ -17,9 +17,9 @@ enum class NrrdEncoding { raw, gzip };
 
 // Where and how a header says its values are stored, checked against the data file's size.
 struct NrrdLayout {
-  std::string data_path;  // the header itself (attached) or the detached data file
-  std::string where;      // how messages name the data: PATH, or "PATH: data file DATA"
-  int64_t data_offset = 0;  // raw: first value; gzip: first compressed byte
+  std::string data_path;      // the header itself (attached) or the detached data file
+  std::string where;          // how messages name the data: PATH, or "PATH: data file DATA"
+  int64_t data_offset = 0;    // raw: first value; gzip: first compressed byte
   int64_t inflated_skip = 0;  // gzip: decompressed bytes before the first value
   NrrdEncoding encoding = NrrdEncoding::raw;
   ScalarType type = ScalarType::uint8;

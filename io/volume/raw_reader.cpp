@@ -31,8 +31,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string lowercase(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return s;
 }
 
@@ -101,7 +100,8 @@ void read_values(const std::string& path, ScalarType type, std::vector<float>& v
     buffer.resize(n * elem);
     size_t got = 0;
     while (got < buffer.size()) {
-      const ssize_t r = ::pread(file.get(), buffer.data() + got, buffer.size() - got, static_cast<off_t>(first * elem + got));
+      const ssize_t r =
+          ::pread(file.get(), buffer.data() + got, buffer.size() - got, static_cast<off_t>(first * elem + got));
       if (r < 0 && errno == EINTR) continue;
       if (r <= 0) {
         const std::string why = r < 0 ? std::strerror(errno) : "unexpected end of file";
@@ -128,7 +128,6 @@ std::optional<std::array<int64_t, 3>> parse_dims(const std::string& token) {
   }
   return dims;
 }
-
 
 std::optional<ScalarType> parse_scalar_type(const std::string& name) {
   const std::string n = lowercase(name);
@@ -175,8 +174,7 @@ std::optional<RawLayout> parse_raw_name(const std::string& path) {
   return RawLayout{*dims, *type};
 }
 
-int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes,
-                           const std::string& file) {
+int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes, const std::string& file) {
   for (int64_t d : dims) {
     if (d < 1) throw IoError(file + ": dimensions " + dims_text(dims) + " invalid, each must be >= 1");
   }
@@ -201,8 +199,8 @@ void check_finite(const float* values, const std::array<int64_t, 3>& lo, const s
   const int64_t i = bad - values;
   const int64_t nx = size[0], ny = size[1];
   std::ostringstream msg;
-  msg << file << ": value " << *bad << " at (x,y,z) = (" << lo[0] + i % nx << "," << lo[1] + (i / nx) % ny
-      << "," << lo[2] + i / (nx * ny) << ") is not finite (NaN, infinite, or beyond float range)";
+  msg << file << ": value " << *bad << " at (x,y,z) = (" << lo[0] + i % nx << "," << lo[1] + (i / nx) % ny << ","
+      << lo[2] + i / (nx * ny) << ") is not finite (NaN, infinite, or beyond float range)";
   throw IoError(msg.str());
 }
 
@@ -226,9 +224,8 @@ int64_t check_raw_file(const std::string& path, const RawLayout& layout) {
   const auto size = fs::file_size(path, ec);
   if (ec) throw IoError(path + ": cannot determine file size: " + ec.message());
   if (static_cast<int64_t>(size) != expected_bytes) {
-    throw IoError(path + ": size " + std::to_string(size) + " bytes, expected " +
-                  std::to_string(expected_bytes) + " for " + dims_text(layout.dims) + " " +
-                  scalar_type_name(layout.type));
+    throw IoError(path + ": size " + std::to_string(size) + " bytes, expected " + std::to_string(expected_bytes) +
+                  " for " + dims_text(layout.dims) + " " + scalar_type_name(layout.type));
   }
   return expected_bytes;
 }

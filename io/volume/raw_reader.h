@@ -28,8 +28,7 @@ int64_t check_raw_file(const std::string& path, const RawLayout& layout);
 
 // Shared by the readers and writers. Throws IoError naming FILE when a dimension is < 1 or
 // dims[0]*dims[1]*dims[2]*element_bytes does not fit in int64; returns the node count.
-int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes,
-                           const std::string& file);
+int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes, const std::string& file);
 // Throws IoError naming FILE and the (x, y, z) of the first NaN or infinite value.
 void check_finite(const Volume& volume, const std::string& file);
 // The same for a box of SIZE nodes at LO (x fastest); the message gives global coordinates.

@@ -4,8 +4,8 @@
 #include <cstring>
 #include <stdexcept>
 
-#include "isotope/volume.h"
 #include "io/volume/box_reader.h"
+#include "isotope/volume.h"
 
 namespace isotope {
 

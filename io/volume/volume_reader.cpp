@@ -5,10 +5,10 @@
 #include <filesystem>
 #include <system_error>
 
-#include "io/volume/hdf5_reader.h"
 #include "io/file/input_file.h"
-#include "isotope/error.h"
+#include "io/volume/hdf5_reader.h"
 #include "io/volume/nrrd_reader.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -56,8 +56,7 @@ std::string only_3d_dataset(const std::string& file) {
   const auto names = list_3d_datasets(file);
   if (names.size() == 1) return names.front();
   if (names.empty()) throw IoError(file + ": contains no 3-D numeric dataset");
-  throw IoError(file + ": contains several 3-D datasets (" + join(names) + "); name one as " +
-                file + ":/DATASET");
+  throw IoError(file + ": contains several 3-D datasets (" + join(names) + "); name one as " + file + ":/DATASET");
 }
 
 RawLayout raw_layout(const VolumeSpec& source) {
@@ -72,7 +71,6 @@ RawLayout raw_layout(const VolumeSpec& source) {
   throw IoError(source.path + ": cannot tell the " + missing +
                 " from the file name (expected NAME_XxYxZ_TYPE.raw); pass --dims and --type");
 }
-
 
 }  // namespace
 

@@ -3,9 +3,9 @@
 #include <optional>
 #include <string>
 
-#include "isotope/volume.h"
 #include "io/volume/raw_reader.h"
 #include "isotope/source.h"  // VolumeSpec
+#include "isotope/volume.h"
 
 namespace isotope {
 

@@ -10,8 +10,8 @@
 
 #include "io/file/atomic_file.h"
 #include "io/volume/hdf5_handle.h"
-#include "isotope/error.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -19,8 +19,8 @@ namespace {
 void check_shape(const Volume& volume, const std::string& path, int element_bytes) {
   const int64_t count = checked_node_count(volume.dims, element_bytes, path);
   if (static_cast<int64_t>(volume.values.size()) != count) {
-    throw IoError(path + ": volume holds " + std::to_string(volume.values.size()) +
-                  " values but its dimensions need " + std::to_string(count));
+    throw IoError(path + ": volume holds " + std::to_string(volume.values.size()) + " values but its dimensions need " +
+                  std::to_string(count));
   }
 }
 
@@ -59,19 +59,18 @@ void encode_block(const RawEncoding& e, std::span<const float> in, unsigned char
     case ScalarType::uint8: return encode_le<1>(in, out, code);
     case ScalarType::uint16:
     case ScalarType::int16: return encode_le<2>(in, out, code);
-    case ScalarType::float32: return encode_le<4>(in, out, [](float v) { return uint64_t{std::bit_cast<uint32_t>(v)}; });
+    case ScalarType::float32:
+      return encode_le<4>(in, out, [](float v) { return uint64_t{std::bit_cast<uint32_t>(v)}; });
     case ScalarType::float64:
       return encode_le<8>(in, out, [](float v) { return std::bit_cast<uint64_t>(static_cast<double>(v)); });
   }
 }
 
-void write_xyz_attribute(hid_t ds, const char* name, const std::array<double, 3>& v,
-                         const std::string& path) {
+void write_xyz_attribute(hid_t ds, const char* name, const std::array<double, 3>& v, const std::string& path) {
   const hsize_t three = 3;
   const Hdf5Handle space(H5Screate_simple(1, &three, nullptr), H5Sclose);
-  const Hdf5Handle attr(space ? H5Acreate2(ds, name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT)
-                              : H5I_INVALID_HID,
-                        H5Aclose);
+  const Hdf5Handle attr(
+      space ? H5Acreate2(ds, name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT) : H5I_INVALID_HID, H5Aclose);
   if (!attr || H5Awrite(attr.get(), H5T_NATIVE_DOUBLE, v.data()) < 0)
     throw IoError(path + ": cannot write attribute '" + name + "': " + hdf5_error_detail());
 }
@@ -80,10 +79,10 @@ void write_volume_dataset(hid_t file, const Volume& volume, const std::string& p
   const hsize_t zyx[3] = {static_cast<hsize_t>(volume.dims[2]), static_cast<hsize_t>(volume.dims[1]),
                           static_cast<hsize_t>(volume.dims[0])};
   const Hdf5Handle space(H5Screate_simple(3, zyx, nullptr), H5Sclose);
-  const Hdf5Handle ds(space ? H5Dcreate2(file, "/volume", H5T_IEEE_F32LE, space.get(), H5P_DEFAULT,
-                                         H5P_DEFAULT, H5P_DEFAULT)
-                            : H5I_INVALID_HID,
-                      H5Dclose);
+  const Hdf5Handle ds(
+      space ? H5Dcreate2(file, "/volume", H5T_IEEE_F32LE, space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT)
+            : H5I_INVALID_HID,
+      H5Dclose);
   if (!ds) throw IoError(path + ": cannot create dataset /volume: " + hdf5_error_detail());
   if (H5Dwrite(ds.get(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, volume.values.data()) < 0)
     throw IoError(path + ": cannot write dataset /volume: " + hdf5_error_detail());

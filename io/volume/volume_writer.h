@@ -3,8 +3,8 @@
 // "/volume" of shape (z, y, x) in float32.
 #include <string>
 
-#include "isotope/volume.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/volume.h"
 
 namespace isotope {
 

@@ -1,32 +1,32 @@
 #include "tools/serve/viewer_server.h"
 
 #include <httplib.h>
+#include <oneapi/tbb/global_control.h>
 #include <sys/socket.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <mutex>
-#include <thread>
-#include <atomic>
-#include <semaphore>
 #include <nlohmann/json.hpp>
-#include <oneapi/tbb/global_control.h>
+#include <semaphore>
+#include <thread>
 
-#include "isotope/mesh.h"
 #include "engine/core/parallel.h"
-#include "isotope/error.h"
+#include "io/file/input_file.h"
 #include "io/mesh/mesh_wire.h"
 #include "io/store/store_histogram.h"
 #include "io/store/store_reader.h"
-#include "tools/support/command_line.h"
-#include "io/file/input_file.h"
+#include "isotope/error.h"
+#include "isotope/mesh.h"
 #include "isotope/source.h"
-#include "tools/support/peak_memory.h"
-#include "tools/support/report.h"
 #include "tools/serve/serve_request.h"
 #include "tools/serve/supersession.h"
 #include "tools/serve/viewer_assets.h"
+#include "tools/support/command_line.h"
+#include "tools/support/peak_memory.h"
+#include "tools/support/report.h"
 
 namespace isotope::tools {
 namespace {
@@ -62,8 +62,8 @@ nlohmann::ordered_json store_info_json(const StoreReader& store) {
   j["spacing"] = h.spacing;
   j["origin"] = h.origin;
   j["value_range"] = {h.value_min, h.value_max};
-  j["histogram"] = {{"min", hist.min}, {"max", hist.max}, {"counts", hist.counts}, {"sampled", hist.sampled},
-                    {"scale", hist.scale}};
+  j["histogram"] = {
+      {"min", hist.min}, {"max", hist.max}, {"counts", hist.counts}, {"sampled", hist.sampled}, {"scale", hist.scale}};
   j["iso"] = hist.mean;
   j["eps"] = 0.01 * (h.value_max - h.value_min);
   return j;
@@ -72,7 +72,8 @@ nlohmann::ordered_json store_info_json(const StoreReader& store) {
 // Only a store is served (the viewer pages it; a raw volume would be read whole per server).
 Source open_store(const ViewerServer::Settings& s) {
   require_regular_file(s.store, s.store, "an isotope store");  // a missing file says so (io/file/input_file.h)
-  if (!is_store_file(s.store)) throw IoError(s.store + ": not an isotope store (isotope serve shows stores; run isotope convert first)");
+  if (!is_store_file(s.store))
+    throw IoError(s.store + ": not an isotope store (isotope serve shows stores; run isotope convert first)");
   OpenOptions options;
   options.cache_mb = s.cache_mb;
   options.tune_allocator = true;
@@ -101,8 +102,7 @@ struct ViewerServer::Impl {
   bool stop_requested = false, listening = false;
   std::atomic<bool> finished{false};
 
-  explicit Impl(const Settings& s)
-      : settings(s), input(open_store(s)), info(store_info_json(*input.store()).dump()) {
+  explicit Impl(const Settings& s) : settings(s), input(open_store(s)), info(store_info_json(*input.store()).dump()) {
     http.Get("/api/info", [this](const httplib::Request&, httplib::Response& res) {
       res.set_header("Cache-Control", "no-store");
       res.set_content(info, "application/json");
@@ -150,23 +150,25 @@ struct ViewerServer::Impl {
       }
       if (!wait_for_slot(ticket ? &*ticket : nullptr)) {
         res.set_header("Retry-After", "1");
-        return answer_text(res, 503, "busy: " + std::to_string(kWaitingExtractions) +
-                                         " extractions are waiting already; retry in a moment");
+        return answer_text(
+            res, 503,
+            "busy: " + std::to_string(kWaitingExtractions) + " extractions are waiting already; retry in a moment");
       }
       const SlotRelease slot{slots};
       ExtractionRun run;
       run.input = settings.store;
       run.options = r.options;
-      run.threads = static_cast<int>(
-          tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+      run.threads = static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
       const Mesh mesh = input.extract(r.options, &run.extract);
       run.extract_seconds = seconds_since(start);
       describe(input.info(), run);
       const auto measure_start = std::chrono::steady_clock::now();
       std::vector<std::array<float, 3>> normals;  // meanwhile, on the other core
-      parallel_for(0, 2, [&](int64_t part) {  // engine/core/parallel.h: std::threads under TSan
-        if (part == 0) run.topology = measure_topology(mesh);
-        else normals = vertex_normals(mesh);
+      parallel_for(0, 2, [&](int64_t part) {      // engine/core/parallel.h: std::threads under TSan
+        if (part == 0)
+          run.topology = measure_topology(mesh);
+        else
+          normals = vertex_normals(mesh);
       });
       run.measure_seconds = seconds_since(measure_start);
       run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);
@@ -214,8 +216,8 @@ struct ViewerServer::Impl {
     const std::lock_guard<std::mutex> lock(log_mutex);
     std::fprintf(stderr, "isotope: %s iso %g eps %g %s: %lld triangles in %.1f ms\n", req.path.c_str(),
                  static_cast<double>(run.options.iso), run.options.eps,
-                 std::string(to_string(run.options.topology)).c_str(),
-                 static_cast<long long>(run.topology.triangles), 1e3 * run.extract_seconds);
+                 std::string(to_string(run.options.topology)).c_str(), static_cast<long long>(run.topology.triangles),
+                 1e3 * run.extract_seconds);
   }
 };
 
@@ -225,7 +227,9 @@ ViewerServer::~ViewerServer() = default;
 
 int ViewerServer::bind(const std::string& host, int port) {
   const int bound = port == 0 ? impl_->http.bind_to_any_port(host) : (impl_->http.bind_to_port(host, port) ? port : -1);
-  if (bound <= 0) throw IoError("cannot listen on " + host + ":" + std::to_string(port) + " (in use, or not an address of this machine)");
+  if (bound <= 0)
+    throw IoError("cannot listen on " + host + ":" + std::to_string(port) +
+                  " (in use, or not an address of this machine)");
   // cpp-httplib 0.11 listens with a backlog of 5: a crowd's connections beyond it were dropped by
   // the kernel and their clients timed out. listen() again on the bound socket sets the kernel's
   // largest backlog; the pool's workers then answer or refuse each (503) in turn.

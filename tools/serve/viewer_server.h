@@ -11,9 +11,9 @@ namespace isotope::tools {
 class ViewerServer {
  public:
   struct Settings {
-    std::string store;        // made by isotope convert
-    int64_t cache_mb = 512;   // decoded bricks, shared by all requests
-    bool log = false;         // a line per extraction on stderr
+    std::string store;       // made by isotope convert
+    int64_t cache_mb = 512;  // decoded bricks, shared by all requests
+    bool log = false;        // a line per extraction on stderr
   };
   // Opens the store and samples its histogram. Throws IoError (not a store, unreadable).
   explicit ViewerServer(const Settings& settings);

@@ -9,10 +9,10 @@
 namespace isotope::tools {
 
 struct ChildRun {
-  int code = -1;            // exit status; -1 when it did not exit normally or did not start
-  double seconds = 0;       // wall time from spawn to exit
-  int64_t max_rss_kb = 0;   // its own peak resident set
-  std::string output;       // stdout and stderr
+  int code = -1;           // exit status; -1 when it did not exit normally or did not start
+  double seconds = 0;      // wall time from spawn to exit
+  int64_t max_rss_kb = 0;  // its own peak resident set
+  std::string output;      // stdout and stderr
 };
 
 // Runs argv[0] (found on PATH when it has no '/') with ARGV, stdout and stderr into LOG (a path

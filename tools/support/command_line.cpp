@@ -43,7 +43,8 @@ Source open_input(const std::string& path, const std::string& dims, const std::s
   }
   if (!type.empty()) {
     spec.type = parse_scalar_type(type);
-    if (!spec.type) throw CLI::ValidationError("--type", "must be uint8, uint16, int16, float32 or float64, got '" + type + "'");
+    if (!spec.type)
+      throw CLI::ValidationError("--type", "must be uint8, uint16, int16, float32 or float64, got '" + type + "'");
   }
   OpenOptions options;
   options.cache_mb = cache_mb;

@@ -104,8 +104,8 @@ Range axis_window(Range r, bool log) {
 
 struct PreparedSeries {
   std::string label;
-  std::vector<PLFLT> x, y;       // kept points in plot coordinates
-  std::vector<PLINT> run_ends;   // exclusive end of each unbroken run of x, y
+  std::vector<PLFLT> x, y;      // kept points in plot coordinates
+  std::vector<PLINT> run_ends;  // exclusive end of each unbroken run of x, y
 };
 
 struct Prepared {
@@ -129,7 +129,7 @@ PLINT quietest_corner(const Prepared& p) {
   std::array<size_t, 4> count{};
   const auto add = [&](double x, double y) {
     const double u = (x - p.x.lo) / (p.x.hi - p.x.lo), v = (y - p.y.lo) / (p.y.hi - p.y.lo);
-    const bool right = u > 0.55, left = u < 0.45, top = v > 0.6, bottom = v < 0.4;
+    const bool right = u > 0.55, left = u<0.45, top = v> 0.6, bottom = v < 0.4;
     count[0] += right && top;
     count[1] += left && top;
     count[2] += right && bottom;
@@ -268,8 +268,8 @@ void draw_axes(const Scene& s) {
   plgspa(&page_x0, &page_x1, &page_y0, &page_y1);
   const PLFLT y_label_offset = s.log_y ? kYLabelOffsetLog : kYLabelOffsetLinear;
   const PLFLT top = (kTitleOffset + 1.2) * kTitleScale / kTextScale * height;
-  plsvpa((y_label_offset + 1.3) * height, page_x1 - page_x0 - kMarginRight * height,
-         (kXLabelOffset + 1.4) * height, page_y1 - page_y0 - top);
+  plsvpa((y_label_offset + 1.3) * height, page_x1 - page_x0 - kMarginRight * height, (kXLabelOffset + 1.4) * height,
+         page_y1 - page_y0 - top);
   plwind(s.x0, s.x1, s.y0, s.y1);
   // Grid first so the curves and the frame are drawn over it.
   plcol0(kGrid);
@@ -306,10 +306,10 @@ void draw_legend(const Scene& s) {
   const Legend& l = s.legend;
   PLFLT width = 0, height = 0;
   plschr(0.0, kLegendTextScale);
-  pllegend(&width, &height, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, l.position | PL_POSITION_INSIDE, 0.02,
-           0.03, 0.07, 0, kInk, 1, 0, 0, l.entries, l.opts, 0.6, 1.0, 2.0, 0.0, l.text_colours, l.text, nullptr,
-           nullptr, nullptr, nullptr, l.line_colours, l.line_styles, l.line_widths, l.symbol_colours,
-           l.symbol_scales, l.symbol_numbers, l.symbols);
+  pllegend(&width, &height, PL_LEGEND_BACKGROUND | PL_LEGEND_BOUNDING_BOX, l.position | PL_POSITION_INSIDE, 0.02, 0.03,
+           0.07, 0, kInk, 1, 0, 0, l.entries, l.opts, 0.6, 1.0, 2.0, 0.0, l.text_colours, l.text, nullptr, nullptr,
+           nullptr, nullptr, l.line_colours, l.line_styles, l.line_widths, l.symbol_colours, l.symbol_scales,
+           l.symbol_numbers, l.symbols);
 }
 
 // One page on a stream of its own; plend1 writes the PNG into s.out and closes it.
@@ -390,8 +390,8 @@ std::string g_plplot_broken;  // why PLplot may not be used again in this proces
 std::vector<unsigned char> render_png(const LinePlot& plot, const Prepared& p, const std::string& path) {
   const size_t n = p.series.size();
   std::vector<SeriesView> views(n);
-  std::vector<PLINT> opts(n, PL_LEGEND_LINE | PL_LEGEND_SYMBOL), text_colours(n, kInk), colours(n),
-      line_styles(n, 1), symbol_numbers(n, 1);
+  std::vector<PLINT> opts(n, PL_LEGEND_LINE | PL_LEGEND_SYMBOL), text_colours(n, kInk), colours(n), line_styles(n, 1),
+      symbol_numbers(n, 1);
   std::vector<PLFLT> line_widths(n, kLineWidth), symbol_scales(n, 1.0);
   std::vector<const char*> text(n), symbols(n);
   for (size_t i = 0; i < n; ++i) {
@@ -399,14 +399,25 @@ std::vector<unsigned char> render_png(const LinePlot& plot, const Prepared& p, c
     colours[i] = kFirstSeriesColour + static_cast<PLINT>(i % kSeriesColours.size());
     symbols[i] = kMarkers[i % kMarkers.size()];
     text[i] = s.label.c_str();
-    views[i] = {s.x.data(), s.y.data(), s.run_ends.data(), static_cast<PLINT>(s.run_ends.size()), colours[i],
-                symbols[i]};
+    views[i] = {s.x.data(), s.y.data(), s.run_ends.data(), static_cast<PLINT>(s.run_ends.size()),
+                colours[i], symbols[i]};
   }
-  Scene scene{p.title.c_str(), p.x_label.c_str(), p.y_label.c_str(), plot.width, plot.height, plot.log_x,
-              plot.log_y, p.x.lo, p.x.hi, p.y.lo, p.y.hi, views.data(), static_cast<PLINT>(n),
+  Scene scene{p.title.c_str(),
+              p.x_label.c_str(),
+              p.y_label.c_str(),
+              plot.width,
+              plot.height,
+              plot.log_x,
+              plot.log_y,
+              p.x.lo,
+              p.x.hi,
+              p.y.lo,
+              p.y.hi,
+              views.data(),
+              static_cast<PLINT>(n),
               Legend{static_cast<PLINT>(n), p.legend_position, opts.data(), text.data(), text_colours.data(),
-                     colours.data(), line_styles.data(), line_widths.data(), colours.data(),
-                     symbol_scales.data(), symbol_numbers.data(), symbols.data()},
+                     colours.data(), line_styles.data(), line_widths.data(), colours.data(), symbol_scales.data(),
+                     symbol_numbers.data(), symbols.data()},
               nullptr};
 
   Sink sink;

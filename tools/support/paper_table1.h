@@ -12,7 +12,8 @@ struct Table1Row {
   int without, with;
 };
 
-inline constexpr Table1Eps kTable1Eps[5] = {{"0", 0.0}, {"1/64", 1.0 / 64}, {"1/16", 1.0 / 16}, {"1/4", 0.25}, {"1", 1.0}};
+inline constexpr Table1Eps kTable1Eps[5] = {
+    {"0", 0.0}, {"1/64", 1.0 / 64}, {"1/16", 1.0 / 16}, {"1/4", 0.25}, {"1", 1.0}};
 inline constexpr Table1Row kTable1Paper[5] = {{59290, 59290}, {25456, 25464}, {7124, 7528}, {1936, 3503}, {374, 3095}};
 
 }  // namespace isotope::tools

@@ -20,8 +20,7 @@ uint64_t peak_rss_bytes() {
     char line[256];
     unsigned long long kib = 0;
     bool found = false;
-    while (!found && std::fgets(line, sizeof line, f))
-      found = std::sscanf(line, "VmHWM: %llu kB", &kib) == 1;
+    while (!found && std::fgets(line, sizeof line, f)) found = std::sscanf(line, "VmHWM: %llu kB", &kib) == 1;
     std::fclose(f);
     if (found) return static_cast<uint64_t>(kib) << 10;
   }

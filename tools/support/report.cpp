@@ -12,8 +12,8 @@ namespace isotope::tools {
 
 namespace {
 
-constexpr ChangeKind kChangeKinds[] = {ChangeKind::lost,           ChangeKind::appeared,       ChangeKind::merged,
-                                       ChangeKind::split,          ChangeKind::rearranged,     ChangeKind::handles_closed,
+constexpr ChangeKind kChangeKinds[] = {ChangeKind::lost,           ChangeKind::appeared,     ChangeKind::merged,
+                                       ChangeKind::split,          ChangeKind::rearranged,   ChangeKind::handles_closed,
                                        ChangeKind::handles_opened, ChangeKind::euler_changed};
 
 int64_t count_of(const ComponentComparison& c, ChangeKind k) {
@@ -46,9 +46,7 @@ nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tole
   nlohmann::ordered_json j;
   int64_t triangles = 0, euler = 0;
   for (const ComponentStats& s : c.full_components) triangles += s.triangles, euler += s.euler_characteristic;
-  j["full"] = {{"triangles", triangles},
-               {"components", c.full_components.size()},
-               {"euler_characteristic", euler}};
+  j["full"] = {{"triangles", triangles}, {"components", c.full_components.size()}, {"euler_characteristic", euler}};
   nlohmann::ordered_json counts;
   for (ChangeKind k : kChangeKinds) counts[std::string(to_string(k))] = count_of(c, k);
   counts["unchanged"] = c.matched_unchanged.size();
@@ -63,8 +61,10 @@ nlohmann::ordered_json comparison_json(const ComponentComparison& c, double tole
   j["changes"] = changes;
   j["match_tolerance"] = tolerance;
   j["seconds"] = seconds;
-  j["samples_matched"] = {{"full", c.full_samples_matched}, {"full_of", c.full_samples},
-                          {"adaptive", c.adaptive_samples_matched}, {"adaptive_of", c.adaptive_samples}};
+  j["samples_matched"] = {{"full", c.full_samples_matched},
+                          {"full_of", c.full_samples},
+                          {"adaptive", c.adaptive_samples_matched},
+                          {"adaptive_of", c.adaptive_samples}};
   j["full_components"] = components_json(c.full_components);
   return j;
 }
@@ -156,12 +156,16 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["measure_seconds"] = run.measure_seconds;
 
   const PreprocessStats& p = run.preprocess;
-  if (!run.hierarchy_built) j["preprocess"] = nullptr;
-  else j["preprocess"] = {
-      {"seconds", p.seconds},
-      {"critical_paper", {{"cube", p.critical_paper[0]}, {"octahedron", p.critical_paper[1]}, {"diamond", p.critical_paper[2]}}},
-      {"critical_exact", {{"cube", p.critical_exact[0]}, {"octahedron", p.critical_exact[1]}, {"diamond", p.critical_exact[2]}}},
-  };
+  if (!run.hierarchy_built)
+    j["preprocess"] = nullptr;
+  else
+    j["preprocess"] = {
+        {"seconds", p.seconds},
+        {"critical_paper",
+         {{"cube", p.critical_paper[0]}, {"octahedron", p.critical_paper[1]}, {"diamond", p.critical_paper[2]}}},
+        {"critical_exact",
+         {{"cube", p.critical_exact[0]}, {"octahedron", p.critical_exact[1]}, {"diamond", p.critical_exact[2]}}},
+    };
   j["extract"] = {
       {"seconds", run.extract.seconds},
       {"tets_visited", run.extract.tets_visited},

@@ -2,17 +2,17 @@
 // What one extraction produced, as a JSON report (extract --report) and a one-line summary.
 #include <array>
 #include <cstdint>
-#include <optional>
 #include <nlohmann/json_fwd.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
-#include "engine/topology/component_report.h"
 #include "engine/extract/extract.h"
-#include "isotope/mesh.h"
-#include "engine/hierarchy/multires_volume.h"
 #include "engine/extract/options.h"
+#include "engine/hierarchy/multires_volume.h"
+#include "engine/topology/component_report.h"
 #include "io/store/brick_cache.h"
+#include "isotope/mesh.h"
 #include "isotope/source.h"
 
 namespace isotope::tools {
@@ -28,18 +28,18 @@ struct ExtractionRun {
   bool hierarchy_built = true;  // raw input at eps 0 needs none (isotope/source.h)
   ExtractStats extract;
   MeshTopology topology;
-  std::vector<ComponentStats> components;        // with --report
+  std::vector<ComponentStats> components;         // with --report
   std::optional<ComponentComparison> comparison;  // with --compare-full
   double compare_tolerance = 0;
   double compare_seconds = 0;  // --compare-full: the full-resolution extraction and the matching
   int threads = 1;
   double peak_rss_mb = 0;
-  BrickCacheStats cache;        // store input: what the brick cache read and served
-  int64_t cache_mb = 0;         // store input: its budget (0: not a store)
+  BrickCacheStats cache;            // store input: what the brick cache read and served
+  int64_t cache_mb = 0;             // store input: its budget (0: not a store)
   uint64_t cache_budget_bytes = 0;  // store input: the budget in effect (BrickCache::kMinBricks)
   uint64_t cache_brick_bytes = 0;   // store input: a brick decoded whole, the cache's largest entry
-  uint64_t store_bytes = 0;     // store input: the file's size
-  uint64_t input_bytes = 0;     // other input: the values read (as float)
+  uint64_t store_bytes = 0;         // store input: the file's size
+  uint64_t input_bytes = 0;         // other input: the values read (as float)
   double read_seconds = 0, preprocess_seconds = 0, extract_seconds = 0, measure_seconds = 0;
   double total_seconds() const { return read_seconds + preprocess_seconds + extract_seconds + measure_seconds; }
 };
