@@ -18,7 +18,8 @@ packages=(
 if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+=(nodejs npm); fi
 # python3-skimage: the peer that isotope bench (and its test) times beside ours. clang-14 and its
 # runtime libraries (libFuzzer, the sanitizers): the fuzz targets of fuzz/ (scripts/fuzz.sh).
-if [ "${1:-}" = "--tests" ]; then packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev); fi
+# clang-format: the style check (scripts/format.sh --check).
+if [ "${1:-}" = "--tests" ]; then packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format); fi
 
 missing=()
 for p in "${packages[@]}"; do

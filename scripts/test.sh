@@ -14,6 +14,9 @@ trap 'rm -f "$log"' EXIT
 run_ctest() { ctest "$@" | tee -a "$log"; }
 phase() { echo "== [${SECONDS} s] $*"; }
 
+phase "style (scripts/format.sh --check: .clang-format)"
+bash scripts/format.sh --check
+
 phase "Release, -Werror (build-ci)"
 cmake -S . -B build-ci -DCMAKE_BUILD_TYPE=Release -DISOTOPE_WERROR=ON
 cmake --build build-ci -j "$jobs"
