@@ -263,8 +263,10 @@ def cli_numbers(iso, work, volume):
              ('--cache-mb 0', ['extract', volume, '--iso', '0', '--cache-mb', '0', '-o', 'm.ply'], '--cache-mb'),
              ('--dims 0x4x4', ['extract', volume, '--dims', '0x4x4', '--type', 'uint8', '--iso', '0', '-o', 'm.ply'],
               '--dims'),
-             ('--focus 1,2 --radius -1', ['extract', volume, '--iso', '0', '--focus', '1,2', '--radius', '-1', '-o',
-                                          'm.ply'], '--radius'),
+             ('--focus 1,2 --radius 1', ['extract', volume, '--iso', '0', '--focus', '1,2', '--radius', '1', '-o',
+                                         'm.ply'], '--focus'),
+             ('--focus 1,2,3 --radius -1', ['extract', volume, '--iso', '0', '--focus', '1,2,3', '--radius', '-1',
+                                            '-o', 'm.ply'], '--radius'),
              ('--port 70000', ['serve', volume, '--port', '70000'], '--port'),
              ('--zstd-level 30', ['convert', volume, 's.isotope', '--zstd-level', '30'], '--zstd-level')]
     d = os.path.join(work, 'cli')
