@@ -147,7 +147,9 @@ int run_extract(const ExtractArgs& a) {
     });
   try {
     const auto start = std::chrono::steady_clock::now();
-    run.topology = measure_topology(mesh);
+    // The topology is measured for the summary line and the report only: with --quiet and no
+    // report nobody reads it (embryo eps 0, 2 threads: 249 -> 183 ms for the whole process).
+    if (!a.quiet || !a.report.empty()) run.topology = measure_topology(mesh);
     const MeshComponents components = a.report.empty() ? MeshComponents{} : label_components(mesh);
     run.components = components.components;
     run.measure_seconds = seconds_since(start);
