@@ -424,7 +424,7 @@ TEST_F(Cli, ConvertFailuresLeaveNothing) {
   const std::string bolt = quote(kData + "/bolt_70x123x66_uint8.raw");
   expect_failure("convert " + quote(in_work("missing_9x9x9_uint8.raw")) + " " + quote(in_work("o.isotope")), 1);
   expect_failure("convert " + bolt + " " + quote(in_work("no/such/dir/o.isotope")), 1, "does not exist");
-  expect_failure("convert " + bolt + " " + quote(in_work("o.isotope")) + " --quantize 8", 1, "integer");
+  expect_failure("convert " + bolt + " " + quote(in_work("o.isotope")) + " --quantize 8", 2, "integer");
   expect_failure("convert " + bolt + " " + quote(in_work("o.isotope")) + " --quantize 12", 2);
   expect_failure("convert " + bolt + " " + quote(in_work("o.isotope")) + " --zstd-level 30", 2);
   expect_failure("convert " + bolt, 2);

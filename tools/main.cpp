@@ -9,6 +9,7 @@
 #include <new>
 
 #include "isotope/error.h"
+#include "isotope/extract.h"  // OptionError
 #include "isotope/version.h"
 #include "tools/commands.h"
 
@@ -57,8 +58,12 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("serve")) return serve();
     return 2;  // unreachable: require_subcommand(1)
   } catch (const CLI::ParseError& e) {
-    const int code = app.exit(e);  // prints help, version or the usage message
-    return code == 0 ? 0 : 2;      // CLI11's own codes (105, 106, ...) are all usage errors here
+    const int code = app.exit(e);            // prints help, version or the usage message
+    return code == 0 ? 0 : 2;                // CLI11's own codes (105, 106, ...) are all usage errors here
+  } catch (const isotope::OptionError& e) {  // the library's word for an option out of range
+    std::cerr << "isotope: usage error: --" << e.option << ": " << e.message
+              << "\nRun 'isotope --help' or 'isotope COMMAND --help'.\n";
+    return 2;
   } catch (const std::bad_alloc&) {
     std::cerr << "isotope: error: out of memory\n";
     return 1;

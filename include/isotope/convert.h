@@ -43,7 +43,8 @@ struct ConvertStats {
 // Writes OUTPUT atomically (temporary name, renamed when complete): on any error or cancellation
 // nothing is left behind, and an OUTPUT that is the input, a device, a FIFO or a directory is
 // refused before any work. The file does not depend on the thread count or the memory budget.
-// Scratch data goes to unlinked files beside OUTPUT. Throws IoError.
+// Scratch data goes to unlinked files beside OUTPUT. Throws IoError, and OptionError for options
+// out of range (or --quantize on integer data).
 ConvertStats convert(const VolumeSpec& input, const std::string& output, const ConvertOptions& options = {});
 // The same from an array in memory.
 ConvertStats convert(const Volume& volume, const std::string& output, const ConvertOptions& options = {});

@@ -253,7 +253,7 @@ class Converter {
   const BoxReader& quantized_or(const BoxReader& input, const ConvertOptions& options) {
     if (options.quantize_bits == 0) return input;
     if (input.info().is_integer)
-      throw IoError("--quantize applies to float data; integer data is stored losslessly as it is");
+      throw OptionError("quantize", "applies to float data; integer data is stored losslessly as it is");
     quantized_ = std::make_unique<QuantizingReader>(input, options.quantize_bits, options.cancel);
     return *quantized_;
   }
@@ -270,12 +270,12 @@ class Converter {
 }  // namespace
 
 ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options) {
-  if (options.zstd_level < 1 || options.zstd_level > 19) throw IoError("--zstd-level must be 1..19");
-  if (options.memory_mb < 1) throw IoError("--memory-mb must be at least 1");
+  if (options.zstd_level < 1 || options.zstd_level > 19) throw OptionError("zstd-level", "must be 1..19");
+  if (options.memory_mb < 1) throw OptionError("memory-mb", "must be at least 1");
   if (options.quantize_bits != 0 && options.quantize_bits != 8 && options.quantize_bits != 16)
-    throw IoError("--quantize must be 8 or 16");
+    throw OptionError("quantize", "must be 8 or 16");
   if (options.brick_bits < kMinBrickBits || options.brick_bits > kMaxBrickBits)
-    throw IoError("--brick-bits must be " + std::to_string(kMinBrickBits) + ".." + std::to_string(kMaxBrickBits));
+    throw OptionError("brick-bits", "must be " + std::to_string(kMinBrickBits) + ".." + std::to_string(kMaxBrickBits));
   for (int64_t d : input.info().dims)
     if (d < 2 || d > (int64_t{1} << 19) + 1) throw IoError("volume dimensions must be 2 .. 524289 nodes per axis");
   Converter converter(input, output, options);
