@@ -45,19 +45,22 @@ struct Source::Impl {
   std::unique_ptr<Volume> volume;
   ProgressCallback progress;
   mutable std::mutex build_mutex;
-  mutable std::unique_ptr<Hierarchy> memory;
+  // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
+  // that reads more fields builds the next (Source::extract may run on several threads at once).
+  mutable std::shared_ptr<const Hierarchy> memory;
   mutable double preprocess_seconds = 0;
   double read_seconds = 0;
 
-  const Hierarchy& hierarchy(const RecordFields& fields) const {
+  std::shared_ptr<const Hierarchy> hierarchy(const RecordFields& fields) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
-    if (memory && memory->fields().covers(fields)) return *memory;
+    if (memory && memory->fields().covers(fields)) return memory;
     const RecordFields all = memory ? memory->fields() | fields : fields;
-    memory.reset();
+    memory.reset();  // freed now unless an extraction still holds it
     const auto start = std::chrono::steady_clock::now();
-    memory = std::make_unique<Hierarchy>(Hierarchy::build(*volume, all, StoreLayout::kDefaultBrickBits, progress));
+    memory =
+        std::make_shared<const Hierarchy>(Hierarchy::build(*volume, all, StoreLayout::kDefaultBrickBits, progress));
     preprocess_seconds += seconds_since(start);
-    return *memory;
+    return memory;
   }
 };
 
@@ -72,6 +75,8 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
   impl->progress = options.preprocess_progress;
   // A store is known by its magic; a file named .isotope without it is a damaged store, whose
   // reader says so, not a raw volume whose name lacks its dimensions (tests/reject/zeros.isotope).
+  if (options.cache_mb < 1 || options.cache_mb > (int64_t{1} << 30))
+    throw OptionError("cache-mb", "must be 1 .. " + std::to_string(int64_t{1} << 30) + " (MB)");
   if (is_store_file(spec.path) || spec.path.ends_with(".isotope")) {
     if (spec.dims || spec.type) throw OptionError(spec.dims ? "dims" : "type", "does not apply to a store");
     if (options.tune_allocator) keep_freed_brick_memory();
@@ -97,7 +102,8 @@ Source open_volume(Volume volume, const OpenOptions& options) {
 Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
   if (impl_->paged) return isotope::extract(*impl_->paged, options, stats);
   if (!needs_hierarchy(options)) return isotope::extract(*impl_->volume, options, stats);
-  return isotope::extract(impl_->hierarchy(fields_for(options)), options, stats);
+  const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(options));
+  return isotope::extract(*hierarchy, options, stats);
 }
 
 void Source::prepare(const std::vector<ExtractOptions>& planned) const {

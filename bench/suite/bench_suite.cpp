@@ -1096,7 +1096,7 @@ std::vector<const DatasetSpec*> selected(const SuiteOptions& a) {
     if (it == suite().end()) {
       std::string names;
       for (const DatasetSpec& s : suite()) names += std::string(names.empty() ? "" : ", ") + s.name;
-      throw std::invalid_argument("unknown dataset '" + name + "' (one of " + names + ")");
+      throw OptionError("dataset", "unknown dataset '" + name + "' (one of " + names + ")");
     }
   }
   for (const DatasetSpec& s : suite()) {

@@ -23,8 +23,8 @@ struct SuiteOptions {
 };
 
 // Runs the suite (or, with `scale`, the large-volume row) and prints its tables; writes `json`.
-// Throws IoError (a missing volume, an interrupted run, a child that failed) and
-// std::invalid_argument for a dataset name that is not in the suite. Returns the exit code.
+// Throws IoError (a missing volume, an interrupted run, a child that failed) and OptionError
+// ("dataset") for a dataset name that is not in the suite. Returns the exit code.
 int run_suite(const SuiteOptions& options);
 
 }  // namespace isotope::bench

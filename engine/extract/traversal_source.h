@@ -62,7 +62,7 @@ concept BlockReader = requires(R& r, const Coord& lo, const std::array<int64_t, 
 // The shape of the grid and a reader per task: what eps = 0 needs (engine/extract/finest_extract.h).
 template <class S>
 concept ValueSource = requires(const S& s) {
-  { s.lattice() } -> std::convertible_to<const Lattice&>;
+  { s.lattice() } -> std::same_as<const Lattice&>;  // a reference: the traversal keeps it
   { s.data_dims() } -> std::convertible_to<const std::array<int64_t, 3>&>;
   { s.origin() } -> std::convertible_to<const std::array<double, 3>&>;
   { s.spacing() } -> std::convertible_to<const std::array<double, 3>&>;

@@ -38,7 +38,7 @@ struct VolumeSpec {
 };
 
 struct OpenOptions {
-  int64_t cache_mb = 512;  // a store: memory for decoded bricks (at least 16 bricks)
+  int64_t cache_mb = 512;  // a store: memory for decoded bricks (at least 16 bricks); 1 .. 2^30
   // A volume's hierarchy being built (on the first extraction that needs it).
   ProgressCallback preprocess_progress;
   // Process-wide: keep freed brick memory for reuse (glibc's mallopt) instead of returning it to the
@@ -99,7 +99,7 @@ class Source {
 
 // Opens what SPEC names: reads a volume whole, or a store's header (its bricks on demand). Throws
 // IoError naming the file and what is wrong (missing, unreadable, not a volume, a corrupt store,
-// a version 2 store), and std::invalid_argument for dims or type given with a store.
+// a version 2 store), and OptionError for dims or type given with a store, or cache_mb out of range.
 Source open_volume(const VolumeSpec& spec, const OpenOptions& options = {});
 // An array already in memory (a simulation's field, a numpy array's copy). Throws
 // std::invalid_argument for dimensions below 2, values that do not fill them, or values that are

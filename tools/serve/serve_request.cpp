@@ -1,11 +1,17 @@
 #include "tools/serve/serve_request.h"
 
 #include <algorithm>
+#include <set>
+#include <string>
 #include <utility>
 #include <vector>
 
 namespace isotope::tools {
 namespace {
+
+// The extraction options a client may set (docs/SERVE.md); the rest of isotope/extract.h's are the
+// command line's.
+const std::set<std::string> kServedOptions = {"iso", "eps", "topology", "delta", "weight", "error", "focus", "radius"};
 
 bool valid_client(const std::string& c) {
   return !c.empty() && c.size() <= 64 && std::all_of(c.begin(), c.end(), [](char ch) {
@@ -33,8 +39,10 @@ ServeRequest parse_extract_request(const std::multimap<std::string, std::string>
       std::optional<std::string>& slot = name == "client" ? client : seq;
       if (slot) throw BadRequest(name + " is given twice");
       slot = value;
-    } else {
+    } else if (kServedOptions.count(name)) {
       options.emplace_back(name, value);
+    } else {  // max-triangles too: its search is neither cancellable nor bounded in memory here
+      throw BadRequest("unknown parameter '" + name.substr(0, 64) + "'");
     }
   }
   try {
