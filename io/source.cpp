@@ -10,6 +10,7 @@
 #include <mutex>
 #include <utility>
 
+#include "engine/core/volume_check.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"

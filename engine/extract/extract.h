@@ -4,6 +4,7 @@
 // extraction from an array, extract(const Volume&, ...), is public (isotope/extract.h).
 #include <cstdint>
 
+#include "engine/core/volume_check.h"        // validate_volume: what extract(const Volume&) refuses
 #include "engine/extract/full_resolution.h"  // the baseline, offered with the extraction it checks
 #include "engine/extract/options.h"
 #include "engine/hierarchy/multires_volume.h"
@@ -15,10 +16,6 @@ namespace isotope {
 
 // Throws as extract(const Volume&, ...) does (isotope/extract.h).
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
-
-// Throws std::invalid_argument for dimensions outside 2 .. 2^19 + 1, values that do not fill them,
-// or values that are not finite: what extract(const Volume&, ...) refuses.
-void validate_volume(const Volume& volume);
 
 // Whether extract(volume, options) needs a hierarchy (eps > 0, or a triangle budget).
 bool needs_hierarchy(const ExtractOptions& options);

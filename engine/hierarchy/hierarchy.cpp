@@ -4,6 +4,7 @@
 #include <cmath>
 #include <string>
 
+#include "engine/core/volume_check.h"
 #include "engine/extract/adaptive_extract.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/banded_build.h"
@@ -89,12 +90,7 @@ struct MemorySink {
 
 Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int brick_bits,
                            const ProgressCallback& progress) {
-  if (static_cast<int64_t>(volume.values.size()) != volume.node_count())
-    throw std::invalid_argument("volume holds " + std::to_string(volume.values.size()) +
-                                " values, its dimensions need " + std::to_string(volume.node_count()));
-  for (size_t i = 0; i < volume.values.size(); ++i)
-    if (!std::isfinite(volume.values[i]))
-      throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
+  validate_volume(volume);
   const auto start = std::chrono::steady_clock::now();
   Hierarchy h = allocate(volume.dims, brick_bits, fields);
   h.set_geometry(volume.origin, volume.spacing);

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "engine/core/parallel.h"
+#include "engine/core/volume_check.h"
 #include "engine/hierarchy/record_builder.h"
 
 namespace isotope {
@@ -26,13 +27,8 @@ void validate_dims(const std::array<int64_t, 3>& dims) {
 }
 
 void validate(const Volume& volume) {
-  validate_dims(volume.dims);
-  if (static_cast<int64_t>(volume.values.size()) != volume.node_count())
-    throw std::invalid_argument("volume holds " + std::to_string(volume.values.size()) +
-                                " values, its dimensions need " + std::to_string(volume.node_count()));
-  for (size_t i = 0; i < volume.values.size(); ++i)
-    if (!std::isfinite(volume.values[i]))
-      throw std::invalid_argument("volume value " + std::to_string(i) + " is not finite");
+  validate_dims(volume.dims);  // its own words for the dimensions, then the shared check
+  validate_volume(volume);
 }
 
 }  // namespace

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "engine/core/parallel.h"
-#include "engine/extract/extract.h"  // validate_volume
+#include "engine/core/volume_check.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/compact_record.h"
