@@ -9,15 +9,8 @@
 #include "io/volume/nrrd_reader.h"
 #include "isotope/error.h"
 
-namespace {
-struct RemoveAtExit {
-  std::string path = isotope::fuzz::temp_path(".nrrd");
-  ~RemoveAtExit() { std::filesystem::remove(path); }
-};
-}  // namespace
-
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  static const RemoveAtExit file;
+  static const isotope::fuzz::RemoveAtExit file{isotope::fuzz::temp_path(".nrrd")};
   isotope::fuzz::write_whole(file.path, data, size);
   try {
     (void)isotope::read_nrrd(file.path);

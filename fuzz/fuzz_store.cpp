@@ -60,15 +60,10 @@ void reseal(std::vector<uint8_t>& b) {
   store_u64(b, kHeaderChecksumAt, store_checksum(b.data(), kHeaderChecksumAt));
 }
 
-struct RemoveAtExit {
-  std::string path = fuzz::temp_path(".isotope");
-  ~RemoveAtExit() { std::filesystem::remove(path); }
-};
-
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  static const RemoveAtExit file;
+  static const fuzz::RemoveAtExit file{fuzz::temp_path(".isotope")};
   if (size < 1) return 0;
   std::vector<uint8_t> bytes(data + 1, data + size);
   if ((data[0] & 1) != 0) reseal(bytes);

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
 
 namespace isotope::fuzz {
@@ -26,5 +27,11 @@ inline void write_whole(const std::string& path, const uint8_t* data, size_t siz
   }
   ::close(fd);
 }
+
+// The one input file of a process, removed when the process ends.
+struct RemoveAtExit {
+  std::string path;
+  ~RemoveAtExit() { std::filesystem::remove(path); }
+};
 
 }  // namespace isotope::fuzz

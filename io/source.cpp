@@ -129,7 +129,7 @@ SourceInfo Source::info() const {
     info.spacing = s.volume->spacing;
     info.origin = s.volume->origin;
     info.lattice_k = Lattice::enclosing(info.dims).k;
-    info.input_bytes = s.volume->values.size() * sizeof(float);
+    info.input_bytes = s.volume->size() * sizeof(float);
     const std::lock_guard<std::mutex> lock(s.build_mutex);
     info.preprocess_seconds = s.preprocess_seconds;
     info.hierarchy_built = s.memory != nullptr;

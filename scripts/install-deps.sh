@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what building isotope needs on Debian/Ubuntu, and the viewer's npm packages
 # (viewer/package-lock.json). With --tests, also what the tests need: Chromium, for the viewer's
-# end-to-end test, scikit-image, the peer the bench runs, and clang-14 with libFuzzer. Does nothing (and needs no network) when everything is already installed.
+# end-to-end test, scikit-image, the peer the bench runs, clang-14 with libFuzzer, pytest, VTK's
+# Python readers and the glTF validator (tests/formats/package-lock.json). Does nothing (and needs no network) when everything is already installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -12,14 +13,20 @@ packages=(
   libzstd-dev libxxhash-dev zlib1g-dev
   libplplot-dev plplot-driver-cairo
   libcpp-httplib-dev
+  libtiff-dev
+  python3-dev python3-venv python3-pip python3-setuptools python3-wheel python3-numpy pybind11-dev python3-pybind11
 )
 # Node.js bundles the viewer (esbuild) and drives the browser test; a machine that has node and
 # npm already (e.g. from NodeSource) keeps them.
 if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+=(nodejs npm); fi
 # python3-skimage: the peer that isotope bench (and its test) times beside ours. clang-14 and its
 # runtime libraries (libFuzzer, the sanitizers): the fuzz targets of fuzz/ (scripts/fuzz.sh).
-# clang-format: the style check (scripts/format.sh --check).
-if [ "${1:-}" = "--tests" ]; then packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format); fi
+# clang-format: the style check (scripts/format.sh --check). python3-pytest, python3-vtk9 (VTK's
+# readers: the mesh formats read back, tests/formats) and python3-tifffile (TIFF stacks written by
+# the Python tests).
+if [ "${1:-}" = "--tests" ]; then
+  packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format python3-pytest python3-vtk9 python3-tifffile)
+fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -37,10 +44,15 @@ else
   "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends "${missing[@]}"
 fi
 
-# The exact versions of the lock file; skipped when the lock file has not changed since.
-stamp=viewer/node_modules/.isotope-lock-stamp
-if ! cmp -s viewer/package-lock.json "$stamp" 2>/dev/null; then
-  echo "install-deps: npm ci (viewer)"
-  npm ci --prefix viewer --no-audit --no-fund --loglevel=error
-  cp viewer/package-lock.json "$stamp"
-fi
+# The exact versions of the lock files; each skipped when its lock file has not changed since: the
+# viewer's, and with --tests the Khronos glTF validator (tests/formats).
+npm_folders=(viewer)
+if [ "${1:-}" = "--tests" ]; then npm_folders+=(tests/formats); fi
+for folder in "${npm_folders[@]}"; do
+  stamp=$folder/node_modules/.isotope-lock-stamp
+  if ! cmp -s "$folder/package-lock.json" "$stamp" 2>/dev/null; then
+    echo "install-deps: npm ci ($folder)"
+    npm ci --prefix "$folder" --no-audit --no-fund --loglevel=error
+    cp "$folder/package-lock.json" "$stamp"
+  fi
+done

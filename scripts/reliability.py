@@ -120,7 +120,7 @@ def bad_paths(iso, work):
     os.mkfifo(fifo)
     expect_refusal(add(Row('Bad paths', '`-o` names a FIFO (stays a FIFO)')), ex + ['-o', fifo], d, message='is a FIFO')
     r = add(Row('Bad paths', '`-o` names a character device made by mknod (stays a device)'))
-    dev = os.path.join(d, 'null')
+    dev = os.path.join(d, 'null.ply')
     try:
         os.mknod(dev, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
         expect_refusal(r, ex + ['-o', dev], d, message='device')
@@ -130,8 +130,12 @@ def bad_paths(iso, work):
     except PermissionError:
         r.got, r.message = 'not run', 'mknod needs root'
     os.remove(fifo)
-    expect_refusal(add(Row('Bad paths', '`-o` is the input')), ex + ['-o', v], d, message='is the same file as INPUT',
-                   unchanged=[v])
+    expect_refusal(add(Row('Bad paths', '`-o` names no mesh format (the input `.raw`)')), ex + ['-o', v], d, code=2,
+                   message="unknown mesh format '.raw'", unchanged=[v])
+    os.symlink(v, os.path.join(d, 'same.ply'))
+    expect_refusal(add(Row('Bad paths', '`-o` is the input (a link named `.ply`)')), ex + ['-o', f'{d}/same.ply'], d,
+                   message='is the same file as INPUT', unchanged=[v])
+    os.remove(os.path.join(d, 'same.ply'))
     os.symlink(v, os.path.join(d, 'link.raw'))
     expect_refusal(add(Row('Bad paths', '`convert X LINK-TO-X`')), [iso, 'convert', v, os.path.join(d, 'link.raw')], d,
                    message='is the same file as INPUT', unchanged=[v])
@@ -144,9 +148,9 @@ def bad_paths(iso, work):
                    ex + ['-o', old], d, message='File too large', unchanged=[old], limit_fsize=16 << 10)
     os.remove(old)
     os.makedirs(os.path.join(d, 'loop'))
-    os.symlink('b', os.path.join(d, 'loop', 'a'))
-    os.symlink('a', os.path.join(d, 'loop', 'b'))
-    expect_refusal(add(Row('Bad paths', '`-o` is a symbolic link loop')), ex + ['-o', f'{d}/loop/a'], d)
+    os.symlink('b.ply', os.path.join(d, 'loop', 'a.ply'))
+    os.symlink('a.ply', os.path.join(d, 'loop', 'b.ply'))
+    expect_refusal(add(Row('Bad paths', '`-o` is a symbolic link loop')), ex + ['-o', f'{d}/loop/a.ply'], d)
     shutil.rmtree(os.path.join(d, 'loop'))
     r = add(Row('Bad paths', '`-o` is a symbolic link to a file: the file is replaced, the link stays'))
     target = os.path.join(d, 'target.ply')

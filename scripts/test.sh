@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # What CI runs: a warnings-as-errors Release build with every test, the installed library used by
-# examples/, then the tests again
+# examples/, the Python module installed with pip and its pytest suite with the mesh formats' read-backs, then the tests again
 # under AddressSanitizer and UndefinedBehaviorSanitizer, then the parallel tests and the server under
 # ThreadSanitizer, then every parser under libFuzzer and the hostile-user table of
 # docs/RELIABILITY.md. Fails on the first error.
@@ -36,6 +36,19 @@ build-examples/extract_file "$bolt" 64.5 build-examples/bolt.ply 4
 build-ci/prefix/bin/isotope extract "$bolt" --iso 64.5 --eps 4 -q -o build-examples/bolt-command.ply
 cmp build-examples/bolt.ply build-examples/bolt-command.ply
 build-examples/extract_array build-examples/sphere.ply
+
+# The Python module as a user installs it (README, "Python"): pip from the checkout, no network, in
+# a virtual environment that sees Debian's numpy, scikit-image and VTK; setup.py builds the module
+# in build-ci (the library is not compiled again). Then pytest: the module against the command and
+# scikit-image (python/tests), and every mesh format read back by readers that are not ours
+# (tests/formats: VTK, the Khronos glTF validator, numpy).
+phase "Python module (pip install ./python into build-ci/venv), pytest: python/tests, tests/formats"
+rm -rf build-ci/venv
+/usr/bin/python3 -m venv --system-site-packages build-ci/venv
+ISOTOPE_BUILD_DIR="$PWD/build-ci" build-ci/venv/bin/pip install --no-build-isolation --no-index -q ./python
+rm -rf python/build python/*.egg-info
+ISOTOPE="$PWD/build-ci/tools/isotope" build-ci/venv/bin/python -m pytest -p no:cacheprovider -ra python/tests tests/formats \
+  | tee "$log.pytest"
 
 phase "RelWithDebInfo, address,undefined sanitizers (build-asan)"
 # Assertions stay on here (no NDEBUG): they check the traversal's invariants on every test.
@@ -84,6 +97,10 @@ rm -f "$log.reliability.md"
 total=0
 for n in $(sed -n 's/.*tests failed out of \([0-9]*\).*/\1/p' "$log"); do total=$((total + n)); done
 skipped=$(grep -c '\*\*\*Skipped' "$log" || true)
-phase "all tests passed (Release, ASan+UBSan, TSan)"
-echo "$((total - skipped)) passed, $skipped skipped, 0 failed"
+# pytest's closing line, e.g. "== 33 passed in 20.1s ==" (python/tests/conftest.py fails its run on a skip).
+py_passed=$(tail -1 "$log.pytest" | sed -n 's/.* \([0-9][0-9]*\) passed.*/\1/p')
+py_skipped=$(tail -1 "$log.pytest" | sed -n 's/.* \([0-9][0-9]*\) skipped.*/\1/p')
+rm -f "$log.pytest"
+phase "all tests passed (Release, Python, ASan+UBSan, TSan)"
+echo "$((total - skipped + ${py_passed:-0})) passed, $((skipped + ${py_skipped:-0})) skipped, 0 failed"
 grep '\*\*\*Skipped' "$log" | sed 's/^/  skipped: /' || true

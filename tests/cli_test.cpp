@@ -293,7 +293,11 @@ TEST_F(Cli, OutputIntoMissingDirectoryFailsAndWritesNothing) {
 TEST_F(Cli, AnOutputThatIsTheInputOrTheOtherOutputIsRefusedAndNothingChanges) {
   const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
   const std::string bytes = slurp(vol);
-  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(vol), 1, "is the same file as INPUT");
+  // -o names a mesh format by its extension: the volume itself is refused as a usage error, and a
+  // link with a mesh's name that leads back to it as the input.
+  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(vol), 2, "unknown mesh format '.raw'");
+  fs::create_symlink(vol, in_work("same.ply"));
+  expect_failure("extract " + quote(vol) + " --iso 0 -o " + quote(in_work("same.ply")), 1, "is the same file as INPUT");
   expect_failure("convert " + quote(vol) + " " + quote(vol), 1, "is the same file as INPUT");
   fs::create_symlink(vol, in_work("link.raw"));
   expect_failure("convert " + quote(vol) + " " + quote(in_work("link.raw")), 1, "is the same file as INPUT");

@@ -26,7 +26,7 @@
 #include <vector>
 
 #include "io/file/atomic_file.h"
-#include "io/mesh/ply_writer.h"
+#include "io/mesh/mesh_writer.h"
 #include "io/store/store_reader.h"
 #include "io/volume/hdf5_reader.h"
 #include "io/volume/raw_reader.h"

@@ -14,7 +14,7 @@
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
-#include "io/mesh/ply_writer.h"
+#include "io/mesh/mesh_writer.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/mesh.h"
 #include "tools/commands.h"

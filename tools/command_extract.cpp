@@ -1,4 +1,5 @@
-// isotope extract: volume -> adaptive isosurface (PLY) + optional JSON report.
+// isotope extract: volume -> adaptive isosurface (PLY, OBJ, STL, glTF or VTK, by -o's extension) +
+// optional JSON report.
 // Steps: read, preprocess (MultiresVolume::build), extract, measure topology, write.
 // Nothing is written before the mesh exists, and the writers are atomic, so a failure
 // leaves no output file behind.
@@ -21,7 +22,7 @@
 #include "engine/extract/extract.h"
 #include "engine/topology/component_report.h"
 #include "io/file/atomic_file.h"
-#include "io/mesh/ply_writer.h"
+#include "io/mesh/mesh_writer.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/error.h"
 #include "isotope/mesh.h"
@@ -132,6 +133,7 @@ int run_extract(const ExtractArgs& a) {
   // files named by -o and --report as they were. On more than one thread the mesh is written while
   // its topology is measured: the write ends waiting for the disk (fsync), which the measuring
   // overlaps.
+  const MeshFormat format = *mesh_format_of(a.output);  // checked when parsed
   AtomicFile mesh_file(a.output);
   std::optional<AtomicFile> report_file;
   if (!a.report.empty()) report_file.emplace(a.report);
@@ -140,7 +142,7 @@ int run_extract(const ExtractArgs& a) {
   if (run.threads > 1)
     writer = std::thread([&] {
       try {
-        write_ply(mesh, mesh_file);
+        write_mesh(mesh, mesh_file, format);
       } catch (...) {
         write_error = std::current_exception();
       }
@@ -166,7 +168,7 @@ int run_extract(const ExtractArgs& a) {
   if (writer.joinable()) writer.join();
   if (write_error) std::rethrow_exception(write_error);
   run.peak_rss_mb = static_cast<double>(peak_rss_bytes()) / (1 << 20);  // this process so far
-  if (run.threads <= 1) write_ply(mesh, mesh_file);
+  if (run.threads <= 1) write_mesh(mesh, mesh_file, format);
   if (report_file) {
     const std::string text = report_json(run).dump(2) + "\n";
     report_file->write(text.data(), text.size());
@@ -183,7 +185,8 @@ int run_extract(const ExtractArgs& a) {
 
 Command add_extract_command(CLI::App& app) {
   auto a = std::make_shared<ExtractArgs>();
-  CLI::App* cmd = app.add_subcommand("extract", "Extract an adaptive isosurface from a volume into a PLY mesh");
+  CLI::App* cmd = app.add_subcommand(
+      "extract", "Extract an adaptive isosurface from a volume into a mesh (PLY, OBJ, STL, glTF, VTK)");
   cmd->add_option("INPUT", a->input,
                   "Store made by 'isotope convert', or a volume: NAME_XxYxZ_TYPE.raw, any .raw with --dims/--type, "
                   "FILE.h5:/path/to/dataset, .nrrd/.nhdr")
@@ -227,7 +230,13 @@ Command add_extract_command(CLI::App& app) {
       ->type_name("XxYxZ");
   cmd->add_option("--type", a->type, "Raw input: value type (overrides the file name)")
       ->check(CLI::IsMember({"uint8", "uint16", "int16", "float32", "float64"}));
-  cmd->add_option("-o,--output", a->output, "Output mesh (binary PLY)")->required()->type_name("MESH.ply");
+  cmd->add_option("-o,--output", a->output,
+                  "Output mesh, its format by extension: .ply (binary), .obj, .stl (binary), .glb (glTF), .vtp "
+                  "(ParaView)")
+      ->required()
+      ->check(CLI::Validator(
+          [](std::string& s) -> std::string { return mesh_format_of(s) ? "" : unknown_mesh_format_message(s); }, ""))
+      ->type_name("MESH");
   cmd->add_option("--report", a->report,
                   "Write a JSON report: counts, timings, and per connected component its triangles, Euler "
                   "characteristic, genus, bounding box, area and volume")

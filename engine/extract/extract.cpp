@@ -66,15 +66,16 @@ class ArraySource {
 
   class Reader {
    public:
-    explicit Reader(const Volume& v) : v_(v) {}
+    explicit Reader(const Volume& v) : v_(v), values_(v.data()) {}
     float value(const Coord& c, int /*band*/) const {
-      return v_.at(std::min(c[0], v_.dims[0] - 1), std::min(c[1], v_.dims[1] - 1), std::min(c[2], v_.dims[2] - 1));
+      return values_[v_.index(std::min(c[0], v_.dims[0] - 1), std::min(c[1], v_.dims[1] - 1),
+                              std::min(c[2], v_.dims[2] - 1))];
     }
     // Blocks lie in the data box (extract_finest cuts them there): whole rows of the array.
     bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
       for (int64_t z = 0; z <= n[2]; ++z)
         for (int64_t y = 0; y <= n[1]; ++y) {
-          const float* row = v_.values.data() + v_.index(lo[0], lo[1] + y, lo[2] + z);
+          const float* row = values_ + v_.index(lo[0], lo[1] + y, lo[2] + z);
           std::copy(row, row + n[0] + 1, f + (z * stride + y) * stride);
         }
       return true;
@@ -82,6 +83,7 @@ class ArraySource {
 
    private:
     const Volume& v_;
+    const float* values_;  // v_.data(), once: Volume::at chooses between owned and borrowed values
   };
   Reader reader() const { return Reader(v_); }
 

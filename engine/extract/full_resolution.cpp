@@ -20,16 +20,18 @@ constexpr int64_t kSlabCells = int64_t{1} << 18;
 // Marching tetrahedra over the cells of layers [z_begin, z_end), in the serial walk's order.
 void march_layers(const Volume& volume, float iso, int64_t z_begin, int64_t z_end, MeshBuilder& builder) {
   const auto& d = volume.dims;
+  const float* values = volume.data();  // once, not per value (Volume::at chooses where they are)
+  const auto at = [&](int64_t x, int64_t y, int64_t z) { return values[volume.index(x, y, z)]; };
   for (int64_t z = z_begin; z < z_end; ++z)
     for (int64_t y = 0; y + 1 < d[1]; ++y)
       for (int64_t x = 0; x + 1 < d[0]; ++x) {
         int above = 0;
-        for (int c = 0; c < 8; ++c) above += volume.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)) > iso;
+        for (int c = 0; c < 8; ++c) above += at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)) > iso;
         if (above == 0 || above == 8) continue;
         for (const Tet& t : cell_tetrahedra({x, y, z}))
           builder.add_tet(t,
-                          {volume.at(t[0][0], t[0][1], t[0][2]), volume.at(t[1][0], t[1][1], t[1][2]),
-                           volume.at(t[2][0], t[2][1], t[2][2]), volume.at(t[3][0], t[3][1], t[3][2])},
+                          {at(t[0][0], t[0][1], t[0][2]), at(t[1][0], t[1][1], t[1][2]), at(t[2][0], t[2][1], t[2][2]),
+                           at(t[3][0], t[3][1], t[3][2])},
                           traversal::orientation(t) > 0);
       }
 }

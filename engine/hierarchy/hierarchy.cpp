@@ -97,7 +97,7 @@ Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int
   const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
     for (int64_t z = 0; z < size[2]; ++z)
       for (int64_t y = 0; y < size[1]; ++y) {
-        const float* row = volume.values.data() + volume.index(lo[0], lo[1] + y, lo[2] + z);
+        const float* row = volume.data() + volume.index(lo[0], lo[1] + y, lo[2] + z);
         std::copy(row, row + size[0], out + (z * size[1] + y) * size[0]);
       }
   };

@@ -3,7 +3,7 @@
 // IEEE Visualization 2000), out of core, on all cores. The public interface, whole:
 //
 //   isotope/volume.h   Volume (an array in memory), ScalarType
-//   isotope/mesh.h     Mesh, MeshTopology, measure_topology, vertex_normals, write_ply
+//   isotope/mesh.h     Mesh, MeshTopology, measure_topology, vertex_normals, write_ply, write_mesh
 //   isotope/extract.h  ExtractOptions (iso, eps, topology, ...), ExtractStats, extract(Volume)
 //   isotope/source.h   open_volume(): any input (raw, NRRD, HDF5, a store, an array), extracted
 //                      from as often as needed

@@ -41,4 +41,11 @@ std::vector<std::array<float, 3>> vertex_normals(const Mesh& mesh);
 // device, FIFO or directory is refused, a link followed). Throws IoError.
 void write_ply(const Mesh& mesh, const std::string& path);
 
+// The format PATH's extension names, written as write_ply writes PLY (atomically; throws IoError,
+// also for an extension that names no format): .ply (as write_ply), .obj (Wavefront text, every
+// float in its shortest exact form), .stl (binary, a unit normal per triangle), .glb (glTF 2.0
+// binary: positions, unit vertex normals, uint32 indices) or .vtp (VTK XML PolyData with point
+// normals, for ParaView). docs/MESH_FORMATS.md says what each holds and which tools open it.
+void write_mesh(const Mesh& mesh, const std::string& path);
+
 }  // namespace isotope

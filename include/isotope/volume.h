@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -15,10 +16,17 @@ struct Volume {
   std::array<double, 3> spacing{1, 1, 1};  // physical distance between nodes
   std::array<double, 3> origin{0, 0, 0};   // physical position of node (0,0,0)
   std::vector<float> values;               // dims[0]*dims[1]*dims[2], x fastest
+  // Instead of `values`: values that live elsewhere (a numpy array, a simulation's field), read
+  // where they are, never copied. The caller keeps them alive and unchanged while this Volume, or
+  // a Source opened from it, is in use (the Python module holds the array: python/src/module.cpp).
+  std::span<const float> borrowed;
 
   int64_t node_count() const { return dims[0] * dims[1] * dims[2]; }
   size_t index(int64_t x, int64_t y, int64_t z) const { return static_cast<size_t>((z * dims[1] + y) * dims[0] + x); }
-  float at(int64_t x, int64_t y, int64_t z) const { return values[index(x, y, z)]; }
+  // The values, wherever they are: `borrowed` when set, else `values`.
+  const float* data() const { return borrowed.data() ? borrowed.data() : values.data(); }
+  size_t size() const { return borrowed.data() ? borrowed.size() : values.size(); }
+  float at(int64_t x, int64_t y, int64_t z) const { return data()[index(x, y, z)]; }
 };
 
 // The element types of raw files (and what NRRD and HDF5 inputs are read as).

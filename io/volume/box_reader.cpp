@@ -18,6 +18,7 @@
 #include "io/volume/hdf5_handle.h"
 #include "io/volume/nrrd_reader.h"
 #include "io/volume/raw_reader.h"
+#include "io/volume/tiff_reader.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -34,17 +35,6 @@ std::string errno_text(int err) { return std::error_code(err, std::generic_categ
 
 std::string xyz_text(const std::array<int64_t, 3>& v) {
   return "(" + std::to_string(v[0]) + "," + std::to_string(v[1]) + "," + std::to_string(v[2]) + ")";
-}
-
-// A size of 0 is inside (it reads nothing). lo + size is never formed, so it cannot overflow.
-void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, const VolumeInfo& info,
-               const std::string& where) {
-  for (int axis = 0; axis < 3; ++axis) {
-    if (lo[axis] < 0 || size[axis] < 0 || size[axis] > info.dims[axis] - lo[axis]) {
-      throw std::invalid_argument(where + ": box of size " + xyz_text(size) + " at (x,y,z) = " + xyz_text(lo) +
-                                  " is not inside the volume of size " + xyz_text(info.dims));
-    }
-  }
 }
 
 VolumeInfo info_of(ScalarType type, const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
@@ -297,11 +287,23 @@ std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string&
 
 }  // namespace
 
+// A size of 0 is inside (it reads nothing). lo + size is never formed, so it cannot overflow.
+void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, const VolumeInfo& info,
+               const std::string& where) {
+  for (int axis = 0; axis < 3; ++axis) {
+    if (lo[axis] < 0 || size[axis] < 0 || size[axis] > info.dims[axis] - lo[axis]) {
+      throw std::invalid_argument(where + ": box of size " + xyz_text(size) + " at (x,y,z) = " + xyz_text(lo) +
+                                  " is not inside the volume of size " + xyz_text(info.dims));
+    }
+  }
+}
+
 std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir) {
   const VolumeLocation at = locate_volume(source);
   switch (at.format) {
     case VolumeLocation::Format::hdf5: return open_hdf5(at.file, at.dataset);
     case VolumeLocation::Format::nrrd: return open_nrrd(at.file, scratch_dir);
+    case VolumeLocation::Format::tiff: return open_tiff_stack(at.file);
     case VolumeLocation::Format::raw: break;
   }
   return open_raw(at.file, at.layout);

@@ -34,8 +34,13 @@ class BoxReader {
   VolumeInfo info_;
 };
 
+// Throws std::invalid_argument, naming WHERE, unless the box of SIZE nodes at LO lies inside
+// info.dims (a size of 0 is inside: it reads nothing). For the readers' read_box.
+void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, const VolumeInfo& info,
+               const std::string& where);
+
 // Same inputs as read_volume: raw (layout from the name or the overrides), FILE.h5:/dataset,
-// FILE.h5 holding a single 3-D dataset, .nrrd/.nhdr. Checks at open what needs no value: the
+// FILE.h5 holding a single 3-D dataset, .nrrd/.nhdr, a TIFF stack. Checks at open what needs no value: the
 // file size against dims * type for raw data, the dataset's existence, rank and type for HDF5.
 // gzip-encoded NRRD cannot be read at random: it is inflated once, streaming, into a temporary
 // raw file inside SCRATCH_DIR, removed when the reader is destroyed or the open fails.

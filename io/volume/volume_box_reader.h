@@ -27,7 +27,7 @@ class VolumeBoxReader final : public BoxReader {
         throw std::invalid_argument("box outside the volume");
     for (int64_t z = 0; z < size[2]; ++z)
       for (int64_t y = 0; y < size[1]; ++y) {
-        const float* row = &volume_.values[volume_.index(lo[0], lo[1] + y, lo[2] + z)];
+        const float* row = volume_.data() + volume_.index(lo[0], lo[1] + y, lo[2] + z);
         std::memcpy(out, row, static_cast<size_t>(size[0]) * sizeof(float));
         out += size[0];
       }

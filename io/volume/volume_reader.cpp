@@ -5,9 +5,11 @@
 #include <filesystem>
 #include <system_error>
 
+#include "io/file/extension.h"
 #include "io/file/input_file.h"
 #include "io/volume/hdf5_reader.h"
 #include "io/volume/nrrd_reader.h"
+#include "io/volume/tiff_reader.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -27,13 +29,6 @@ std::optional<Hdf5Spec> split_hdf5_spec(const std::string& spec) {
   const size_t colon = spec.rfind(":/");
   if (colon == std::string::npos || colon == 0) return std::nullopt;
   return Hdf5Spec{spec.substr(0, colon), spec.substr(colon + 1)};
-}
-
-std::string lowercase_extension(const std::string& path) {
-  std::string ext = fs::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
 }
 
 bool has_hdf5_extension(const std::string& path) {
@@ -80,6 +75,7 @@ VolumeLocation locate_volume(const VolumeSpec& source) {
   if (const auto h5 = split_hdf5_spec(source.path)) return {Format::hdf5, h5->file, h5->dataset, {}};
   if (has_hdf5_extension(source.path)) return {Format::hdf5, source.path, only_3d_dataset(source.path), {}};
   if (has_nrrd_extension(source.path)) return {Format::nrrd, source.path, "", {}};  // the header says dims and type
+  if (is_tiff_stack(source.path)) return {Format::tiff, source.path, "", {}};       // so do the pages
   require_regular_file(source.path, source.path, "a volume file");  // a mistyped path says so, not "pass --dims"
   return {Format::raw, source.path, "", raw_layout(source)};
 }
@@ -89,6 +85,7 @@ Volume read_volume(const VolumeSpec& source) {
   switch (at.format) {
     case VolumeLocation::Format::hdf5: return read_hdf5(at.file, at.dataset);
     case VolumeLocation::Format::nrrd: return read_nrrd(at.file);
+    case VolumeLocation::Format::tiff: return read_tiff_stack(at.file);
     case VolumeLocation::Format::raw: break;
   }
   return read_raw(at.file, at.layout);

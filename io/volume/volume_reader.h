@@ -1,5 +1,6 @@
 #pragma once
-// Opens what a user names on the command line: "vol.raw", "vol.nrrd" or "file.h5:/path/to/dataset".
+// Opens what a user names on the command line: "vol.raw", "vol.nrrd", "file.h5:/path/to/dataset", or a
+// TIFF stack ("scan.tif", a multi-page file, or "slices/", a folder of one file per slice).
 #include <optional>
 #include <string>
 
@@ -14,7 +15,7 @@ Volume read_volume(const VolumeSpec& source);
 
 // Where a source's values are, decided from the spec and the overrides without reading them.
 struct VolumeLocation {
-  enum class Format { raw, hdf5, nrrd };
+  enum class Format { raw, hdf5, nrrd, tiff };
   Format format = Format::raw;
   std::string file;
   std::string dataset;  // hdf5: the dataset, found in the file when the spec names none

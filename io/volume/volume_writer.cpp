@@ -18,8 +18,8 @@ namespace {
 
 void check_shape(const Volume& volume, const std::string& path, int element_bytes) {
   const int64_t count = checked_node_count(volume.dims, element_bytes, path);
-  if (static_cast<int64_t>(volume.values.size()) != count) {
-    throw IoError(path + ": volume holds " + std::to_string(volume.values.size()) + " values but its dimensions need " +
+  if (static_cast<int64_t>(volume.size()) != count) {
+    throw IoError(path + ": volume holds " + std::to_string(volume.size()) + " values but its dimensions need " +
                   std::to_string(count));
   }
 }
@@ -84,7 +84,7 @@ void write_volume_dataset(hid_t file, const Volume& volume, const std::string& p
             : H5I_INVALID_HID,
       H5Dclose);
   if (!ds) throw IoError(path + ": cannot create dataset /volume: " + hdf5_error_detail());
-  if (H5Dwrite(ds.get(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, volume.values.data()) < 0)
+  if (H5Dwrite(ds.get(), H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, volume.data()) < 0)
     throw IoError(path + ": cannot write dataset /volume: " + hdf5_error_detail());
   write_xyz_attribute(ds.get(), "spacing", volume.spacing, path);
   write_xyz_attribute(ds.get(), "origin", volume.origin, path);
@@ -99,8 +99,8 @@ double RawEncoding::code(double v) const { return is_mapped() ? first + (v - min
 RawEncoding raw_encoding(const Volume& volume, ScalarType type) {
   RawEncoding e;
   e.type = type;
-  if (!volume.values.empty()) {
-    const auto [lo, hi] = std::minmax_element(volume.values.begin(), volume.values.end());
+  if (volume.size() > 0) {
+    const auto [lo, hi] = std::minmax_element(volume.data(), volume.data() + volume.size());
     e.min = *lo;
     e.max = *hi;
   }
@@ -120,7 +120,7 @@ RawEncoding write_raw(const Volume& volume, const std::string& path, ScalarType 
   AtomicFile out(path);
   constexpr size_t kBlock = size_t{1} << 16;
   std::vector<unsigned char> buffer(kBlock * static_cast<size_t>(bytes));
-  const std::span<const float> values(volume.values);
+  const std::span<const float> values(volume.data(), volume.size());
   for (size_t i = 0; i < values.size(); i += kBlock) {
     const std::span<const float> block = values.subspan(i, std::min(kBlock, values.size() - i));
     encode_block(e, block, buffer.data());

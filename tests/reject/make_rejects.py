@@ -66,6 +66,29 @@ def xxh64(data, seed=0):
 HEADER, BAND_TABLE, HEADER_SUM, ENTRY, SECTION_SUM = 1024, 256, 1016, 24, 8
 
 
+def tiff(pages):
+    """A little-endian TIFF of one-strip pages: (width, height, bits, sample_format, samples, data,
+    strip_byte_count or None, strip_offset or None) each; what libtiff reads, written by hand."""
+    out = bytearray(b'II*\0' + bytes(4))
+    link = 4  # where the next IFD's offset goes
+    for width, height, bits, fmt, samples, data, count, offset in pages:
+        at = len(out)
+        out += data
+        tags = [(256, 4, width), (257, 4, height), (258, 3, bits), (259, 3, 1), (262, 3, 2 if samples == 3 else 1),
+                (273, 4, at if offset is None else offset), (277, 3, samples), (278, 4, height),
+                (279, 4, len(data) if count is None else count), (339, 3, fmt)]
+        if len(out) % 2:
+            out += b'\0'
+        struct.pack_into('<I', out, link, len(out))
+        out += struct.pack('<H', len(tags))
+        for tag, kind, value in tags:
+            out += struct.pack('<HHI', tag, kind, 1) + (struct.pack('<HH', value, 0) if kind == 3 else
+                                                       struct.pack('<I', value))
+        link = len(out)
+        out += bytes(4)
+    return bytes(out)
+
+
 def bands(b):
     out = []
     for j in range(20):
@@ -179,6 +202,17 @@ def main():
     volume_case('data-file-directory.nhdr', header.replace('encoding', 'data file: .\nencoding').encode(),
                 'is a directory')
     volume_case('not-nrrd.nrrd', b'PK\x03\x04' + bytes(60), 'NRRD')
+    # TIFF stacks (io/volume/tiff_reader.h): each page is checked at open, before anything is read.
+    gray = bytes(range(16))
+    volume_case('tiff-rgb.tif', tiff([(4, 4, 8, 1, 3, bytes(48), None, None)] * 2), '3 samples per pixel')
+    volume_case('tiff-int32.tif', tiff([(2, 2, 32, 2, 1, bytes(16), None, None)] * 2), '32-bit signed integer')
+    volume_case('tiff-pages-differ.tif', tiff([(4, 4, 8, 1, 1, gray, None, None), (4, 3, 8, 1, 1, gray[:12], None, None)]),
+                'page 1 is 4x3 uint8, where page 0 is 4x4 uint8')
+    volume_case('tiff-lying-size.tif', tiff([(60000, 2, 8, 1, 1, gray, None, None)] * 2),
+                'too few for 60000x2 uint8 values')
+    volume_case('tiff-strip-beyond-end.tif', tiff([(4, 4, 8, 1, 1, gray, None, 1 << 20)] * 2),
+                'its strips hold 0 bytes, too few for 4x4 uint8')
+    volume_case('tiff-not-tiff.tif', b'II*\0' + bytes(4) + b'not a TIFF directory', 'not a readable TIFF file')
 
     for f in os.listdir(HERE):
         if f not in ('make_rejects.py', 'README.md'):

@@ -1,0 +1,363 @@
+#include "io/mesh/mesh_writer.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <vector>
+
+#include "engine/core/parallel.h"
+#include "io/file/extension.h"
+#include "isotope/error.h"
+#include "isotope/version.h"
+
+namespace isotope {
+namespace {
+
+constexpr size_t kBlockItems = size_t{1} << 16;  // items per buffered write
+constexpr size_t kWindowBlocks = 8;              // blocks encoded at once, in parallel
+
+using Bytes = std::vector<unsigned char>;
+
+template <typename T>
+unsigned char* put_le(unsigned char* p, T value) {
+  std::array<unsigned char, sizeof(T)> b = std::bit_cast<std::array<unsigned char, sizeof(T)>>(value);
+  if constexpr (std::endian::native == std::endian::big) std::reverse(b.begin(), b.end());
+  std::memcpy(p, b.data(), sizeof(T));
+  return p + sizeof(T);
+}
+
+void write_text(AtomicFile& out, const std::string& text) { out.write(text.data(), text.size()); }
+
+// A dangling index would make a file other tools reject (or, for the formats that store corners,
+// read outside the positions): refused before anything is encoded.
+void check_indices(const Mesh& mesh, const std::string& path) {
+  const size_t n = mesh.positions.size();
+  const int64_t blocks = static_cast<int64_t>((mesh.triangles.size() + kBlockItems - 1) / kBlockItems);
+  std::atomic<bool> bad{false};  // on all threads; the serial scan below only names the first
+  parallel_for(int64_t{0}, blocks, [&](int64_t b) {
+    const size_t end = std::min(mesh.triangles.size(), static_cast<size_t>(b + 1) * kBlockItems);
+    for (size_t t = static_cast<size_t>(b) * kBlockItems; t < end; ++t)
+      if (mesh.triangles[t][0] >= n || mesh.triangles[t][1] >= n || mesh.triangles[t][2] >= n) bad = true;
+  });
+  if (!bad) return;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    for (uint32_t v : mesh.triangles[t])
+      if (v >= n)
+        throw IoError(path + ": triangle " + std::to_string(t) + " references vertex " + std::to_string(v) +
+                      " but the mesh has " + std::to_string(n) + " vertices");
+}
+
+void check_count(size_t count, size_t limit, const std::string& path, const char* what, const char* format) {
+  if (count > limit)
+    throw IoError(path + ": " + std::to_string(count) + " " + what + " exceed the " + format + " range");
+}
+
+// Encodes `count` items a window of blocks at a time, the blocks of a window on all threads, so a
+// large mesh costs a few hundred writes and a few blocks of memory, and its encoding scales with
+// the threads (a whole extraction written on one thread did not: issue 17). ENCODE(begin, end,
+// buffer) appends items [begin, end) to an empty buffer.
+template <typename Encode>
+void write_blocks(AtomicFile& out, size_t count, Encode encode) {
+  const size_t blocks = (count + kBlockItems - 1) / kBlockItems;
+  std::vector<Bytes> buffers(std::min(kWindowBlocks, blocks));
+  for (size_t first = 0; first < blocks; first += buffers.size()) {
+    const size_t window = std::min(buffers.size(), blocks - first);
+    parallel_for(int64_t{0}, static_cast<int64_t>(window), [&](int64_t b) {
+      const size_t begin = (first + static_cast<size_t>(b)) * kBlockItems;
+      Bytes& buffer = buffers[static_cast<size_t>(b)];
+      buffer.clear();
+      encode(begin, std::min(count, begin + kBlockItems), buffer);
+    });
+    for (size_t b = 0; b < window; ++b) out.write(buffers[b].data(), buffers[b].size());
+  }
+}
+
+// Items of RECORD_BYTES each: PUT(p, item) writes one at p and returns the end.
+template <typename Items, typename Put>
+void write_records(AtomicFile& out, const Items& items, size_t record_bytes, Put put) {
+  write_blocks(out, items.size(), [&](size_t begin, size_t end, Bytes& buffer) {
+    buffer.resize((end - begin) * record_bytes);
+    unsigned char* p = buffer.data();
+    for (size_t k = begin; k < end; ++k) p = put(p, items[k]);
+  });
+}
+
+unsigned char* put_vec3(unsigned char* p, const std::array<float, 3>& v) {
+  for (float c : v) p = put_le(p, c);
+  return p;
+}
+
+// ---- PLY ----
+
+void encode_ply(const Mesh& mesh, AtomicFile& out) {
+  check_count(mesh.positions.size(), std::numeric_limits<int32_t>::max(), out.path(), "vertices", "PLY int index");
+  write_text(out, "ply\nformat binary_little_endian 1.0\ncomment written by isotope\nelement vertex " +
+                      std::to_string(mesh.positions.size()) +
+                      "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                      std::to_string(mesh.triangles.size()) + "\nproperty list uchar int vertex_indices\nend_header\n");
+  write_records(out, mesh.positions, 12, put_vec3);
+  write_records(out, mesh.triangles, 13, [](unsigned char* p, const std::array<uint32_t, 3>& t) {
+    p = put_le(p, uint8_t{3});
+    for (uint32_t v : t) p = put_le(p, static_cast<int32_t>(v));
+    return p;
+  });
+}
+
+// ---- OBJ ----
+
+// Shortest text that reads back as the same float (std::to_chars), so OBJ loses nothing.
+template <typename T>
+void append_number(Bytes& buffer, T value) {
+  char text[32];
+  const auto end = std::to_chars(text, text + sizeof text, value).ptr;
+  buffer.insert(buffer.end(), text, end);
+}
+
+void encode_obj(const Mesh& mesh, AtomicFile& out) {
+  write_text(out, "# written by isotope " ISOTOPE_VERSION_STRING ": " + std::to_string(mesh.positions.size()) +
+                      " vertices, " + std::to_string(mesh.triangles.size()) + " triangles\n");
+  write_blocks(out, mesh.positions.size(), [&](size_t begin, size_t end, Bytes& buffer) {
+    buffer.reserve((end - begin) * 36);
+    for (size_t i = begin; i < end; ++i) {
+      buffer.push_back('v');
+      for (float c : mesh.positions[i]) {
+        buffer.push_back(' ');
+        append_number(buffer, c);
+      }
+      buffer.push_back('\n');
+    }
+  });
+  write_blocks(out, mesh.triangles.size(), [&](size_t begin, size_t end, Bytes& buffer) {
+    buffer.reserve((end - begin) * 24);
+    for (size_t t = begin; t < end; ++t) {
+      buffer.push_back('f');
+      for (uint32_t v : mesh.triangles[t]) {
+        buffer.push_back(' ');
+        append_number(buffer, uint64_t{v} + 1);  // OBJ counts vertices from 1
+      }
+      buffer.push_back('\n');
+    }
+  });
+}
+
+// ---- STL ----
+
+std::array<float, 3> unit_normal(const std::array<float, 3>& a, const std::array<float, 3>& b,
+                                 const std::array<float, 3>& c) {
+  const double u[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
+  const double v[3] = {double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]};
+  const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+  const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  if (!(len > 0)) return {0, 0, 0};  // a degenerate triangle: STL readers recompute it
+  return {static_cast<float>(n[0] / len), static_cast<float>(n[1] / len), static_cast<float>(n[2] / len)};
+}
+
+void encode_stl(const Mesh& mesh, AtomicFile& out) {
+  check_count(mesh.triangles.size(), std::numeric_limits<uint32_t>::max(), out.path(), "triangles", "STL count");
+  // 80 bytes of header that must not begin with "solid" (the text format's first word).
+  std::array<unsigned char, 84> head{};
+  std::fill(head.begin(), head.begin() + 80, ' ');
+  const std::string title = "binary STL written by isotope " ISOTOPE_VERSION_STRING;
+  std::memcpy(head.data(), title.data(), title.size());
+  put_le(head.data() + 80, static_cast<uint32_t>(mesh.triangles.size()));
+  out.write(head.data(), head.size());
+  write_records(out, mesh.triangles, 50, [&](unsigned char* p, const std::array<uint32_t, 3>& t) {
+    const auto& a = mesh.positions[t[0]];
+    const auto& b = mesh.positions[t[1]];
+    const auto& c = mesh.positions[t[2]];
+    p = put_vec3(p, unit_normal(a, b, c));
+    p = put_vec3(put_vec3(put_vec3(p, a), b), c);
+    return put_le(p, uint16_t{0});  // attribute byte count
+  });
+}
+
+// Vertex normals as glTF requires them: unit length. A vertex whose triangles are all degenerate
+// has none (isotope::vertex_normals gives 0); it gets +z, which no shading of a zero-area
+// triangle can show.
+std::vector<std::array<float, 3>> unit_vertex_normals(const Mesh& mesh) {
+  std::vector<std::array<float, 3>> normals = vertex_normals(mesh);
+  for (auto& n : normals)
+    if (n[0] == 0 && n[1] == 0 && n[2] == 0) n = {0, 0, 1};
+  return normals;
+}
+
+// ---- glTF binary ----
+
+std::string json_number(double value) {
+  char text[40];
+  return std::string(text, std::to_chars(text, text + sizeof text, value).ptr);
+}
+
+std::string json_vec3(const std::array<float, 3>& v) {
+  return "[" + json_number(v[0]) + "," + json_number(v[1]) + "," + json_number(v[2]) + "]";
+}
+
+// The glTF 2.0 binary container (GLB): a 12-byte header, a JSON chunk describing one mesh of one
+// triangle primitive, and a BIN chunk holding positions, normals and indices back to back. Written
+// here, not with tinygltf (libtinygltf-dev): its writer takes a copy of every buffer into its model
+// and writes to a stream or a path of its own, where a mesh of hundreds of megabytes needs to be
+// streamed, block by block, through AtomicFile; the container itself is three headers.
+void encode_glb(const Mesh& mesh, AtomicFile& out) {
+  const uint64_t n = mesh.positions.size(), m = mesh.triangles.size();
+  std::string json =
+      "{\"asset\":{\"version\":\"2.0\",\"generator\":\"isotope " ISOTOPE_VERSION_STRING "\"},\"scene\":0,";
+  uint64_t bin = 0;
+  if (m == 0) {
+    json += "\"scenes\":[{}]}";  // an accessor must count at least one element: no mesh at all
+  } else {
+    std::array<float, 3> lo = mesh.positions[0], hi = lo;
+    for (const auto& p : mesh.positions)
+      for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], p[k]), hi[k] = std::max(hi[k], p[k]);
+    bin = 24 * n + 12 * m;
+    json +=
+        "\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"NORMAL\":1},\"indices\":2,\"mode\":4}]}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":" +
+        std::to_string(n) + ",\"type\":\"VEC3\",\"min\":" + json_vec3(lo) + ",\"max\":" + json_vec3(hi) +
+        "},{\"bufferView\":1,\"componentType\":5126,\"count\":" + std::to_string(n) +
+        ",\"type\":\"VEC3\"},{\"bufferView\":2,\"componentType\":5125,\"count\":" + std::to_string(3 * m) +
+        ",\"type\":\"SCALAR\"}],\"bufferViews\":[{\"buffer\":0,\"byteOffset\":0,\"byteLength\":" +
+        std::to_string(12 * n) + ",\"target\":34962},{\"buffer\":0,\"byteOffset\":" + std::to_string(12 * n) +
+        ",\"byteLength\":" + std::to_string(12 * n) +
+        ",\"target\":34962},{\"buffer\":0,\"byteOffset\":" + std::to_string(24 * n) +
+        ",\"byteLength\":" + std::to_string(12 * m) +
+        ",\"target\":34963}],\"buffers\":[{\"byteLength\":" + std::to_string(bin) + "}]}";
+  }
+  json.resize((json.size() + 3) / 4 * 4, ' ');  // chunks are 4-byte aligned; JSON pads with spaces
+  const uint64_t total = 12 + 8 + json.size() + (bin > 0 ? 8 + bin : 0);  // bin is a multiple of 4
+  check_count(total, std::numeric_limits<uint32_t>::max(), out.path(), "bytes", "glTF binary 4 GiB");
+  std::array<unsigned char, 20> head;
+  unsigned char* p = put_le(head.data(), uint32_t{0x46546C67});  // "glTF"
+  p = put_le(p, uint32_t{2});
+  p = put_le(p, static_cast<uint32_t>(total));
+  p = put_le(p, static_cast<uint32_t>(json.size()));
+  put_le(p, uint32_t{0x4E4F534A});  // "JSON"
+  out.write(head.data(), head.size());
+  write_text(out, json);
+  if (bin == 0) return;
+  p = put_le(head.data(), static_cast<uint32_t>(bin));
+  put_le(p, uint32_t{0x004E4942});  // "BIN\0"
+  out.write(head.data(), 8);
+  write_records(out, mesh.positions, 12, put_vec3);
+  write_records(out, unit_vertex_normals(mesh), 12, put_vec3);
+  write_records(out, mesh.triangles, 12, [](unsigned char* q, const std::array<uint32_t, 3>& t) {
+    for (uint32_t v : t) q = put_le(q, v);
+    return q;
+  });
+}
+
+// ---- VTK XML PolyData ----
+
+// One piece with point normals, points and triangles as polys, in the raw appended encoding (each
+// array a UInt64 byte count and its little-endian values), which ParaView and VTK read without a
+// base64 pass. Indices are Int32 when they fit, else Int64.
+template <typename Index>
+void encode_vtp_polys(const Mesh& mesh, AtomicFile& out) {
+  const uint64_t m = mesh.triangles.size();
+  std::array<unsigned char, 8> count;
+  put_le(count.data(), uint64_t{3 * m * sizeof(Index)});
+  out.write(count.data(), 8);
+  write_records(out, mesh.triangles, 3 * sizeof(Index), [](unsigned char* p, const std::array<uint32_t, 3>& t) {
+    for (uint32_t v : t) p = put_le(p, static_cast<Index>(v));
+    return p;
+  });
+  put_le(count.data(), uint64_t{m * sizeof(Index)});
+  out.write(count.data(), 8);
+  write_blocks(out, m, [](size_t begin, size_t end, Bytes& buffer) {
+    buffer.resize((end - begin) * sizeof(Index));
+    unsigned char* p = buffer.data();
+    for (size_t t = begin; t < end; ++t) p = put_le(p, static_cast<Index>(3 * (t + 1)));
+  });
+}
+
+void encode_vtp(const Mesh& mesh, AtomicFile& out) {
+  const uint64_t n = mesh.positions.size(), m = mesh.triangles.size();
+  const bool wide = 3 * m > static_cast<uint64_t>(std::numeric_limits<int32_t>::max());
+  const uint64_t index_bytes = wide ? 8 : 4;
+  const char* index_type = wide ? "Int64" : "Int32";
+  const uint64_t normals_at = 0, points_at = normals_at + 8 + 12 * n, connectivity_at = points_at + 8 + 12 * n,
+                 offsets_at = connectivity_at + 8 + 3 * m * index_bytes;
+  const auto array = [](const char* type, const char* name, int components, uint64_t offset) {
+    return std::string("        <DataArray type=\"") + type + "\" Name=\"" + name + "\" NumberOfComponents=\"" +
+           std::to_string(components) + "\" format=\"appended\" offset=\"" + std::to_string(offset) + "\"/>\n";
+  };
+  write_text(
+      out, "<?xml version=\"1.0\"?>\n<!-- written by isotope " ISOTOPE_VERSION_STRING
+           " -->\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" "
+           "header_type=\"UInt64\">\n  <PolyData>\n    <Piece NumberOfPoints=\"" +
+               std::to_string(n) + "\" NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"" +
+               std::to_string(m) + "\">\n      <PointData Normals=\"Normals\">\n" +
+               array("Float32", "Normals", 3, normals_at) + "      </PointData>\n      <Points>\n" +
+               array("Float32", "Points", 3, points_at) + "      </Points>\n      <Polys>\n" +
+               array(index_type, "connectivity", 1, connectivity_at) + array(index_type, "offsets", 1, offsets_at) +
+               "      </Polys>\n    </Piece>\n  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _");
+  std::array<unsigned char, 8> count;
+  put_le(count.data(), uint64_t{12 * n});
+  out.write(count.data(), 8);
+  write_records(out, vertex_normals(mesh), 12, put_vec3);
+  out.write(count.data(), 8);
+  write_records(out, mesh.positions, 12, put_vec3);
+  if (wide)
+    encode_vtp_polys<int64_t>(mesh, out);
+  else
+    encode_vtp_polys<int32_t>(mesh, out);
+  write_text(out, "\n  </AppendedData>\n</VTKFile>\n");
+}
+
+}  // namespace
+
+std::optional<MeshFormat> mesh_format_of(const std::string& path) {
+  const std::string ext = lowercase_extension(path);
+  if (ext == ".ply") return MeshFormat::ply;
+  if (ext == ".obj") return MeshFormat::obj;
+  if (ext == ".stl") return MeshFormat::stl;
+  if (ext == ".glb") return MeshFormat::glb;
+  if (ext == ".vtp") return MeshFormat::vtp;
+  return std::nullopt;
+}
+
+std::string unknown_mesh_format_message(const std::string& path) {
+  const std::string ext = lowercase_extension(path);
+  return path + ": " +
+         (ext.empty() ? std::string("no extension to choose a mesh format by") : "unknown mesh format '" + ext + "'") +
+         " (use .ply, .obj, .stl, .glb or .vtp)";
+}
+
+void write_mesh(const Mesh& mesh, AtomicFile& out, MeshFormat format) {
+  check_indices(mesh, out.path());
+  switch (format) {
+    case MeshFormat::ply: encode_ply(mesh, out); break;
+    case MeshFormat::obj: encode_obj(mesh, out); break;
+    case MeshFormat::stl: encode_stl(mesh, out); break;
+    case MeshFormat::glb: encode_glb(mesh, out); break;
+    case MeshFormat::vtp: encode_vtp(mesh, out); break;
+  }
+  out.finish();
+}
+
+void write_ply(const Mesh& mesh, AtomicFile& out) { write_mesh(mesh, out, MeshFormat::ply); }
+
+void write_ply(const Mesh& mesh, const std::string& path) {
+  check_count(mesh.positions.size(), std::numeric_limits<int32_t>::max(), path, "vertices", "PLY int index");
+  AtomicFile out(path);
+  write_ply(mesh, out);
+  out.commit();
+}
+
+void write_mesh(const Mesh& mesh, const std::string& path) {
+  const std::optional<MeshFormat> format = mesh_format_of(path);
+  if (!format) throw IoError(unknown_mesh_format_message(path));
+  AtomicFile out(path);
+  write_mesh(mesh, out, *format);
+  out.commit();
+}
+
+}  // namespace isotope

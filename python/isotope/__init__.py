@@ -1,0 +1,131 @@
+"""isotope: multiresolution isosurface extraction with topology control, out of core, on all cores.
+
+Three lines from a numpy array to a mesh:
+
+    import isotope
+    mesh = isotope.extract(volume, iso=64.5, eps=4)   # volume[z, y, x], or a file's path
+    mesh.save("surface.glb")                          # .ply .obj .stl .glb .vtp
+
+``mesh.vertices`` is (n, 3) float32 (x, y, z), ``mesh.faces`` (m, 3) uint32, ``mesh.normals``
+(n, 3) float32 and ``mesh.stats`` a dict. A numpy array is indexed ``a[z, y, x]``, as numpy, HDF5
+and scikit-image users expect; the mesh's columns are x, y, z, in physical coordinates
+(``origin + spacing * index``, both given in x, y, z order). A float32 array in C order is read
+where it is, without a copy; uint8, uint16, int16 and float64 are converted once.
+
+The work runs with the GIL released; Ctrl-C stops it. Errors are raised with the words of the
+command line: ``isotope.IoError`` (an OSError) for files, ``isotope.OptionError`` (a ValueError,
+with ``.option``) for options out of range, ValueError for arrays that are not volumes.
+"""
+
+import os
+from numbers import Integral, Real
+
+import numpy as np
+
+from . import _isotope
+from ._isotope import IoError, Mesh, OptionError, __version__
+
+__all__ = ["extract", "convert", "Store", "Mesh", "IoError", "OptionError", "__version__"]
+
+
+def _option_error(name, message):
+    error = OptionError(f"{name} {message}")
+    error.option = name
+    return error
+
+
+def _option_text(name, value):
+    """A Python value as the text the library's one option parser reads (isotope/extract.h)."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, bool):
+        raise _option_error(name, f"must be a number or a name, got {value!r}")
+    if isinstance(value, Integral):
+        return str(int(value))
+    if isinstance(value, Real):
+        return repr(float(value))  # shortest text that reads back as the same double
+    if name == "focus":
+        return ",".join(_option_text(name, v) for v in value)
+    raise _option_error(name, f"must be a number, got {value!r}")
+
+
+def _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles):
+    given = {"iso": iso, "eps": eps, "topology": topology, "error": error, "weight": weight, "delta": delta,
+             "focus": focus, "radius": radius, "max-triangles": max_triangles}
+    return [(name, _option_text(name, value)) for name, value in given.items() if value is not None]
+
+
+def _input(volume):
+    if isinstance(volume, np.ndarray):
+        return volume
+    if isinstance(volume, (str, os.PathLike)):
+        return os.fspath(volume)
+    return np.asarray(volume)  # an h5py dataset, a zarr array, nested lists
+
+
+def _triple(name, value, kind):
+    if value is None:
+        return None
+    value = tuple(value)
+    if len(value) != 3:
+        raise _option_error(name, f"must have three values (x, y, z), got {len(value)}")
+    return tuple(kind(v) for v in value)
+
+
+class Store:
+    """An input opened once and extracted from as often as needed.
+
+    ``input`` is a store made by :func:`convert` (read out of core: only the bricks an extraction
+    reaches, through a cache of ``cache_mb``), a volume file (raw ``NAME_XxYxZ_TYPE.raw`` or any
+    raw with ``dims=(x, y, z)`` and ``type``, ``FILE.h5:/dataset``, NRRD, a TIFF stack) or a numpy
+    array ``a[z, y, x]``. A volume is held in memory; its hierarchy is built on the first
+    extraction that needs one (eps > 0), reporting to ``progress(fraction)``.
+    """
+
+    def __init__(self, input, *, dims=None, type=None, spacing=None, origin=None, cache_mb=512, progress=None):
+        self._source = _isotope.Source(_input(input), _triple("dims", dims, int), type,
+                                       _triple("spacing", spacing, float), _triple("origin", origin, float),
+                                       int(cache_mb), progress)
+
+    @property
+    def info(self):
+        """What the input is (dims in x, y, z; shape as numpy indexes it) and what was read so far."""
+        return self._source.info
+
+    def extract(self, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
+                radius=None, max_triangles=None, threads=0):
+        """The isosurface at ``iso`` (inside means value > iso), as a :class:`Mesh`.
+
+        ``eps`` (data units) is the coarse surface's error bound (0: full resolution, marching
+        tetrahedra on every cell). ``topology``: ``"preserve"`` (the exact rule: components and
+        Euler characteristic of eps = 0 kept), ``"simplify"`` (features of weight below ``delta``
+        may go; ``weight`` = interval, gradient or size), ``"paper"`` or ``"none"``. ``focus`` =
+        (x, y, z) and ``radius``: full resolution at the point, eps from radius on.
+        ``max_triangles``: the finest eps whose mesh fits (with simplify and no delta, delta
+        too). ``threads``: 0 for all cores.
+        """
+        options = _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles)
+        return self._source.extract(options, int(threads))
+
+
+def extract(volume, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
+            radius=None, max_triangles=None, dims=None, type=None, spacing=None, origin=None, cache_mb=512,
+            threads=0, progress=None):
+    """One extraction: ``Store(volume, ...).extract(iso, ...)``; see :class:`Store`."""
+    store = Store(volume, dims=dims, type=type, spacing=spacing, origin=origin, cache_mb=cache_mb, progress=progress)
+    return store.extract(iso, eps=eps, topology=topology, error=error, weight=weight, delta=delta, focus=focus,
+                         radius=radius, max_triangles=max_triangles, threads=threads)
+
+
+def convert(volume, output, *, dims=None, type=None, spacing=None, origin=None, memory_mb=1024, zstd_level=3,
+            brick_bits=4, quantize_bits=0, threads=0, progress=None):
+    """A volume (a file, as :class:`Store` takes, or an array) into a store at ``output``.
+
+    The store holds the hierarchy in compressed, checksummed bricks, so that later extractions
+    read only what they reach. ``memory_mb`` bounds the conversion's memory whatever the volume's
+    size; ``quantize_bits`` 8 or 16 stores float values as codes (the error bound grows by half a
+    code step). Written atomically. Returns what it measured (a dict).
+    """
+    return _isotope.convert(_input(volume), os.fspath(output), _triple("dims", dims, int), type,
+                            _triple("spacing", spacing, float), _triple("origin", origin, float), int(memory_mb),
+                            int(zstd_level), int(brick_bits), int(quantize_bits), int(threads), progress)

@@ -1,0 +1,397 @@
+// isotope._isotope: the Python face of the library (include/isotope/isotope.h), wrapped by
+// python/isotope/__init__.py. What it adds to the C++ API, and only that:
+// - numpy arrays a[z, y, x] as volumes: float32 C-contiguous ones read where they are
+//   (Volume::borrowed, the array held alive by the Python object), other dtypes converted once;
+// - meshes as numpy views of the C++ arrays, without a copy;
+// - the GIL released while the library works, which it does on a thread of its own, so that the
+//   calling thread can hear Ctrl-C (Python handles signals on the main thread only) and cancel;
+// - progress reported to a Python callable; an exception it raises cancels the work and is raised;
+// - the library's exceptions as Python's, with the library's words: IoError (an OSError),
+//   OptionError (a ValueError) naming the option, ValueError, RuntimeError.
+// Options are parsed by the one parser every face uses (isotope/extract.h), from the text Python
+// hands over (python/isotope/__init__.py, _option_text).
+#include <oneapi/tbb/global_control.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <exception>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <isotope/isotope.h>
+
+namespace py = pybind11;
+
+namespace isotope::python {
+namespace {
+
+using TextOptions = std::vector<std::pair<std::string, std::string>>;
+
+// ---- work off the GIL, cancellable from Python ----
+
+// What a run shares with its callbacks: the cancel flag the library polls, and the first Python
+// exception a callback raised.
+struct RunState {
+  std::atomic<bool> cancel{false};
+  std::mutex error_mutex;
+  std::optional<py::error_already_set> error;
+};
+
+// A Python callable as a ProgressCallback: called under the GIL from whatever thread reports.
+// CALLBACK is held by pointer (it outlives the run: a PySource member or an argument of the call),
+// so that the library may copy the std::function on any thread without touching a reference count.
+ProgressCallback progress_of(const py::object& callback, RunState& state) {
+  if (callback.is_none()) return {};
+  return [callback = &callback, &state](double fraction) {
+    if (state.cancel.load()) return;
+    py::gil_scoped_acquire gil;
+    try {
+      (*callback)(fraction);
+    } catch (py::error_already_set& e) {
+      const std::lock_guard lock(state.error_mutex);
+      if (!state.error) state.error.emplace(std::move(e));
+      state.cancel = true;
+    }
+  };
+}
+
+// Runs WORK on a thread of its own with the GIL released, and waits for it here, checking for
+// signals every 50 ms: Ctrl-C sets the cancel flag (the library stops at its next piece or tile)
+// and raises KeyboardInterrupt once the work has stopped. THREADS > 0 bounds the library's threads.
+template <typename Work>
+auto run(RunState& state, int threads, Work work) -> decltype(work()) {
+  using Result = decltype(work());
+  std::future<Result> done;
+  {
+    py::gil_scoped_release release;
+    done = std::async(std::launch::async, [&]() -> Result {
+      std::optional<tbb::global_control> limit;
+      if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+      return work();
+    });
+  }
+  bool interrupted = false;
+  while (true) {
+    {
+      py::gil_scoped_release release;
+      if (done.wait_for(std::chrono::milliseconds(50)) == std::future_status::ready) break;
+    }
+    if (!interrupted && PyErr_CheckSignals() != 0) {  // a handler raised (KeyboardInterrupt): stop
+      interrupted = true;
+      state.cancel = true;
+    }
+  }
+  if (interrupted) {
+    try {
+      done.get();
+    } catch (...) {  // the cancellation's own exception: the signal's is the one to raise
+    }
+    throw py::error_already_set();
+  }
+  try {
+    return done.get();
+  } catch (const ExtractionCancelled&) {
+    if (state.error) throw std::move(*state.error);
+    throw;
+  } catch (const IoError&) {
+    if (state.error) throw std::move(*state.error);  // convert's cancellation is an IoError
+    throw;
+  }
+}
+
+// ---- arrays as volumes ----
+
+// A numpy array a[z, y, x] as a Volume: float32 in C order is borrowed (ARRAY must outlive the
+// Volume; the caller keeps it), any other supported dtype or layout converted to float32 once.
+Volume volume_of(const py::array& array, const std::optional<std::array<double, 3>>& spacing,
+                 const std::optional<std::array<double, 3>>& origin, py::object& keep_alive) {
+  if (array.ndim() != 3)
+    throw py::value_error("a volume is a 3-D array a[z, y, x], got " + std::to_string(array.ndim()) + " dimensions");
+  const std::string kind = py::str(array.dtype()).cast<std::string>();
+  static const std::vector<std::string> kSupported = {"uint8", "uint16", "int16", "float32", "float64"};
+  if (std::find(kSupported.begin(), kSupported.end(), kind) == kSupported.end())
+    throw py::type_error("isotope reads arrays of uint8, uint16, int16, float32 and float64, got " + kind +
+                         " (convert it with a.astype(numpy.float32))");
+  using Floats = py::array_t<float, py::array::c_style | py::array::forcecast>;
+  Floats floats = Floats::ensure(array);  // the same array when it is float32 in C order, else a copy
+  if (!floats) throw py::error_already_set();
+  keep_alive = floats;
+  Volume v;
+  v.dims = {floats.shape(2), floats.shape(1), floats.shape(0)};
+  if (spacing) v.spacing = *spacing;
+  if (origin) v.origin = *origin;
+  v.borrowed = std::span<const float>(floats.data(), static_cast<size_t>(floats.size()));
+  return v;
+}
+
+VolumeSpec spec_of(const std::string& path, const std::optional<std::array<int64_t, 3>>& dims,
+                   const std::optional<std::string>& type) {
+  VolumeSpec spec;
+  spec.path = path;
+  spec.dims = dims;
+  if (type) {
+    spec.type = parse_scalar_type(*type);
+    if (!spec.type) throw OptionError("type", "must be uint8, uint16, int16, float32 or float64, got '" + *type + "'");
+  }
+  return spec;
+}
+
+// ---- meshes ----
+
+// A mesh and what was measured of it; the numpy arrays are views of its memory.
+struct PyMesh {
+  Mesh mesh;
+  py::dict stats;
+  std::optional<py::array_t<float>> normals;  // computed on first use
+};
+
+template <typename T>
+py::array_t<T> view(const T* data, size_t rows, const py::object& owner) {
+  if (rows == 0) return py::array_t<T>(std::vector<py::ssize_t>{0, 3});
+  return py::array_t<T>({static_cast<py::ssize_t>(rows), py::ssize_t{3}},
+                        {static_cast<py::ssize_t>(3 * sizeof(T)), static_cast<py::ssize_t>(sizeof(T))}, data, owner);
+}
+
+py::dict stats_dict(const Mesh& mesh, const ExtractStats& s) {
+  py::dict d;
+  d["vertices"] = mesh.positions.size();
+  d["triangles"] = mesh.triangles.size();
+  d["seconds"] = s.seconds;
+  d["tets_visited"] = s.tets_visited;
+  d["tets_emitted"] = s.tets_emitted;
+  d["tets_simplified"] = s.tets_simplified;
+  d["chosen_eps"] = s.chosen_eps;
+  d["next_eps"] = s.next_eps;
+  d["next_triangles"] = s.next_triangles;
+  d["chosen_delta"] = s.chosen_delta;
+  return d;
+}
+
+py::dict info_dict(const SourceInfo& i) {
+  py::dict d;
+  d["store"] = i.store;
+  d["dims"] = i.dims;
+  d["shape"] = py::make_tuple(i.dims[2], i.dims[1], i.dims[0]);  // as numpy indexes it
+  d["spacing"] = i.spacing;
+  d["origin"] = i.origin;
+  d["lattice_k"] = i.lattice_k;
+  d["read_seconds"] = i.read_seconds;
+  d["preprocess_seconds"] = i.preprocess_seconds;
+  d["hierarchy_built"] = i.hierarchy_built;
+  d["critical_paper"] = i.critical_paper;
+  d["critical_exact"] = i.critical_exact;
+  d["input_bytes"] = i.input_bytes;
+  d["store_bytes"] = i.store_bytes;
+  d["cache_mb"] = i.cache_mb;
+  d["bytes_read"] = i.bytes_read;
+  d["bricks_read"] = i.bricks_read;
+  d["cache_hits"] = i.cache_hits;
+  return d;
+}
+
+// ---- sources ----
+
+// An opened input (isotope::Source) and the array it may borrow from.
+class PySource {
+ public:
+  PySource(const py::object& input, const std::optional<std::array<int64_t, 3>>& dims,
+           const std::optional<std::string>& type, const std::optional<std::array<double, 3>>& spacing,
+           const std::optional<std::array<double, 3>>& origin, int64_t cache_mb, const py::object& progress)
+      : progress_(progress) {
+    OpenOptions options;
+    options.cache_mb = cache_mb;
+    options.preprocess_progress = [this](double f) {
+      ProgressCallback report;
+      {  // copied, then called without the lock: it takes the GIL, which set_progress's caller holds
+        const std::lock_guard lock(progress_mutex_);
+        report = on_progress_;
+      }
+      if (report) report(f);
+    };
+    if (py::isinstance<py::array>(input)) {
+      if (dims || type) throw OptionError("dims", "is for raw files, not arrays (an array has its shape and dtype)");
+      Volume v = volume_of(input.cast<py::array>(), spacing, origin, array_);
+      source_ = std::make_shared<Source>(open_volume(std::move(v), options));
+    } else {
+      if (spacing || origin)
+        throw OptionError("spacing", "is for arrays; a file's header (NRRD, HDF5, a store) gives its geometry");
+      const VolumeSpec spec = spec_of(py::str(input).cast<std::string>(), dims, type);  // str or os.PathLike
+      RunState state;
+      source_ = run(state, 0, [&] { return std::make_shared<Source>(open_volume(spec, options)); });
+    }
+  }
+
+  py::object extract(const TextOptions& text, int threads) {
+    ExtractOptions options = parse_extract_options(text);
+    // As `isotope extract` does (tools/command_extract.cpp): a budget in simplify mode without a
+    // delta chooses delta too.
+    const bool has_delta = std::any_of(text.begin(), text.end(), [](const auto& p) { return p.first == "delta"; });
+    options.auto_delta = options.topology == TopologyMode::simplify && options.max_triangles > 0 && !has_delta;
+    RunState state;
+    options.cancel = &state.cancel;
+    set_progress(progress_of(progress_, state));
+    ExtractStats stats;
+    auto result = std::make_unique<PyMesh>();
+    try {
+      result->mesh = run(state, threads, [&] { return source_->extract(options, &stats); });
+    } catch (...) {
+      set_progress({});
+      throw;
+    }
+    set_progress({});
+    result->stats = stats_dict(result->mesh, stats);
+    return py::cast(std::move(result));
+  }
+
+  py::dict info() const { return info_dict(source_->info()); }
+
+ private:
+  void set_progress(ProgressCallback callback) {
+    const std::lock_guard lock(progress_mutex_);
+    on_progress_ = std::move(callback);
+  }
+
+  py::object array_;           // the array a volume borrows, if any
+  py::object progress_;        // a Python callable or None
+  std::mutex progress_mutex_;  // the hierarchy's build reports from a worker thread
+  ProgressCallback on_progress_;
+  std::shared_ptr<Source> source_;
+};
+
+py::dict convert_any(const py::object& input, const std::string& output,
+                     const std::optional<std::array<int64_t, 3>>& dims, const std::optional<std::string>& type,
+                     const std::optional<std::array<double, 3>>& spacing,
+                     const std::optional<std::array<double, 3>>& origin, int64_t memory_mb, int zstd_level,
+                     int brick_bits, int quantize_bits, int threads, const py::object& progress) {
+  RunState state;
+  ConvertOptions options;
+  options.memory_mb = memory_mb;
+  options.zstd_level = zstd_level;
+  options.brick_bits = brick_bits;
+  options.quantize_bits = quantize_bits;
+  options.progress = progress_of(progress, state);
+  options.cancel = &state.cancel;
+  ConvertStats s;
+  if (py::isinstance<py::array>(input)) {
+    py::object keep;
+    const Volume v = volume_of(input.cast<py::array>(), spacing, origin, keep);
+    s = run(state, threads, [&] { return convert(v, output, options); });
+  } else {
+    const VolumeSpec spec = spec_of(py::str(input).cast<std::string>(), dims, type);
+    s = run(state, threads, [&] { return convert(spec, output, options); });
+  }
+  py::dict d;
+  d["dims"] = s.dims;
+  d["type"] = s.type;
+  d["seconds"] = s.seconds;
+  d["input_bytes"] = s.input_bytes;
+  d["output_bytes"] = s.output_bytes;
+  d["bricks"] = s.bricks;
+  return d;
+}
+
+}  // namespace
+}  // namespace isotope::python
+
+PYBIND11_MODULE(_isotope, m) {
+  using namespace isotope;
+  using namespace isotope::python;
+  m.doc() = "isotope's C++ library; use the isotope package (python/isotope/__init__.py)";
+  m.attr("__version__") = ISOTOPE_VERSION_STRING;
+
+  static py::exception<IoError> io_error(m, "IoError", PyExc_OSError);
+  static py::exception<OptionError> option_error(m, "OptionError", PyExc_ValueError);
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const OptionError& e) {
+      py::object error = py::handle(option_error.ptr())(e.what());  // an instance, to carry .option
+      error.attr("option") = e.option;
+      PyErr_SetObject(option_error.ptr(), error.ptr());
+    } catch (const IoError& e) {
+      io_error(e.what());
+    } catch (const ExtractionCancelled& e) {
+      PyErr_SetString(PyExc_RuntimeError, e.what());
+    }
+  });
+
+  py::class_<PyMesh>(m, "Mesh", "A triangle mesh: numpy views of the library's arrays")
+      .def_property_readonly(
+          "vertices",
+          [](py::object self) {
+            const Mesh& mesh = self.cast<PyMesh&>().mesh;
+            return view(mesh.positions.empty() ? nullptr : mesh.positions[0].data(), mesh.positions.size(), self);
+          },
+          "(n, 3) float32: x, y, z of each vertex, in physical coordinates (origin + spacing * index)")
+      .def_property_readonly(
+          "faces",
+          [](py::object self) {
+            const Mesh& mesh = self.cast<PyMesh&>().mesh;
+            return view(mesh.triangles.empty() ? nullptr : mesh.triangles[0].data(), mesh.triangles.size(), self);
+          },
+          "(m, 3) uint32: vertex indices of each triangle, counter-clockwise seen from outside (values <= iso)")
+      .def_property_readonly(
+          "normals",
+          [](PyMesh& self) {
+            if (!self.normals) {
+              const auto n = vertex_normals(self.mesh);
+              py::array_t<float> a({static_cast<py::ssize_t>(n.size()), py::ssize_t{3}});
+              if (!n.empty()) std::memcpy(a.mutable_data(), n.data(), n.size() * sizeof(n[0]));
+              self.normals = a;
+            }
+            return *self.normals;
+          },
+          "(n, 3) float32: unit normal of each vertex, outward (area-weighted over its triangles)")
+      .def_readonly("stats", &PyMesh::stats, "what the extraction measured of itself")
+      .def(
+          "save",
+          [](const PyMesh& self, const py::object& path) {
+            const std::string p = py::str(path).cast<std::string>();
+            py::gil_scoped_release release;
+            write_mesh(self.mesh, p);
+          },
+          py::arg("path"), "Writes the mesh, its format by extension: .ply, .obj, .stl, .glb or .vtp (atomically)")
+      .def(
+          "topology",
+          [](const PyMesh& self) {
+            MeshTopology t;
+            {
+              py::gil_scoped_release release;
+              t = measure_topology(self.mesh);
+            }
+            py::dict d;
+            d["vertices"] = t.vertices;
+            d["triangles"] = t.triangles;
+            d["edges"] = t.edges;
+            d["components"] = t.components;
+            d["euler_characteristic"] = t.euler_characteristic;
+            d["boundary_edges"] = t.boundary_edges;
+            d["nonmanifold_edges"] = t.nonmanifold_edges;
+            return d;
+          },
+          "Components, Euler characteristic, boundary and non-manifold edges");
+
+  py::class_<PySource>(m, "Source")
+      .def(py::init<const py::object&, const std::optional<std::array<int64_t, 3>>&, const std::optional<std::string>&,
+                    const std::optional<std::array<double, 3>>&, const std::optional<std::array<double, 3>>&, int64_t,
+                    const py::object&>(),
+           py::arg("input"), py::arg("dims"), py::arg("type"), py::arg("spacing"), py::arg("origin"),
+           py::arg("cache_mb"), py::arg("progress"))
+      .def("extract", &PySource::extract, py::arg("options"), py::arg("threads"))
+      .def_property_readonly("info", &PySource::info);
+
+  m.def("convert", &convert_any, py::arg("input"), py::arg("output"), py::arg("dims"), py::arg("type"),
+        py::arg("spacing"), py::arg("origin"), py::arg("memory_mb"), py::arg("zstd_level"), py::arg("brick_bits"),
+        py::arg("quantize_bits"), py::arg("threads"), py::arg("progress"));
+}

@@ -1,0 +1,280 @@
+"""The Python face (python/isotope, python/src/module.cpp): the same meshes as the command, byte
+for byte; arrays of every supported dtype, borrowed when they are float32 in C order; stores and
+repeated extraction; progress, cancellation and the GIL; errors with the command's words; and,
+against scikit-image's marching_cubes on the same volume, the same enclosed volume and box."""
+
+import re
+import subprocess
+import threading
+import time
+import tracemalloc
+
+import numpy as np
+import pytest
+
+import isotope
+
+# (file, isovalue, a coarse eps in data units): every shared volume at its first suggested isovalue.
+VOLUMES = [
+    ("bolt_70x123x66_uint8.raw", 64.5, 8),
+    ("neghip_66x66x66_uint8.raw", 32.5, 8),
+    ("ironProt_68x68x68_uint8.raw", 32.5, 8),
+    ("hydrogen_64x64x64_float32.raw", 0.005, 0.01),
+    ("embryo_256x256x256_uint8.raw", 64.5, 16),
+]
+
+
+def load(data, name):
+    m = re.search(r"_(\d+)x(\d+)x(\d+)_(\w+)\.raw$", name)
+    x, y, z = (int(v) for v in m.group(1, 2, 3))
+    return np.fromfile(data / name, dtype=m.group(4)).reshape(z, y, x)  # a[z, y, x]
+
+
+def command(isotope_command, *args):
+    return subprocess.run([isotope_command, *args], capture_output=True, text=True)
+
+
+def cli_mesh(isotope_command, tmp_path, volume, iso, eps):
+    out = tmp_path / "cli.ply"
+    r = command(isotope_command, "extract", str(volume), "--iso", repr(iso), "--eps", repr(eps), "-q", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    return out.read_bytes()
+
+
+def ply_bytes(mesh, tmp_path, name="py.ply"):
+    mesh.save(tmp_path / name)
+    return (tmp_path / name).read_bytes()
+
+
+def test_three_lines_from_a_numpy_array(data):
+    volume = load(data, "bolt_70x123x66_uint8.raw")
+    mesh = isotope.extract(volume, iso=64.5, eps=4)
+    assert mesh.vertices.dtype == np.float32 and mesh.vertices.shape[1] == 3
+    assert mesh.faces.dtype == np.uint32 and mesh.faces.shape[1] == 3
+    assert mesh.normals.shape == mesh.vertices.shape
+    assert mesh.stats["triangles"] == len(mesh.faces) > 1000
+    assert mesh.faces.max() < len(mesh.vertices)
+    np.testing.assert_allclose(np.linalg.norm(mesh.normals, axis=1), 1, atol=1e-5)
+    # x, y, z columns: the box of a[z, y, x] is x < 70, y < 123, z < 66
+    assert (mesh.vertices.max(axis=0) <= [69, 122, 65]).all()
+    topology = mesh.topology()
+    assert topology["boundary_edges"] == 0 and topology["components"] >= 1
+
+
+@pytest.mark.parametrize("name,iso,coarse", VOLUMES, ids=[v[0].split("_")[0] for v in VOLUMES])
+def test_same_bytes_as_the_command_from_an_array_and_from_the_file(data, isotope_command, tmp_path, name, iso, coarse):
+    volume = load(data, name)
+    for eps in (0, coarse):
+        want = cli_mesh(isotope_command, tmp_path, data / name, iso, eps)
+        assert ply_bytes(isotope.extract(volume, iso=iso, eps=eps), tmp_path) == want, f"array, eps {eps}"
+        assert ply_bytes(isotope.extract(data / name, iso=iso, eps=eps), tmp_path) == want, f"file, eps {eps}"
+
+
+def test_every_dtype_and_layout_gives_the_same_mesh(data):
+    base = load(data, "neghip_66x66x66_uint8.raw")
+    want = isotope.extract(base, iso=32.5, eps=4)
+    for dtype in (np.uint8, np.uint16, np.int16, np.float32, np.float64):
+        got = isotope.extract(base.astype(dtype), iso=32.5, eps=4)
+        np.testing.assert_array_equal(got.vertices, want.vertices, err_msg=str(dtype))
+        np.testing.assert_array_equal(got.faces, want.faces, err_msg=str(dtype))
+    # A view that is not in C order (Fortran order, a reversed axis) is read as the values it shows.
+    fortran = np.asfortranarray(base.astype(np.float32))
+    np.testing.assert_array_equal(isotope.extract(fortran, iso=32.5, eps=4).faces, want.faces)
+    flipped = isotope.extract(base[:, :, ::-1], iso=32.5)
+    copied = isotope.extract(np.ascontiguousarray(base[:, :, ::-1]), iso=32.5)
+    np.testing.assert_array_equal(flipped.vertices, copied.vertices)
+
+
+def test_a_float32_array_in_c_order_is_read_without_a_copy(data):
+    floats = load(data, "embryo_256x256x256_uint8.raw").astype(np.float32)  # 64 MiB
+    tracemalloc.start()
+    try:
+        source = isotope.Store(floats)
+        _, borrowed_peak = tracemalloc.get_traced_memory()
+        tracemalloc.reset_peak()
+        converted = isotope.Store(floats.astype(np.float64))  # the float64 copy is made before tracing
+        del converted
+    finally:
+        tracemalloc.stop()
+    assert borrowed_peak < floats.nbytes // 100, borrowed_peak
+    assert source.info["dims"] == [256, 256, 256]
+    # and the borrowed array is held: the source outlives the name
+    del floats
+    assert len(source.extract(iso=64.5).faces) > 0
+
+
+def test_a_store_is_opened_once_and_extracted_from_repeatedly(data, tmp_path):
+    volume = load(data, "bolt_70x123x66_uint8.raw")
+    stats = isotope.convert(volume, tmp_path / "bolt.isotope", memory_mb=64)
+    assert stats["dims"] == [70, 123, 66] and stats["output_bytes"] > 0
+    store = isotope.Store(tmp_path / "bolt.isotope", cache_mb=16)
+    assert store.info["store"] and store.info["shape"] == (66, 123, 70)
+    for eps in (0, 8, 0):
+        a, b = store.extract(iso=64.5, eps=eps), isotope.extract(volume, iso=64.5, eps=eps)
+        np.testing.assert_array_equal(a.vertices, b.vertices)
+        np.testing.assert_array_equal(a.faces, b.faces)
+    assert store.info["bytes_read"] > 0
+    # the file converted by the command is the same store
+    isotope.convert(data / "bolt_70x123x66_uint8.raw", tmp_path / "from_file.isotope")
+    assert (tmp_path / "from_file.isotope").read_bytes() != b""
+
+
+def test_options_reach_the_library(data):
+    volume = load(data, "bolt_70x123x66_uint8.raw")
+    full = isotope.extract(volume, iso=64.5)
+    budget = isotope.extract(volume, iso=64.5, max_triangles=20000)
+    assert len(budget.faces) <= 20000 < len(full.faces) and budget.stats["chosen_eps"] > 0
+    simplified = isotope.extract(volume, iso=64.5, eps=32, topology="simplify", delta=50)
+    preserved = isotope.extract(volume, iso=64.5, eps=32)
+    assert len(simplified.faces) <= len(preserved.faces)
+    focused = isotope.extract(volume, iso=64.5, eps=32, focus=(35, 60, 30), radius=10)
+    assert len(preserved.faces) < len(focused.faces) < len(full.faces)
+    spaced = isotope.extract(volume, iso=64.5, spacing=(0.5, 0.5, 2), origin=(10, 0, 0))
+    np.testing.assert_allclose(spaced.vertices, full.vertices * [0.5, 0.5, 2] + [10, 0, 0], rtol=1e-6)
+
+
+def test_errors_carry_the_commands_words(data, isotope_command, tmp_path):
+    missing = str(tmp_path / "missing_8x8x8_uint8.raw")
+    with pytest.raises(isotope.IoError) as e:
+        isotope.extract(missing, iso=1)
+    cli = command(isotope_command, "extract", missing, "--iso", "1", "-o", str(tmp_path / "m.ply"))
+    assert cli.returncode == 1 and f"isotope: error: {e.value}" in cli.stderr
+    assert isinstance(e.value, OSError)
+
+    volume = load(data, "neghip_66x66x66_uint8.raw")
+    for option, value, flag in (("eps", -1, "--eps"), ("topology", "bogus", "--topology"),
+                                ("delta", 2, "--delta")):
+        with pytest.raises(isotope.OptionError) as e:
+            isotope.extract(volume, iso=30, **{option: value})
+        assert e.value.option == option
+        assert isinstance(e.value, ValueError)
+        cli = command(isotope_command, "extract", str(data / "neghip_66x66x66_uint8.raw"), "--iso", "30", flag,
+                      str(value), "-o", str(tmp_path / "m.ply"))
+        assert cli.returncode == 2
+        assert str(e.value)[len(option) + 1:] in cli.stderr, (str(e.value), cli.stderr)
+
+    with pytest.raises(ValueError, match="a volume is a 3-D array"):
+        isotope.extract(np.zeros((4, 4)), iso=0)
+    with pytest.raises(TypeError, match="got int32"):
+        isotope.extract(np.zeros((4, 4, 4), dtype=np.int32), iso=0)
+    with pytest.raises(ValueError, match="not finite"):
+        isotope.extract(np.full((4, 4, 4), np.nan, dtype=np.float32), iso=0)
+    with pytest.raises(isotope.IoError, match="unknown mesh format '.xyz'"):
+        isotope.extract(volume, iso=30).save(tmp_path / "m.xyz")
+    assert not (tmp_path / "m.xyz").exists()
+
+
+def test_progress_is_heard_and_an_exception_in_it_cancels(data, tmp_path):
+    volume = load(data, "embryo_256x256x256_uint8.raw")
+    heard = []
+    store = isotope.Store(volume, progress=heard.append)
+    store.extract(iso=64.5, eps=16)  # builds the hierarchy: the step that reports
+    assert len(heard) > 10 and heard == sorted(heard) and heard[-1] == 1.0
+
+    def stop(fraction):
+        if fraction > 0.2:
+            raise KeyError("stop here")
+
+    with pytest.raises(KeyError, match="stop here"):
+        isotope.convert(volume, tmp_path / "embryo.isotope", progress=stop)
+    assert list(tmp_path.iterdir()) == []  # nothing half-written
+
+
+def test_the_gil_is_released_while_the_library_works(data):
+    volume = load(data, "embryo_256x256x256_uint8.raw")
+    done = threading.Event()
+    result = {}
+
+    def work():
+        result["mesh"] = isotope.extract(volume, iso=64.5, eps=16)
+        done.set()
+
+    thread = threading.Thread(target=work)
+    ticks = 0
+    thread.start()
+    while not done.is_set():
+        ticks += 1
+        time.sleep(0.005)
+    thread.join()
+    assert len(result["mesh"].faces) > 0
+    assert ticks > 20  # about a second of work: this thread ran all along
+
+
+def test_every_mesh_format_is_written(data, tmp_path):
+    mesh = isotope.extract(load(data, "bolt_70x123x66_uint8.raw"), iso=64.5, eps=8)
+    for ext in ("ply", "obj", "stl", "glb", "vtp"):
+        mesh.save(tmp_path / f"bolt.{ext}")
+        assert (tmp_path / f"bolt.{ext}").stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"bolt.{e}" for e in ("glb", "obj", "ply", "stl", "vtp")]
+
+
+def test_a_tiff_stack_is_a_volume(data, tmp_path):
+    tifffile = pytest.importorskip("tifffile")  # python3-tifffile; a skip fails the run (conftest.py)
+    volume = load(data, "bolt_70x123x66_uint8.raw")
+    tifffile.imwrite(tmp_path / "bolt.tif", volume, compression="zlib", photometric="minisblack")  # one page per z
+    (tmp_path / "slices").mkdir()
+    for z in range(volume.shape[0]):
+        tifffile.imwrite(tmp_path / "slices" / f"bolt{z}.tif", volume[z], photometric="minisblack")
+    want = isotope.extract(volume, iso=64.5, eps=8)
+    for stack in (tmp_path / "bolt.tif", tmp_path / "slices"):
+        got = isotope.extract(stack, iso=64.5, eps=8)
+        np.testing.assert_array_equal(got.vertices, want.vertices)
+        np.testing.assert_array_equal(got.faces, want.faces)
+
+
+def enclosed_volume(vertices, faces):
+    v = vertices.astype(np.float64)
+    a, b, c = v[faces[:, 0]], v[faces[:, 1]], v[faces[:, 2]]
+    return abs(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6)
+
+
+def area(vertices, faces):
+    v = vertices.astype(np.float64)
+    return np.linalg.norm(np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]]), axis=1).sum() / 2
+
+
+@pytest.mark.parametrize("name,iso,coarse", VOLUMES, ids=[v[0].split("_")[0] for v in VOLUMES])
+def test_eps_zero_against_scikit_image_marching_cubes(data, name, iso, coarse):
+    from skimage import measure
+
+    # A border below the isovalue closes every surface, for both, so that volumes are defined.
+    volume = np.pad(load(data, name).astype(np.float32), 1, constant_values=min(0.0, iso - 1))
+    mesh = isotope.extract(volume, iso=iso)
+    verts, faces, _, _ = measure.marching_cubes(volume, level=iso)
+    verts = verts[:, ::-1]  # skimage gives (z, y, x)
+    ours, theirs = enclosed_volume(mesh.vertices, mesh.faces), enclosed_volume(verts, faces)
+    ratio = area(mesh.vertices, mesh.faces) / area(verts, faces)
+    print(f"\n{name} iso {iso}: enclosed volume {ours:.1f} vs {theirs:.1f} ({ours / theirs - 1:+.3%}), "
+          f"area ratio marching tetrahedra / cubes {ratio:.3f}, triangles {len(mesh.faces)} vs {len(faces)}")
+    assert abs(ours / theirs - 1) < 0.01
+    np.testing.assert_allclose(mesh.vertices.min(axis=0), verts.min(axis=0), atol=1)
+    np.testing.assert_allclose(mesh.vertices.max(axis=0), verts.max(axis=0), atol=1)
+
+
+def test_the_arrays_make_a_closed_vtk_surface(data):
+    """What the README hands to pyvista (a thin layer over VTK): points and [3, a, b, c, ...] cells."""
+    import vtk
+    from vtk.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+
+    mesh = isotope.extract(load(data, "bolt_70x123x66_uint8.raw"), iso=64.5, eps=8)
+    cells = np.column_stack([np.full(len(mesh.faces), 3), mesh.faces]).ravel()  # as in the README
+    points = vtk.vtkPoints()
+    points.SetData(numpy_to_vtk(mesh.vertices, deep=True))
+    polys = vtk.vtkCellArray()
+    polys.SetCells(len(mesh.faces), numpy_to_vtkIdTypeArray(cells.astype(np.int64), deep=True))
+    poly = vtk.vtkPolyData()
+    poly.SetPoints(points)
+    poly.SetPolys(polys)
+    edges = vtk.vtkFeatureEdges()
+    edges.SetInputData(poly)
+    edges.BoundaryEdgesOn()
+    edges.NonManifoldEdgesOn()
+    edges.FeatureEdgesOff()
+    edges.ManifoldEdgesOff()
+    edges.Update()
+    assert poly.GetNumberOfCells() == len(mesh.faces)
+    assert edges.GetOutput().GetNumberOfCells() == 0  # closed and manifold, as VTK sees it
+    mass = vtk.vtkMassProperties()
+    mass.SetInputData(poly)
+    mass.Update()
+    assert abs(mass.GetVolume() - enclosed_volume(mesh.vertices, mesh.faces)) < 1e-3 * mass.GetVolume()
