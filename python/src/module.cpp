@@ -18,14 +18,17 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstring>
 #include <exception>
+#include <functional>
 #include <future>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <span>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -66,20 +69,59 @@ ProgressCallback progress_of(const py::object& callback, RunState& state) {
   };
 }
 
-// Runs WORK on a thread of its own with the GIL released, and waits for it here, checking for
+// The thread the library's work runs on, one per calling Python thread, kept for the life of the
+// process: a fresh thread per call would start with a cold malloc arena and a cold oneTBB slot,
+// which cost bolt's 4 ms extraction 2 ms and its 42 ms coarse one 11 ms (bench/python_overhead.py).
+// Leaked on purpose: the detached thread waits on it until the process ends.
+class Worker {
+ public:
+  Worker() {
+    std::thread([this] { loop(); }).detach();
+  }
+  void submit(std::function<void()> job) {
+    const std::lock_guard lock(mutex_);
+    job_ = std::move(job);
+    wake_.notify_one();
+  }
+
+ private:
+  [[noreturn]] void loop() {
+    for (;;) {
+      std::function<void()> job;
+      {
+        std::unique_lock lock(mutex_);
+        wake_.wait(lock, [&] { return job_ != nullptr; });
+        job = std::exchange(job_, nullptr);
+      }
+      job();
+    }
+  }
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  std::function<void()> job_;
+};
+
+Worker& worker() {
+  thread_local Worker* const w = new Worker;
+  return *w;
+}
+
+// Runs WORK on this thread's worker with the GIL released, and waits for it here, checking for
 // signals every 50 ms: Ctrl-C sets the cancel flag (the library stops at its next piece or tile)
 // and raises KeyboardInterrupt once the work has stopped. THREADS > 0 bounds the library's threads.
 template <typename Work>
 auto run(RunState& state, int threads, Work work) -> decltype(work()) {
   using Result = decltype(work());
-  std::future<Result> done;
+  // Shared with the worker's copy of the job, so that neither thread frees it under the other.
+  const auto task = std::make_shared<std::packaged_task<Result()>>([&]() -> Result {
+    std::optional<tbb::global_control> limit;
+    if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    return work();
+  });
+  std::future<Result> done = task->get_future();
   {
     py::gil_scoped_release release;
-    done = std::async(std::launch::async, [&]() -> Result {
-      std::optional<tbb::global_control> limit;
-      if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
-      return work();
-    });
+    worker().submit([task] { (*task)(); });
   }
   bool interrupted = false;
   while (true) {
@@ -211,14 +253,15 @@ class PySource {
       : progress_(progress) {
     OpenOptions options;
     options.cache_mb = cache_mb;
-    options.preprocess_progress = [this](double f) {
-      ProgressCallback report;
-      {  // copied, then called without the lock: it takes the GIL, which set_progress's caller holds
-        const std::lock_guard lock(progress_mutex_);
-        report = on_progress_;
-      }
-      if (report) report(f);
-    };
+    if (!progress.is_none())  // none: the build counts nothing
+      options.preprocess_progress = [this](double f) {
+        ProgressCallback report;
+        {  // copied, then called without the lock: it takes the GIL, which set_progress's caller holds
+          const std::lock_guard lock(progress_mutex_);
+          report = on_progress_;
+        }
+        if (report) report(f);
+      };
     if (py::isinstance<py::array>(input)) {
       if (dims || type) throw OptionError("dims", "is for raw files, not arrays (an array has its shape and dtype)");
       Volume v = volume_of(input.cast<py::array>(), spacing, origin, array_);

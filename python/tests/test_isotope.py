@@ -278,3 +278,25 @@ def test_the_arrays_make_a_closed_vtk_surface(data):
     mass.SetInputData(poly)
     mass.Update()
     assert abs(mass.GetVolume() - enclosed_volume(mesh.vertices, mesh.faces)) < 1e-3 * mass.GetVolume()
+
+
+def test_ctrl_c_stops_the_work_and_leaves_nothing(data, tmp_path):
+    import signal
+    import sys
+
+    script = ("import sys, numpy as np, isotope\n"
+              "a = np.fromfile(sys.argv[1], np.uint8).reshape(256, 256, 256)\n"
+              "print('ready', flush=True)\n"
+              "isotope.convert(a, sys.argv[2])\n"
+              "print('finished', flush=True)\n")
+    output = tmp_path / "embryo.isotope"
+    child = subprocess.Popen([sys.executable, "-c", script, str(data / "embryo_256x256x256_uint8.raw"), str(output)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert child.stdout.readline().strip() == "ready"
+    time.sleep(0.3)  # convert takes about a second here
+    start = time.monotonic()
+    child.send_signal(signal.SIGINT)
+    out, err = child.communicate(timeout=30)
+    assert "KeyboardInterrupt" in err and "finished" not in out, (out, err)
+    assert time.monotonic() - start < 1.0  # stopped at its next tile, not at the end
+    assert list(tmp_path.iterdir()) == []
