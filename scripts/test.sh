@@ -10,7 +10,7 @@ cd "$(dirname "$0")/.."
 jobs=$(nproc)
 bash scripts/install-deps.sh --tests
 log=$(mktemp)
-trap 'rm -f "$log"' EXIT
+trap 'rm -f "$log" "$log.pytest"' EXIT
 run_ctest() { ctest "$@" | tee -a "$log"; }
 phase() { echo "== [${SECONDS} s] $*"; }
 

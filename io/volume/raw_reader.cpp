@@ -188,7 +188,7 @@ int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes
 }
 
 void check_finite(const Volume& volume, const std::string& file) {
-  check_finite(volume.values.data(), {0, 0, 0}, volume.dims, file);
+  check_finite(volume.data(), {0, 0, 0}, volume.dims, file);
 }
 
 void check_finite(const float* values, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,

@@ -86,7 +86,8 @@ class TiffFile {
     TIFFOpenOptionsFree(options);
     if (!tif_) fail("not a readable TIFF file");
     std::error_code ec;
-    size_ = fs::file_size(path, ec);
+    const uintmax_t size = fs::file_size(path, ec);
+    size_ = ec ? 0 : size;  // unknown: every page's data is then refused as missing
   }
   ~TiffFile() {
     if (tif_) TIFFClose(tif_);
@@ -164,8 +165,9 @@ uint64_t max_expansion(uint16_t compression) {
   }
 }
 
-// The current page's strips or tiles hold enough bytes for the values its header claims.
-void check_page_data(const TiffFile& file, const PageFormat& f, const std::string& page) {
+// The current page's strips or tiles hold enough bytes for the values its header claims; returns
+// those values' bytes.
+uint64_t check_page_data(const TiffFile& file, const PageFormat& f, const std::string& page) {
   TIFF* tif = file.get();
   uint16_t compression = COMPRESSION_NONE;
   TIFFGetFieldDefaulted(tif, TIFFTAG_COMPRESSION, &compression);
@@ -178,15 +180,19 @@ void check_page_data(const TiffFile& file, const PageFormat& f, const std::strin
   }
   const uint64_t decoded = uint64_t{f.width} * f.height * static_cast<uint64_t>(scalar_type_size(f.type));
   if (file.had_error()) file.fail(page + ": a damaged directory");
+  stored = std::min(stored, file.size());  // strips may overlap: a page holds at most the file
   if (decoded / max_expansion(compression) > stored)
     file.fail(page + ": its strips hold " + std::to_string(stored) + " bytes, too few for " + describe(f) +
               " values (a damaged or lying header)");
+  return decoded;
 }
 
 struct Stack {
   std::string where;               // the path the user named
   std::vector<std::string> files;  // one per slice; a multi-page file once
   bool multipage = false;
+  std::vector<toff_t> directories;  // a multi-page file: where each page's directory is, to go
+                                    // straight to it (TIFFSetDirectory walks the chain from page 0)
   PageFormat format;
   int64_t pages = 0;
 };
@@ -231,9 +237,14 @@ Stack open_stack(const std::string& path) {
     s.files = {path};
     s.multipage = true;
     const TiffFile file(path, path);
+    uint64_t claimed = 0;  // the pages' values, in bytes: pages may share their strips
     do {
       const PageFormat f = page_format(file);
-      check_page_data(file, f, "page " + std::to_string(s.pages));
+      claimed += check_page_data(file, f, "page " + std::to_string(s.pages));
+      s.directories.push_back(TIFFCurrentDirOffset(file.get()));
+      if (claimed / max_expansion(COMPRESSION_LZMA) > file.size())
+        file.fail("its pages claim " + std::to_string(claimed) + " bytes of values, more than " +
+                  std::to_string(file.size()) + " bytes could hold (pages sharing their strips?)");
       if (s.pages == 0) s.format = f;
       if (f != s.format)
         file.fail("page " + std::to_string(s.pages) + " is " + describe(f) + ", where page 0 is " + describe(s.format) +
@@ -265,8 +276,10 @@ class TiffBoxReader final : public BoxReader {
       const int64_t z = lo[2] + k;
       float* slice = out + k * size[0] * size[1];
       if (multipage) {
-        if (!TIFFSetDirectory(multipage->get(), static_cast<tdir_t>(z)))
+        if (!TIFFSetSubDirectory(multipage->get(), stack_.directories[static_cast<size_t>(z)]))
           multipage->fail("page " + std::to_string(z) + " cannot be read");
+        if (page_format(*multipage) != stack_.format)  // the file may have been replaced since
+          multipage->fail("page " + std::to_string(z) + " changed since the stack was opened");
         read_rows(*multipage, lo, size, slice, buffer, "page " + std::to_string(z));
       } else {
         const TiffFile file(stack_.files[static_cast<size_t>(z)], stack_.files[static_cast<size_t>(z)]);

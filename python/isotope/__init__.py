@@ -102,7 +102,8 @@ class Store:
         may go; ``weight`` = interval, gradient or size), ``"paper"`` or ``"none"``. ``focus`` =
         (x, y, z) and ``radius``: full resolution at the point, eps from radius on.
         ``max_triangles``: the finest eps whose mesh fits (with simplify and no delta, delta
-        too). ``threads``: 0 for all cores.
+        too). ``threads``: 0 for all cores; a limit holds for the whole process while the call
+        runs (oneTBB's), so concurrent calls share it.
         """
         options = _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles)
         return self._source.extract(options, int(threads))

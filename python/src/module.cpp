@@ -14,6 +14,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -54,9 +55,12 @@ struct RunState {
 // A Python callable as a ProgressCallback: called under the GIL from whatever thread reports.
 // CALLBACK is held by pointer (it outlives the run: a PySource member or an argument of the call),
 // so that the library may copy the std::function on any thread without touching a reference count.
-ProgressCallback progress_of(const py::object& callback, RunState& state) {
+// STATE is shared: a hierarchy's build, shared by the extractions of one Source, may report to a
+// call's callback after that call has returned.
+ProgressCallback progress_of(const py::object& callback, const std::shared_ptr<RunState>& shared) {
   if (callback.is_none()) return {};
-  return [callback = &callback, &state](double fraction) {
+  return [callback = &callback, shared](double fraction) {
+    RunState& state = *shared;
     if (state.cancel.load()) return;
     py::gil_scoped_acquire gil;
     try {
@@ -69,10 +73,9 @@ ProgressCallback progress_of(const py::object& callback, RunState& state) {
   };
 }
 
-// The thread the library's work runs on, one per calling Python thread, kept for the life of the
-// process: a fresh thread per call would start with a cold malloc arena and a cold oneTBB slot,
-// which cost bolt's 4 ms extraction 2 ms and its 42 ms coarse one 11 ms (bench/python_overhead.py).
-// Leaked on purpose: the detached thread waits on it until the process ends.
+// The thread the library's work runs on, one per calling Python thread, kept while that thread
+// lives: a fresh thread per call would start with a cold malloc arena and a cold oneTBB slot, which
+// cost bolt's 4 ms extraction 2 ms and its 42 ms coarse one 11 ms (bench/python_overhead.py).
 class Worker {
  public:
   Worker() {
@@ -83,27 +86,49 @@ class Worker {
     job_ = std::move(job);
     wake_.notify_one();
   }
+  // The thread ends after any job in hand and deletes this (nothing joins a detached thread).
+  void stop() {
+    const std::lock_guard lock(mutex_);
+    stop_ = true;
+    wake_.notify_one();
+  }
 
  private:
-  [[noreturn]] void loop() {
+  void loop() {
     for (;;) {
       std::function<void()> job;
       {
         std::unique_lock lock(mutex_);
-        wake_.wait(lock, [&] { return job_ != nullptr; });
+        wake_.wait(lock, [&] { return job_ != nullptr || stop_; });
+        if (!job_) break;
         job = std::exchange(job_, nullptr);
       }
       job();
     }
+    delete this;
   }
   std::mutex mutex_;
   std::condition_variable wake_;
   std::function<void()> job_;
+  bool stop_ = false;
 };
 
+// This thread's worker: stopped when the thread ends, made again in a forked child (which inherits
+// the pointer but not the thread: multiprocessing forks on Linux).
 Worker& worker() {
-  thread_local Worker* const w = new Worker;
-  return *w;
+  struct Handle {
+    Worker* worker = nullptr;
+    pid_t pid = 0;
+    ~Handle() {
+      if (worker != nullptr && pid == ::getpid()) worker->stop();
+    }
+  };
+  thread_local Handle handle;
+  if (handle.worker == nullptr || handle.pid != ::getpid()) {
+    handle.worker = new Worker;
+    handle.pid = ::getpid();
+  }
+  return *handle.worker;
 }
 
 // Runs WORK on this thread's worker with the GIL released, and waits for it here, checking for
@@ -142,7 +167,11 @@ auto run(RunState& state, int threads, Work work) -> decltype(work()) {
     throw py::error_already_set();
   }
   try {
-    return done.get();
+    Result result = done.get();
+    // A callback that raised at its last report, or during a step that cannot be cancelled (the
+    // hierarchy's build), still has its exception raised.
+    if (state.error) throw std::move(*state.error);
+    return result;
   } catch (const ExtractionCancelled&) {
     if (state.error) throw std::move(*state.error);
     throw;
@@ -166,7 +195,9 @@ Volume volume_of(const py::array& array, const std::optional<std::array<double, 
     throw py::type_error("isotope reads arrays of uint8, uint16, int16, float32 and float64, got " + kind +
                          " (convert it with a.astype(numpy.float32))");
   using Floats = py::array_t<float, py::array::c_style | py::array::forcecast>;
-  Floats floats = Floats::ensure(array);  // the same array when it is float32 in C order, else a copy
+  // The same array when it is float32 in C order and aligned, else a copy.
+  const bool aligned = (array.flags() & py::detail::npy_api::NPY_ARRAY_ALIGNED_) != 0;
+  Floats floats = Floats::ensure(aligned ? array : py::array(array.attr("copy")()));
   if (!floats) throw py::error_already_set();
   keep_alive = floats;
   Volume v;
@@ -201,8 +232,13 @@ struct PyMesh {
 template <typename T>
 py::array_t<T> view(const T* data, size_t rows, const py::object& owner) {
   if (rows == 0) return py::array_t<T>(std::vector<py::ssize_t>{0, 3});
-  return py::array_t<T>({static_cast<py::ssize_t>(rows), py::ssize_t{3}},
-                        {static_cast<py::ssize_t>(3 * sizeof(T)), static_cast<py::ssize_t>(sizeof(T))}, data, owner);
+  // Read-only: an index written out of range would make normals(), topology() and save() read
+  // outside the mesh (and save() runs without the GIL). Copy to edit: mesh.faces.copy().
+  py::array_t<T> a =
+      py::array_t<T>({static_cast<py::ssize_t>(rows), py::ssize_t{3}},
+                     {static_cast<py::ssize_t>(3 * sizeof(T)), static_cast<py::ssize_t>(sizeof(T))}, data, owner);
+  a.attr("setflags")(py::arg("write") = false);
+  return a;
 }
 
 py::dict stats_dict(const Mesh& mesh, const ExtractStats& s) {
@@ -281,9 +317,10 @@ class PySource {
     // delta chooses delta too.
     const bool has_delta = std::any_of(text.begin(), text.end(), [](const auto& p) { return p.first == "delta"; });
     options.auto_delta = options.topology == TopologyMode::simplify && options.max_triangles > 0 && !has_delta;
-    RunState state;
+    const auto shared = std::make_shared<RunState>();
+    RunState& state = *shared;
     options.cancel = &state.cancel;
-    set_progress(progress_of(progress_, state));
+    set_progress(progress_of(progress_, shared));
     ExtractStats stats;
     auto result = std::make_unique<PyMesh>();
     try {
@@ -297,7 +334,14 @@ class PySource {
     return py::cast(std::move(result));
   }
 
-  py::dict info() const { return info_dict(source_->info()); }
+  py::dict info() const {
+    SourceInfo i;
+    {  // it waits for a hierarchy being built, whose progress callback may wait for the GIL
+      py::gil_scoped_release release;
+      i = source_->info();
+    }
+    return info_dict(i);
+  }
 
  private:
   void set_progress(ProgressCallback callback) {
@@ -317,13 +361,14 @@ py::dict convert_any(const py::object& input, const std::string& output,
                      const std::optional<std::array<double, 3>>& spacing,
                      const std::optional<std::array<double, 3>>& origin, int64_t memory_mb, int zstd_level,
                      int brick_bits, int quantize_bits, int threads, const py::object& progress) {
-  RunState state;
+  const auto shared = std::make_shared<RunState>();
+  RunState& state = *shared;
   ConvertOptions options;
   options.memory_mb = memory_mb;
   options.zstd_level = zstd_level;
   options.brick_bits = brick_bits;
   options.quantize_bits = quantize_bits;
-  options.progress = progress_of(progress, state);
+  options.progress = progress_of(progress, shared);
   options.cancel = &state.cancel;
   ConvertStats s;
   if (py::isinstance<py::array>(input)) {

@@ -8,7 +8,7 @@ are stored as they are, or as their shortest exact text):
 - .glb through the Khronos glTF validator (npm, tests/formats/package-lock.json): no error, no
   warning, its counts, and the bounds of the position accessor, whose min and max it checks
   against the data.
-Run by ctest (tests/CMakeLists.txt) with ISOTOPE pointing at the command.
+Run by scripts/test.sh (pytest) with ISOTOPE pointing at the command.
 """
 
 import json
