@@ -83,9 +83,8 @@ int run_extract(const ExtractArgs& a) {
                                    {"radius", a.radius}})
     if (!text.empty()) given.emplace_back(name, text);
   if (a.max_triangles > 0) given.emplace_back("max-triangles", std::to_string(a.max_triangles));
+  // A budget in simplify mode without a delta chooses delta too (the parser sets auto_delta).
   run.options = parse_command_line_options(given);
-  // A budget in simplify mode without a delta: delta is chosen too, dropping the smallest features.
-  run.options.auto_delta = run.options.topology == TopologyMode::simplify && a.max_triangles > 0 && a.delta.empty();
   if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
   // Below 2^-11 (about 0.00049) voxel spacings the comparison's sampling grid of a 2^19-node axis would overflow
   // (engine/topology/component_report.cpp): refused here, before the work, not after it.

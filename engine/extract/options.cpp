@@ -126,6 +126,8 @@ ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, st
   if (has("focus") != has("radius"))
     throw OptionError(has("focus") ? "radius" : "focus",
                       has("focus") ? "is required with focus" : "is required with radius");
+  // A budget in simplify mode without a delta chooses delta too (isotope/extract.h, auto_delta).
+  o.auto_delta = o.topology == TopologyMode::simplify && o.max_triangles > 0 && !has("delta");
   o.validate();
   return o;
 }

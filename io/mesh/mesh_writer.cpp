@@ -36,6 +36,12 @@ unsigned char* put_le(unsigned char* p, T value) {
 
 void write_text(AtomicFile& out, const std::string& text) { out.write(text.data(), text.size()); }
 
+void write_u64(AtomicFile& out, uint64_t value) {
+  std::array<unsigned char, 8> bytes;
+  put_le(bytes.data(), value);
+  out.write(bytes.data(), bytes.size());
+}
+
 // A dangling index would make a file other tools reject (or, for the formats that store corners,
 // read outside the positions): refused before anything is encoded.
 void check_indices(const Mesh& mesh, const std::string& path) {
@@ -262,15 +268,12 @@ void encode_glb(const Mesh& mesh, AtomicFile& out) {
 template <typename Index>
 void encode_vtp_polys(const Mesh& mesh, AtomicFile& out) {
   const uint64_t m = mesh.triangles.size();
-  std::array<unsigned char, 8> count;
-  put_le(count.data(), uint64_t{3 * m * sizeof(Index)});
-  out.write(count.data(), 8);
+  write_u64(out, 3 * m * sizeof(Index));
   write_records(out, mesh.triangles, 3 * sizeof(Index), [](unsigned char* p, const std::array<uint32_t, 3>& t) {
     for (uint32_t v : t) p = put_le(p, static_cast<Index>(v));
     return p;
   });
-  put_le(count.data(), uint64_t{m * sizeof(Index)});
-  out.write(count.data(), 8);
+  write_u64(out, m * sizeof(Index));
   write_blocks(out, m, [](size_t begin, size_t end, Bytes& buffer) {
     buffer.resize((end - begin) * sizeof(Index));
     unsigned char* p = buffer.data();
@@ -299,11 +302,9 @@ void encode_vtp(const Mesh& mesh, AtomicFile& out) {
                array("Float32", "Points", 3, points_at) + "      </Points>\n      <Polys>\n" +
                array(index_type, "connectivity", 1, connectivity_at) + array(index_type, "offsets", 1, offsets_at) +
                "      </Polys>\n    </Piece>\n  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _");
-  std::array<unsigned char, 8> count;
-  put_le(count.data(), uint64_t{12 * n});
-  out.write(count.data(), 8);
+  write_u64(out, 12 * n);
   write_records(out, vertex_normals(mesh), 12, put_vec3);
-  out.write(count.data(), 8);
+  write_u64(out, 12 * n);
   write_records(out, mesh.positions, 12, put_vec3);
   if (wide)
     encode_vtp_polys<int64_t>(mesh, out);

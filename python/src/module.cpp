@@ -313,10 +313,6 @@ class PySource {
 
   py::object extract(const TextOptions& text, int threads) {
     ExtractOptions options = parse_extract_options(text);
-    // As `isotope extract` does (tools/command_extract.cpp): a budget in simplify mode without a
-    // delta chooses delta too.
-    const bool has_delta = std::any_of(text.begin(), text.end(), [](const auto& p) { return p.first == "delta"; });
-    options.auto_delta = options.topology == TopologyMode::simplify && options.max_triangles > 0 && !has_delta;
     const auto shared = std::make_shared<RunState>();
     RunState& state = *shared;
     options.cancel = &state.cancel;
@@ -419,14 +415,14 @@ PYBIND11_MODULE(_isotope, m) {
           "vertices",
           [](py::object self) {
             const Mesh& mesh = self.cast<PyMesh&>().mesh;
-            return view(mesh.positions.empty() ? nullptr : mesh.positions[0].data(), mesh.positions.size(), self);
+            return view(reinterpret_cast<const float*>(mesh.positions.data()), mesh.positions.size(), self);
           },
           "(n, 3) float32: x, y, z of each vertex, in physical coordinates (origin + spacing * index)")
       .def_property_readonly(
           "faces",
           [](py::object self) {
             const Mesh& mesh = self.cast<PyMesh&>().mesh;
-            return view(mesh.triangles.empty() ? nullptr : mesh.triangles[0].data(), mesh.triangles.size(), self);
+            return view(reinterpret_cast<const uint32_t*>(mesh.triangles.data()), mesh.triangles.size(), self);
           },
           "(m, 3) uint32: vertex indices of each triangle, counter-clockwise seen from outside (values <= iso)")
       .def_property_readonly(
