@@ -2,7 +2,7 @@
 # Installs what building isotope needs on Debian/Ubuntu, and the viewer's npm packages
 # (viewer/package-lock.json). With --tests, also what the tests need: Chromium, for the viewer's
 # end-to-end test, scikit-image, the peer the bench runs, clang-14 with libFuzzer, pytest, VTK's
-# Python readers and the glTF validator (tests/formats/package-lock.json). Does nothing (and needs no network) when everything is already installed.
+# Python readers, the glTF validator (tests/formats/package-lock.json) and Open MPI. Does nothing (and needs no network) when everything is already installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -23,9 +23,12 @@ if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+
 # runtime libraries (libFuzzer, the sanitizers): the fuzz targets of fuzz/ (scripts/fuzz.sh).
 # clang-format: the style check (scripts/format.sh --check). python3-pytest, python3-vtk9 (VTK's
 # readers: the mesh formats read back, tests/formats) and python3-tifffile (TIFF stacks written by
-# the Python tests).
+# the Python tests). libopenmpi-dev and openmpi-bin: the build finds MPI and makes `mpirun -n R
+# isotope` share its work (dist/, optional: without them the command runs as one process), which
+# tests/mpi checks.
 if [ "${1:-}" = "--tests" ]; then
-  packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format python3-pytest python3-vtk9 python3-tifffile)
+  packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format python3-pytest python3-vtk9 python3-tifffile
+    libopenmpi-dev openmpi-bin)
 fi
 
 missing=()

@@ -10,6 +10,7 @@ Exits 1 when a row does not hold. Run by scripts/reliability.sh (which builds an
     python3 scripts/reliability.py --isotope build/tools/isotope [--fuzz-stats FILE] [--out FILE]
 """
 import argparse
+import json
 import os
 import random
 import re
@@ -280,6 +281,44 @@ def cli_numbers(iso, work, volume):
         expect_refusal(r, [iso] + args, d, code=2, message=named)
 
 
+KILL_RANK_1 = """#!/bin/sh
+if [ "$OMPI_COMM_WORLD_RANK" = 1 ]; then exec timeout -s KILL 0.5 "$@"; fi
+exec "$@"
+"""
+
+
+def distributed(iso, work):
+    """`mpirun -n 2 isotope ...` (docs/DISTRIBUTED.md): a rank that fails stops both with its message, a
+    rank that is killed ends the job, and neither leaves a file behind."""
+    os.environ.update(OMPI_ALLOW_RUN_AS_ROOT='1', OMPI_ALLOW_RUN_AS_ROOT_CONFIRM='1')
+    mpirun = ['mpirun', '--oversubscribe', '-n', '2']
+    d = os.path.join(work, 'mpi')
+    os.makedirs(d)
+    embryo = os.path.join(ROOT, '..', 'shared', 'data', 'embryo_256x256x256_uint8.raw')
+    store = os.path.join(d, 'embryo.isotope')
+    subprocess.run([iso, 'convert', embryo, store, '--quiet'], check=True)
+    band0 = json.loads(subprocess.run([iso, 'info', store, '--json'], check=True, capture_output=True,
+                                      text=True).stdout)['band_detail'][0]['bytes']
+    data = bytearray(open(store, 'rb').read())
+    for at in range(1024 + int(0.98 * band0), 1024 + band0, 4096):  # bricks only the last of 2 ranks reads
+        data[at] ^= 0xFF
+    open(store, 'wb').write(bytes(data))
+    r = add(Row('Across ranks', '`mpirun -n 2 isotope extract`: bricks only rank 1 reads are corrupt'))
+    expect_refusal(r, mpirun + [iso, 'extract', 'embryo.isotope', '--iso', '50', '--eps', '4', '--threads', '1',
+                                '-o', 'm.ply'], d, code=1, message='rank 1 of 2: ')
+    wrapper = os.path.join(work, 'kill1.sh')
+    open(wrapper, 'w').write(KILL_RANK_1)
+    os.chmod(wrapper, 0o755)
+    raw = os.path.join(d, 'noise_321x321x321_float32.raw')
+    subprocess.run([iso, 'generate', 'noise', '--size', '321', '-q', '-o', raw], check=True)
+    r = add(Row('Across ranks', '`mpirun -n 2 isotope convert`: rank 1 killed (SIGKILL) half a second in'))
+    expect_refusal(r, mpirun + [wrapper, iso, 'convert', os.path.basename(raw), 's.isotope', '--threads', '1',
+                                '--memory-mb', '16'], d, code=137, message='exited on signal 9')
+    r = add(Row('Across ranks', '`--parts DIR` and `-o` both given'))
+    expect_refusal(r, mpirun + [iso, 'extract', 'embryo.isotope', '--iso', '50', '--parts', 'p', '-o', 'm.ply'], d,
+                   code=2, message='--parts')
+
+
 def http(port, raw, timeout=10):
     s = socket.create_connection(('127.0.0.1', port), timeout=timeout)
     s.sendall(raw)
@@ -441,6 +480,9 @@ def write_table(out, fuzz_seconds):
              'request lines and headers, 2 extractions at once and 16 waiting, 503 with Retry-After beyond.',
              '- **Command line** (tools/commands.h): every numeric option checked at parse time, with a message '
              'that names the option and its range; exit 2.',
+             '- **Across ranks** (docs/DISTRIBUTED.md): under `mpirun`, a rank whose work fails stops every rank at '
+             'the next step they share, and rank 0 prints the failing rank\'s message once; a killed rank ends the '
+             'job (the others remove their temporary files on SIGTERM); nothing is left behind either way.',
              '', '## What was tried', '',
              '| | what | tried | gets | message | holds |', '|---|---|---:|---|---|---|']
     category = None
@@ -478,6 +520,7 @@ def main():
         reject_files(iso, work)
         store = random_corruptions(iso, work, volume, args.random)
         cli_numbers(iso, work, volume)
+        distributed(iso, work)
         http_abuse(iso, work, store)
     fuzz_rows(args.fuzz_stats)
     bad = write_table(args.out, args.fuzz_seconds)

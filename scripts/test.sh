@@ -41,13 +41,14 @@ build-examples/extract_array build-examples/sphere.ply
 # a virtual environment that sees Debian's numpy, scikit-image and VTK; setup.py builds the module
 # in build-ci (the library is not compiled again). Then pytest: the module against the command and
 # scikit-image (python/tests), and every mesh format read back by readers that are not ours
-# (tests/formats: VTK, the Khronos glTF validator, numpy).
-phase "Python module (pip install ./python into build-ci/venv), pytest: python/tests, tests/formats"
+# (tests/formats: VTK, the Khronos glTF validator, numpy). And `mpirun -n 1..4 isotope` against one
+# process (tests/mpi: Open MPI, oversubscribed on this machine's cores).
+phase "Python module (pip install ./python into build-ci/venv), pytest: python/tests, tests/formats, tests/mpi"
 rm -rf build-ci/venv
 /usr/bin/python3 -m venv --system-site-packages build-ci/venv
 ISOTOPE_BUILD_DIR="$PWD/build-ci" build-ci/venv/bin/pip install --no-build-isolation --no-index -q ./python
 rm -rf python/build python/*.egg-info
-ISOTOPE="$PWD/build-ci/tools/isotope" build-ci/venv/bin/python -m pytest -p no:cacheprovider -ra python/tests tests/formats \
+ISOTOPE="$PWD/build-ci/tools/isotope" build-ci/venv/bin/python -m pytest -p no:cacheprovider -ra python/tests tests/formats tests/mpi \
   | tee "$log.pytest"
 
 phase "RelWithDebInfo, address,undefined sanitizers (build-asan)"
@@ -79,10 +80,10 @@ run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "sl
 phase "RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF
-cmake --build build-tsan --target test_determinism test_store test_paged_extract test_exact_full_resolution test_serve -j "$jobs"
+cmake --build build-tsan --target test_determinism test_distribution test_store test_paged_extract test_exact_full_resolution test_serve -j "$jobs"
 phase "TSan tests"
 TSAN_OPTIONS="halt_on_error=1 suppressions=$PWD/tests/tsan.supp" run_ctest --test-dir build-tsan --output-on-failure --no-tests=error \
-  -R 'Determinism|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount|Serve\.|Supersession\.'
+  -R 'Determinism|SettleTogether\.|Distributed(Extract|Store)\.|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount|Serve\.|Supersession\.'
 
 # Every parser fuzzed for a bounded time (clang-14, libFuzzer, ASan+UBSan; build-fuzz), then the
 # hostile-user table of docs/RELIABILITY.md regenerated into a scratch file: CI fails when a row of

@@ -19,6 +19,7 @@
 #include <string>
 #include <thread>
 
+#include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
 #include "engine/topology/component_report.h"
 #include "io/file/atomic_file.h"
@@ -49,6 +50,7 @@ struct ExtractArgs {
   std::string dims;
   std::string type;
   std::string output;
+  std::string parts;  // --parts DIR: one .vtp per rank and DIR/mesh.pvtp
   std::string report;
   int threads = 0;
   int64_t cache_mb = 512;
@@ -62,10 +64,57 @@ struct ExtractArgs {
 // every cell), from the same source, so a store is read out of core again.
 ExtractOptions full_resolution(const ExtractOptions& o) {
   ExtractOptions full;
+  full.distribution = o.distribution;  // shared among the same processes
   full.iso = o.iso;
   full.eps = 0;
   full.topology = TopologyMode::none;
   return full;
+}
+
+int write_outputs(const ExtractArgs& a, ExtractionRun& run, Mesh& mesh, const Mesh& full);
+
+// --parts DIR: every rank writes its share's mesh as DIR/part-RRRRR.vtp, all of them finished
+// before any is renamed into place, then rank 0 names them in DIR/mesh.pvtp, which ParaView opens
+// as one dataset (docs/DISTRIBUTED.md).
+int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh) {
+  const Distribution* group = process_group();
+  const int rank = group ? group->rank() : 0, ranks = group ? group->ranks() : 1;
+  auto part_name = [](int r) {
+    char name[32];
+    std::snprintf(name, sizeof name, "part-%05d.vtp", r);
+    return std::string(name);
+  };
+  const std::filesystem::path dir(a.parts);
+  std::optional<AtomicFile> part;
+  on_every_rank([&] {
+    part.emplace((dir / part_name(rank)).string());
+    write_mesh(mesh, *part, MeshFormat::vtp);
+    part->finish();
+  });
+  on_every_rank([&] { part->commit(); });
+  int64_t vertices = static_cast<int64_t>(mesh.positions.size()),
+          triangles = static_cast<int64_t>(mesh.triangles.size());
+  if (group) {  // the totals, for the summary: each rank's counts ride in a load's fields
+    RankLoad counts;
+    counts.work = vertices;
+    counts.items = triangles;
+    vertices = triangles = 0;
+    for (const RankLoad& c : gather_loads(*group, counts)) vertices += c.work, triangles += c.items;
+  }
+  const std::string manifest = (dir / "mesh.pvtp").string();
+  on_every_rank([&] {
+    if (!speaking_rank()) return;
+    std::vector<std::string> pieces;
+    for (int r = 0; r < ranks; ++r) pieces.push_back(part_name(r));
+    write_pvtp(pieces, manifest);
+  });
+  if (!a.quiet && speaking_rank())
+    std::printf(
+        "%s: %d part%s, %lld triangles, %lld vertices (those on a boundary between parts in both); extract "
+        "%.3f s%s\n",
+        manifest.c_str(), ranks, ranks == 1 ? "" : "s", static_cast<long long>(triangles),
+        static_cast<long long>(vertices), run.extract_seconds, balance_text(run.extract.ranks).c_str());
+  return 0;
 }
 
 int run_extract(const ExtractArgs& a) {
@@ -86,6 +135,9 @@ int run_extract(const ExtractArgs& a) {
   // A budget in simplify mode without a delta chooses delta too (the parser sets auto_delta).
   run.options = parse_command_line_options(given);
   if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
+  if (a.output.empty() == a.parts.empty()) throw CLI::ValidationError("-o", "give either -o MESH or --parts DIR");
+  if (!a.parts.empty() && !a.report.empty())
+    throw CLI::ValidationError("--report", "needs one mesh (-o); --parts leaves it in pieces");
   // Below 2^-11 (about 0.00049) voxel spacings the comparison's sampling grid of a 2^19-node axis would overflow
   // (engine/topology/component_report.cpp): refused here, before the work, not after it.
   if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6) {
@@ -103,7 +155,15 @@ int run_extract(const ExtractArgs& a) {
       throw IoError("cannot write '" + *path + "': directory '" + dir.string() + "' does not exist");
     }
   }
-  check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
+  if (a.parts.empty()) {
+    check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
+  } else {  // the folder: made by rank 0 if need be, before the work
+    on_every_rank([&] {
+      if (speaking_rank()) std::filesystem::create_directories(a.parts);
+    });
+    if (!std::filesystem::is_directory(a.parts))
+      throw IoError("cannot write '" + a.parts + "': not a directory (on every rank's file system)");
+  }
 
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) {
@@ -111,9 +171,15 @@ int run_extract(const ExtractArgs& a) {
   }
   run.threads = static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 
+  // Under mpirun every rank opens the input and extracts its share; rank 0 gets the mesh and does
+  // the rest (docs/DISTRIBUTED.md). Each step that one rank may fail alone is settled among all.
+  run.options.distribution = process_group();
+  run.options.keep_shares = !a.parts.empty();
   Mesh mesh, full;
   {  // scoped: the input's memory (volume or brick cache) is given back before measuring and writing
-    const Source input = open_input(a.input, a.dims, a.type, a.cache_mb, progress);
+    std::optional<Source> opened;
+    on_every_rank([&] { opened.emplace(open_input(a.input, a.dims, a.type, a.cache_mb, progress)); });
+    const Source& input = *opened;
     const auto start = std::chrono::steady_clock::now();
     mesh = input.extract(run.options, &run.extract);
     const double elapsed = seconds_since(start);
@@ -127,6 +193,16 @@ int run_extract(const ExtractArgs& a) {
       run.compare_seconds = seconds_since(compare_start);
     }
   }
+  if (!a.parts.empty()) return write_parts(a, run, mesh);
+  int code = 0;
+  on_every_rank([&] {
+    if (speaking_rank()) code = write_outputs(a, run, mesh, full);
+  });
+  return code;
+}
+
+// Rank 0's (or the one process's) part: measure the mesh, write it and the report.
+int write_outputs(const ExtractArgs& a, ExtractionRun& run, Mesh& mesh, const Mesh& full) {
   // Both outputs are written to temporary files and finished (flushed to disk) before either is
   // renamed into place (io/file/atomic_file.h): a failure on the way, a full disk included, leaves the
   // files named by -o and --report as they were. On more than one thread the mesh is written while
@@ -232,10 +308,13 @@ Command add_extract_command(CLI::App& app) {
   cmd->add_option("-o,--output", a->output,
                   "Output mesh, its format by extension: .ply (binary), .obj, .stl (binary), .glb (glTF), .vtp "
                   "(ParaView)")
-      ->required()
       ->check(CLI::Validator(
           [](std::string& s) -> std::string { return mesh_format_of(s) ? "" : unknown_mesh_format_message(s); }, ""))
       ->type_name("MESH");
+  cmd->add_option("--parts", a->parts,
+                  "Instead of -o: the mesh in parts, one per rank under mpirun (DIR/part-00000.vtp, ...), and "
+                  "DIR/mesh.pvtp naming them, which ParaView opens as one (docs/DISTRIBUTED.md)")
+      ->type_name("DIR");
   cmd->add_option("--report", a->report,
                   "Write a JSON report: counts, timings, and per connected component its triangles, Euler "
                   "characteristic, genus, bounding box, area and volume")

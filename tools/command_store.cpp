@@ -56,11 +56,17 @@ int run_convert(const ConvertArgs& a) {
   options.zstd_level = a.zstd_level;
   options.quantize_bits = a.quantize;
   options.brick_bits = a.brick_bits;
+  options.distribution = process_group();  // under mpirun: the ranks share the tiles (docs/DISTRIBUTED.md)
   if (progress_enabled(a.quiet)) options.progress = progress_bar("converting");
-  const InterruptGuard guard;  // stops the convert between tiles; its temporary output is removed
-  options.cancel = &InterruptGuard::flag();
+  // Alone: Ctrl-C stops the convert between tiles, and its temporary output is removed as it
+  // unwinds. Under mpirun the signal ends the rank at once instead (tools/main.cpp).
+  std::optional<InterruptGuard> guard;
+  if (!process_group()) {
+    guard.emplace();
+    options.cancel = &InterruptGuard::flag();
+  }
   const ConvertStats s = convert(input, a.output, options);
-  if (!a.quiet) {
+  if (!a.quiet && speaking_rank()) {
     const auto& d = s.dims;
     std::printf(
         "%s: %lldx%lldx%lld %s, %lld bricks, %.1f MB (%.3fx the input's %.1f MB); %.2f s, %.1f MB/s\n",

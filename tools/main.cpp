@@ -12,6 +12,15 @@
 #include "isotope/extract.h"  // OptionError
 #include "isotope/version.h"
 #include "tools/commands.h"
+#include "tools/support/command_line.h"
+#ifdef ISOTOPE_HAVE_MPI
+#include <unistd.h>
+
+#include <optional>
+
+#include "dist/mpi_distribution.h"
+#include "io/file/temporary_registry.h"
+#endif
 
 // Under AddressSanitizer (CI): fontconfig, which PLplot's cairo driver reaches through pango
 // for `sweep --plot`, keeps a process-lifetime cache that LeakSanitizer reports as leaked. It
@@ -25,6 +34,29 @@ int main(int argc, char** argv) {
   // through a write; ignored, the write fails with EFBIG and the output's own error path runs
   // (io/file/atomic_file.h: the message, the temporary removed, the target left as it was).
   std::signal(SIGXFSZ, SIG_IGN);
+#ifdef ISOTOPE_HAVE_MPI
+  // Started by mpirun (or srun): every rank runs the command, sharing its work
+  // (docs/DISTRIBUTED.md); only rank 0 prints. Started otherwise: no MPI at all.
+  std::optional<isotope::MpiSession> mpi;
+  if (isotope::MpiSession::launched()) {
+    try {
+      mpi.emplace(&argc, &argv);
+    } catch (const std::exception& e) {
+      std::cerr << "isotope: error: " << e.what() << '\n';
+      return 1;
+    }
+    set_process_group(&mpi->world());
+    // mpirun ends the other ranks of a job one of whose ranks failed or was killed with SIGTERM
+    // (then SIGKILL): a rank blocked in a collective cannot unwind, so its temporary files go here
+    // (io/file/temporary_registry.h) and it ends at once. Ctrl-C reaches the ranks the same way.
+    for (int sig : {SIGTERM, SIGINT})
+      std::signal(sig, [](int s) {
+        isotope::remove_temporaries_now();
+        _exit(128 + s);
+      });
+  }
+#endif
+  const bool speaks = speaking_rank();
   CLI::App app{"isotope " ISOTOPE_VERSION_STRING
                ": multiresolution isosurface extraction with topology control\n"
                "(Gerstner & Pajarola, IEEE Visualization 2000)"};
@@ -58,17 +90,22 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("serve")) return serve();
     return 2;  // unreachable: require_subcommand(1)
   } catch (const CLI::ParseError& e) {
-    const int code = app.exit(e);            // prints help, version or the usage message
+    // Every rank of a group parses the same words: rank 0 speaks for all.
+    const int code = speaks ? app.exit(e) : e.get_exit_code();  // prints help, version or the usage message
     return code == 0 ? 0 : 2;                // CLI11's own codes (105, 106, ...) are all usage errors here
   } catch (const isotope::OptionError& e) {  // the library's word for an option out of range
-    std::cerr << "isotope: usage error: --" << e.option << ": " << e.message
-              << "\nRun 'isotope --help' or 'isotope COMMAND --help'.\n";
+    if (speaks)
+      std::cerr << "isotope: usage error: --" << e.option << ": " << e.message
+                << "\nRun 'isotope --help' or 'isotope COMMAND --help'.\n";
     return 2;
+  } catch (const isotope::DistributedError& e) {  // every rank throws it; rank 0 says it once
+    if (speaks) std::cerr << "isotope: " << (e.usage_error ? "usage error: " : "error: ") << e.what() << '\n';
+    return e.usage_error ? 2 : 1;
   } catch (const std::bad_alloc&) {
-    std::cerr << "isotope: error: out of memory\n";
+    if (speaks) std::cerr << "isotope: error: out of memory\n";
     return 1;
   } catch (const std::exception& e) {
-    std::cerr << "isotope: error: " << e.what() << '\n';
+    if (speaks) std::cerr << "isotope: error: " << e.what() << '\n';
     return 1;
   }
 }

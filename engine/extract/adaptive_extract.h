@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "engine/core/parallel.h"
+#include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
 #include "engine/extract/finest_extract.h"
 #include "engine/extract/traversal.h"
@@ -36,31 +37,42 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     in_codes.delta = options.delta / weight_scale[static_cast<size_t>(options.weight)];
   }
   ExtractStats total;
-  if (options.auto_delta) {
-    // Half the budget for the features kept, half for the geometry around them; when even with
-    // every feature dropped the coarsest mesh takes more than half, all of it for the features.
-    const double weight_scale[3] = {scale, scale * scale, 1.0};
-    in_codes.delta = 0;
-    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
-    BudgetChoice d;
-    try {
-      d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
-    } catch (const std::runtime_error&) {
-      d = choose_delta_for_budget(source, rule, options.max_triangles);
+  const Distribution* group = options.distribution;
+  // Distributed, each step that may fail runs under settle_together, so that a rank whose read
+  // fails stops every rank instead of leaving them waiting at the next gather.
+  auto together = [group](const auto& work) {
+    if (group)
+      settle_together(*group, work);
+    else
+      work();
+  };
+  together([&] {
+    if (options.auto_delta) {
+      // Half the budget for the features kept, half for the geometry around them; when even with
+      // every feature dropped the coarsest mesh takes more than half, all of it for the features.
+      const double weight_scale[3] = {scale, scale * scale, 1.0};
+      in_codes.delta = 0;
+      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+      BudgetChoice d;
+      try {
+        d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
+      } catch (const std::runtime_error&) {
+        d = choose_delta_for_budget(source, rule, options.max_triangles);
+      }
+      in_codes.delta = d.eps;
+      total.chosen_delta = d.eps * weight_scale[static_cast<size_t>(options.weight)];
+      total.delta_floor_triangles = d.triangles;
     }
-    in_codes.delta = d.eps;
-    total.chosen_delta = d.eps * weight_scale[static_cast<size_t>(options.weight)];
-    total.delta_floor_triangles = d.triangles;
-  }
-  if (options.max_triangles > 0) {
-    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
-    const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);
-    in_codes.eps = c.eps;
-    total.chosen_eps = c.eps * scale;
-    total.next_eps = c.next_eps * scale;
-    total.next_triangles = c.next_triangles;
-    total.budget_steps = c.steps;
-  }
+    if (options.max_triangles > 0) {
+      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+      const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);
+      in_codes.eps = c.eps;
+      total.chosen_eps = c.eps * scale;
+      total.next_eps = c.next_eps * scale;
+      total.next_triangles = c.next_triangles;
+      total.budget_steps = c.steps;
+    }
+  });
   const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
   auto finish = [&](Mesh mesh) {
     if (stats) {
@@ -72,27 +84,64 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   if (in_codes.eps == 0 && finest_extract_applies(source.lattice()))
     return finish(extract_finest(source, rule, &total));
   std::vector<Piece> pieces;
-  {  // scoped: a paged source's reader lets its bricks go before the pieces run
-    Traversal<Source> top(source, rule);
-    pieces = top.split(std::min(kPieceLevel, source.lattice().max_level()));
-    total.tets_visited = top.tets_visited();
-    total.tets_simplified = top.tets_simplified();
-  }
-  std::vector<PartMesh> parts(pieces.size());
-  parallel_for_in_order(int64_t{0}, static_cast<int64_t>(pieces.size()), [&](int64_t i) {
-    throw_if_cancelled(rule.options());
-    Traversal<Source> t(source, rule);
-    t.keep_keys();
-    t.run(pieces[static_cast<size_t>(i)]);
-    PartMesh& part = parts[static_cast<size_t>(i)];
-    const Piece& piece = pieces[static_cast<size_t>(i)];
-    part.region = {unpack(piece.tet[0]), unpack(piece.tet[1]), unpack(piece.tet[2]), unpack(piece.tet[3])};
-    part.tets_visited = t.tets_visited();
-    part.tets_emitted = t.tets_emitted();
-    part.tets_simplified = t.tets_simplified();
-    part.keys = t.take_keys();
-    part.mesh = t.take();
+  // Spread over processes: this one runs its share of the pieces, and rank 0 welds them all
+  // (engine/extract/distributed_parts.h). Every other rank returns an empty mesh.
+  std::vector<size_t> shares;
+  std::vector<double> costs;
+  together([&] {
+    {  // scoped: a paged source's reader lets its bricks go before the pieces run
+      Traversal<Source> top(source, rule);
+      pieces = top.split(std::min(kPieceLevel, source.lattice().max_level()));
+      total.tets_visited = top.tets_visited();
+      total.tets_simplified = top.tets_simplified();
+    }
   });
+  shares = {0, pieces.size()};
+  if (group) {
+    costs = share_costs(*group, pieces.size(), [&](size_t first, size_t last, double* out) {
+      piece_costs(source, rule, pieces, first, last, out);
+    });
+    shares = share_by_cost(costs, group->ranks());
+  }
+  const size_t first = shares[static_cast<size_t>(group ? group->rank() : 0)];
+  const size_t last = shares[static_cast<size_t>(group ? group->rank() : 0) + 1];
+  const auto work_start = std::chrono::steady_clock::now();
+  double work_seconds = 0;  // this process's share of the pieces, without waiting for the others
+  std::vector<PartMesh> parts(last - first);
+  auto run_share = [&] {
+    parallel_for_in_order(int64_t{0}, static_cast<int64_t>(parts.size()), [&](int64_t j) {
+      const int64_t i = static_cast<int64_t>(first) + j;
+      throw_if_cancelled(rule.options());
+      Traversal<Source> t(source, rule);
+      t.keep_keys();
+      t.run(pieces[static_cast<size_t>(i)]);
+      PartMesh& part = parts[static_cast<size_t>(j)];
+      const Piece& piece = pieces[static_cast<size_t>(i)];
+      part.region = {unpack(piece.tet[0]), unpack(piece.tet[1]), unpack(piece.tet[2]), unpack(piece.tet[3])};
+      part.tets_visited = t.tets_visited();
+      part.tets_emitted = t.tets_emitted();
+      part.tets_simplified = t.tets_simplified();
+      part.keys = t.take_keys();
+      part.mesh = t.take();
+    });
+    work_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - work_start).count();
+  };
+  if (group) {
+    RankLoad load;
+    settle_together(*group, run_share);
+    for (size_t i = first; i < last; ++i) load.cost += costs[i];
+    for (const PartMesh& p : parts) load.work += p.tets_visited;
+    load.items = static_cast<int64_t>(last - first);
+    load.seconds = work_seconds;
+    if constexpr (requires { source.bytes_read(); }) load.bytes_read = source.bytes_read();
+    total.ranks = gather_loads(*group, load);
+    if (!options.keep_shares) {
+      parts = gather_parts(*group, std::move(parts));
+      if (group->rank() != 0) return finish(Mesh{});
+    }
+  } else {
+    run_share();
+  }
   for (const PartMesh& p : parts) {
     total.tets_visited += p.tets_visited;
     total.tets_emitted += p.tets_emitted;

@@ -9,10 +9,12 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <vector>
 
 #include "engine/extract/block_march.h"
+#include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
 #include "engine/extract/slab_march.h"
 #include "engine/extract/traversal.h"
@@ -37,6 +39,77 @@ inline bool cut_by(const float* f, int64_t stride, const std::array<int64_t, 3>&
   return below && above;
 }
 
+// The cost of each slab of `plan`, for sharing them among processes: from the records of the
+// cube diamonds of scale 2 (the blocks' own, cubes of 8 cells a side, in band 2: 1/64 of the
+// data), the cells of the cubes the isovalue may cut. Coarser cubes (scale 3 or 4, 1/512 or
+// 1/4096 of the data) read less but left the largest of 4 ranks 1.46x the mean on embryo, against
+// 1.22x (docs/DISTRIBUTED.md). A source without records, or a cube whose centre lies beyond the
+// data: counted as cut.
+template <ValueSource Source>
+std::vector<double> slab_costs(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,
+                               const Distribution& group) {
+  const std::array<int64_t, 3>& dims = source.data_dims();
+  const int scale = std::min(source.lattice().k - 1, 2);
+  const int64_t cube = int64_t{2} << scale;
+  const auto layers = static_cast<size_t>((dims[2] - 1 + cube - 1) / cube);
+  // Per layer of cubes: the cells of its cut cubes. Each rank reads a share of the layers.
+  const std::vector<double> per_layer = share_costs(group, layers, [&](size_t first, size_t last, double* out) {
+    parallel_for(static_cast<int64_t>(first), static_cast<int64_t>(last), [&](int64_t l) {
+      auto reader = source.reader();
+      double cells = 0;
+      for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += cube)
+        for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += cube) {
+          const Coord centre{x0 + cube / 2, y0 + cube / 2, l * cube + cube / 2};
+          if constexpr (RecordReader<decltype(reader)>)
+            if (centre[0] < dims[0] && centre[1] < dims[1] && centre[2] < dims[2] &&
+                !rule.in_range(
+                    reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
+              continue;
+          cells += static_cast<double>(std::min(cube, dims[0] - 1 - x0) * std::min(cube, dims[1] - 1 - y0));
+        }
+      out[static_cast<size_t>(l) - first] = cells;
+    });
+  });
+  std::vector<double> costs(static_cast<size_t>(slab_count(plan)));
+  for (size_t s = 0; s < costs.size(); ++s) {
+    const int64_t z0 = static_cast<int64_t>(s) * plan.slab_layers;
+    const int64_t z1 = std::min(z0 + plan.slab_layers, plan.cell_layers);
+    for (int64_t z = z0; z < z1; ++z) costs[s] += per_layer[static_cast<size_t>(z / cube)];
+  }
+  return costs;
+}
+
+// extract_finest's slabs shared among processes (include/isotope/distribution.h): rank 0 gets the
+// mesh, every rank the counts of all and each rank's load.
+template <ValueSource Source>
+Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,
+                           const MarchSlab& march, const Distribution& group, std::atomic<int64_t>& blocks,
+                           std::atomic<int64_t>& cells, ExtractStats* stats) {
+  const std::vector<double> costs = slab_costs(source, rule, plan, group);
+  const std::vector<size_t> shares = share_by_cost(costs, group.ranks());
+  const auto r = static_cast<size_t>(group.rank());
+  RankLoad load;
+  Mesh mesh = march_in_slabs(plan, march, group, static_cast<int64_t>(shares[r]), static_cast<int64_t>(shares[r + 1]),
+                             &load.seconds, rule.options().keep_shares);
+  for (size_t s = shares[r]; s < shares[r + 1]; ++s) load.cost += costs[s];
+  load.items = static_cast<int64_t>(shares[r + 1] - shares[r]);
+  load.work = cells;
+  if constexpr (requires { source.bytes_read(); }) load.bytes_read = source.bytes_read();
+  // The blocks each rank looked at, for the counts: a second small gather keeps RankLoad plain.
+  const std::vector<RankLoad> loads = gather_loads(group, load);
+  RankLoad seen;
+  seen.work = blocks;
+  const std::vector<RankLoad> seen_all = gather_loads(group, seen);
+  if (stats) {
+    int64_t all_blocks = 0, all_cells = 0;
+    for (size_t i = 0; i < loads.size(); ++i) all_blocks += seen_all[i].work, all_cells += loads[i].work;
+    stats->tets_visited = 6 * (all_blocks + all_cells);
+    stats->tets_emitted = 6 * all_cells;
+    stats->ranks = loads;
+  }
+  return mesh;
+}
+
 // Blocks are cubes of 8 cells a side (4 or 2 on lattices of side 5 or 3), whose centres are the
 // cube diamonds of scale 2 (1 or 0): their records hold the range of every node of the closed
 // cube, and more. The mesh is the same bit for bit on any number of threads, paged or not.
@@ -54,7 +127,7 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
   plan.origin = source.origin();
   plan.spacing = source.spacing();
   std::atomic<int64_t> blocks{0}, cells{0};
-  Mesh mesh = march_in_slabs(plan, [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
+  const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
     throw_if_cancelled(rule.options());
     auto reader = source.reader();
     std::vector<float> f(static_cast<size_t>(stride * stride * stride));
@@ -86,7 +159,10 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
       }
     blocks += seen;
     cells += marched;
-  });
+  };
+  const Distribution* group = rule.options().distribution;
+  if (group) return extract_finest_shared(source, rule, plan, march, *group, blocks, cells, stats);
+  Mesh mesh = march_in_slabs(plan, march);
   if (stats) {
     stats->tets_visited = 6 * (blocks + cells);  // the six tetrahedra of each block's cube, and of each cell
     stats->tets_emitted = 6 * cells;

@@ -1,12 +1,14 @@
 #include "engine/extract/slab_march.h"
 
 #include <algorithm>
+#include <chrono>
 #include <mutex>
 #include <numeric>
 #include <optional>
 #include <utility>
 #include <vector>
 
+#include "engine/core/byte_codec.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/edge_vertex_map.h"
 
@@ -81,8 +83,57 @@ class SlabMerger {
 
 }  // namespace
 
+Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribution& group, int64_t first,
+                    int64_t last, double* seconds, bool keep_share) {
+  const int64_t count = slab_count(plan);
+  std::vector<Slab> mine(static_cast<size_t>(last - first));
+  settle_together(group, [&] {
+    const auto start = std::chrono::steady_clock::now();
+    parallel_for_in_order(first, last, [&](int64_t s) {
+      const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
+      mine[static_cast<size_t>(s - first)] = extract_slab(plan, march, z_begin, z_end, s > 0, s + 1 < count);
+    });
+    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  });
+  if (keep_share) {
+    SlabMerger merger;
+    for (Slab& s : mine) merger.append(s);
+    return merger.take();
+  }
+  ByteWriter w;
+  settle_together(group, [&] {  // the copy may run out of memory on one rank alone
+    w.put(static_cast<uint64_t>(mine.size()));
+    for (Slab& s : mine) {
+      w.put_array(s.mesh.positions);
+      w.put_array(s.mesh.triangles);
+      w.put_array(s.bottom);
+      w.put_array(s.top);
+      s = Slab{};
+    }
+  });
+  std::vector<std::vector<uint8_t>> all = group.gather(w.bytes());
+  w = ByteWriter{};
+  SlabMerger merger;
+  settle_together(group, [&] {
+    for (std::vector<uint8_t>& bytes : all) {
+      ByteReader r(bytes);
+      const auto n = r.get<uint64_t>();
+      for (uint64_t i = 0; i < n; ++i) {
+        Slab s;
+        r.get_array(s.mesh.positions);
+        r.get_array(s.mesh.triangles);
+        r.get_array(s.bottom);
+        r.get_array(s.top);
+        merger.append(s);
+      }
+      bytes = {};
+    }
+  });
+  return merger.take();
+}
+
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march) {
-  const int64_t count = (plan.cell_layers + plan.slab_layers - 1) / plan.slab_layers;
+  const int64_t count = slab_count(plan);
   if (count <= 0) return Mesh{};
   // Each slab is merged as soon as it and all before it are done, by the thread that finished the
   // last of them (the others go on extracting): only the slabs in flight or waiting for an earlier

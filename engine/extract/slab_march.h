@@ -2,11 +2,13 @@
 // Marching tetrahedra over z-slabs of cells on all threads, joined into the mesh of one walk over
 // the slabs in order: what the full-resolution baseline (engine/extract/full_resolution.cpp) and the
 // finest-level extraction (engine/extract/finest_extract.h) share.
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <functional>
 
 #include "engine/mesh/marching_tetrahedra.h"
+#include "isotope/distribution.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
@@ -27,5 +29,18 @@ using MarchSlab = std::function<void(int64_t z_begin, int64_t z_end, MeshBuilder
 // in order of first appearance in one walk over the slabs in order, so the mesh is the same bit
 // for bit whatever the number of threads.
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march);
+
+inline int64_t slab_count(const SlabPlan& plan) {
+  return std::max<int64_t>(0, (plan.cell_layers + plan.slab_layers - 1) / plan.slab_layers);
+}
+
+// Spread over processes (include/isotope/distribution.h): this one marches slabs [first, last),
+// and rank 0 joins every process's slabs in slab order (each process's share is a contiguous run
+// of them), so that its mesh is the one march_in_slabs makes, bit for bit. Other ranks get an
+// empty mesh. Collective; a failure anywhere throws DistributedError everywhere.
+// `seconds`: set to the time this process took for its own slabs. `keep_share`: every rank joins
+// only its own slabs and keeps that mesh (ExtractOptions::keep_shares).
+Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribution& group, int64_t first,
+                    int64_t last, double* seconds, bool keep_share);
 
 }  // namespace isotope

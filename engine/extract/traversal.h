@@ -185,6 +185,19 @@ class Traversal {
     return out;
   }
 
+  // A cost estimate of running piece p (include/isotope/distribution.h): how many subtrees of
+  // `level` below it the traversal reaches (cull and stop as run() would above that level),
+  // reading only the records of the levels above. An emitting piece costs 1.
+  int64_t reach(const Piece& p, int level) {
+    if (p.emit_only) return 1;
+    std::vector<Piece> below;
+    pieces_ = &below;
+    split_level_ = level;
+    visit(p.tet, p.level, p.positive);
+    pieces_ = nullptr;
+    return static_cast<int64_t>(below.size());
+  }
+
   void run(const Piece& p) {
     if (p.emit_only)
       emit(p.tet, p.level, p.positive);

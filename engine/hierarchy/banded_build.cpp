@@ -21,6 +21,20 @@ int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes) {
   return w * w * w * static_cast<int64_t>(sizeof(float) + 2 * sizeof(Record)) + c * c * c * brick_bytes;
 }
 
+int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes) {
+  // Larger tiles compute fewer halo records twice and read their input in fewer, longer calls:
+  // the largest c (tiles up to 64^3 nodes) that keeps every thread busy within three quarters of
+  // the budget, and gives every thread a few tiles of band 0.
+  const auto threads =
+      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const auto budget = static_cast<int64_t>(memory_bytes / 4 * 3);
+  int64_t c = std::max<int64_t>(1, int64_t{64} >> layout.brick_bits());
+  while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes) < threads ||
+                   static_cast<int64_t>(band0_tile_count(layout, c)) < 4 * threads))
+    c /= 2;
+  return c;
+}
+
 namespace banded_build_internal {
 
 void fill_from_input(BandTile& tile, const StoreLayout& layout, const ReadBox& read) {

@@ -80,6 +80,15 @@ struct BandedBuildOptions {
   std::function<void()> check_cancel;  // called between batches; throws to stop
   // Where a band's hand-over goes; by default (or when this returns null) into memory.
   std::function<std::unique_ptr<BandHandover>(const Box3& nodes, uint64_t held_bytes)> make_handover;
+  // One process's share of a distributed convert (io/store/store_writer.cpp): only bands
+  // first_band .. last_band (-1: to the last), and of each only tiles [first_tile, last_tile) of
+  // its Morton order, `tile_bricks` a side (0: chosen by tile_bricks_for). Band first_band > 0
+  // reads `handover_in`; the last band built, when another follows, writes `handover_out`.
+  int first_band = 0, last_band = -1;
+  size_t first_tile = 0, last_tile = SIZE_MAX;
+  int64_t tile_bricks = 0;
+  const BandHandover* handover_in = nullptr;
+  BandHandover* handover_out = nullptr;
 };
 
 struct BandedBuildStats {
@@ -95,6 +104,15 @@ std::vector<Box3> in_morton_order(const Box3& count);
 // Bytes a tile of c^3 bricks holds while in flight: its window (values, records, children), and
 // what the sink makes of its bricks (`brick_bytes` each, at most).
 int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes);
+
+// Bricks per tile side that keep every thread busy within three quarters of the budget and give
+// every thread a few tiles of band 0 (what build_bands uses unless told).
+int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes);
+// Band 0's tiles of c^3 bricks, in Morton order (build_bands' first_tile and last_tile count them).
+inline size_t band0_tile_count(const StoreLayout& layout, int64_t c) {
+  const Box3& b = layout.band(0).bricks;
+  return static_cast<size_t>(((b[0] + c - 1) / c) * ((b[1] + c - 1) / c) * ((b[2] + c - 1) / c));
+}
 
 // Sink:
 //   Payload process(int band, const Box3& brick, const BandTile& tile);  // concurrently, any order
@@ -129,25 +147,28 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
                              const BandedBuildOptions& options) {
   using namespace banded_build_internal;
   using Payload = decltype(sink.process(0, Box3{}, std::declval<const BandTile&>()));
-  // Tiles of c^3 bricks: larger tiles compute fewer halo records twice and read their input in
-  // fewer, longer calls. The largest c that keeps every thread busy within three quarters of the
-  // budget, and gives every thread a few tiles of band 0.
   const auto threads =
       static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
   const auto budget = static_cast<int64_t>(options.memory_bytes / 4 * 3);
-  const Box3& bricks0 = layout.band(0).bricks;
-  auto tiles = [&](int64_t c) {
-    return ((bricks0[0] + c - 1) / c) * ((bricks0[1] + c - 1) / c) * ((bricks0[2] + c - 1) / c);
-  };
-  int64_t c = std::max<int64_t>(1, int64_t{64} >> layout.brick_bits());  // tiles up to 64^3 nodes
-  while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes) < threads || tiles(c) < 4 * threads)) c /= 2;
+  const int64_t c =
+      options.tile_bricks > 0 ? options.tile_bricks : tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
   const int in_flight =
       static_cast<int>(std::clamp<int64_t>(budget / tile_bytes(layout, c, sink_brick_bytes), 1, 2 * threads));
+  const int first_band = options.first_band;
+  const int last_band = options.last_band < 0 ? layout.lattice().k : options.last_band;
 
   BandedBuildStats stats;
   stats.tiles_in_flight = in_flight;
   int64_t work = 0;
-  for (const Band& b : layout.bands()) work += b.nodes[0] * b.nodes[1] * b.nodes[2];
+  for (const Band& b : layout.bands()) {
+    if (b.scale < first_band || b.scale > last_band) continue;
+    const auto tiles =
+        static_cast<int64_t>(((b.bricks[0] + c - 1) / c) * ((b.bricks[1] + c - 1) / c) * ((b.bricks[2] + c - 1) / c));
+    const int64_t mine =
+        std::min<int64_t>(tiles, static_cast<int64_t>(std::min<size_t>(options.last_tile, SIZE_MAX / 2))) -
+        std::min<int64_t>(tiles, static_cast<int64_t>(options.first_tile));
+    work += b.nodes[0] * b.nodes[1] * b.nodes[2] / tiles * mine;  // near enough: edge tiles are smaller
+  }
   ProgressReporter progress(options.progress, work);
   // Band 0 has the largest windows; sized once for them, a slot's arrays never grow again (growing
   // would copy them and fault in fresh pages for every larger tile at the volume's edges).
@@ -165,17 +186,27 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       b.children.resize(cells);
     }
   }
-  std::unique_ptr<BandHandover> in;
+  std::unique_ptr<BandHandover> owned_in;
+  const BandHandover* in = first_band > 0 ? options.handover_in : nullptr;
   for (const Band& band : layout.bands()) {
-    std::unique_ptr<BandHandover> next;
+    if (band.scale < first_band || band.scale > last_band) continue;
+    std::unique_ptr<BandHandover> owned_next;
+    BandHandover* next = nullptr;
     if (band.scale < layout.lattice().k) {
-      const Box3& nodes = layout.band(band.scale + 1).nodes;
-      const uint64_t held = BandHandover::bytes(nodes) + (in ? BandHandover::bytes(in->nodes()) : 0);
-      if (options.make_handover) next = options.make_handover(nodes, held);
-      if (!next) next = std::make_unique<MemoryHandover>(nodes);
+      if (band.scale == last_band && options.handover_out) {
+        next = options.handover_out;
+      } else {
+        const Box3& nodes = layout.band(band.scale + 1).nodes;
+        const uint64_t held = BandHandover::bytes(nodes) + (in ? BandHandover::bytes(in->nodes()) : 0);
+        if (options.make_handover) owned_next = options.make_handover(nodes, held);
+        if (!owned_next) owned_next = std::make_unique<MemoryHandover>(nodes);
+        next = owned_next.get();
+      }
     }
-    const std::vector<Box3> tile_coords =
+    std::vector<Box3> tile_coords =
         in_morton_order({(band.bricks[0] + c - 1) / c, (band.bricks[1] + c - 1) / c, (band.bricks[2] + c - 1) / c});
+    tile_coords = std::vector<Box3>(tile_coords.begin() + std::min(options.first_tile, tile_coords.size()),
+                                    tile_coords.begin() + std::min(options.last_tile, tile_coords.size()));
     std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
     for (size_t first = 0; first < tile_coords.size(); first += results.size()) {
       if (options.check_cancel) options.check_cancel();
@@ -221,7 +252,8 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
         stats.hi = std::max(stats.hi, r.hi);
       }
     }
-    in = std::move(next);
+    owned_in = std::move(owned_next);
+    in = next;
   }
   return stats;
 }

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <string>
 
+#include <isotope/distribution.h>
 #include <isotope/progress.h>
 #include <isotope/source.h>
 #include <isotope/volume.h>
@@ -28,6 +29,11 @@ struct ConvertOptions {
   int quantize_bits = 0;
   ProgressCallback progress;
   const std::atomic<bool>* cancel = nullptr;  // set (e.g. by SIGINT) to stop; IoError("interrupted")
+  // Spread over a group of processes, each calling convert with the same arguments
+  // (include/isotope/distribution.h): each builds a contiguous share of band 0's tiles, and rank 0
+  // the coarser bands from what they hand on; the store is the same file, byte for byte. OUTPUT's
+  // directory must be one every process sees. nullptr: this process alone.
+  const Distribution* distribution = nullptr;
 };
 
 struct ConvertStats {

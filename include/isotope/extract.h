@@ -14,6 +14,7 @@
 #include <utility>
 #include <vector>
 
+#include <isotope/distribution.h>
 #include <isotope/mesh.h>
 #include <isotope/volume.h>
 
@@ -69,6 +70,14 @@ struct ExtractOptions {
   // Set (by another thread) to stop: the extraction then throws ExtractionCancelled at its next
   // piece or slab. For a server whose client asked for something newer; nullptr: never.
   const std::atomic<bool>* cancel = nullptr;
+  // Spread over a group of processes, each running this extraction with the same options
+  // (include/isotope/distribution.h): rank 0 gets the mesh, the same bytes as without; every other
+  // rank an empty one. nullptr: this process alone.
+  const Distribution* distribution = nullptr;
+  // With a distribution: every rank keeps the mesh of its own share (welded within the share; a
+  // vertex on the boundary between two shares is in both), and nothing is sent to rank 0: for a
+  // mesh too large for one process to hold or write (isotope extract --parts).
+  bool keep_shares = false;
 
   // Throws OptionError naming the first option out of its range: iso not finite, eps or delta
   // negative or NaN (infinity is the coarsest), delta without `simplify`, a focus point not finite or a
@@ -106,6 +115,15 @@ std::optional<ErrorIndicator> parse_error_indicator(std::string_view s);
 std::optional<TopologyMode> parse_topology_mode(std::string_view s);
 std::optional<SimplificationWeight> parse_simplification_weight(std::string_view s);
 
+// What one process of a distributed extraction did (include/isotope/distribution.h).
+struct RankLoad {
+  double cost = 0;          // its share of the estimated cost (the unit is the estimate's own)
+  int64_t items = 0;        // pieces (or slabs at eps 0) in its share
+  int64_t work = 0;         // tetrahedra it visited (at eps 0: cells it marched)
+  double seconds = 0;       // running its share
+  uint64_t bytes_read = 0;  // compressed bytes its store cache read, from opening the store on
+};
+
 // What an extraction measured of itself.
 struct ExtractStats {
   int64_t tets_visited = 0;
@@ -124,6 +142,8 @@ struct ExtractStats {
   // coarsest mesh (eps = infinity).
   double chosen_delta = -1;
   int64_t delta_floor_triangles = 0;
+  // Distributed: every process's load, in rank order (on every rank); empty otherwise.
+  std::vector<RankLoad> ranks;
 };
 
 // What an extraction throws when its ExtractOptions::cancel was set.

@@ -11,6 +11,7 @@
 #include <system_error>
 #include <utility>
 
+#include "io/file/temporary_registry.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -144,11 +145,13 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
     }
   }
   if (file_ == nullptr) throw IoError(path_ + ": cannot find a free temporary name in '" + dir + "'");
+  registered_ = register_temporary(temp_path_);
 }
 
 AtomicFile::~AtomicFile() {
   if (file_ != nullptr) std::fclose(file_);
   if (!committed_ && !temp_path_.empty()) std::remove(temp_path_.c_str());
+  unregister_temporary(registered_);
 }
 
 void AtomicFile::write(const void* data, size_t bytes) {
@@ -167,6 +170,14 @@ void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
   const bool ok = std::fseek(file_, static_cast<long>(offset), SEEK_SET) == 0 &&
                   std::fwrite(data, 1, bytes, file_) == bytes && std::fseek(file_, 0, SEEK_END) == 0;
   if (!ok) throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
+}
+
+void AtomicFile::continue_at(uint64_t offset) {
+  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
+  errno = 0;
+  if (std::fflush(file_) != 0 || fseeko(file_, static_cast<off_t>(offset), SEEK_SET) != 0)
+    throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
+  size_ = offset;
 }
 
 void AtomicFile::finish() {
@@ -190,6 +201,8 @@ void AtomicFile::commit() {
   if (std::rename(temp_path_.c_str(), target_.c_str()) != 0)
     throw IoError(path_ + ": cannot rename temporary file into place: " + std::strerror(errno));
   committed_ = true;
+  unregister_temporary(registered_);
+  registered_ = -1;
   sync_directory(directory_of(target_));
 }
 

@@ -42,6 +42,9 @@ class AtomicFile {
   void write(const void* data, size_t bytes);  // throws IoError (e.g. disk full)
   // Overwrites bytes already written (a header completed last); the next write() appends.
   void write_at(uint64_t offset, const void* data, size_t bytes);
+  // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
+  // into temp_path() meanwhile (a distributed convert, io/store/store_writer.cpp).
+  void continue_at(uint64_t offset);
   uint64_t size() const { return size_; }  // bytes written so far
   // Flushes, fsyncs and closes the temporary file: what can fail for lack of disk fails here.
   // Several outputs of one command are all finished before the first is committed, so that a
@@ -55,6 +58,7 @@ class AtomicFile {
   std::string path_, target_, temp_path_;  // as named; the file replaced (output_target); temporary
   std::FILE* file_ = nullptr;
   bool finished_ = false, committed_ = false;
+  int registered_ = -1;  // io/file/temporary_registry.h
   uint64_t size_ = 0;
 };
 

@@ -361,4 +361,20 @@ void write_mesh(const Mesh& mesh, const std::string& path) {
   out.commit();
 }
 
+void write_pvtp(const std::vector<std::string>& pieces, const std::string& path) {
+  // The arrays each piece holds (encode_vtp above), declared once for all of them.
+  std::string text =
+      "<?xml version=\"1.0\"?>\n<!-- written by isotope " ISOTOPE_VERSION_STRING
+      " -->\n<VTKFile type=\"PPolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
+      "  <PPolyData GhostLevel=\"0\">\n    <PPointData Normals=\"Normals\">\n"
+      "      <PDataArray type=\"Float32\" Name=\"Normals\" NumberOfComponents=\"3\"/>\n    </PPointData>\n"
+      "    <PPoints>\n      <PDataArray type=\"Float32\" Name=\"Points\" NumberOfComponents=\"3\"/>\n"
+      "    </PPoints>\n";
+  for (const std::string& piece : pieces) text += "    <Piece Source=\"" + piece + "\"/>\n";
+  text += "  </PPolyData>\n</VTKFile>\n";
+  AtomicFile out(path);
+  out.write(text.data(), text.size());
+  out.commit();
+}
+
 }  // namespace isotope

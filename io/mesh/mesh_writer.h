@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "io/file/atomic_file.h"
 #include "isotope/mesh.h"
@@ -28,5 +29,10 @@ void write_ply(const Mesh& mesh, const std::string& path);
 // place together with its other outputs.
 void write_ply(const Mesh& mesh, AtomicFile& out);
 void write_mesh(const Mesh& mesh, AtomicFile& out, MeshFormat format);
+
+// A parallel VTK PolyData file (.pvtp) naming `pieces` (.vtp files, relative to its folder) that
+// ParaView and VTK's vtkXMLPPolyDataReader open as one dataset: a distributed extraction's
+// parts (isotope extract --parts, docs/DISTRIBUTED.md). Written atomically; throws IoError.
+void write_pvtp(const std::vector<std::string>& pieces, const std::string& path);
 
 }  // namespace isotope

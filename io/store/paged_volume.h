@@ -32,6 +32,7 @@ class PagedVolume {
   const StoreLayout& layout() const { return layout_; }
   const BrickIndexer& indexer() const { return indexer_; }
   BrickCache& cache() const { return cache_; }
+  uint64_t bytes_read() const { return cache_.stats().bytes_read; }  // a distributed rank's load
 
   // One per task: pins the bricks it used last (direct-mapped by brick index), so most lookups
   // touch no shared state at all.

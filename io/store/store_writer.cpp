@@ -8,9 +8,11 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "engine/core/byte_codec.h"
 #include "engine/core/parallel.h"
 #include "engine/core/volume_check.h"
 #include "engine/hierarchy/band_tile.h"
@@ -18,6 +20,7 @@
 #include "engine/hierarchy/compact_record.h"
 #include "io/file/atomic_file.h"
 #include "io/file/scratch_file.h"
+#include "io/file/shared_file.h"
 #include "io/store/store_format.h"
 #include "io/volume/volume_box_reader.h"
 #include "isotope/error.h"
@@ -139,11 +142,37 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
   return f;
 }
 
+// Where a sink's bricks go: the store's file, or (a distributed convert's rank > 0) an unlinked
+// scratch file of its own, copied into the store once the ranks before it know their sizes.
+class ScratchOut {
+ public:
+  explicit ScratchOut(const std::string& dir) : file_(dir) {}
+  void write(const void* data, size_t bytes) {
+    file_.write(data, bytes, size_);
+    size_ += bytes;
+  }
+  uint64_t size() const { return size_; }
+  // Copies everything written into `to` at `offset`, a few MiB at a time.
+  void copy_to(const SharedFile& to, uint64_t offset) const {
+    std::vector<char> buf(size_t{8} << 20);
+    for (uint64_t at = 0; at < size_; at += buf.size()) {
+      const size_t n = static_cast<size_t>(std::min<uint64_t>(buf.size(), size_ - at));
+      file_.read(buf.data(), n, at);
+      to.write(buf.data(), n, offset + at);
+    }
+  }
+
+ private:
+  ScratchFile file_;
+  uint64_t size_ = 0;
+};
+
 // The banded build's sink for a store: each brick compacted and compressed on its tile's thread,
 // then appended to the file in file order.
+template <class Out>
 class FileSink {
  public:
-  FileSink(const StoreLayout& layout, AtomicFile& out, int zstd_level)
+  FileSink(const StoreLayout& layout, Out& out, int zstd_level)
       : layout_(layout), out_(out), zstd_level_(zstd_level), entries_(static_cast<size_t>(layout.brick_count())) {}
 
   using Sections = std::array<std::vector<uint8_t>, kSections>;
@@ -160,13 +189,48 @@ class FileSink {
       e.bytes[static_cast<size_t>(s)] = static_cast<uint32_t>(bytes.size());
     }
   }
-  const std::vector<BrickEntry>& entries() const { return entries_; }
+  std::vector<BrickEntry>& entries() { return entries_; }
 
  private:
   const StoreLayout& layout_;
-  AtomicFile& out_;
+  Out& out_;
   int zstd_level_;
   std::vector<BrickEntry> entries_;
+};
+
+// A band's hand-over to the next in one named file beside the output, which every rank of a
+// distributed convert writes its tiles' rows into and reads the whole of for the next band.
+class SharedHandover : public BandHandover {
+ public:
+  SharedHandover(const std::string& path, SharedFile::Mode mode, const Box3& nodes)
+      : BandHandover(nodes), file_(path, mode), records_at_(count(nodes) * sizeof(float)) {}
+  void write_row(int64_t x0, int64_t y, int64_t z, const float* v, const Record* r, int64_t n) override {
+    file_.write(v, static_cast<size_t>(n) * sizeof(float), at(x0, y, z) * sizeof(float));
+    file_.write(r, static_cast<size_t>(n) * sizeof(Record), records_at_ + at(x0, y, z) * sizeof(Record));
+  }
+  void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const override {
+    file_.read(out, static_cast<size_t>(count) * sizeof(float), at(x0, y, z) * sizeof(float));
+  }
+  void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const override {
+    file_.read(out, static_cast<size_t>(count) * sizeof(Record), records_at_ + at(x0, y, z) * sizeof(Record));
+  }
+
+ private:
+  SharedFile file_;
+  uint64_t records_at_;
+};
+
+// A brick's directory entry as a rank of a distributed convert hands it to rank 0.
+struct PlacedEntry {
+  int64_t index;
+  BrickEntry entry;
+};
+
+// What one rank of a distributed convert tells the others after each band.
+struct BandShare {
+  uint64_t bytes = 0;
+  CriticalCounts critical = {{0, 0, 0}, {0, 0, 0}};
+  float lo = 0, hi = 0;
 };
 
 class Converter {
@@ -175,14 +239,32 @@ class Converter {
       : input_(quantized_or(input, options)),
         options_(options),
         layout_(input.info().dims, options.brick_bits),
-        out_(output),
+        output_(output),
         scratch_dir_(std::filesystem::absolute(output).parent_path().string()) {}
 
   ConvertStats run() {
     const auto start = std::chrono::steady_clock::now();
-    const std::array<uint8_t, kHeaderBytes> blank{};
-    out_.write(blank.data(), blank.size());
-    FileSink sink(layout_, out_, options_.zstd_level);
+    BandedBuildStats built;
+    if (options_.distribution)
+      built = run_shared(*options_.distribution);
+    else
+      built = run_alone();
+    ConvertStats stats;
+    stats.dims = layout_.dims();
+    stats.type = input_.info().type;
+    stats.input_bytes = input_bytes();
+    stats.bricks = layout_.brick_count();
+    stats.tiles_in_flight = built.tiles_in_flight;
+    if (out_) {  // this process wrote the store (alone, or rank 0)
+      stats.output_bytes = out_->size();
+      out_->commit();
+    }
+    stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
+  }
+
+ private:
+  BandedBuildOptions build_options() {
     BandedBuildOptions build;
     build.memory_bytes = static_cast<uint64_t>(options_.memory_mb) << 20;
     build.progress = options_.progress;
@@ -195,23 +277,199 @@ class Converter {
       if (held <= static_cast<uint64_t>(options_.memory_mb) << 18) return nullptr;
       return std::make_unique<ScratchHandover>(scratch_dir_, nodes);
     };
-    const ReadBox read = [this](const Box3& lo, const Box3& size, float* out) { input_.read_box(lo, size, out); };
-    // What a brick holds between its tile and its commit: at most its raw fields, 30 bytes a node.
-    const BandedBuildStats built = build_bands(layout_, read, sink, layout_.brick_nodes() * 30, build);
+    return build;
+  }
+  ReadBox reader() const {
+    return [this](const Box3& lo, const Box3& size, float* out) { input_.read_box(lo, size, out); };
+  }
+  // What a brick holds between its tile and its commit: at most its raw fields, 30 bytes a node.
+  int64_t sink_brick_bytes() const { return layout_.brick_nodes() * 30; }
+
+  BandedBuildStats run_alone() {
+    out_.emplace(output_);
+    const std::array<uint8_t, kHeaderBytes> blank{};
+    out_->write(blank.data(), blank.size());
+    FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level);
+    const BandedBuildStats built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build_options());
     finish(sink.entries(), built);
-    ConvertStats stats;
-    stats.dims = header_.dims;
-    stats.type = header_.source_type;
-    stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    stats.input_bytes = header_.input_bytes;
-    stats.output_bytes = out_.size();
-    stats.bricks = layout_.brick_count();
-    stats.tiles_in_flight = built.tiles_in_flight;
-    out_.commit();
+    return built;
+  }
+
+  // The distributed convert (include/isotope/distribution.h; docs/DISTRIBUTED.md), band by band:
+  //  1. rank 0 creates the output's temporary file; the ranks agree on the tile size (the
+  //     smallest any of them would choose), so that the tiles are the same on all;
+  //  2. each band's tiles, in Morton order, are cut into one contiguous run per rank, whose
+  //     bricks are hence a contiguous run of the file: rank 0 appends its own to the file, every
+  //     other rank to an unlinked scratch file of its own; all write their tiles' rows of the
+  //     band's hand-over, a named file beside the output, which the next band reads whole;
+  //  3. an exclusive scan of the ranks' byte counts places each run; ranks > 0 copy theirs in
+  //     and hand rank 0 their bricks' directory entries;
+  //  4. after the last band rank 0 writes the directories and the header.
+  // Every step that may fail on one rank alone runs under settle_together: all stop together,
+  // and rank 0's temporary files are removed as it unwinds. Coarse bands with fewer tiles than
+  // ranks leave some ranks idle; the last bands are a few bricks.
+  BandedBuildStats run_shared(const Distribution& group) {
+    const bool root = group.rank() == 0;
+    const auto r = static_cast<size_t>(group.rank());
+    settle_together(group, [&] {
+      if (!root) return;
+      out_.emplace(output_);
+      const std::array<uint8_t, kHeaderBytes> blank{};
+      out_->write(blank.data(), blank.size());
+      out_->continue_at(kHeaderBytes);  // flushed: the file exists with its header's room
+    });
+    ByteWriter mine;
+    mine.put(tile_bricks_for(layout_, sink_brick_bytes(), static_cast<uint64_t>(options_.memory_mb) << 20));
+    mine.put_array(root ? out_->temp_path() : std::string());
+    int64_t c = INT64_MAX;
+    std::string temp_path;
+    for (const std::vector<uint8_t>& bytes : group.all_gather(mine.bytes())) {
+      ByteReader rd(bytes);
+      c = std::min(c, rd.get<int64_t>());
+      std::string path;
+      rd.get_array(path);
+      if (!path.empty()) temp_path = path;
+    }
+    std::optional<SharedFile> temp;
+    settle_together(group, [&] {
+      if (!root) temp.emplace(temp_path, SharedFile::Mode::open);
+    });
+
+    BandedBuildStats stats;
+    std::vector<BrickEntry> entries(static_cast<size_t>(layout_.brick_count()));
+    uint64_t end = kHeaderBytes;  // where the next band's bricks begin
+    std::unique_ptr<SharedHandover> in;
+    for (const Band& band : layout_.bands()) {
+      const int j = band.scale;
+      const bool last = j == layout_.lattice().k;
+      // The hand-over to band j + 1: created by rank 0, opened by the others once it exists.
+      std::unique_ptr<SharedHandover> next;
+      const std::string next_path = temp_path + ".band" + std::to_string(j + 1);
+      settle_together(group, [&] {
+        if (root && !last)
+          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::create, layout_.band(j + 1).nodes);
+      });
+      const auto tiles = static_cast<size_t>(((band.bricks[0] + c - 1) / c) * ((band.bricks[1] + c - 1) / c) *
+                                             ((band.bricks[2] + c - 1) / c));
+      const std::vector<size_t> shares = share_by_cost(std::vector<double>(tiles, 1.0), group.ranks());
+      std::optional<ScratchOut> scratch;
+      BandShare share;
+      settle_together(group, [&] {
+        if (!root && !last)
+          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::open, layout_.band(j + 1).nodes);
+        BandedBuildOptions build = build_options();
+        if (j > 0) build.progress = nullptr;  // band 0 is seven eighths of the work: its progress is the convert's
+        build.first_band = build.last_band = j;
+        build.first_tile = shares[r];
+        build.last_tile = shares[r + 1];
+        build.tile_bricks = c;
+        build.handover_in = in.get();
+        build.handover_out = next.get();
+        BandedBuildStats built;
+        if (root) {
+          out_->continue_at(end);
+          FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level);
+          built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
+          take_band(sink.entries(), band, entries);
+          share.bytes = out_->size() - end;
+        } else {
+          scratch.emplace(scratch_dir_);
+          FileSink<ScratchOut> sink(layout_, *scratch, options_.zstd_level);
+          built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
+          take_band(sink.entries(), band, entries);
+          share.bytes = scratch->size();
+        }
+        for (int k = 0; k < 2; ++k)
+          for (int t = 0; t < 3; ++t) share.critical[k][t] = built.critical[k][t];
+        share.lo = built.lo;
+        share.hi = built.hi;
+        stats.tiles_in_flight = std::max(stats.tiles_in_flight, built.tiles_in_flight);
+      });
+      // The exclusive scan of the runs' sizes, and the totals of what the band counted.
+      ByteWriter told;
+      told.put(share);
+      uint64_t offset = end, band_bytes = 0;
+      const std::vector<std::vector<uint8_t>> all = group.all_gather(told.bytes());
+      for (size_t i = 0; i < all.size(); ++i) {
+        ByteReader rd(all[i]);
+        const auto s = rd.get<BandShare>();
+        if (i < r) offset += s.bytes;
+        band_bytes += s.bytes;
+        for (int k = 0; k < 2; ++k)
+          for (int t = 0; t < 3; ++t) stats.critical[k][t] += s.critical[k][t];
+        stats.lo = std::min(stats.lo, s.lo);
+        stats.hi = std::max(stats.hi, s.hi);
+      }
+      // Ranks > 0 copy their run into place, then every rank tells rank 0 where its bricks are.
+      ByteWriter placed;
+      settle_together(group, [&] {
+        std::vector<PlacedEntry> run;
+        for (int64_t i = band.first_brick; i < band.first_brick + band.brick_count(); ++i) {
+          BrickEntry& e = entries[static_cast<size_t>(i)];
+          if (e.total() == 0) continue;   // not this rank's
+          if (!root) e.offset += offset;  // was relative to the rank's scratch file
+          run.push_back({i, e});
+        }
+        if (!root) {
+          // Its bricks are durable when rank 0 commits the store (rank 0's fsync covers only its own
+          // node's writes). The hand-over is not synced: a POSIX-coherent file system (Lustre,
+          // GPFS, BeeGFS, or one node's) shows other ranks its rows without (docs/DISTRIBUTED.md).
+          scratch->copy_to(*temp, offset);
+          temp->sync();
+        }
+        placed.put_array(run);
+      });
+      std::vector<std::vector<uint8_t>> runs = group.gather(placed.bytes());
+      settle_together(group, [&] {
+        if (root) place_band(runs, band, entries);
+      });
+      end += band_bytes;
+      in = std::move(next);  // band j's hand-over, read by band j + 1 (rank 0's removes its file)
+    }
+    settle_together(group, [&] {
+      if (!root) return;
+      out_->continue_at(end);
+      finish(entries, stats);
+      out_->finish();
+    });
     return stats;
   }
 
- private:
+  // A sink's entries of one band into `entries` (the others' are still empty there).
+  static void take_band(const std::vector<BrickEntry>& from, const Band& band, std::vector<BrickEntry>& entries) {
+    std::copy(from.begin() + band.first_brick, from.begin() + band.first_brick + band.brick_count(),
+              entries.begin() + band.first_brick);
+  }
+
+  // Rank 0: every rank's entries of the band, each at its directory index; every brick from
+  // exactly one rank.
+  void place_band(const std::vector<std::vector<uint8_t>>& runs, const Band& band,
+                  std::vector<BrickEntry>& entries) const {
+    std::vector<bool> seen(static_cast<size_t>(band.brick_count()), false);
+    int64_t placed = 0;
+    for (const std::vector<uint8_t>& bytes : runs) {
+      ByteReader rd(bytes);
+      std::vector<PlacedEntry> run;
+      rd.get_array(run);
+      for (const auto& [i, e] : run) {
+        const int64_t local = i - band.first_brick;
+        if (local < 0 || local >= band.brick_count() || seen[static_cast<size_t>(local)])
+          throw IoError(output_ + ": ranks disagree on brick " + std::to_string(i));
+        seen[static_cast<size_t>(local)] = true;
+        entries[static_cast<size_t>(i)] = e;
+        ++placed;
+      }
+    }
+    if (placed != band.brick_count())
+      throw IoError(output_ + ": the ranks' band " + std::to_string(band.scale) + " holds " + std::to_string(placed) +
+                    " bricks, not " + std::to_string(band.brick_count()));
+  }
+
+  uint64_t input_bytes() const {
+    const VolumeInfo& info = input_.info();
+    return static_cast<uint64_t>(info.dims[0] * info.dims[1] * info.dims[2] * info.element_bytes);
+  }
+
   void finish(const std::vector<BrickEntry>& entries, const BandedBuildStats& built) {
     const VolumeInfo& info = input_.info();
     header_.dims = info.dims;
@@ -235,19 +493,19 @@ class Converter {
       header_.value_scale = quantized_->scale();
     }
     header_.brick_count = layout_.brick_count();
-    header_.input_bytes = static_cast<uint64_t>(info.dims[0] * info.dims[1] * info.dims[2] * info.element_bytes);
+    header_.input_bytes = input_bytes();
     for (const Band& band : layout_.bands()) {
       const std::vector<BrickEntry> mine(entries.begin() + band.first_brick,
                                          entries.begin() + band.first_brick + band.brick_count());
       const std::vector<uint8_t> directory = encode_directory(mine);
       BandDirectory& d = header_.bands[static_cast<size_t>(band.scale)];
-      d.offset = out_.size();
+      d.offset = out_->size();
       d.bytes = directory.size();
       d.checksum = store_checksum(directory.data(), directory.size());
-      out_.write(directory.data(), directory.size());
+      out_->write(directory.data(), directory.size());
     }
     const auto header = encode_header(header_);
-    out_.write_at(0, header.data(), header.size());
+    out_->write_at(0, header.data(), header.size());
   }
 
   const BoxReader& quantized_or(const BoxReader& input, const ConvertOptions& options) {
@@ -262,7 +520,8 @@ class Converter {
   const BoxReader& input_;
   const ConvertOptions& options_;
   StoreLayout layout_;
-  AtomicFile out_;
+  std::string output_;
+  std::optional<AtomicFile> out_;  // alone, or rank 0
   std::string scratch_dir_;
   StoreHeader header_;
 };
@@ -278,15 +537,29 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
     throw OptionError("brick-bits", "must be " + std::to_string(kMinBrickBits) + ".." + std::to_string(kMaxBrickBits));
   for (int64_t d : input.info().dims)
     if (d < 2 || d > (int64_t{1} << 19) + 1) throw IoError("volume dimensions must be 2 .. 524289 nodes per axis");
-  Converter converter(input, output, options);
-  return converter.run();
+  // Distributed, the quantizer's pass over the input runs under settle_together: a rank whose
+  // read fails stops every rank.
+  std::optional<Converter> converter;
+  auto make = [&] { converter.emplace(input, output, options); };
+  if (options.distribution)
+    settle_together(*options.distribution, make);
+  else
+    make();
+  return converter->run();
 }
 
 ConvertStats convert(const VolumeSpec& input, const std::string& output, const ConvertOptions& options) {
-  check_outputs({{"INPUT", input.path}}, {{"OUTPUT", output}});
-  // Scratch beside the output: on the file system the user chose for the store's size.
-  const std::string scratch = std::filesystem::absolute(output).parent_path().string();
-  const std::unique_ptr<BoxReader> reader = open_box_reader(input, scratch);
+  std::unique_ptr<BoxReader> reader;
+  auto open = [&] {
+    check_outputs({{"INPUT", input.path}}, {{"OUTPUT", output}});
+    // Scratch beside the output: on the file system the user chose for the store's size.
+    const std::string scratch = std::filesystem::absolute(output).parent_path().string();
+    reader = open_box_reader(input, scratch);
+  };
+  if (options.distribution)  // every rank opens the input; one that cannot stops them all
+    settle_together(*options.distribution, open);
+  else
+    open();
   return convert_to_store(*reader, output, options);
 }
 

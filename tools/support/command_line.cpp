@@ -62,7 +62,19 @@ Source open_input(const std::string& path, const std::string& dims, const std::s
   }
 }
 
-bool progress_enabled(bool quiet) { return !quiet && isatty(STDERR_FILENO) == 1; }
+bool progress_enabled(bool quiet) { return !quiet && speaking_rank() && isatty(STDERR_FILENO) == 1; }
+
+namespace {
+const Distribution* g_group = nullptr;
+}
+const Distribution* process_group() { return g_group; }
+void set_process_group(const Distribution* group) { g_group = group; }
+void on_every_rank(const std::function<void()>& work) {
+  if (g_group)
+    settle_together(*g_group, work);
+  else
+    work();
+}
 
 std::function<void(double)> progress_bar(std::string label) {
   return [label = std::move(label)](double fraction) {

@@ -104,6 +104,32 @@ void describe(const SourceInfo& info, ExtractionRun& run) {
   run.store_bytes = info.store_bytes;
 }
 
+namespace {
+
+// A distributed run's balance: the largest rank's share over the mean (1 is perfect).
+template <class Field>
+double max_over_mean(const std::vector<RankLoad>& loads, Field field) {
+  double sum = 0, most = 0;
+  for (const RankLoad& l : loads) {
+    const auto v = static_cast<double>(field(l));
+    sum += v;
+    most = std::max(most, v);
+  }
+  return sum > 0 ? most * static_cast<double>(loads.size()) / sum : 1.0;
+}
+
+struct Balance {
+  double cost, work, bytes, seconds;
+};
+Balance balance_of(const std::vector<RankLoad>& loads) {
+  return {max_over_mean(loads, [](const RankLoad& l) { return l.cost; }),
+          max_over_mean(loads, [](const RankLoad& l) { return l.work; }),
+          max_over_mean(loads, [](const RankLoad& l) { return l.bytes_read; }),
+          max_over_mean(loads, [](const RankLoad& l) { return l.seconds; })};
+}
+
+}  // namespace
+
 nlohmann::ordered_json report_json(const ExtractionRun& run) {
   const MeshTopology& t = run.topology;
   nlohmann::ordered_json j;
@@ -172,6 +198,21 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
       {"tets_emitted", run.extract.tets_emitted},
       {"tets_simplified", run.extract.tets_simplified},
   };
+  if (!run.extract.ranks.empty()) {
+    nlohmann::ordered_json ranks = nlohmann::ordered_json::array();
+    for (const RankLoad& l : run.extract.ranks)
+      ranks.push_back({{"cost", l.cost},
+                       {"items", l.items},
+                       {"work", l.work},
+                       {"seconds", l.seconds},
+                       {"bytes_read", l.bytes_read}});
+    const Balance b = balance_of(run.extract.ranks);
+    j["ranks"] = ranks;
+    j["balance"] = {{"cost_max_over_mean", b.cost},
+                    {"work_max_over_mean", b.work},
+                    {"bytes_read_max_over_mean", b.bytes},
+                    {"seconds_max_over_mean", b.seconds}};
+  }
   j["per_component"] = components_json(run.components);
   if (run.comparison) j["compare_full"] = comparison_json(*run.comparison, run.compare_tolerance, run.compare_seconds);
   if (run.cache_mb > 0)
@@ -196,6 +237,15 @@ std::string summary_line(const ExtractionRun& run) {
                 static_cast<long long>(t.euler_characteristic), static_cast<long long>(t.boundary_edges),
                 static_cast<long long>(t.nonmanifold_edges), run.preprocess_seconds, run.extract_seconds,
                 chosen.c_str());
+  return buf + balance_text(run.extract.ranks);
+}
+
+std::string balance_text(const std::vector<RankLoad>& loads) {
+  if (loads.empty()) return {};
+  const Balance b = balance_of(loads);
+  char buf[160];
+  std::snprintf(buf, sizeof buf, "; %zu ranks, max/mean: cost %.2f, work %.2f, bytes read %.2f, time %.2f",
+                loads.size(), b.cost, b.work, b.bytes, b.seconds);
   return buf;
 }
 

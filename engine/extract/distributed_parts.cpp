@@ -1,0 +1,78 @@
+#include "engine/extract/distributed_parts.h"
+
+#include <stdexcept>
+#include <utility>
+
+#include "engine/core/byte_codec.h"
+
+namespace isotope {
+
+std::vector<double> share_costs(const Distribution& group, size_t n,
+                                const std::function<void(size_t first, size_t last, double* out)>& compute) {
+  const auto r = static_cast<size_t>(group.rank()), ranks = static_cast<size_t>(group.ranks());
+  const size_t first = n * r / ranks, last = n * (r + 1) / ranks;
+  std::vector<double> mine(last - first);
+  settle_together(group, [&] { compute(first, last, mine.data()); });
+  ByteWriter w;
+  w.put_array(mine);
+  std::vector<double> all;
+  for (const std::vector<uint8_t>& bytes : group.all_gather(w.bytes())) {
+    ByteReader rd(bytes);
+    std::vector<double> part;
+    rd.get_array(part);
+    all.insert(all.end(), part.begin(), part.end());
+  }
+  if (all.size() != n) throw std::runtime_error("the ranks disagree on the number of pieces");
+  return all;
+}
+
+std::vector<RankLoad> gather_loads(const Distribution& group, const RankLoad& mine) {
+  ByteWriter w;
+  w.put(mine);
+  std::vector<RankLoad> loads;
+  for (const std::vector<uint8_t>& bytes : group.all_gather(w.bytes())) {
+    ByteReader r(bytes);
+    loads.push_back(r.get<RankLoad>());
+  }
+  return loads;
+}
+
+std::vector<PartMesh> gather_parts(const Distribution& group, std::vector<PartMesh> mine) {
+  ByteWriter w;
+  settle_together(group, [&] {  // the copy may run out of memory on one rank alone
+    w.put(static_cast<uint64_t>(mine.size()));
+    for (PartMesh& p : mine) {
+      w.put_array(p.mesh.positions);
+      w.put_array(p.mesh.triangles);
+      w.put_array(p.keys);
+      w.put(p.tets_visited);
+      w.put(p.tets_emitted);
+      w.put(p.tets_simplified);
+      w.put(p.region);
+      p = PartMesh{};
+    }
+  });
+  std::vector<std::vector<uint8_t>> all = group.gather(w.bytes());
+  w = ByteWriter{};
+  std::vector<PartMesh> parts;
+  settle_together(group, [&] {
+    for (std::vector<uint8_t>& bytes : all) {
+      ByteReader r(bytes);
+      const auto n = r.get<uint64_t>();
+      for (uint64_t i = 0; i < n; ++i) {
+        PartMesh& p = parts.emplace_back();
+        r.get_array(p.mesh.positions);
+        r.get_array(p.mesh.triangles);
+        r.get_array(p.keys);
+        p.tets_visited = r.get<int64_t>();
+        p.tets_emitted = r.get<int64_t>();
+        p.tets_simplified = r.get<int64_t>();
+        p.region = r.get<Tet>();
+      }
+      bytes = {};
+    }
+  });
+  return parts;
+}
+
+}  // namespace isotope

@@ -1,0 +1,53 @@
+#pragma once
+// Work shared among processes: what the engine asks of a group of processes (MPI ranks) when one
+// extraction or one conversion is spread over them, without depending on MPI. The MPI group is
+// dist/mpi_distribution.h; a host program with its own communicator implements the two gathers.
+//
+// Every process runs the same call with the same options and the same Distribution (rank r of R):
+// each takes a contiguous share of the work, chosen the same way on every process, and rank 0
+// receives the rest and finishes: the mesh (or the store) is the one a single process makes, byte
+// for byte (docs/DISTRIBUTED.md). A failure on any process makes every process throw, with the
+// failing rank's message, at the next point where they meet (settle_together), so none waits for
+// another forever.
+#include <cstdint>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace isotope {
+
+class Distribution {
+ public:
+  virtual ~Distribution() = default;
+  virtual int rank() const = 0;
+  virtual int ranks() const = 0;
+  // Collective: every process's bytes, on every process, in rank order. For small things
+  // (sizes, counts, a failure's message).
+  virtual std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) const = 0;
+  // Collective: every process's bytes on rank 0, in rank order (rank 0's own included); nothing
+  // elsewhere. For large things (the parts of a mesh), of any size.
+  virtual std::vector<std::vector<uint8_t>> gather(const std::vector<uint8_t>& mine) const = 0;
+};
+
+// What every process of a distributed call throws when one of them failed: the message is that
+// process's own ("rank 1 of 3: scan.isotope: brick 812 (...): checksum mismatch"). `usage` is true
+// when the failure was an option out of range (the command's exit code 2).
+struct DistributedError : std::runtime_error {
+  DistributedError(int failed_rank, bool usage, const std::string& message)
+      : std::runtime_error(message), rank(failed_rank), usage_error(usage) {}
+  int rank;
+  bool usage_error;
+};
+
+// Collective: runs `work` on this process, then learns from every process whether its work
+// threw. When any did, every process throws DistributedError with the message of the lowest
+// failing rank (a DistributedError from a nested call passes through as it is).
+void settle_together(const Distribution& group, const std::function<void()>& work);
+
+// Where each of `ranks` contiguous shares of items with these costs begins (ranks + 1 bounds, the
+// last = costs.size()): each share's cost as close to total / ranks as whole items allow. The
+// same on every process for the same costs.
+std::vector<size_t> share_by_cost(const std::vector<double>& costs, int ranks);
+
+}  // namespace isotope

@@ -1,0 +1,17 @@
+#pragma once
+// The temporary files a process has open (an AtomicFile's, a distributed convert's hand-over), so
+// that a process told to end at once can remove them first: under mpirun, a rank that fails or is
+// killed makes mpirun end every other rank with SIGTERM, then SIGKILL, and a rank blocked in a
+// collective cannot unwind to its destructors (tools/main.cpp). Removal is async-signal-safe.
+#include <string>
+
+namespace isotope {
+
+// Returns a slot for unregister_temporary, or -1 when all slots are taken (the file is then only
+// removed by its owner's destructor, as always).
+int register_temporary(const std::string& path) noexcept;
+void unregister_temporary(int slot) noexcept;
+// Unlinks every registered file. Async-signal-safe: for a signal handler.
+void remove_temporaries_now() noexcept;
+
+}  // namespace isotope

@@ -1,0 +1,269 @@
+// A distributed extraction and conversion (include/isotope/distribution.h) with the ranks as
+// threads of this process, so that the engine's side of it runs under the sanitizers (scripts/test.sh:
+// ASan and TSan) without MPI: the same mesh and the same store, byte for byte, as one process; a
+// failure on one rank thrown on every rank with its message; nothing left behind. The MPI face
+// itself is tested through mpirun in tests/mpi/test_mpi.py.
+#include "isotope/distribution.h"
+
+#include <gtest/gtest.h>
+
+#include <condition_variable>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "engine/core/fields.h"
+#include "isotope/convert.h"
+#include "isotope/error.h"
+#include "isotope/extract.h"
+#include "isotope/source.h"
+
+namespace isotope {
+namespace {
+
+// The ranks' meeting point: each exchange waits for all of them, then hands every one the lot.
+class ThreadGroup {
+ public:
+  explicit ThreadGroup(int ranks) : ranks_(ranks), slots_(static_cast<size_t>(ranks)) {}
+  int ranks() const { return ranks_; }
+  std::vector<std::vector<uint8_t>> exchange(int rank, const std::vector<uint8_t>& mine) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    slots_[static_cast<size_t>(rank)] = mine;
+    const uint64_t generation = generation_;
+    if (++arrived_ == ranks_) {
+      arrived_ = 0;
+      result_ = slots_;
+      ++generation_;
+      done_.notify_all();
+    } else {
+      done_.wait(lock, [&] { return generation_ != generation; });
+    }
+    return result_;  // replaced only when every rank, this one included, has come back
+  }
+
+ private:
+  int ranks_;
+  std::mutex mutex_;
+  std::condition_variable done_;
+  int arrived_ = 0;
+  uint64_t generation_ = 0;
+  std::vector<std::vector<uint8_t>> slots_, result_;
+};
+
+class ThreadRank : public Distribution {
+ public:
+  ThreadRank(ThreadGroup& group, int rank) : group_(group), rank_(rank) {}
+  int rank() const override { return rank_; }
+  int ranks() const override { return group_.ranks(); }
+  std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) const override {
+    return group_.exchange(rank_, mine);
+  }
+  std::vector<std::vector<uint8_t>> gather(const std::vector<uint8_t>& mine) const override {
+    auto all = group_.exchange(rank_, mine);
+    if (rank_ != 0) return {};
+    return all;
+  }
+
+ private:
+  ThreadGroup& group_;
+  int rank_;
+};
+
+// Runs work(rank) on `ranks` threads; what each returned, or threw.
+template <class T>
+struct Outcome {
+  std::optional<T> value;
+  std::exception_ptr error;
+};
+template <class T>
+std::vector<Outcome<T>> on_ranks(int ranks, const std::function<T(const Distribution&)>& work) {
+  ThreadGroup group(ranks);
+  std::vector<Outcome<T>> out(static_cast<size_t>(ranks));
+  std::vector<std::thread> threads;
+  for (int r = 0; r < ranks; ++r)
+    threads.emplace_back([&, r] {
+      const ThreadRank me(group, r);
+      try {
+        out[static_cast<size_t>(r)].value = work(me);
+      } catch (...) {
+        out[static_cast<size_t>(r)].error = std::current_exception();
+      }
+    });
+  for (std::thread& t : threads) t.join();
+  return out;
+}
+
+// Every rank threw DistributedError with this message.
+template <class T>
+void expect_every_rank_threw(const std::vector<Outcome<T>>& out, const char* message, bool usage = false) {
+  for (const auto& o : out) {
+    ASSERT_TRUE(o.error);
+    try {
+      std::rethrow_exception(o.error);
+    } catch (const DistributedError& e) {
+      EXPECT_STREQ(e.what(), message);
+      EXPECT_EQ(e.usage_error, usage);
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << "not a DistributedError: " << e.what();
+    }
+  }
+}
+
+std::string bytes_of(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+
+void expect_same(const Mesh& a, const Mesh& b) {
+  ASSERT_EQ(a.positions.size(), b.positions.size());
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  EXPECT_TRUE(a.positions == b.positions);
+  EXPECT_TRUE(a.triangles == b.triangles);
+}
+
+TEST(ShareByCost, ContiguousSharesOfEqualCost) {
+  EXPECT_EQ(share_by_cost({1, 1, 1, 1}, 2), (std::vector<size_t>{0, 2, 4}));
+  EXPECT_EQ(share_by_cost({1, 1, 1, 1, 1, 1}, 3), (std::vector<size_t>{0, 2, 4, 6}));
+  EXPECT_EQ(share_by_cost({10, 1, 1, 1, 1}, 2), (std::vector<size_t>{0, 1, 5}));  // the heavy one alone
+  EXPECT_EQ(share_by_cost({1, 1, 1, 1, 10}, 2), (std::vector<size_t>{0, 4, 5}));
+  // More ranks than items, or nothing to do: bounds still rise from 0 to the end.
+  for (const auto& costs : {std::vector<double>{5}, std::vector<double>{0, 0, 0}, std::vector<double>{}}) {
+    const std::vector<size_t> b = share_by_cost(costs, 4);
+    ASSERT_EQ(b.size(), 5u);
+    EXPECT_EQ(b.front(), 0u);
+    EXPECT_EQ(b.back(), costs.size());
+    EXPECT_TRUE(std::is_sorted(b.begin(), b.end()));
+  }
+}
+
+TEST(SettleTogether, OneRanksFailureIsEveryRanksWithItsMessage) {
+  const auto out = on_ranks<int>(3, [](const Distribution& g) {
+    settle_together(g, [&] {
+      if (g.rank() == 1) throw IoError("scan.isotope: brick 7: checksum mismatch");
+    });
+    return 0;
+  });
+  expect_every_rank_threw(out, "rank 1 of 3: scan.isotope: brick 7: checksum mismatch");
+}
+
+TEST(SettleTogether, WhatEveryRankMetIsSaidAsOneProcessSaysItAndUsageStaysUsage) {
+  const auto all = on_ranks<int>(2, [](const Distribution& g) {
+    settle_together(g, [] { throw OptionError("eps", "must be >= 0, got '-1'"); });
+    return 0;
+  });
+  expect_every_rank_threw(all, "--eps: must be >= 0, got '-1'", true);
+  const auto none = on_ranks<int>(3, [](const Distribution& g) {
+    settle_together(g, [] {});
+    return 7;
+  });
+  for (const auto& o : none) EXPECT_EQ(o.value, 7);
+}
+
+ExtractOptions options_for(double eps, int64_t budget = 0) {
+  ExtractOptions o;
+  o.iso = 0.1f;
+  o.eps = eps;
+  o.max_triangles = budget;
+  return o;
+}
+
+// The in-memory paths: eps 0 marches slabs (no records: every slab costs the same), eps > 0 and
+// a budget share the traversal's pieces.
+TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
+  const Volume volume = generate_noise(61, 3);  // 61: the lattice (65) is clipped to the data
+  for (const ExtractOptions& o : {options_for(0), options_for(0.02), options_for(0, 20000)}) {
+    const Mesh single = extract(volume, o);
+    ASSERT_GT(single.triangles.size(), 1000u);
+    const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(3, [&](const Distribution& g) {
+      ExtractOptions mine = o;
+      mine.distribution = &g;
+      ExtractStats stats;
+      Mesh mesh = extract(volume, mine, &stats);
+      return std::pair{std::move(mesh), stats};
+    });
+    for (int r = 0; r < 3; ++r) {
+      ASSERT_FALSE(out[static_cast<size_t>(r)].error) << "rank " << r;
+      const auto& [mesh, stats] = *out[static_cast<size_t>(r)].value;
+      EXPECT_EQ(stats.ranks.size(), 3u);
+      if (r == 0)
+        expect_same(mesh, single);
+      else
+        EXPECT_TRUE(mesh.triangles.empty() && mesh.positions.empty());
+    }
+  }
+}
+
+class DistributedStore : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("isotope-distribution-" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(dir_);
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::vector<std::string> files() const {
+    std::vector<std::string> names;
+    for (const auto& e : std::filesystem::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  }
+  std::filesystem::path dir_;
+};
+
+TEST_F(DistributedStore, FourRanksWriteTheSingleProcessFileAndExtractFromIt) {
+  const Volume volume = generate_noise(75, 5);
+  ConvertOptions single_options;
+  single_options.brick_bits = 3;  // many bricks and tiles for a small volume
+  convert(volume, (dir_ / "one.isotope").string(), single_options);
+  const auto out = on_ranks<int>(4, [&](const Distribution& g) {
+    ConvertOptions o = single_options;
+    o.distribution = &g;
+    convert(volume, (dir_ / "four.isotope").string(), o);
+    return 0;
+  });
+  for (const auto& o : out) ASSERT_FALSE(o.error);
+  EXPECT_EQ(bytes_of(dir_ / "four.isotope"), bytes_of(dir_ / "one.isotope"));
+  EXPECT_EQ(files(), (std::vector<std::string>{"four.isotope", "one.isotope"}));  // no hand-over left
+
+  // The paged paths: the slabs' and the pieces' costs from the store's records.
+  VolumeSpec spec;
+  spec.path = (dir_ / "one.isotope").string();
+  const Source store = open_volume(spec);
+  for (const ExtractOptions& opt : {options_for(0), options_for(0.01)}) {
+    const Mesh single = store.extract(opt);
+    const auto meshes = on_ranks<Mesh>(4, [&](const Distribution& g) {
+      ExtractOptions mine = opt;
+      mine.distribution = &g;
+      return store.extract(mine);
+    });
+    ASSERT_FALSE(meshes[0].error);
+    expect_same(*meshes[0].value, single);
+  }
+}
+
+TEST_F(DistributedStore, ARankThatFailsStopsEveryRankAndLeavesNothing) {
+  const Volume volume = generate_noise(75, 5);
+  std::atomic<bool> stop{true};  // rank 2's convert is "interrupted" at its first batch of tiles
+  const auto out = on_ranks<int>(3, [&](const Distribution& g) {
+    ConvertOptions o;
+    o.brick_bits = 3;
+    o.distribution = &g;
+    if (g.rank() == 2) o.cancel = &stop;
+    convert(volume, (dir_ / "three.isotope").string(), o);
+    return 0;
+  });
+  expect_every_rank_threw(out, "rank 2 of 3: interrupted");
+  EXPECT_TRUE(files().empty());  // no store, no temporary, no hand-over
+}
+
+}  // namespace
+}  // namespace isotope
