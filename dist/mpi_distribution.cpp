@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <climits>
 #include <cstdlib>
+#include <new>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -10,7 +11,7 @@
 namespace isotope {
 namespace {
 
-constexpr uint64_t kChunk = uint64_t{1} << 30;
+constexpr uint64_t kChunk = uint64_t{64} << 20;  // 64 MiB: MPI counts are ints, and a drain's room
 constexpr int kTag = 7041;
 
 }  // namespace
@@ -46,20 +47,39 @@ std::vector<std::vector<uint8_t>> MpiDistribution::gather(const std::vector<uint
       MPI_Send(mine.data() + at, static_cast<int>(std::min(kChunk, size - at)), MPI_BYTE, 0, kTag, comm_);
     return {};
   }
+  // Out of memory here, rank 0 still receives every piece (into one chunk's room, over and over),
+  // so that no sender waits forever, and throws after.
   std::vector<std::vector<uint8_t>> out(static_cast<size_t>(ranks_));
-  out[0] = mine;
+  std::vector<uint8_t> drain;
+  bool failed = false;
+  try {
+    out[0] = mine;
+  } catch (const std::bad_alloc&) {
+    failed = true;
+  }
   for (int r = 1; r < ranks_; ++r) {
     std::vector<uint8_t>& bytes = out[static_cast<size_t>(r)];
-    bytes.resize(sizes[static_cast<size_t>(r)]);
-    for (uint64_t at = 0; at < bytes.size(); at += kChunk)
-      MPI_Recv(bytes.data() + at, static_cast<int>(std::min<uint64_t>(kChunk, bytes.size() - at)), MPI_BYTE, r, kTag,
-               comm_, MPI_STATUS_IGNORE);
+    const uint64_t theirs = sizes[static_cast<size_t>(r)];
+    if (!failed) try {
+        bytes.resize(theirs);
+      } catch (const std::bad_alloc&) {
+        failed = true;
+      }
+    if (failed) {
+      for (std::vector<uint8_t>& o : out) std::vector<uint8_t>().swap(o);  // what was received goes
+      drain.resize(std::min(kChunk, theirs));
+    }
+    for (uint64_t at = 0; at < theirs; at += kChunk)
+      MPI_Recv(failed ? drain.data() : bytes.data() + at, static_cast<int>(std::min(kChunk, theirs - at)), MPI_BYTE, r,
+               kTag, comm_, MPI_STATUS_IGNORE);
   }
+  if (failed) throw std::bad_alloc();
   return out;
 }
 
 bool MpiSession::launched() {
-  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK", "PMI_SIZE", "SLURM_PROCID"})
+  // Not SLURM_PROCID: a batch script's own shell has it, without a launcher behind it.
+  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK", "PMI_SIZE"})
     if (std::getenv(name)) return true;
   return false;
 }

@@ -18,7 +18,7 @@ class MpiDistribution : public Distribution {
   int rank() const override { return rank_; }
   int ranks() const override { return ranks_; }
   std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) const override;
-  // Point to point, in pieces of at most 1 GiB: MPI counts are ints, a rank's mesh may be larger.
+  // Point to point, in pieces of 64 MiB: MPI counts are ints, a rank's mesh may be larger.
   std::vector<std::vector<uint8_t>> gather(const std::vector<uint8_t>& mine) const override;
 
  private:

@@ -5,6 +5,7 @@
 // leaves no output file behind.
 
 #include <oneapi/tbb/global_control.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -19,6 +20,7 @@
 #include <string>
 #include <thread>
 
+#include "engine/core/byte_codec.h"
 #include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
 #include "engine/topology/component_report.h"
@@ -73,9 +75,9 @@ ExtractOptions full_resolution(const ExtractOptions& o) {
 
 int write_outputs(const ExtractArgs& a, ExtractionRun& run, Mesh& mesh, const Mesh& full);
 
-// --parts DIR: every rank writes its share's mesh as DIR/part-RRRRR.vtp, all of them finished
-// before any is renamed into place, then rank 0 names them in DIR/mesh.pvtp, which ParaView opens
-// as one dataset (docs/DISTRIBUTED.md).
+// --parts DIR: every rank writes its share's mesh as part-RRRRR.vtp into a new folder beside DIR,
+// rank 0 adds mesh.pvtp naming them all (ParaView opens it as one dataset), and only then does the
+// folder take DIR's place: a failure on any rank leaves DIR as it was (docs/DISTRIBUTED.md).
 int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh) {
   const Distribution* group = process_group();
   const int rank = group ? group->rank() : 0, ranks = group ? group->ranks() : 1;
@@ -84,14 +86,43 @@ int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh
     std::snprintf(name, sizeof name, "part-%05d.vtp", r);
     return std::string(name);
   };
-  const std::filesystem::path dir(a.parts);
-  std::optional<AtomicFile> part;
+  const std::filesystem::path target = std::filesystem::absolute(a.parts).lexically_normal();
+  const std::filesystem::path parent = target.parent_path();
+  const std::string base = "." + target.filename().string() + ".tmp." + std::to_string(::getpid());
+  // Rank 0's new folder, removed unless it took DIR's place.
+  struct Folder {
+    std::filesystem::path path;
+    bool kept = false;
+    ~Folder() {
+      std::error_code ignored;
+      if (!path.empty() && !kept) std::filesystem::remove_all(path, ignored);
+    }
+  } folder;
   on_every_rank([&] {
-    part.emplace((dir / part_name(rank)).string());
-    write_mesh(mesh, *part, MeshFormat::vtp);
-    part->finish();
+    if (!speaking_rank()) return;
+    if (std::filesystem::exists(target) && !std::filesystem::is_directory(target))
+      throw IoError("--parts " + a.parts + ": is not a directory");
+    for (int n = 0; folder.path.empty(); ++n) {
+      const std::filesystem::path p = parent / (base + "." + std::to_string(n));
+      if (std::filesystem::create_directory(p)) folder.path = p;
+      if (n > 100) throw IoError("--parts " + a.parts + ": cannot make a new folder beside it");
+    }
   });
-  on_every_rank([&] { part->commit(); });
+  std::filesystem::path temp = folder.path;
+  if (group) {  // rank 0's folder, to every rank
+    ByteWriter w;
+    w.put_array(folder.path.string());
+    const std::vector<std::vector<uint8_t>> all = group->all_gather(w.bytes());
+    ByteReader r(all[0]);
+    std::string path;
+    r.get_array(path);
+    temp = path;
+  }
+  on_every_rank([&] {
+    AtomicFile part((temp / part_name(rank)).string());
+    write_mesh(mesh, part, MeshFormat::vtp);
+    part.commit();
+  });
   int64_t vertices = static_cast<int64_t>(mesh.positions.size()),
           triangles = static_cast<int64_t>(mesh.triangles.size());
   if (group) {  // the totals, for the summary: each rank's counts ride in a load's fields
@@ -101,19 +132,26 @@ int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh
     vertices = triangles = 0;
     for (const RankLoad& c : gather_loads(*group, counts)) vertices += c.work, triangles += c.items;
   }
-  const std::string manifest = (dir / "mesh.pvtp").string();
   on_every_rank([&] {
     if (!speaking_rank()) return;
     std::vector<std::string> pieces;
     for (int r = 0; r < ranks; ++r) pieces.push_back(part_name(r));
-    write_pvtp(pieces, manifest);
+    write_pvtp(pieces, (folder.path / "mesh.pvtp").string());
+    // The new folder takes DIR's place; an old DIR is moved aside first, then removed.
+    const std::filesystem::path old = parent / (base + ".old");
+    const bool replace = std::filesystem::exists(target);
+    if (replace) std::filesystem::rename(target, old);
+    std::filesystem::rename(folder.path, target);
+    folder.kept = true;
+    if (replace) std::filesystem::remove_all(old);
   });
   if (!a.quiet && speaking_rank())
     std::printf(
         "%s: %d part%s, %lld triangles, %lld vertices (those on a boundary between parts in both); extract "
         "%.3f s%s\n",
-        manifest.c_str(), ranks, ranks == 1 ? "" : "s", static_cast<long long>(triangles),
-        static_cast<long long>(vertices), run.extract_seconds, balance_text(run.extract.ranks).c_str());
+        (std::filesystem::path(a.parts) / "mesh.pvtp").c_str(), ranks, ranks == 1 ? "" : "s",
+        static_cast<long long>(triangles), static_cast<long long>(vertices), run.extract_seconds,
+        balance_text(run.extract.ranks).c_str());
   return 0;
 }
 
@@ -148,22 +186,19 @@ int run_extract(const ExtractArgs& a) {
   }
 
   // Fail before the (possibly long) extraction when the outputs cannot be written; creates nothing.
-  for (const std::string* path : {&a.output, &a.report}) {
-    if (path->empty()) continue;
-    const std::filesystem::path dir = std::filesystem::path(*path).parent_path();
-    if (!dir.empty() && !std::filesystem::is_directory(dir)) {
-      throw IoError("cannot write '" + *path + "': directory '" + dir.string() + "' does not exist");
+  // Under mpirun rank 0 writes them (--parts: every rank, into a folder rank 0 makes), and checks
+  // them for all.
+  on_every_rank([&] {
+    if (!speaking_rank()) return;
+    for (const std::string* path : {&a.output, &a.report, &a.parts}) {
+      if (path->empty()) continue;
+      const std::filesystem::path dir = std::filesystem::path(*path).parent_path();
+      if (!dir.empty() && !std::filesystem::is_directory(dir)) {
+        throw IoError("cannot write '" + *path + "': directory '" + dir.string() + "' does not exist");
+      }
     }
-  }
-  if (a.parts.empty()) {
-    check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
-  } else {  // the folder: made by rank 0 if need be, before the work
-    on_every_rank([&] {
-      if (speaking_rank()) std::filesystem::create_directories(a.parts);
-    });
-    if (!std::filesystem::is_directory(a.parts))
-      throw IoError("cannot write '" + a.parts + "': not a directory (on every rank's file system)");
-  }
+    if (a.parts.empty()) check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
+  });
 
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) {
@@ -178,14 +213,20 @@ int run_extract(const ExtractArgs& a) {
   Mesh mesh, full;
   {  // scoped: the input's memory (volume or brick cache) is given back before measuring and writing
     std::optional<Source> opened;
-    on_every_rank([&] { opened.emplace(open_input(a.input, a.dims, a.type, a.cache_mb, progress)); });
+    on_every_rank([&] {
+      opened.emplace(open_input(a.input, a.dims, a.type, a.cache_mb, progress));
+      // A volume's hierarchy, if the extraction needs one, built here, where a rank that runs out
+      // of memory stops them all (a store needs nothing).
+      if (process_group()) opened->prepare({run.options});
+    });
     const Source& input = *opened;
     const auto start = std::chrono::steady_clock::now();
     mesh = input.extract(run.options, &run.extract);
     const double elapsed = seconds_since(start);
     describe(input.info(), run);  // before --compare-full: the cache's reads are the extraction's own
-    // A volume's hierarchy is built on demand inside the extraction: that part is preprocessing.
-    run.extract_seconds = elapsed - run.preprocess_seconds;
+    // A volume's hierarchy is built on demand inside the extraction: that part is preprocessing
+    // (under mpirun it was built before, above).
+    run.extract_seconds = process_group() ? elapsed : elapsed - run.preprocess_seconds;
     if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
     if (a.compare_full) {
       const auto compare_start = std::chrono::steady_clock::now();

@@ -7,6 +7,7 @@
 #include <exception>
 #include <iostream>
 #include <new>
+#include <string>
 
 #include "isotope/error.h"
 #include "isotope/extract.h"  // OptionError
@@ -101,11 +102,19 @@ int main(int argc, char** argv) {
   } catch (const isotope::DistributedError& e) {  // every rank throws it; rank 0 says it once
     if (speaks) std::cerr << "isotope: " << (e.usage_error ? "usage error: " : "error: ") << e.what() << '\n';
     return e.usage_error ? 2 : 1;
-  } catch (const std::bad_alloc&) {
-    if (speaks) std::cerr << "isotope: error: out of memory\n";
-    return 1;
   } catch (const std::exception& e) {
-    if (speaks) std::cerr << "isotope: error: " << e.what() << '\n';
+    const std::string what = dynamic_cast<const std::bad_alloc*>(&e) ? "out of memory" : e.what();
+#ifdef ISOTOPE_HAVE_MPI
+    // Every failure one rank may meet alone is settled among the ranks (DistributedError above); one
+    // that was not may leave the others waiting in a collective: end them all rather than hang.
+    if (mpi && mpi->world().ranks() > 1) {
+      std::cerr << "isotope: error: rank " << mpi->world().rank() << " of " << mpi->world().ranks() << ": " << what
+                << '\n';
+      isotope::remove_temporaries_now();
+      MPI_Abort(MPI_COMM_WORLD, 1);
+    }
+#endif
+    if (speaks) std::cerr << "isotope: error: " << what << '\n';
     return 1;
   }
 }

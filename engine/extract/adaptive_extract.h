@@ -135,10 +135,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     load.seconds = work_seconds;
     if constexpr (requires { source.bytes_read(); }) load.bytes_read = source.bytes_read();
     total.ranks = gather_loads(*group, load);
-    if (!options.keep_shares) {
-      parts = gather_parts(*group, std::move(parts));
-      if (group->rank() != 0) return finish(Mesh{});
-    }
+    if (!options.keep_shares) parts = gather_parts(*group, std::move(parts));  // rank 0's parts: all of them
   } else {
     run_share();
   }
@@ -147,7 +144,13 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     total.tets_emitted += p.tets_emitted;
     total.tets_simplified += p.tets_simplified;
   }
-  return finish(weld(parts, source.lattice().side));
+  Mesh mesh;
+  // Rank 0 (or every rank, keeping its share) welds; the others wait, so that running out of
+  // memory in the weld stops them too.
+  together([&] {
+    if (!group || options.keep_shares || group->rank() == 0) mesh = weld(parts, source.lattice().side);
+  });
+  return finish(std::move(mesh));
 }
 
 }  // namespace isotope

@@ -52,7 +52,8 @@ std::vector<PartMesh> gather_parts(const Distribution& group, std::vector<PartMe
       p = PartMesh{};
     }
   });
-  std::vector<std::vector<uint8_t>> all = group.gather(w.bytes());
+  std::vector<std::vector<uint8_t>> all;
+  settle_together(group, [&] { all = group.gather(w.bytes()); });  // rank 0 may run out of memory receiving
   w = ByteWriter{};
   std::vector<PartMesh> parts;
   settle_together(group, [&] {

@@ -97,7 +97,9 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
   });
   if (keep_share) {
     SlabMerger merger;
-    for (Slab& s : mine) merger.append(s);
+    settle_together(group, [&] {
+      for (Slab& s : mine) merger.append(s);
+    });
     return merger.take();
   }
   ByteWriter w;
@@ -111,7 +113,8 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
       s = Slab{};
     }
   });
-  std::vector<std::vector<uint8_t>> all = group.gather(w.bytes());
+  std::vector<std::vector<uint8_t>> all;
+  settle_together(group, [&] { all = group.gather(w.bytes()); });  // rank 0 may run out of memory receiving
   w = ByteWriter{};
   SlabMerger merger;
   settle_together(group, [&] {

@@ -26,7 +26,9 @@ class Distribution {
   // (sizes, counts, a failure's message).
   virtual std::vector<std::vector<uint8_t>> all_gather(const std::vector<uint8_t>& mine) const = 0;
   // Collective: every process's bytes on rank 0, in rank order (rank 0's own included); nothing
-  // elsewhere. For large things (the parts of a mesh), of any size.
+  // elsewhere. For large things (the parts of a mesh), of any size. When rank 0 cannot hold them
+  // it must still take part to the end, then throw (the engine calls it under settle_together, so
+  // that every rank learns of it).
   virtual std::vector<std::vector<uint8_t>> gather(const std::vector<uint8_t>& mine) const = 0;
 };
 

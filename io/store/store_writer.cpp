@@ -255,10 +255,14 @@ class Converter {
     stats.input_bytes = input_bytes();
     stats.bricks = layout_.brick_count();
     stats.tiles_in_flight = built.tiles_in_flight;
-    if (out_) {  // this process wrote the store (alone, or rank 0)
-      stats.output_bytes = out_->size();
-      out_->commit();
-    }
+    if (out_) stats.output_bytes = out_->size();  // this process wrote the store (alone, or rank 0)
+    auto commit = [this] {
+      if (out_) out_->commit();
+    };
+    if (options_.distribution)  // a rename that fails on rank 0 fails every rank
+      settle_together(*options_.distribution, commit);
+    else
+      commit();
     stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return stats;
   }

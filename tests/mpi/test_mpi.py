@@ -152,34 +152,73 @@ def test_a_corrupt_brick_on_one_rank_stops_every_rank_with_its_message(tmp_path,
     assert leftovers(tmp_path, {"bad.isotope"}) == []
 
 
-KILL_RANK_1 = """#!/bin/sh
+KILL_RANK_1_EARLY = """#!/bin/sh
 # Rank 1 is killed (SIGKILL) after a moment; the others run on.
 if [ "$OMPI_COMM_WORLD_RANK" = 1 ]; then exec timeout -s KILL 0.5 "$@"; fi
 exec "$@"
 """
 
+KILL_RANK_1_WHEN_FILES_APPEAR = """#!/bin/sh
+# Rank 1 is killed (SIGKILL) once the output's folder holds a file (rank 0's temporary store or a
+# hand-over), and says what it saw.
+if [ "$OMPI_COMM_WORLD_RANK" = 1 ]; then
+  "$@" &
+  pid=$!
+  while [ -z "$(ls -A "$WATCH")" ]; do sleep 0.02; done
+  ls -A "$WATCH" > "$SEEN"
+  kill -9 $pid
+  wait $pid
+  exit 137
+fi
+exec "$@"
+"""
 
-@pytest.mark.parametrize("command", ["extract", "convert"])
-def test_a_killed_rank_ends_the_job_without_output_or_deadlock(tmp_path, isotope_command, smooth_store, command):
-    wrapper = tmp_path / "kill1.sh"
-    wrapper.write_text(KILL_RANK_1)
+
+def wrapper_file(tmp_path, text):
+    wrapper = tmp_path / "wrapper.sh"
+    wrapper.write_text(text)
     wrapper.chmod(0o755)
+    return wrapper
+
+
+def test_a_killed_rank_ends_an_extraction_without_output_or_deadlock(tmp_path, smooth_store):
     out = tmp_path / "out"
     out.mkdir()
-    if command == "extract":
-        args = ["extract", smooth_store, "--iso", 128, "--threads", 1, "-o", out / "k.ply"]
-    else:
-        # The smooth volume again as a raw file, which takes a few seconds to convert.
-        raw = tmp_path / "v_513x513x513_uint8.raw"
-        r = run([isotope_command, "generate", "noise", "--size", "513", "--type", "uint8", "-o", raw, "--quiet"])
-        assert r.returncode == 0, r.stderr
-        args = ["convert", raw, out / "k.isotope", "--threads", 1]
     start = time.monotonic()
-    r = mpirun(2, args, wrapper=wrapper, timeout=120)
+    r = mpirun(2, ["extract", smooth_store, "--iso", 128, "--threads", 1, "-o", out / "k.ply"],
+               wrapper=wrapper_file(tmp_path, KILL_RANK_1_EARLY), timeout=120)
     assert r.returncode != 0
     assert time.monotonic() - start < 60
     assert "exited on signal 9" in r.stderr, r.stderr
-    assert leftovers(out, set()) == []  # no output, no temporary, no hand-over
+    assert leftovers(out, set()) == []
+
+
+def test_a_killed_rank_ends_a_conversion_and_rank_0_removes_its_temporaries(tmp_path, isotope_command, monkeypatch):
+    raw = tmp_path / "v_513x513x513_uint8.raw"
+    r = run([isotope_command, "generate", "noise", "--size", "513", "--type", "uint8", "-o", raw, "--quiet"])
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "out"
+    out.mkdir()
+    seen = tmp_path / "seen.txt"
+    monkeypatch.setenv("WATCH", str(out))
+    monkeypatch.setenv("SEEN", str(seen))
+    start = time.monotonic()
+    r = mpirun(2, ["convert", raw, out / "k.isotope", "--threads", 1],
+               wrapper=wrapper_file(tmp_path, KILL_RANK_1_WHEN_FILES_APPEAR), timeout=120)
+    assert r.returncode != 0
+    assert time.monotonic() - start < 60
+    assert seen.read_text().strip(), "rank 1 was killed before rank 0 made any file"
+    assert leftovers(out, set()) == []  # rank 0, ended by mpirun's SIGTERM, removed what it had made
+
+
+def test_parts_replace_the_folder_whole(tmp_path, isotope_command, embryo_store):
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    (parts / "part-00007.vtp").write_text("stale, from a run with more ranks")
+    r = mpirun(2, ["extract", embryo_store, "--iso", "50", "--eps", "8", "--parts", parts, "--quiet"])
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in parts.iterdir()) == ["mesh.pvtp", "part-00000.vtp", "part-00001.vtp"]
+    assert leftovers(tmp_path, {"parts"}) == []  # no folder moved aside, none half made
 
 
 @pytest.mark.parametrize("eps", [0, 4])
