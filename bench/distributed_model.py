@@ -65,7 +65,7 @@ def table(c, a):
         nodes = n ** 3
         for p in a.nodes:
             read = nodes * a.input_bytes / bw(p)
-            build = nodes * 8 / 7 * c["convert_core_ns_per_node"] * 1e-9 / cores(p)
+            build = nodes * c["convert_core_ns_per_node"] * 1e-9 / cores(p)  # measured over all bands
             handover = 2 * nodes / 7 * a.handover_bytes / bw(p)
             store = 3 * nodes * c["store_bytes_per_node"] * a.input_bytes / bw(p)
             total = read + build + handover + store + a.launch_s
