@@ -24,6 +24,7 @@
 #include "isotope/error.h"
 #include "isotope/extract.h"
 #include "isotope/source.h"
+#include "tests/temp_dir_test.h"
 
 namespace isotope {
 namespace {
@@ -200,24 +201,8 @@ TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
   }
 }
 
-class DistributedStore : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("isotope-distribution-" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::remove_all(dir_);
-    std::filesystem::create_directories(dir_);
-  }
-  void TearDown() override { std::filesystem::remove_all(dir_); }
-  std::vector<std::string> files() const {
-    std::vector<std::string> names;
-    for (const auto& e : std::filesystem::directory_iterator(dir_)) names.push_back(e.path().filename().string());
-    std::sort(names.begin(), names.end());
-    return names;
-  }
-  std::filesystem::path dir_;
-};
+// A fresh folder per test (tests/temp_dir_test.h): what a failed convert must leave empty.
+class DistributedStore : public testing::TempDirTest {};
 
 TEST_F(DistributedStore, FourRanksWriteTheSingleProcessFileAndExtractFromIt) {
   const Volume volume = generate_noise(75, 5);
@@ -232,7 +217,7 @@ TEST_F(DistributedStore, FourRanksWriteTheSingleProcessFileAndExtractFromIt) {
   });
   for (const auto& o : out) ASSERT_FALSE(o.error);
   EXPECT_EQ(bytes_of(dir_ / "four.isotope"), bytes_of(dir_ / "one.isotope"));
-  EXPECT_EQ(files(), (std::vector<std::string>{"four.isotope", "one.isotope"}));  // no hand-over left
+  EXPECT_EQ(entries(), (std::vector<std::string>{"four.isotope", "one.isotope"}));  // no hand-over left
 
   // The paged paths: the slabs' and the pieces' costs from the store's records.
   VolumeSpec spec;
@@ -262,7 +247,7 @@ TEST_F(DistributedStore, ARankThatFailsStopsEveryRankAndLeavesNothing) {
     return 0;
   });
   expect_every_rank_threw(out, "rank 2 of 3: interrupted");
-  EXPECT_TRUE(files().empty());  // no store, no temporary, no hand-over
+  EXPECT_TRUE(entries().empty());  // no store, no temporary, no hand-over
 }
 
 }  // namespace

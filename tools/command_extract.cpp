@@ -21,7 +21,6 @@
 #include <thread>
 
 #include "engine/core/byte_codec.h"
-#include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
 #include "engine/topology/component_report.h"
 #include "io/file/atomic_file.h"
@@ -125,12 +124,16 @@ int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh
   });
   int64_t vertices = static_cast<int64_t>(mesh.positions.size()),
           triangles = static_cast<int64_t>(mesh.triangles.size());
-  if (group) {  // the totals, for the summary: each rank's counts ride in a load's fields
-    RankLoad counts;
-    counts.work = vertices;
-    counts.items = triangles;
+  if (group) {  // the totals, for the summary
+    ByteWriter w;
+    w.put(vertices);
+    w.put(triangles);
     vertices = triangles = 0;
-    for (const RankLoad& c : gather_loads(*group, counts)) vertices += c.work, triangles += c.items;
+    for (const std::vector<uint8_t>& bytes : group->all_gather(w.bytes())) {
+      ByteReader r(bytes);
+      vertices += r.get<int64_t>();
+      triangles += r.get<int64_t>();
+    }
   }
   on_every_rank([&] {
     if (!speaking_rank()) return;

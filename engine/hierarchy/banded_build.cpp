@@ -30,7 +30,7 @@ int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uin
   const auto budget = static_cast<int64_t>(memory_bytes / 4 * 3);
   int64_t c = std::max<int64_t>(1, int64_t{64} >> layout.brick_bits());
   while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes) < threads ||
-                   static_cast<int64_t>(band0_tile_count(layout, c)) < 4 * threads))
+                   static_cast<int64_t>(tile_count(layout.band(0), c)) < 4 * threads))
     c /= 2;
   return c;
 }

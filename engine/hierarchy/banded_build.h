@@ -108,10 +108,14 @@ int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes);
 // Bricks per tile side that keep every thread busy within three quarters of the budget and give
 // every thread a few tiles of band 0 (what build_bands uses unless told).
 int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes);
-// Band 0's tiles of c^3 bricks, in Morton order (build_bands' first_tile and last_tile count them).
-inline size_t band0_tile_count(const StoreLayout& layout, int64_t c) {
-  const Box3& b = layout.band(0).bricks;
-  return static_cast<size_t>(((b[0] + c - 1) / c) * ((b[1] + c - 1) / c) * ((b[2] + c - 1) / c));
+// A band's tiles of c^3 bricks per axis, and how many (build_bands' first_tile and last_tile
+// count them in Morton order).
+inline Box3 tile_grid(const Band& band, int64_t c) {
+  return {(band.bricks[0] + c - 1) / c, (band.bricks[1] + c - 1) / c, (band.bricks[2] + c - 1) / c};
+}
+inline size_t tile_count(const Band& band, int64_t c) {
+  const Box3 g = tile_grid(band, c);
+  return static_cast<size_t>(g[0] * g[1] * g[2]);
 }
 
 // Sink:
@@ -162,12 +166,10 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   int64_t work = 0;
   for (const Band& b : layout.bands()) {
     if (b.scale < first_band || b.scale > last_band) continue;
-    const auto tiles =
-        static_cast<int64_t>(((b.bricks[0] + c - 1) / c) * ((b.bricks[1] + c - 1) / c) * ((b.bricks[2] + c - 1) / c));
-    const int64_t mine =
-        std::min<int64_t>(tiles, static_cast<int64_t>(std::min<size_t>(options.last_tile, SIZE_MAX / 2))) -
-        std::min<int64_t>(tiles, static_cast<int64_t>(options.first_tile));
-    work += b.nodes[0] * b.nodes[1] * b.nodes[2] / tiles * mine;  // near enough: edge tiles are smaller
+    const size_t tiles = tile_count(b, c);
+    const auto mine = static_cast<int64_t>(std::min(options.last_tile, tiles) - std::min(options.first_tile, tiles));
+    // Near enough: edge tiles are smaller.
+    work += b.nodes[0] * b.nodes[1] * b.nodes[2] / static_cast<int64_t>(tiles) * mine;
   }
   ProgressReporter progress(options.progress, work);
   // Band 0 has the largest windows; sized once for them, a slot's arrays never grow again (growing
@@ -203,8 +205,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
         next = owned_next.get();
       }
     }
-    std::vector<Box3> tile_coords =
-        in_morton_order({(band.bricks[0] + c - 1) / c, (band.bricks[1] + c - 1) / c, (band.bricks[2] + c - 1) / c});
+    std::vector<Box3> tile_coords = in_morton_order(tile_grid(band, c));
     tile_coords = std::vector<Box3>(tile_coords.begin() + std::min(options.first_tile, tile_coords.size()),
                                     tile_coords.begin() + std::min(options.last_tile, tile_coords.size()));
     std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));

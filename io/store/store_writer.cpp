@@ -353,9 +353,7 @@ class Converter {
         if (root && !last)
           next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::create, layout_.band(j + 1).nodes);
       });
-      const auto tiles = static_cast<size_t>(((band.bricks[0] + c - 1) / c) * ((band.bricks[1] + c - 1) / c) *
-                                             ((band.bricks[2] + c - 1) / c));
-      const std::vector<size_t> shares = share_by_cost(std::vector<double>(tiles, 1.0), group.ranks());
+      const std::vector<size_t> shares = share_by_cost(std::vector<double>(tile_count(band, c), 1.0), group.ranks());
       std::optional<ScratchOut> scratch;
       BandShare share;
       settle_together(group, [&] {
