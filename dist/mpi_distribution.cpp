@@ -77,13 +77,6 @@ std::vector<std::vector<uint8_t>> MpiDistribution::gather(const std::vector<uint
   return out;
 }
 
-bool MpiSession::launched() {
-  // Not SLURM_PROCID: a batch script's own shell has it, without a launcher behind it.
-  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK", "PMI_SIZE"})
-    if (std::getenv(name)) return true;
-  return false;
-}
-
 MpiSession::MpiSession(int* argc, char*** argv) {
   int provided = 0;
   if (MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS)

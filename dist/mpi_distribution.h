@@ -26,12 +26,11 @@ class MpiDistribution : public Distribution {
   int rank_ = 0, ranks_ = 1;
 };
 
-// MPI for the life of a process that an MPI launcher started (mpirun, srun: seen by the
-// variables they set), and nothing at all for one started otherwise, so that the same isotope
-// binary runs alone without an MPI runtime being involved.
+// MPI for the life of a process that an MPI launcher started (mpirun, srun: the isotope command
+// tells by the variables they set), and nothing at all for one started otherwise, so that the same
+// isotope binary runs alone without an MPI runtime being involved.
 class MpiSession {
  public:
-  static bool launched();               // whether an MPI launcher started this process
   MpiSession(int* argc, char*** argv);  // MPI_Init_thread; throws std::runtime_error if that fails
   ~MpiSession();                        // MPI_Finalize
   MpiSession(const MpiSession&) = delete;

@@ -33,6 +33,11 @@ void keep_freed_brick_memory() {
   mallopt(M_TRIM_THRESHOLD, 128 << 20);
 }
 
+void check_cache_mb(const OpenOptions& options) {
+  if (options.cache_mb < 1 || options.cache_mb > (int64_t{1} << 30))
+    throw OptionError("cache-mb", "must be 1 .. " + std::to_string(int64_t{1} << 30) + " (MB)");
+}
+
 }  // namespace
 
 struct Source::Impl {
@@ -58,8 +63,7 @@ struct Source::Impl {
     const RecordFields all = memory ? memory->fields() | fields : fields;
     memory.reset();  // freed now unless an extraction still holds it
     const auto start = std::chrono::steady_clock::now();
-    memory =
-        std::make_shared<const Hierarchy>(Hierarchy::build(*volume, all, StoreLayout::kDefaultBrickBits, progress));
+    memory = std::make_shared<const Hierarchy>(Hierarchy::build(*volume, all, Hierarchy::kMemoryBrickBits, progress));
     preprocess_seconds += seconds_since(start);
     return memory;
   }
@@ -74,10 +78,9 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   auto impl = std::make_unique<Source::Impl>();
   impl->progress = options.preprocess_progress;
+  check_cache_mb(options);
   // A store is known by its magic; a file named .isotope without it is a damaged store, whose
   // reader says so, not a raw volume whose name lacks its dimensions (tests/reject/zeros.isotope).
-  if (options.cache_mb < 1 || options.cache_mb > (int64_t{1} << 30))
-    throw OptionError("cache-mb", "must be 1 .. " + std::to_string(int64_t{1} << 30) + " (MB)");
   if (is_store_file(spec.path) || spec.path.ends_with(".isotope")) {
     if (spec.dims || spec.type) throw OptionError(spec.dims ? "dims" : "type", "does not apply to a store");
     if (options.tune_allocator) keep_freed_brick_memory();
@@ -93,6 +96,7 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
 }
 
 Source open_volume(Volume volume, const OpenOptions& options) {
+  check_cache_mb(options);  // unused for an array, but refused in the same words as for a file
   validate_volume(volume);  // what extract() would refuse, refused at open
   auto impl = std::make_unique<Source::Impl>();
   impl->progress = options.preprocess_progress;

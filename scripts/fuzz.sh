@@ -23,7 +23,7 @@ while [ $# -gt 0 ]; do
     *) targets+=("$1"); shift ;;
   esac
 done
-[ ${#targets[@]} -gt 0 ] || targets=(store nrrd raw_name tiff serve_request)
+[ ${#targets[@]} -gt 0 ] || targets=(store nrrd raw_name tiff serve_request serve_http)
 
 if [ "$build" = 1 ]; then
   cmake -S . -B build-fuzz -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_BUILD_TYPE=RelWithDebInfo \

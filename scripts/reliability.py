@@ -163,6 +163,34 @@ def bad_paths(iso, work):
         r.problems.append(f'exit {rc}, link or target wrong: {out[:200]}')
     os.remove(os.path.join(d, 'link.ply'))
     os.remove(target)
+    # --parts DIR writes a folder (io/file/output_folder.h): never over one that holds the input or
+    # files isotope did not write, which it deleted before, exit 0.
+    p = os.path.join(d, 'p')
+    os.makedirs(os.path.join(p, 'sub'))
+    shutil.copy(v, p)
+    open(os.path.join(p, 'sub', 'notes.txt'), 'w').write('x\n')
+    expect_refusal(add(Row('Bad paths', '`--parts DIR` where DIR holds the input and a folder of notes')),
+                   [iso, 'extract', os.path.join(p, os.path.basename(v)), '--iso', '0', '--eps', '0.01', '--parts', p],
+                   d, message='holds INPUT', unchanged=[os.path.join(p, os.path.basename(v)),
+                                                       os.path.join(p, 'sub', 'notes.txt')])
+    expect_refusal(add(Row('Bad paths', '`--parts DIR` where DIR holds files isotope did not write')),
+                   ex + ['--eps', '0.01', '--parts', p], d, message='is a folder that isotope did not write',
+                   unchanged=[os.path.join(p, 'sub', 'notes.txt')])
+    shutil.rmtree(p)
+    # A slice folder with a link that leads nowhere between its slices: named, whatever the order.
+    sl = os.path.join(d, 'slices')
+    os.makedirs(sl)
+    subprocess.run([iso, 'generate', 'sphere', '--size', '9', '-q', '-o', os.path.join(sl, 'v_9x9x9_float32.raw')],
+                   check=True)
+    raw9 = open(os.path.join(sl, 'v_9x9x9_float32.raw'), 'rb').read()
+    os.remove(os.path.join(sl, 'v_9x9x9_float32.raw'))
+    for z in (1, 3):  # single-page float32 TIFFs of one 9x9 slice each, written by hand
+        open(os.path.join(sl, f's{z}.tif'), 'wb').write(one_page_tiff(9, 9, raw9[:324]))
+    os.symlink('gone.tif', os.path.join(sl, 's2.tif'))
+    expect_refusal(add(Row('Bad paths', 'a slice folder with a `.tif` link that leads nowhere')),
+                   [iso, 'extract', sl, '--iso', '0', '-o', f'{d}/m.ply'], d,
+                   message='s2.tif: a symbolic link that leads nowhere')
+    shutil.rmtree(sl)
     # Inputs that are not regular files would block a reader forever (a FIFO) or never end.
     inputs = [('a FIFO', 'in_2x2x2_uint8.raw', lambda p: os.mkfifo(p), 'is a FIFO'),
               ('a directory', 'dir_2x2x2_uint8.raw', lambda p: os.makedirs(p), 'is a directory'),
@@ -180,6 +208,18 @@ def bad_paths(iso, work):
         elif os.path.exists(p):
             os.remove(p)
     return v
+
+
+def one_page_tiff(width, height, data):
+    """A little-endian single-page float32 TIFF of one strip."""
+    import struct
+    tags = [(256, 4, width), (257, 4, height), (258, 3, 32), (259, 3, 1), (262, 3, 1), (273, 4, 8), (277, 3, 1),
+            (278, 4, height), (279, 4, len(data)), (339, 3, 3)]
+    out = b'II*\0' + struct.pack('<I', 8 + len(data)) + data + struct.pack('<H', len(tags))
+    for tag, kind, value in tags:
+        out += struct.pack('<HHI', tag, kind, 1) + (struct.pack('<HH', value, 0) if kind == 3 else
+                                                   struct.pack('<I', value))
+    return out + bytes(4)
 
 
 def reject_files(iso, work):
@@ -265,6 +305,10 @@ def cli_numbers(iso, work, volume):
                                           '1e-300', '-o', 'm.ply', '--report', 'r.json'], '--compare-voxels'),
              ('--max-triangles -5', ['extract', volume, '--iso', '0', '--max-triangles', '-5', '-o', 'm.ply'],
               '--max-triangles'),
+             ('--max-triangles 0', ['extract', volume, '--iso', '0', '--max-triangles', '0', '-o', 'm.ply'],
+              '--max-triangles'),
+             ('--max-triangles 1000 --eps 0.1', ['extract', volume, '--iso', '0', '--max-triangles', '1000', '--eps',
+                                                 '0.1', '-o', 'm.ply'], 'give eps or max-triangles, not both'),
              ('--cache-mb 0', ['extract', volume, '--iso', '0', '--cache-mb', '0', '-o', 'm.ply'], '--cache-mb'),
              ('--dims 0x4x4', ['extract', volume, '--dims', '0x4x4', '--type', 'uint8', '--iso', '0', '-o', 'm.ply'],
               '--dims'),
@@ -318,6 +362,22 @@ def distributed(iso, work):
     r = add(Row('Across ranks', '`--parts DIR` and `-o` both given'))
     expect_refusal(r, mpirun + [iso, 'extract', 'embryo.isotope', '--iso', '50', '--parts', 'p', '-o', 'm.ply'], d,
                    code=2, message='--parts')
+    # MPMD: two ranks run one command, a third another; every rank compares its words first.
+    same = [iso, 'extract', 'embryo.isotope', '--iso', '50', '--eps', '8', '-o', 'm.ply']
+    for what, third in (('`--eps -1`', same[:6] + ['-1', '-o', 'm.ply']),
+                        ('`isotope info`', [iso, 'info', 'embryo.isotope']),
+                        ('another `--iso`', same[:3] + ['--iso', '60'] + same[5:])):
+        r = add(Row('Across ranks', f'MPMD: two ranks extract, a third runs {what}'))
+        expect_refusal(r, ['mpirun', '--oversubscribe', '-n', '2'] + same + [':', '-n', '1'] + third, d, code=2,
+                       message='the ranks of this job run different commands')
+    without = os.path.join(os.path.dirname(os.path.dirname(iso)), 'tests', 'isotope_without_mpi')
+    r = add(Row('Across ranks', '`mpirun -n 3` of an isotope built without MPI'))
+    if os.path.exists(without):
+        expect_refusal(r, ['mpirun', '--oversubscribe', '-n', '3', without] + same[1:], d, code=1,
+                       message='built without MPI')
+    else:
+        r.got, r.message = 'not run', f'{without} not built'
+        r.problems.append('not run')
 
 
 def http(port, raw, timeout=10):
@@ -403,6 +463,45 @@ def http_abuse(iso, work, store):
         r.problems.append(f'{seconds:.2f} s')
     for s in drips:
         s.close()
+    # One request listing many ranges: the whole body once, not one copy per range.
+    status, head, data = http(port, b'GET /viewer.js HTTP/1.1\r\nHost: x\r\nConnection: close\r\nRange: bytes=' +
+                              b','.join([b'0-'] * 1000) + b'\r\n\r\n')
+    whole = len(get('/viewer.js')[2])
+    r = row('`Range:` with 1,000 ranges on /viewer.js', status, {200}, f'{len(data):,} bytes: the whole file once')
+    if len(data) > whole:
+        r.problems.append(f'{len(data)} bytes, the file is {whole}')
+    status, head, data = http(port, b'GET /api/extract?iso=0&eps=0 HTTP/1.1\r\nHost: x\r\nConnection: close\r\n'
+                              b'Range: bytes=' + b','.join([b'0-'] * 2600) + b'\r\n\r\n', timeout=30)
+    r = row('`Range:` with 2,600 ranges on /api/extract', status, {200}, f'{len(data):,} bytes: the mesh once')
+    if vm_kb(p.pid, 'VmHWM') > 1 << 20:
+        r.problems.append(f'server peak {vm_kb(p.pid, "VmHWM") >> 10} MB')
+    # 100 connections dripping a header line a second: each loses its connection at its request's
+    # deadline (5 s), however often it sends; normal requests are answered meanwhile.
+    drips = []
+    for _ in range(100):
+        s = socket.create_connection(('127.0.0.1', port))
+        s.sendall(b'GET /api/info HTTP/1.1\r\n')
+        drips.append(s)
+    closed, worst, start = set(), 0.0, time.monotonic()
+    for second in range(8):
+        time.sleep(1)
+        for i, s in enumerate(drips):
+            try:
+                s.sendall(b'X-Drip-%d: y\r\n' % second)
+            except OSError:
+                closed.add(i)
+        t = time.monotonic()
+        if get('/api/info')[0] != 200:
+            worst = 999
+        worst = max(worst, time.monotonic() - t)
+    for s in drips:
+        s.close()
+    r = row('100 connections dripping a header line a second for 8 s; a normal request each second', 200,
+            {200}, f'slowest normal answer {1e3 * worst:.0f} ms; {len(closed)} of 100 drips cut by the server', 109)
+    if worst > 2:
+        r.problems.append(f'a normal request took {worst:.1f} s')
+    if len(closed) < 100:
+        r.problems.append(f'{100 - len(closed)} drips still connected after 8 s')
     # 200 extraction requests at once.
     rss_before = vm_kb(p.pid, 'VmRSS')
     results = []
@@ -432,6 +531,35 @@ def http_abuse(iso, work, store):
     if grown > 400:
         r.problems.append(f'server grew {grown:.0f} MB')
     r.max_rss_mb = vm_kb(p.pid, 'VmHWM') / 1024
+    # 60 clients asking for big meshes and never reading them (a store of embryo, eps 16: about 39 MB
+    # a mesh): the server holds them against its response budget, refuses (503) beyond it, and drops
+    # each client behind the pace.
+    embryo = os.path.join(ROOT, '..', 'shared', 'data', 'embryo_256x256x256_uint8.raw')
+    big = os.path.join(work, 'embryo-serve.isotope')
+    subprocess.run([iso, 'convert', embryo, big, '--quiet'], check=True)
+    q = subprocess.Popen([iso, 'serve', big, '--port', '0', '-q', '--cache-mb', '64'], stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT)
+    big_port = int(q.stdout.readline().decode().rsplit(':', 1)[1].strip().strip('/'))
+    stalled = []
+    for _ in range(60):
+        s = socket.create_connection(('127.0.0.1', big_port))
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        s.sendall(b'GET /api/extract?iso=64.5&eps=16 HTTP/1.1\r\nHost: x\r\n\r\n')
+        stalled.append(s)
+    time.sleep(15)
+    held = vm_kb(q.pid, 'VmRSS') >> 10
+    for s in stalled:
+        s.close()
+    time.sleep(3)
+    after = vm_kb(q.pid, 'VmRSS') >> 10
+    peak = vm_kb(q.pid, 'VmHWM') >> 10
+    r = row('60 clients ask for 39 MB meshes and never read them', 'bounded', {'bounded'},
+            f'server {held} MB while they wait, peak {peak} MB, {after} MB once they left', 60)
+    if peak > 1024 or after > 400:
+        r.problems.append(f'peak {peak} MB, {after} MB after')
+    r.max_rss_mb = peak
+    q.send_signal(signal.SIGINT)
+    q.wait(timeout=10)
     status, _, _ = get('/api/info')
     row('still serving after all of the above', status, {200})
     p.send_signal(signal.SIGINT)
@@ -441,6 +569,85 @@ def http_abuse(iso, work, store):
         p.kill()
         rc = 'hang'
     r = row('Ctrl-C stops the server', f'exit {rc}', {'exit 0'})
+
+
+PYTHON_CASES = [
+    ('`spacing=(nan, 1, 1)`', "isotope.extract(a, 30, spacing=(float('nan'), 1, 1))", 'ValueError',
+     'must be 3 finite numbers > 0'),
+    ('`origin=(inf, 0, 0)`', "isotope.extract(a, 30, origin=(float('inf'), 0, 0))", 'ValueError',
+     'must be 3 finite numbers'),
+    ('`spacing=(1e300, 1, 1)`', 'isotope.extract(a, 30, spacing=(1e300, 1, 1))', 'ValueError', 'float32 coordinates'),
+    ('`convert` with `spacing=(0, 1, 1)`', 'isotope.convert(a, "c.isotope", spacing=(0, 1, 1))', 'ValueError',
+     'must be 3 finite numbers > 0'),
+    ('`max_triangles=0`', 'isotope.extract(a, 30, max_triangles=0)', 'OptionError', 'must be an integer in 1 ..'),
+    ('`max_triangles=1000, eps=2`', 'isotope.extract(a, 30, max_triangles=1000, eps=2)', 'OptionError',
+     'not both'),
+    ('`threads=-1`', 'isotope.extract(a, 30, threads=-1)', 'OptionError', 'threads must be an integer in 0 .. 4096'),
+    ('`threads=2**70`', 'isotope.extract(a, 30, threads=2 ** 70)', 'OptionError',
+     'threads must be an integer in 0 .. 4096'),
+    ('`dims=(2**63, 2, 2)`', 'isotope.extract("x.raw", 30, dims=(2 ** 63, 2, 2), type="uint8")', 'OptionError',
+     'dims must look like'),
+    ('a progress callback that uses its own Store',
+     'exec("s = None\\ndef cb(f):\\n    s.info\\ns = isotope.Store(a, progress=cb)\\ns.extract(30, eps=4)")',
+     'RuntimeError', 'may not use the Store that reports to it'),
+    ('a NaN in a float32 array', 'b = a.astype("float32"); b[1, 2, 3] = float("nan"); isotope.extract(b, 30)',
+     'ValueError', 'at (x,y,z) = (3,2,1) is not finite'),
+    ('a 1x1x1 array', 'isotope.extract(a[:1, :1, :1], 30)', 'ValueError', 'volume dimensions 1x1x1'),
+    ('a copy that fails for memory (`RLIMIT_AS`)',
+     'import resource; big = np.ones((256, 256, 512), np.uint8); used = int(open("/proc/self/statm").read().split()[0])'
+     ' * resource.getpagesize(); resource.setrlimit(resource.RLIMIT_AS, (used + (96 << 20), resource.RLIM_INFINITY));'
+     ' isotope.extract(big, 0.5)', 'MemoryError', ''),
+]
+
+
+def python_module(python, work):
+    """The Python module as a hostile caller would use it: one child per case, each must raise its
+    exception with the library's words (and never hang, crash or write)."""
+    d = os.path.join(work, 'python')
+    os.makedirs(d)
+    neghip = os.path.join(ROOT, '..', 'shared', 'data', 'neghip_66x66x66_uint8.raw')
+    for case, code, exception, words in PYTHON_CASES:
+        r = add(Row('Python module', case))
+        if not python:
+            r.got, r.message = 'not run', 'no --python given'
+            r.problems.append('not run')
+            continue
+        script = (f'import sys, numpy as np, isotope\na = np.fromfile({neghip!r}, np.uint8).reshape(66, 66, 66)\n'
+                  f'try:\n    {code}\nexcept {exception if exception != "OptionError" else "isotope.OptionError"}'
+                  f' as e:\n    print("raised", type(e).__name__ + ":", e)\n    sys.exit(0)\nprint("returned")\n')
+        before = listing(d)
+        rc, out, secs, rss = run([python, '-c', script], cwd=d)
+        r.max_rss_mb, r.max_seconds = rss, secs
+        first = out.strip().splitlines()[-1] if out.strip() else ''
+        r.got = f'{exception}' if rc == 0 and first.startswith('raised') else (
+            'hang' if rc == 'hang' else f'exit {rc}')
+        r.message = first.replace('raised ', '', 1)
+        if rc != 0 or not first.startswith('raised') or words not in first:
+            r.problems.append(f'{rc}: {out[-300:]}')
+        if listing(d) != before:
+            r.problems.append('wrote a file')
+    r = add(Row('Python module', 'another thread writes NaN into a borrowed float32 array during an extraction', 0))
+    r.got, r.message = 'documented', 'a borrowed array must not change while a call reads it (README, Python)'
+
+
+def memory_shapes(iso, work):
+    """A volume's memory follows its voxels, not its longest axis (engine/hierarchy/store_layout.h)."""
+    d = os.path.join(work, 'shapes')
+    os.makedirs(d)
+    import math
+    for name, dims in (('long', (500000, 2, 2)), ('flat', (2000, 2000, 2))):
+        raw = os.path.join(d, f'{name}_{dims[0]}x{dims[1]}x{dims[2]}_uint8.raw')
+        row_values = bytes(int(128 + 100 * math.sin(x / 50)) for x in range(dims[0]))
+        open(raw, 'wb').write(row_values * (dims[1] * dims[2]))
+        r = add(Row('Memory', f'`extract --eps 1` of a {dims[0]}x{dims[1]}x{dims[2]} uint8 volume '
+                              f'({dims[0] * dims[1] * dims[2] / 1e6:.0f} MB)'))
+        rc, out, secs, rss = run([iso, 'extract', raw, '--iso', '127.5', '--eps', '1', '-q', '-o',
+                                  os.path.join(d, 'm.ply')])
+        r.got, r.max_rss_mb, r.max_seconds = f'exit {rc}', rss, secs
+        r.message = f'peak RSS {rss:.0f} MB in {secs:.1f} s'
+        if rc != 0 or rss > 600:
+            r.problems.append(f'exit {rc}, {rss:.0f} MB: {out[:200]}')
+        os.remove(raw)
 
 
 def fuzz_rows(stats):
@@ -477,8 +684,16 @@ def write_table(out, fuzz_seconds):
              'overlapping; sizes and offsets from the file checked with io/file/checked_size.h, never by a sum that '
              'can wrap; nothing allocated by a file field before that check. Every byte of a store is under a '
              'checksum; `verify` also checks what a checksum cannot (bricks against their neighbours and bands).',
-             '- **Server** (docs/SERVE.md, Limits): 64 workers, 5 s read and idle timeouts, 1 KB bodies, 8 KB '
-             'request lines and headers, 2 extractions at once and 16 waiting, 503 with Retry-After beyond.',
+             '- **Server** (docs/SERVE.md, Limits): 128 workers; 5 s for a whole request head and body, and 5 s '
+             'idle; a response taken at 256 KB/s on average after its first 10 s, or the connection is closed; '
+             'Range headers ignored (the whole body once); 512 MB of responses in flight, 503 beyond; 1 KB '
+             'bodies, 8 KB request lines and headers, 2 extractions at once and 16 waiting, 503 with Retry-After '
+             'beyond.',
+             '- **Output folders** (io/file/output_folder.h, `--parts`): a new, empty or earlier `--parts` folder '
+             '(its manifest lists what isotope wrote), nothing else; never one that holds the input; of an earlier '
+             'one only the files its manifest lists are removed.',
+             '- **Python module**: arrays and options checked by the same library checks as files and the command '
+             'line, with the same words.',
              '- **Command line** (tools/commands.h): every numeric option checked at parse time, with a message '
              'that names the option and its range; exit 2.',
              '- **Across ranks** (docs/DISTRIBUTED.md): under `mpirun`, a rank whose work fails stops every rank at '
@@ -513,9 +728,11 @@ def main():
     a.add_argument('--fuzz-stats', default='')
     a.add_argument('--fuzz-seconds', default='60')
     a.add_argument('--random', type=int, default=400, help='random store corruptions')
+    a.add_argument('--python', default='', help='a Python with the isotope module installed (its rows)')
     a.add_argument('--out', default=os.path.join(ROOT, 'docs', 'RELIABILITY.md'))
     args = a.parse_args()
     iso = os.path.abspath(args.isotope)
+    python = os.path.abspath(args.python) if args.python else ''  # not resolved: a venv's python is a link
     with tempfile.TemporaryDirectory() as work:
         volume = bad_paths(iso, work)
         reject_files(iso, work)
@@ -523,6 +740,8 @@ def main():
         cli_numbers(iso, work, volume)
         distributed(iso, work)
         http_abuse(iso, work, store)
+        python_module(python, work)
+        memory_shapes(iso, work)
     fuzz_rows(args.fuzz_stats)
     bad = write_table(args.out, args.fuzz_seconds)
     for r in bad:

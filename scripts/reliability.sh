@@ -4,18 +4,22 @@
 # and the server as a hostile user would (scripts/reliability.py) and writes the table. Fails when a
 # row does not hold. CI (scripts/test.sh) runs the same with --out to a scratch file.
 #
-#   scripts/reliability.sh [--fuzz-seconds N] [--out FILE] [--isotope BIN] [--no-fuzz-build]
+#   scripts/reliability.sh [--fuzz-seconds N] [--out FILE] [--isotope BIN] [--python PY] [--no-fuzz-build]
+#
+# --python: a Python with the isotope module installed (scripts/test.sh passes build-ci/venv's), for
+# the module's rows; without it they do not hold.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-fuzz_seconds=60 out=docs/RELIABILITY.md isotope="" fuzz_build=()
+fuzz_seconds=60 out=docs/RELIABILITY.md isotope="" python="" fuzz_build=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --fuzz-seconds) fuzz_seconds="$2"; shift 2 ;;
     --out) out="$2"; shift 2 ;;
     --isotope) isotope="$2"; shift 2 ;;
+    --python) python="$2"; shift 2 ;;
     --no-fuzz-build) fuzz_build=(--no-build); shift ;;
-    -h|--help) sed -n '2,8p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,11p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "reliability.sh: unknown argument $1" >&2; exit 2 ;;
   esac
 done
@@ -28,4 +32,5 @@ fi
 stats=$(mktemp)
 trap 'rm -f "$stats"' EXIT
 bash scripts/fuzz.sh "${fuzz_build[@]}" --seconds "$fuzz_seconds" --stats "$stats"
-/usr/bin/python3 scripts/reliability.py --isotope "$isotope" --fuzz-stats "$stats" --fuzz-seconds "$fuzz_seconds" --out "$out"
+/usr/bin/python3 scripts/reliability.py --isotope "$isotope" --python "$python" --fuzz-stats "$stats" \
+  --fuzz-seconds "$fuzz_seconds" --out "$out"

@@ -311,6 +311,97 @@ TEST_F(Cli, AnOutputThatIsTheInputOrTheOtherOutputIsRefusedAndNothingChanges) {
   EXPECT_TRUE(fs::is_fifo(in_work("pipe.ply")));
 }
 
+// --parts DIR writes a folder (io/file/output_folder.h): a new, empty or earlier --parts folder is
+// written; a folder holding anything isotope did not write, the input among them, is refused and
+// left as it was, byte for byte; of an earlier output only the files its manifest lists go.
+TEST_F(Cli, PartsFolderNeverDeletesWhatIsotopeDidNotWrite) {
+  const std::string vol = generate("sphere", 17, "s_17x17x17_float32.raw");
+  const std::string extract = "extract " + quote(vol) + " --iso 0 --eps 0.01 -q --parts ";
+  auto snapshot = [&](const fs::path& dir) {
+    std::map<std::string, std::string> files;
+    for (const auto& e : fs::recursive_directory_iterator(dir))
+      files[fs::relative(e.path(), dir).string()] = e.is_regular_file() ? slurp(e.path()) : "(folder)";
+    return files;
+  };
+  // A folder that holds the input and a subfolder of notes: refused, and left as it was.
+  const fs::path p = work() / "p";
+  fs::create_directories(p / "sub");
+  fs::copy_file(vol, p / "s_17x17x17_float32.raw");
+  std::ofstream(p / "sub" / "notes.txt") << "x\n";
+  const auto before = snapshot(p);
+  expect_failure(
+      "extract " + quote((p / "s_17x17x17_float32.raw").string()) + " --iso 0 --eps 0.01 --parts " + quote(p.string()),
+      1, "holds INPUT");
+  EXPECT_EQ(snapshot(p), before);
+  // The same folder with the input elsewhere: still not isotope's.
+  expect_failure(extract + quote(p.string()), 1, "is a folder that isotope did not write");
+  EXPECT_EQ(snapshot(p), before);
+  // A new folder, then written again over itself: only its own files, the manifest listing them.
+  const fs::path q = work() / "q";
+  ASSERT_EQ(run(extract + quote(q.string())).code, 0);
+  EXPECT_EQ(slurp(q / "isotope-manifest.txt"), "isotope output folder 1\npart-00000.vtp\nmesh.pvtp\n");
+  const Result again = run(extract + quote(q.string() + "/"));
+  ASSERT_EQ(again.code, 0) << again.err;
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(q)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"isotope-manifest.txt", "mesh.pvtp", "part-00000.vtp"}));
+  // An earlier output with a file of the user's added: refused, nothing removed.
+  std::ofstream(q / "mine.txt") << "mine\n";
+  const auto with_mine = snapshot(q);
+  expect_failure(extract + quote(q.string()), 1, "holds 'mine.txt', which isotope did not write");
+  EXPECT_EQ(snapshot(q), with_mine);
+  // A manifest that lists a path out of the folder is not isotope's: refused.
+  fs::remove(q / "mine.txt");
+  std::ofstream(q / "isotope-manifest.txt") << "isotope output folder 1\n../s_17x17x17_float32.raw\nmesh.pvtp\n";
+  expect_failure(extract + quote(q.string()), 1, "is a folder that isotope did not write");
+  EXPECT_TRUE(fs::exists(vol));
+  // An empty folder is taken; a file in its place is refused.
+  fs::create_directories(work() / "empty");
+  ASSERT_EQ(run(extract + quote((work() / "empty").string())).code, 0);
+  EXPECT_TRUE(fs::exists(work() / "empty" / "mesh.pvtp"));
+  expect_failure(extract + quote(vol), 1, "not a folder");
+}
+
+// An isotope built without MPI, started by a launcher as one of several ranks (the variables Open
+// MPI's and MPICH's launchers set): every rank refuses, rank 0 says why, nothing is written; as
+// the only rank, or without a launcher, it runs.
+TEST_F(Cli, ABinaryWithoutMpiRefusesToRunAsOneOfSeveralRanks) {
+  const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
+  const std::string mesh = in_work("m.ply");
+  auto run_as = [&](const std::string& environment) {
+    const std::string cmd = environment + " " + quote(ISOTOPE_WITHOUT_MPI_BINARY) + " extract " + quote(vol) +
+                            " --iso 0 -q -o " + quote(mesh) + " 2>" + quote(in_work("err.txt"));
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.err = slurp(in_work("err.txt"));
+    fs::remove(in_work("err.txt"));
+    return r;
+  };
+  Result r = run_as("env OMPI_COMM_WORLD_SIZE=3 OMPI_COMM_WORLD_RANK=0");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("isotope: error: started by an MPI launcher as rank 0 of 3, but this isotope was built "
+                       "without MPI"),
+            std::string::npos)
+      << r.err;
+  r = run_as("env OMPI_COMM_WORLD_SIZE=3 OMPI_COMM_WORLD_RANK=2");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_TRUE(r.err.empty()) << r.err;      // rank 0 speaks for all
+  r = run_as("env PMI_SIZE=2 PMI_RANK=0");  // MPICH's Hydra
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("of 2, but this isotope was built without MPI"), std::string::npos) << r.err;
+  r = run_as("env PMIX_RANK=1");  // PMIx, how many not said
+  EXPECT_EQ(r.code, 1);
+  EXPECT_FALSE(fs::exists(mesh));
+  r = run_as("env OMPI_COMM_WORLD_SIZE=1 OMPI_COMM_WORLD_RANK=0");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(mesh));
+  fs::remove(mesh);
+  r = run_as("env -u OMPI_COMM_WORLD_SIZE -u PMI_SIZE -u PMIX_RANK -u PMI_RANK -u OMPI_COMM_WORLD_RANK");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(mesh));
+}
+
 // A full disk, stood in for by a file size limit (ulimit -f: writes past it fail with EFBIG, as
 // they fail with ENOSPC on a full disk; tools/main.cpp ignores SIGXFSZ): a clear message, exit 1,
 // no temporary left, and outputs that existed keep their bytes, the mesh and the report alike
@@ -363,11 +454,11 @@ TEST_F(Cli, InvalidNumbersAreUsageErrors) {
         run(command + quote(vol) + " --iso 0 --threads -1" + (std::string(command) == "sweep " ? "" : outputs()));
     EXPECT_EQ(r.code, 2) << command;
     EXPECT_NE(r.err.find("--threads"), std::string::npos) << r.err;
-    EXPECT_NE(r.err.find("0 to 4096"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("0 .. 4096 (0: all cores), got '-1'"), std::string::npos) << r.err;
     EXPECT_EQ(r.err.find("e+308"), std::string::npos) << r.err;
     EXPECT_EQ(r.err.find("1797693"), std::string::npos) << r.err;
   }
-  expect_failure("convert " + quote(vol) + " " + quote(in_work("v.isotope")) + " --threads 5000", 2, "0 to 4096");
+  expect_failure("convert " + quote(vol) + " " + quote(in_work("v.isotope")) + " --threads 5000", 2, "0 .. 4096");
   expect_failure("extract " + quote(vol) + " --iso 0 --max-triangles -1" + outputs(), 2, "--max-triangles");
   // A comparison tolerance too small to sample is refused before the work, not after it.
   expect_failure("extract " + quote(vol) + " --iso 0 --compare-full --compare-voxels 1e-300" + outputs(), 2,

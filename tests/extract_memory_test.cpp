@@ -11,7 +11,9 @@
 #include <sys/wait.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -213,6 +215,36 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
     }
     fs::remove(huge.mesh);
   }
+}
+
+// A volume's hierarchy held in memory (a raw file at eps > 0) takes memory in proportion to its
+// voxels whatever its shape: a thin volume (500000x2x2, 1000x1000x2) no more than twice what a cube
+// of as many voxels takes, with the same field across x. In bricks of 16^3 the long one took 4.0 GB
+// for 2 MB of data (28 slots a node, all but two in each brick's y and z padding), the flat one
+// 2.7 times the cube (engine/hierarchy/store_layout.h, memory_brick_bits).
+TEST_F(ExtractMemory, ThinVolumesTakeMemoryInProportionToTheirVoxels) {
+  auto write = [&](const std::string& name, std::array<int64_t, 3> dims) {
+    std::vector<uint8_t> v(static_cast<size_t>(dims[0] * dims[1] * dims[2]));
+    for (size_t i = 0; i < v.size(); ++i)  // a wave along x: planes of the isosurface across y and z
+      v[i] = static_cast<uint8_t>(128 + 100 * std::sin(static_cast<double>(i % static_cast<size_t>(dims[0])) / 50));
+    const std::string file = path(name + "_" + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                                  std::to_string(dims[2]) + "_uint8.raw");
+    std::ofstream(file, std::ios::binary)
+        .write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size()));
+    return file;
+  };
+  auto peak_mb = [&](const std::string& raw) {
+    const Child c = expect_ok({"extract", raw, "--iso", "127.5", "--eps", "1", "-q", "-o", path("m.ply")});
+    return mb_of_kb(c.max_rss_kb);
+  };
+  const double cube = peak_mb(write("cube", {126, 126, 126}));  // 2.0 M voxels
+  const double long_one = peak_mb(write("long", {500000, 2, 2}));
+  const double flat = peak_mb(write("flat", {1000, 1000, 2}));
+  report("thin_cube_rss_mb", cube);
+  report("thin_long_rss_mb", long_one);
+  report("thin_flat_rss_mb", flat);
+  EXPECT_LT(long_one, 2 * cube);
+  EXPECT_LT(flat, 1.25 * cube);  // 1.94 times in bricks of 16^3
 }
 
 }  // namespace

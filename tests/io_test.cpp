@@ -498,14 +498,19 @@ TEST_F(IoTest, ReadVolumeSplitsTheSpecAtTheLastColonSlash) {
 }
 
 TEST_F(IoTest, ReadVolumeRawUsesOverridesBeforeTheName) {
-  const std::string named = path("v_2x2x2_uint8.raw");
-  write_values(named, std::vector<uint8_t>{0, 1, 2, 3, 4, 5, 6, 7});
-  EXPECT_EQ(read_volume({named, {}, {}}).dims, (std::array<int64_t, 3>{2, 2, 2}));
-  const Volume flat = read_volume({named, std::array<int64_t, 3>{8, 1, 1}, {}});
-  EXPECT_EQ(flat.dims, (std::array<int64_t, 3>{8, 1, 1}));
-  EXPECT_EQ(flat.at(7, 0, 0), 7.0f);
-  const Volume wide = read_volume({named, std::array<int64_t, 3>{2, 2, 1}, ScalarType::uint16});
+  const std::string named = path("v_2x2x4_uint8.raw");
+  std::vector<uint8_t> values(16);
+  for (uint8_t i = 0; i < 16; ++i) values[i] = i;
+  write_values(named, values);
+  EXPECT_EQ(read_volume({named, {}, {}}).dims, (std::array<int64_t, 3>{2, 2, 4}));
+  const Volume flat = read_volume({named, std::array<int64_t, 3>{4, 2, 2}, {}});
+  EXPECT_EQ(flat.dims, (std::array<int64_t, 3>{4, 2, 2}));
+  EXPECT_EQ(flat.at(3, 1, 1), 15.0f);
+  const Volume wide = read_volume({named, std::array<int64_t, 3>{2, 2, 2}, ScalarType::uint16});
   EXPECT_EQ(wide.at(0, 0, 0), 256.0f);
+  // A layout the volume cannot have is refused with the file and the dimensions named.
+  EXPECT_CONTAINS(io_error_of([&] { read_volume({named, std::array<int64_t, 3>{16, 1, 1}, {}}); }),
+                  "v_2x2x4_uint8.raw: volume dimensions 16x1x1 (x by y by z): every axis needs 2 .. 524289 nodes");
 }
 
 TEST_F(IoTest, ReadVolumeAsksForDimsAndTypeWhenTheNameSaysNothing) {

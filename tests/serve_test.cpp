@@ -8,14 +8,20 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <future>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <string>
 #include <thread>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include "engine/core/fields.h"
@@ -187,6 +193,13 @@ TEST(ExtractionCancelled, AFlagSetBeforehandStopsBothPaths) {
 }
 
 // The server on a real store, on a free loopback port, for one test.
+tools::ViewerServer::Settings small_cache(const std::string& store) {
+  tools::ViewerServer::Settings s;
+  s.store = store;
+  s.cache_mb = 16;
+  return s;
+}
+
 class Serve : public testing::TempDirTest {
  protected:
   void SetUp() override {
@@ -195,10 +208,16 @@ class Serve : public testing::TempDirTest {
     volume_ = testing::load_shared(hydrogen);
     iso_ = hydrogen.isovalues[0];
     store_ = testing::write_store(volume_, dir_.string(), "hydrogen");
-    server_ = std::make_unique<tools::ViewerServer>(tools::ViewerServer::Settings{store_, 64, false});
+    tools::ViewerServer::Settings settings;
+    settings.store = store_;
+    settings.cache_mb = 64;
+    customize(settings);
+    server_ = std::make_unique<tools::ViewerServer>(settings);
     port_ = server_->bind("127.0.0.1", 0);
     thread_ = std::thread([this] { server_->listen(); });
   }
+  // Limits a test tightens, before the server starts.
+  virtual void customize(tools::ViewerServer::Settings&) {}
   void TearDown() override {
     server_->stop();
     thread_.join();
@@ -394,30 +413,231 @@ TEST_F(Serve, OtherMethodsGet405WithAllowAndBodiesAreBounded) {
 
 // Fifty clients that send a request a byte now and then hold fifty connections; a normal request
 // still gets its answer within a second.
+// A loopback connection to PORT, with a receive buffer of RCVBUF bytes if > 0 (set before it
+// connects, so that the window stays that small).
+int connect_to(int port, int rcvbuf = 0) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) return -1;
+  if (rcvbuf > 0) ::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+bool send_text(int fd, const std::string& text) {
+  return ::send(fd, text.data(), text.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(text.size());
+}
+
+// Everything the server sends on FD until it closes the connection, or until SECONDS pass.
+std::string receive_all(int fd, double seconds) {
+  std::string got;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  char buffer[65536];
+  while (std::chrono::steady_clock::now() < end) {
+    timeval tv{0, 100000};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) break;
+    if (n > 0) got.append(buffer, static_cast<size_t>(n));
+  }
+  return got;
+}
+
+// Whether the server has closed FD (end of stream or reset) within SECONDS, reading what it sent.
+bool closed_within(int fd, double seconds) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  char buffer[4096];
+  while (std::chrono::steady_clock::now() < end) {
+    timeval tv{0, 50000};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) return true;
+  }
+  return false;
+}
+
+// The status and the body of one raw response (Content-Length framed).
+std::pair<int, std::string> parse_response(const std::string& raw) {
+  const size_t head_end = raw.find("\r\n\r\n");
+  if (raw.rfind("HTTP/1.1 ", 0) != 0 || head_end == std::string::npos) return {-1, ""};
+  return {std::stoi(raw.substr(9, 3)), raw.substr(head_end + 4)};
+}
+
 TEST_F(Serve, SlowClientsDoNotStallOthers) {
+  // 100 connections that drip a header line now and then: each holds a worker for at most the
+  // request deadline, and the pool has more workers than they are (HttpLimits).
   std::vector<int> drips;
-  for (int i = 0; i < 50; ++i) {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  for (int i = 0; i < 100; ++i) {
+    const int fd = connect_to(port_);
     ASSERT_GE(fd, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_port = htons(static_cast<uint16_t>(port_));
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ASSERT_EQ(::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr), 0);
-    ASSERT_EQ(::send(fd, "GET /api/in", 11, MSG_NOSIGNAL), 11);  // and no more, for now
+    ASSERT_TRUE(send_text(fd, "GET /api/info HTTP/1.1\r\n"));  // and one line more now and then
     drips.push_back(fd);
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(200));  // every drip has its worker
+  for (int fd : drips) (void)send_text(fd, "X-Drip: 1\r\n");
   const auto start = std::chrono::steady_clock::now();
   const auto res = get("/api/info");
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   ASSERT_TRUE(res);
   EXPECT_EQ(res->status, 200);
   EXPECT_LT(seconds, 1.0);
-  for (int fd : drips) {
-    (void)::send(fd, "f", 1, MSG_NOSIGNAL);  // still dripping
-    ::close(fd);
+  for (int fd : drips) ::close(fd);
+}
+
+// More dripping connections than workers: each loses its connection when its request's deadline
+// passes, however often it sends a line (cpp-httplib's own read timeout restarts with every
+// line, so that one connection could hold a worker for many minutes), and a normal request waits
+// at most about one deadline for a worker.
+class ServeTightLimits : public Serve {
+ protected:
+  void customize(tools::ViewerServer::Settings& s) override {
+    s.limits.workers = 4;
+    s.limits.request_deadline = std::chrono::milliseconds(1000);
   }
+};
+
+TEST_F(ServeTightLimits, DrippedHeadersLoseTheirConnectionAtTheRequestDeadline) {
+  std::vector<int> drips;
+  for (int i = 0; i < 8; ++i) {
+    const int fd = connect_to(port_);
+    ASSERT_GE(fd, 0);
+    ASSERT_TRUE(send_text(fd, "GET /api/info HTTP/1.1\r\n"));
+    drips.push_back(fd);
+  }
+  std::atomic<bool> dripping{true};
+  std::thread dripper([&] {
+    for (int line = 0; dripping; ++line) {
+      for (int fd : drips) (void)send_text(fd, "X-Drip-" + std::to_string(line) + ": 1\r\n");
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  const auto start = std::chrono::steady_clock::now();
+  const auto res = get("/api/info");
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_TRUE(res);
+  EXPECT_EQ(res->status, 200);
+  EXPECT_LT(seconds, 2.5);  // the first four drips' deadline, then a worker
+  // The first four at their deadline (1 s), the next four one deadline later.
+  for (int fd : drips) EXPECT_TRUE(closed_within(fd, 3.0));
+  dripping = false;
+  dripper.join();
+  for (int fd : drips) ::close(fd);
+}
+
+// A Range header with many ranges would have the server build a multipart body of that many copies
+// (2,600 ranges of a mesh: 66 GB): ranges are ignored, the whole body is sent once (200).
+TEST_F(Serve, ManyRangesGetTheWholeBodyOnce) {
+  const auto whole_js = get("/viewer.js");
+  ASSERT_TRUE(whole_js);
+  ASSERT_EQ(whole_js->status, 200);
+  ExtractOptions o;
+  o.iso = iso_;
+  o.eps = 0.02;
+  const auto whole_mesh = get(url(o));
+  ASSERT_TRUE(whole_mesh);
+  ASSERT_EQ(whole_mesh->status, 200);
+  auto ranges = [](int n) {
+    std::string r = "Range: bytes=0-";
+    for (int i = 1; i < n; ++i) r += ",0-";
+    return r + "\r\n";
+  };
+  for (const auto& [target, count, whole] :
+       {std::tuple<std::string, int, std::string>{"/viewer.js", 1000, whole_js->body},
+        {url(o), 2600, whole_mesh->body},
+        {"/viewer.js", 1, whole_js->body}}) {
+    SCOPED_TRACE(target + ", " + std::to_string(count) + " ranges");
+    const int fd = connect_to(port_);
+    ASSERT_GE(fd, 0);
+    ASSERT_TRUE(
+        send_text(fd, "GET " + target + " HTTP/1.1\r\nHost: x\r\nConnection: close\r\n" + ranges(count) + "\r\n"));
+    const auto [status, body] = parse_response(receive_all(fd, 30));
+    ::close(fd);
+    EXPECT_EQ(status, 200);
+    if (target == "/viewer.js") {
+      EXPECT_TRUE(body == whole);
+    } else {  // the same mesh; its report's timings differ
+      ASSERT_GT(body.size(), whole.size() / 2);
+      expect_same_mesh(decode_mesh_wire(body).mesh, decode_mesh_wire(whole).mesh);
+    }
+  }
+}
+
+// Clients that ask for meshes and never read them: the server holds their bodies against its
+// budget for responses in flight, refuses (503) what would go beyond it, and drops each such client
+// once it falls behind the pace (HttpLimits), freeing what it held. Without the budget, every
+// stalled client kept its mesh in the server's memory for as long as it kept the connection.
+class ServeStalledReaders : public Serve {
+ protected:
+  static constexpr size_t kBudget = size_t{24} << 20;
+  void customize(tools::ViewerServer::Settings& s) override {
+    Volume random;  // a mesh of many small pieces: about 12 MB on the wire
+    random.dims = {40, 40, 40};
+    random.values.resize(40 * 40 * 40);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> unit(0, 1);
+    for (float& v : random.values) v = unit(rng);
+    s.store = testing::write_store(random, dir_.string(), "random");
+    s.response_budget_bytes = kBudget;
+    s.limits.send_grace = std::chrono::milliseconds(3000);
+    s.limits.min_send_bytes_per_second = 4 << 20;
+  }
+};
+
+TEST_F(ServeStalledReaders, HoldAtMostTheResponseBudgetAndAreDroppedAtThePace) {
+  const std::string target = "/api/extract?iso=0.5";
+  const auto one = get(target);
+  ASSERT_TRUE(one);
+  ASSERT_EQ(one->status, 200);
+  const size_t body = one->body.size();
+  ASSERT_GT(body, kBudget / 3);  // two fit, eight do not
+  ASSERT_LE(body, kBudget / 2);
+  EXPECT_EQ(server_->response_bytes_held(), 0u);
+  std::vector<int> stalled;
+  for (int i = 0; i < 8; ++i) {
+    const int fd = connect_to(port_, 4096);
+    ASSERT_GE(fd, 0);
+    ASSERT_TRUE(send_text(fd, "GET " + target + " HTTP/1.1\r\nHost: x\r\n\r\n"));
+    stalled.push_back(fd);
+  }
+  size_t most = 0;
+  const auto start = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - start < std::chrono::milliseconds(2500)) {
+    most = std::max(most, server_->response_bytes_held());
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  testing::report("serve_stalled_most_held_mb", static_cast<double>(most) / (1 << 20));
+  EXPECT_GT(most, body);  // two at once
+  EXPECT_LE(most, kBudget);
+  int ok = 0, busy = 0;
+  for (int fd : stalled) {  // the status line only: the rest stays unread
+    char status[13] = {};
+    timeval tv{2, 0};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    if (::recv(fd, status, 12, MSG_WAITALL) == 12) {
+      ok += std::string(status) == "HTTP/1.1 200";
+      busy += std::string(status) == "HTTP/1.1 503";
+    }
+  }
+  EXPECT_GE(ok, 2);
+  EXPECT_GE(busy, 1);
+  EXPECT_EQ(ok + busy, 8);
+  // Dropped once behind the pace (3 s, then 4 MB/s): nothing held any more.
+  const auto dropped = std::chrono::steady_clock::now();
+  while (server_->response_bytes_held() > 0 && std::chrono::steady_clock::now() - dropped < std::chrono::seconds(20))
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_EQ(server_->response_bytes_held(), 0u);
+  for (int fd : stalled) ::close(fd);
+  const auto again = get(target);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->status, 200);
+  expect_same_mesh(decode_mesh_wire(again->body).mesh, decode_mesh_wire(one->body).mesh);
 }
 
 // 200 clients at once, each asking for a full-resolution mesh: every one is answered, with the
@@ -469,7 +689,7 @@ TEST_F(Serve, ACrowdIsAnsweredOrRefusedWithBoundedMemory) {
 }
 
 TEST_F(Serve, APortInUseIsAnErrorNotASharedPort) {
-  tools::ViewerServer second({store_, 16, false});
+  tools::ViewerServer second(small_cache(store_));
   try {
     second.bind("127.0.0.1", port_);
     FAIL() << "bound port " << port_ << " twice";
@@ -483,14 +703,14 @@ TEST_F(Serve, APortInUseIsAnErrorNotASharedPort) {
 // before listen() was ever called.
 TEST_F(Serve, StopEndsTheServerWhenever) {
   for (int i = 0; i < 12; ++i) {
-    tools::ViewerServer server({store_, 16, false});
+    tools::ViewerServer server(small_cache(store_));
     server.bind("127.0.0.1", 0);
     auto listening = std::async(std::launch::async, [&] { return server.listen(); });
     if (i % 3 == 1) std::this_thread::sleep_for(std::chrono::milliseconds(2));
     server.stop();
     ASSERT_EQ(listening.wait_for(std::chrono::seconds(10)), std::future_status::ready) << "round " << i;
   }
-  tools::ViewerServer idle({store_, 16, false});
+  tools::ViewerServer idle(small_cache(store_));
   idle.bind("127.0.0.1", 0);
   idle.stop();
   EXPECT_TRUE(idle.listen());  // at once
@@ -500,7 +720,9 @@ TEST_F(Serve, OnlyAStoreIsServed) {
   const std::string raw = path("v_8x8x8_float32.raw");
   std::ofstream(raw, std::ios::binary) << std::string(8 * 8 * 8 * 4, '\0');
   try {
-    tools::ViewerServer server({raw, 16, false});
+    tools::ViewerServer::Settings settings;
+    settings.store = raw;
+    tools::ViewerServer server(settings);
     FAIL() << "served a raw volume";
   } catch (const IoError& e) {
     EXPECT_NE(std::string(e.what()).find("not an isotope store"), std::string::npos) << e.what();

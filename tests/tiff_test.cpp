@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -44,6 +45,8 @@ struct Layout {
   uint16_t compression = COMPRESSION_NONE;
   uint32_t tile = 0;            // > 0: tiles of tile x tile, else strips
   uint32_t rows_per_strip = 5;  // a strip boundary inside most boxes
+  uint16_t photometric = 0;     // 0: min-is-black, or RGB for 3 samples
+  std::string description{};    // the first page's ImageDescription, if any
 };
 
 // Writes PAGES (each width*height*samples elements of BITS, as bytes) as one file, one page each.
@@ -58,7 +61,16 @@ void write_tiff(const std::string& path, uint32_t width, uint32_t height,
     TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, l.bits);
     TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, l.format);
     TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, l.samples);
-    TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, l.samples == 3 ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK);
+    TIFFSetField(tif, TIFFTAG_PHOTOMETRIC,
+                 l.photometric != 0 ? l.photometric
+                 : l.samples == 3   ? PHOTOMETRIC_RGB
+                                    : PHOTOMETRIC_MINISBLACK);
+    if (l.photometric == PHOTOMETRIC_PALETTE) {
+      std::vector<uint16_t> map(size_t{1} << l.bits, 0);
+      TIFFSetField(tif, TIFFTAG_COLORMAP, map.data(), map.data(), map.data());
+    }
+    if (!l.description.empty() && &page == &pages.front())
+      TIFFSetField(tif, TIFFTAG_IMAGEDESCRIPTION, l.description.c_str());
     TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
     TIFFSetField(tif, TIFFTAG_COMPRESSION, l.compression);
     if (pages.size() > 1) TIFFSetField(tif, TIFFTAG_SUBFILETYPE, FILETYPE_PAGE);
@@ -260,6 +272,92 @@ TEST_F(TiffStack, TruncatedAndNonFiniteDataAreIoErrors) {
              {.bits = 32, .format = SAMPLEFORMAT_IEEEFP});
   EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("nan.tif"))); }), "nan.tif");
   EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("nan.tif"))); }), "at (x,y,z) = (1,2,1) is not finite");
+}
+
+// The value of TAG in every directory of a classic little-endian TIFF, set to VALUE (SHORT or LONG),
+// or the tag's number changed to VALUE when RENUMBER: a file's header made to lie.
+void patch_tag(testing::Bytes& b, uint16_t tag, uint32_t value, bool renumber = false) {
+  auto u16 = [&](size_t at) { return static_cast<uint16_t>(b[at] | b[at + 1] << 8); };
+  auto u32 = [&](size_t at) { return static_cast<uint32_t>(u16(at) | u16(at + 2) << 16); };
+  for (uint32_t ifd = u32(4); ifd != 0; ifd = u32(ifd + 2 + 12 * size_t{u16(ifd)})) {
+    for (size_t e = ifd + 2; e < ifd + 2 + 12 * size_t{u16(ifd)}; e += 12) {
+      if (u16(e) != tag) continue;
+      if (renumber) {
+        b[e] = static_cast<uint8_t>(value), b[e + 1] = static_cast<uint8_t>(value >> 8);
+      } else {
+        for (int k = 0; k < (u16(e + 2) == 3 ? 2 : 4); ++k) b[e + 8 + k] = static_cast<uint8_t>(value >> (8 * k));
+      }
+    }
+  }
+}
+
+// Stacks whose files are not what they claim, or not one channel's slices in order, are refused by
+// name rather than read as something else: libtiff's warnings that mean it would guess at the data
+// (a strip table that disagrees with RowsPerStrip: it read the strips from offset 0, the header,
+// giving 0..155 for values 100..227), palette images (indices, not values), hyperstacks whose
+// pages interleave channels or time points, links in a slice folder that lead nowhere (skipped or
+// refused by the directory's order before), and a single page (no cells between slices).
+TEST_F(TiffStack, StacksThatAreNotOneChannelsSlicesAsTheyClaimAreRefusedByName) {
+  std::vector<unsigned char> page(8 * 16);
+  for (size_t i = 0; i < page.size(); ++i) page[i] = static_cast<unsigned char>(100 + i);
+  write_tiff(path("good.tif"), 8, 16, {page, page}, {.rows_per_strip = 16});
+  testing::Bytes bytes = testing::read_bytes(path("good.tif"));
+  patch_tag(bytes, TIFFTAG_ROWSPERSTRIP, 7);  // 3 strips, where the table holds 1
+  testing::write_file(path("lying.tif"), "", bytes);
+  for (const auto& read : {std::function<void()>([&] { read_volume(spec(path("lying.tif"))); }),
+                           std::function<void()>([&] { open_box_reader(spec(path("lying.tif")), path("")); })}) {
+    const std::string message = io_error_of(read);
+    EXPECT_CONTAINS(message, "lying.tif: page 0: its directory does not describe its data consistently");
+    EXPECT_CONTAINS(message, "Incorrect count for \"StripOffsets\"");
+  }
+  // Warnings about other tags leave the values as they are: a private tag libtiff does not know
+  // (as ImageJ's and microscopes' are), out of order.
+  bytes = testing::read_bytes(path("good.tif"));
+  patch_tag(bytes, TIFFTAG_SUBFILETYPE, 65000, true);
+  testing::write_file(path("private.tif"), "", bytes);
+  const Volume v = read_volume(spec(path("private.tif")));
+  EXPECT_EQ(v.values.front(), 100.0f);
+  EXPECT_EQ(v.values.back(), 227.0f);
+
+  write_tiff(path("palette.tif"), 8, 16, {page, page}, {.photometric = PHOTOMETRIC_PALETTE});
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("palette.tif"))); }),
+                  "palette.tif: a palette (indexed colour) image");
+  const std::vector<std::vector<unsigned char>> four = {page, page, page, page};
+  write_tiff(path("channels.tif"), 8, 16, four,
+             {.description = "ImageJ=1.54f\nimages=4\nchannels=2\nslices=2\nhyperstack=true\nmode=composite\n"});
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("channels.tif"))); }),
+                  "channels.tif: a hyperstack of 2 channels, whose pages interleave them");
+  write_tiff(path("frames.tif"), 8, 16, four, {.description = "ImageJ=1.54f\nimages=4\nslices=2\nframes=2\n"});
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("frames.tif"))); }),
+                  "frames.tif: a hyperstack of 2 time points of 2 slices each");
+  write_tiff(path("ome.tif"), 8, 16, four,
+             {.description = "<?xml version=\"1.0\"?><OME><Image><Pixels SizeC=\"2\" SizeZ=\"2\" SizeT=\"1\"/>"
+                             "</Image></OME>"});
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("ome.tif"))); }), "ome.tif: a hyperstack of 2 channels");
+  write_tiff(path("slices.tif"), 8, 16, four, {.description = "ImageJ=1.54f\nimages=4\nslices=4\n"});
+  EXPECT_EQ(read_volume(spec(path("slices.tif"))).dims, (std::array<int64_t, 3>{8, 16, 4}));
+
+  // A link that leads nowhere, between two slices: named, whatever the directory's order.
+  fs::create_directory(path("linked"));
+  write_tiff(path("linked/s1.tif"), 8, 16, {page}, {});
+  write_tiff(path("linked/s3.tif"), 8, 16, {page}, {});
+  fs::create_symlink("gone.tif", path("linked/s2.tif"));
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("linked"))); }),
+                  "linked/s2.tif: a symbolic link that leads nowhere");
+  fs::remove(path("linked/s2.tif"));
+  fs::create_symlink("s4.tif", path("linked/s4.tif"));  // a loop
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("linked"))); }),
+                  "linked/s4.tif: a symbolic link that leads nowhere");
+  fs::remove(path("linked/s4.tif"));
+  fs::create_directory(path("linked/s5.tif"));
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("linked"))); }),
+                  "linked/s5.tif: a directory named like a slice");
+
+  write_tiff(path("one.tif"), 8, 16, {page}, {});
+  for (const auto& read : {std::function<void()>([&] { read_volume(spec(path("one.tif"))); }),
+                           std::function<void()>([&] { open_box_reader(spec(path("one.tif")), path("")); })})
+    EXPECT_CONTAINS(io_error_of(read),
+                    "one.tif: volume dimensions 8x16x1 (x by y by z): every axis needs 2 .. 524289 nodes");
 }
 
 }  // namespace

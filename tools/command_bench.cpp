@@ -18,7 +18,7 @@ Command add_bench_command(CLI::App& app) {
   cmd->add_flag("--quick", a->quick, "The small suite (algebraic 65^3 and 257^3, the shared volumes): a few minutes");
   cmd->add_option("--json", a->json, "Also write every number as JSON")->type_name("F.json");
   cmd->add_option("--threads", a->threads, "Threads for the parallel rows (0 = all cores)")
-      ->check(CLI::Range(0, kMaxThreads))
+      ->check(thread_count_check())
       ->capture_default_str();
   cmd->add_option("--dataset", a->datasets,
                   "Run only this dataset (repeatable): algebraic65, algebraic257, bolt,\n"

@@ -5,7 +5,6 @@
 // leaves no output file behind.
 
 #include <oneapi/tbb/global_control.h>
-#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -24,6 +23,7 @@
 #include "engine/extract/extract.h"
 #include "engine/topology/component_report.h"
 #include "io/file/atomic_file.h"
+#include "io/file/output_folder.h"
 #include "io/mesh/mesh_writer.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/error.h"
@@ -39,7 +39,7 @@ namespace {
 struct ExtractArgs {
   std::string input;
   std::string iso;
-  std::string eps = "0";
+  std::string eps;  // "" : not given (0, full resolution, unless --max-triangles chooses it)
   std::string error = "bound";
   std::string topology = "preserve";
   std::string weight;
@@ -57,7 +57,7 @@ struct ExtractArgs {
   int64_t cache_mb = 512;
   std::string focus;
   std::string radius;
-  int64_t max_triangles = 0;
+  std::string max_triangles;
   bool quiet = false;
 };
 
@@ -76,7 +76,8 @@ int write_outputs(const ExtractArgs& a, ExtractionRun& run, Mesh& mesh, const Me
 
 // --parts DIR: every rank writes its share's mesh as part-RRRRR.vtp into a new folder beside DIR,
 // rank 0 adds mesh.pvtp naming them all (ParaView opens it as one dataset), and only then does the
-// folder take DIR's place: a failure on any rank leaves DIR as it was (docs/DISTRIBUTED.md).
+// folder take DIR's place: a failure on any rank leaves DIR as it was (docs/DISTRIBUTED.md). DIR
+// must be new, empty or an earlier --parts output holding nothing else (io/file/output_folder.h).
 int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh) {
   const Distribution* group = process_group();
   const int rank = group ? group->rank() : 0, ranks = group ? group->ranks() : 1;
@@ -85,32 +86,14 @@ int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh
     std::snprintf(name, sizeof name, "part-%05d.vtp", r);
     return std::string(name);
   };
-  const std::filesystem::path target = std::filesystem::absolute(a.parts).lexically_normal();
-  const std::filesystem::path parent = target.parent_path();
-  const std::string base = "." + target.filename().string() + ".tmp." + std::to_string(::getpid());
-  // Rank 0's new folder, removed unless it took DIR's place.
-  struct Folder {
-    std::filesystem::path path;
-    bool kept = false;
-    ~Folder() {
-      std::error_code ignored;
-      if (!path.empty() && !kept) std::filesystem::remove_all(path, ignored);
-    }
-  } folder;
+  std::optional<OutputFolder> folder;  // rank 0's
   on_every_rank([&] {
-    if (!speaking_rank()) return;
-    if (std::filesystem::exists(target) && !std::filesystem::is_directory(target))
-      throw IoError("--parts " + a.parts + ": is not a directory");
-    for (int n = 0; folder.path.empty(); ++n) {
-      const std::filesystem::path p = parent / (base + "." + std::to_string(n));
-      if (std::filesystem::create_directory(p)) folder.path = p;
-      if (n > 100) throw IoError("--parts " + a.parts + ": cannot make a new folder beside it");
-    }
+    if (speaking_rank()) folder.emplace(NamedPath{"--parts", a.parts});
   });
-  std::filesystem::path temp = folder.path;
+  std::filesystem::path temp = folder ? folder->path() : std::filesystem::path();
   if (group) {  // rank 0's folder, to every rank
     ByteWriter w;
-    w.put_array(folder.path.string());
+    w.put_array(temp.string());
     const std::vector<std::vector<uint8_t>> all = group->all_gather(w.bytes());
     ByteReader r(all[0]);
     std::string path;
@@ -139,14 +122,9 @@ int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh
     if (!speaking_rank()) return;
     std::vector<std::string> pieces;
     for (int r = 0; r < ranks; ++r) pieces.push_back(part_name(r));
-    write_pvtp(pieces, (folder.path / "mesh.pvtp").string());
-    // The new folder takes DIR's place; an old DIR is moved aside first, then removed.
-    const std::filesystem::path old = parent / (base + ".old");
-    const bool replace = std::filesystem::exists(target);
-    if (replace) std::filesystem::rename(target, old);
-    std::filesystem::rename(folder.path, target);
-    folder.kept = true;
-    if (replace) std::filesystem::remove_all(old);
+    write_pvtp(pieces, (folder->path() / "mesh.pvtp").string());
+    pieces.push_back("mesh.pvtp");
+    folder->commit(pieces);
   });
   if (!a.quiet && speaking_rank())
     std::printf(
@@ -166,13 +144,14 @@ int run_extract(const ExtractArgs& a) {
   // The extraction's options through the parser every face shares (isotope/extract.h): the
   // same words, ranges and relations as `isotope serve` and `isotope sweep`.
   std::vector<std::pair<std::string, std::string>> given = {
-      {"iso", a.iso}, {"eps", a.eps}, {"error", a.error}, {"topology", a.topology}};
-  for (const auto& [name, text] : {std::pair<const char*, const std::string&>{"weight", a.weight},
+      {"iso", a.iso}, {"error", a.error}, {"topology", a.topology}};
+  for (const auto& [name, text] : {std::pair<const char*, const std::string&>{"eps", a.eps},
+                                   {"weight", a.weight},
                                    {"delta", a.delta},
                                    {"focus", a.focus},
-                                   {"radius", a.radius}})
+                                   {"radius", a.radius},
+                                   {"max-triangles", a.max_triangles}})
     if (!text.empty()) given.emplace_back(name, text);
-  if (a.max_triangles > 0) given.emplace_back("max-triangles", std::to_string(a.max_triangles));
   // A budget in simplify mode without a delta chooses delta too (the parser sets auto_delta).
   run.options = parse_command_line_options(given);
   if (a.compare_full && a.report.empty()) throw CLI::ValidationError("--compare-full", "needs --report");
@@ -200,7 +179,10 @@ int run_extract(const ExtractArgs& a) {
         throw IoError("cannot write '" + *path + "': directory '" + dir.string() + "' does not exist");
       }
     }
-    if (a.parts.empty()) check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
+    if (a.parts.empty())
+      check_outputs({{"INPUT", a.input}}, {{"-o", a.output}, {"--report", a.report}});
+    else
+      OutputFolder::check({"--parts", a.parts}, {{"INPUT", a.input}});
   });
 
   std::optional<tbb::global_control> threads;
@@ -314,10 +296,10 @@ Command add_extract_command(CLI::App& app) {
       ->required()
       ->check(extract_option_check("iso"))
       ->type_name("V");
-  cmd->add_option("--eps", a->eps, "Error threshold: refine while the error indicator is >= eps; 0 = full resolution")
+  cmd->add_option("--eps", a->eps,
+                  "Error threshold: refine while the error indicator is >= eps; 0 (the default) = full resolution")
       ->check(extract_option_check("eps"))
-      ->type_name("E")
-      ->capture_default_str();
+      ->type_name("E");
   cmd->add_option("--error", a->error,
                   "Error indicator: bound (guaranteed L-infinity bound of the coarse field) or surplus (the paper's)")
       ->check(extract_option_check("error"))
@@ -372,7 +354,7 @@ Command add_extract_command(CLI::App& app) {
       ->capture_default_str()
       ->type_name("V");
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
-      ->check(CLI::Range(0, kMaxThreads))
+      ->check(thread_count_check())
       ->capture_default_str();
   cmd->add_option(
          "--cache-mb", a->cache_mb,
@@ -387,10 +369,10 @@ Command add_extract_command(CLI::App& app) {
       ->check(extract_option_check("radius"))
       ->type_name("R");
   cmd->add_option("--max-triangles", a->max_triangles,
-                  "Instead of --eps: the finest eps whose mesh has at most T triangles (0 = off); with --topology "
+                  "Instead of --eps: the finest eps whose mesh has at most T triangles (T >= 1); with --topology "
                   "simplify and no --delta, delta too: the features of smallest weight are dropped until the "
                   "coarsest mesh takes half the budget")
-      ->check(CLI::Range(int64_t{0}, kMaxTriangleBudget))
+      ->check(extract_option_check("max-triangles"))
       ->type_name("T");
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");
 

@@ -33,7 +33,11 @@ int run_serve(const ServeArgs& a) {
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
   const InterruptGuard interrupt;
-  ViewerServer server({a.store, a.cache_mb, !a.quiet});
+  ViewerServer::Settings settings;
+  settings.store = a.store;
+  settings.cache_mb = a.cache_mb;
+  settings.log = !a.quiet;
+  ViewerServer server(settings);
   const int port = server.bind(a.host, a.port);
   if (!is_loopback_host(a.host))
     std::fprintf(stderr,
@@ -75,7 +79,7 @@ Command add_serve_command(CLI::App& app) {
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads per extraction (0 = all cores)")
-      ->check(CLI::Range(0, kMaxThreads))
+      ->check(thread_count_check())
       ->capture_default_str();
   cmd->add_flag("-q,--quiet", a->quiet, "Print only the line that names the address");
   return [a] { return run_serve(*a); };

@@ -187,7 +187,7 @@ Command add_convert_command(CLI::App& app) {
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
-      ->check(CLI::Range(0, kMaxThreads))
+      ->check(thread_count_check())
       ->capture_default_str();
   cmd->add_option("--zstd-level", a->zstd_level, "zstd compression level of the bricks (1..19)")
       ->check(CLI::Range(1, 19))
@@ -238,7 +238,7 @@ Command add_verify_command(CLI::App& app) {
   auto threads = std::make_shared<int>(0);
   CLI::App* cmd = app.add_subcommand("verify", "Read every brick of a store and check checksums and invariants");
   cmd->add_option("STORE", *path, "Store file")->required();
-  cmd->add_option("--threads", *threads, "Worker threads (0 = all cores)")->check(CLI::Range(0, kMaxThreads));
+  cmd->add_option("--threads", *threads, "Worker threads (0 = all cores)")->check(thread_count_check());
   cmd->add_flag("-q,--quiet", *quiet, "Print nothing on success");
   return [path, quiet, threads] {
     std::optional<tbb::global_control> limit;

@@ -192,7 +192,7 @@ Command add_sweep_command(CLI::App& app) {
   cmd->add_option("--csv", a->csv, "Also write the table as CSV")->type_name("F.csv");
   cmd->add_option("--plot", a->plot, "Also plot triangles against eps per mode (PNG)")->type_name("F.png");
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
-      ->check(CLI::Range(0, kMaxThreads))
+      ->check(thread_count_check())
       ->capture_default_str();
   cmd->add_option("--cache-mb", a->cache_mb, "Store input: memory for decoded bricks, in MB")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))

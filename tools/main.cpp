@@ -14,10 +14,14 @@
 #include "isotope/version.h"
 #include "tools/commands.h"
 #include "tools/support/command_line.h"
+#include "tools/support/mpi_launcher.h"
 #ifdef ISOTOPE_HAVE_MPI
 #include <unistd.h>
 
+#include <algorithm>
+#include <cstdint>
 #include <optional>
+#include <vector>
 
 #include "dist/mpi_distribution.h"
 #include "io/file/temporary_registry.h"
@@ -29,17 +33,43 @@
 extern "C" const char* __lsan_default_suppressions();
 extern "C" const char* __lsan_default_suppressions() { return "leak:libfontconfig.so\n"; }
 
+#ifdef ISOTOPE_HAVE_MPI
+namespace {
+
+// "" when every rank of WORLD was started with the same words as this one; otherwise what differs,
+// for rank 0 to say. Every rank calls it (one all_gather).
+std::string ranks_disagree(const isotope::Distribution& world, int argc, char** argv) {
+  std::string words;
+  for (int i = 1; i < argc; ++i) words += std::string(i > 1 ? " " : "") + argv[i];
+  const std::vector<uint8_t> mine(words.begin(), words.end());
+  const std::vector<std::vector<uint8_t>> all = world.all_gather(mine);
+  for (size_t r = 1; r < all.size(); ++r)
+    if (all[r] != all[0]) {
+      auto shown = [](const std::vector<uint8_t>& w) {
+        const std::string text(w.begin(), w.begin() + static_cast<std::ptrdiff_t>(std::min<size_t>(w.size(), 200)));
+        return "'isotope " + text + (w.size() > 200 ? "...'" : "'");
+      };
+      return "the ranks of this job run different commands: rank 0 " + shown(all[0]) + ", rank " + std::to_string(r) +
+             " " + shown(all[r]) + "; under mpirun every rank runs the same isotope command with the same options";
+    }
+  return "";
+}
+
+}  // namespace
+#endif
+
 int main(int argc, char** argv) {
   using namespace isotope::tools;
   // A file size limit (ulimit -f, a quota) would otherwise kill the process by SIGXFSZ halfway
   // through a write; ignored, the write fails with EFBIG and the output's own error path runs
   // (io/file/atomic_file.h: the message, the temporary removed, the target left as it was).
   std::signal(SIGXFSZ, SIG_IGN);
+  const MpiLauncher launcher = mpi_launcher();
 #ifdef ISOTOPE_HAVE_MPI
   // Started by mpirun (or srun): every rank runs the command, sharing its work
   // (docs/DISTRIBUTED.md); only rank 0 prints. Started otherwise: no MPI at all.
   std::optional<isotope::MpiSession> mpi;
-  if (isotope::MpiSession::launched()) {
+  if (launcher.launched) {
     try {
       mpi.emplace(&argc, &argv);
     } catch (const std::exception& e) {
@@ -47,6 +77,14 @@ int main(int argc, char** argv) {
       return 1;
     }
     set_process_group(&mpi->world());
+    // Every rank must run the same command with the same options (an MPMD launch may give them
+    // different ones): the ranks compare their words once, before any of them parses or reads, and
+    // all stop with one message otherwise, rather than wait for each other forever or weld a mesh
+    // of different isovalues.
+    if (const std::string differ = ranks_disagree(mpi->world(), argc, argv); !differ.empty()) {
+      if (mpi->world().rank() == 0) std::cerr << "isotope: usage error: " << differ << '\n';
+      return 2;
+    }
     // mpirun ends the other ranks of a job one of whose ranks failed or was killed with SIGTERM
     // (then SIGKILL): a rank blocked in a collective cannot unwind, so its temporary files go here
     // (io/file/temporary_registry.h) and it ends at once. Ctrl-C reaches the ranks the same way.
@@ -55,6 +93,18 @@ int main(int argc, char** argv) {
         isotope::remove_temporaries_now();
         _exit(128 + s);
       });
+  }
+#else
+  // An MPI launcher started this isotope, built without MPI, as one of several ranks: each would run
+  // the whole job alone, racing for the same outputs.
+  if (launcher.launched && (launcher.ranks != 1 || launcher.rank != 0)) {
+    if (launcher.rank == 0)  // every rank refuses; one says why
+      std::cerr << "isotope: error: started by an MPI launcher as rank 0 of "
+                << (launcher.ranks > 0 ? std::to_string(launcher.ranks) : std::string("several"))
+                << ", but this isotope was built without MPI, so every rank would do the whole job alone; build it "
+                   "with MPI (Debian: apt-get install libopenmpi-dev openmpi-bin, then configure and build again; "
+                   "docs/DISTRIBUTED.md) or run it without mpirun\n";
+    return 1;
   }
 #endif
   const bool speaks = speaking_rank();

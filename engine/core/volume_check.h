@@ -1,13 +1,27 @@
 #pragma once
-// What every consumer of an array in memory refuses: dimensions outside 2 .. 2^19 + 1 per axis
-// (the traversal packs coordinates in 21 bits), values that do not fill them, values that are not
-// finite. One check for the one-shot extraction, the hierarchy's build, the exact reference build,
-// isotope::open_volume and isotope::convert.
+// What every consumer of a volume refuses (one check for the command, the C++ API, the Python
+// module and the server's store): dimensions outside 2 .. 2^19 + 1 per axis (the traversal packs
+// coordinates in 21 bits), a spacing that is not finite and positive, an origin that is not finite,
+// a geometry whose far corner lies beyond the mesh's float32 coordinates, values that do not fill
+// the dimensions, values that are not finite.
+#include <array>
+#include <cstdint>
+
 #include "isotope/volume.h"
 
 namespace isotope {
 
-// Throws std::invalid_argument naming the first problem.
+// Dimensions alone (a hierarchy's lattice, before there is a volume). Throws std::invalid_argument.
+void validate_dims(const std::array<int64_t, 3>& dims);
+
+// Dimensions and geometry, before any value is read. Throws std::invalid_argument naming the
+// first problem and the numbers, e.g. "volume dimensions 8x16x1 (x by y by z): every axis needs
+// 2 .. 524289 nodes".
+void validate_layout(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
+                     const std::array<double, 3>& origin);
+
+// validate_layout, then the values. Throws std::invalid_argument naming the first problem (a value
+// by its x, y, z).
 void validate_volume(const Volume& volume);
 
 }  // namespace isotope

@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <set>
 
 namespace isotope {
@@ -41,13 +42,23 @@ std::array<double, 3> point(std::string_view text) {
   return p;
 }
 
-int64_t triangle_budget(std::string_view text) {
+// An integer as typed, within [lo, hi]; nullopt otherwise (not a whole number, out of range,
+// beyond 64 bits).
+std::optional<int64_t> integer_in(std::string_view text, int64_t lo, int64_t hi) {
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
   int64_t v = 0;
   const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-  if (ec != std::errc() || end != text.data() + text.size() || v < 0 || v > kMaxTriangleBudget)
-    throw OptionError("max-triangles",
-                      "must be an integer in 0 .. " + std::to_string(kMaxTriangleBudget) + ", got " + quoted(text));
+  if (ec != std::errc() || end != text.data() + text.size() || v < lo || v > hi) return std::nullopt;
   return v;
+}
+
+int64_t triangle_budget(std::string_view text) {
+  // 0 would mean no budget, which is leaving the option out: a budget of 0 is refused as meaningless.
+  const auto v = integer_in(text, 1, kMaxTriangleBudget);
+  if (!v)
+    throw OptionError("max-triangles", "must be an integer in 1 .. " + std::to_string(kMaxTriangleBudget) +
+                                           " (the most triangles the mesh may have), got " + quoted(text));
+  return *v;
 }
 
 }  // namespace
@@ -121,6 +132,8 @@ ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, st
   }
   const auto has = [&](const char* name) { return seen.count(name) > 0; };
   if (!has("iso")) throw OptionError("iso", "is required");
+  if (has("max-triangles") && has("eps"))
+    throw OptionError("max-triangles", "chooses eps itself: give eps or max-triangles, not both");
   if (o.topology != TopologyMode::simplify && (has("delta") || has("weight")))
     throw OptionError(has("delta") ? "delta" : "weight", "applies to topology simplify only");
   if (has("focus") != has("radius"))
@@ -141,6 +154,7 @@ void ExtractOptions::validate() const {
   if (delta > 0 && topology != TopologyMode::simplify) throw OptionError("delta", "applies to topology simplify only");
   if (max_triangles < 0 || max_triangles > kMaxTriangleBudget)
     throw OptionError("max-triangles", "must be in 0 .. " + std::to_string(kMaxTriangleBudget));
+  if (max_triangles > 0 && eps != 0) throw OptionError("eps", "must be 0 with max-triangles, which chooses eps itself");
   if (auto_delta && (topology != TopologyMode::simplify || max_triangles == 0 || delta != 0))
     throw OptionError("delta", "is chosen only with topology simplify, a triangle budget and no delta given");
   if (focus) {
@@ -149,6 +163,14 @@ void ExtractOptions::validate() const {
     if (!(focus->radius > 0) || !std::isfinite(focus->radius))
       throw OptionError("radius", "must be a finite number > 0");
   }
+}
+
+int parse_thread_count(std::string_view text) {
+  const auto v = integer_in(text.substr(0, kMaxValueChars + 1), 0, kMaxThreads);
+  if (!v)
+    throw OptionError("threads", "must be an integer in 0 .. " + std::to_string(kMaxThreads) + " (0: all cores), got " +
+                                     quoted(text));
+  return static_cast<int>(*v);
 }
 
 std::string_view to_string(ErrorIndicator e) {

@@ -48,9 +48,7 @@ void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, 
 }
 
 Hierarchy Hierarchy::allocate(const std::array<int64_t, 3>& dims, int brick_bits, const RecordFields& fields) {
-  for (int64_t d : dims)
-    if (d < 2 || d > (int64_t{1} << 19) + 1)
-      throw std::invalid_argument("volume dimensions must be 2 .. 524289 nodes per axis");
+  validate_dims(dims);
   Hierarchy h;
   h.layout_ = std::make_unique<StoreLayout>(dims, brick_bits);
   h.indexer_ = std::make_unique<BrickIndexer>(*h.layout_);
@@ -92,6 +90,7 @@ Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int
                            const ProgressCallback& progress) {
   validate_volume(volume);
   const auto start = std::chrono::steady_clock::now();
+  if (brick_bits == kMemoryBrickBits) brick_bits = StoreLayout::memory_brick_bits(volume.dims);
   Hierarchy h = allocate(volume.dims, brick_bits, fields);
   h.set_geometry(volume.origin, volume.spacing);
   const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {

@@ -97,9 +97,11 @@ class BrickIndexer {
 class Hierarchy {
  public:
   // The banded build (engine/hierarchy/banded_build.h) on all threads, with only the topology fields asked
-  // for. Throws std::invalid_argument for dimensions below 2 or non-finite values.
-  static Hierarchy build(const Volume& volume, const RecordFields& fields = {},
-                         int brick_bits = StoreLayout::kDefaultBrickBits, const ProgressCallback& progress = {});
+  // for, in bricks of 2^brick_bits nodes a side (kMemoryBrickBits: StoreLayout::memory_brick_bits).
+  // Throws std::invalid_argument for dimensions below 2 or non-finite values.
+  static constexpr int kMemoryBrickBits = 0;
+  static Hierarchy build(const Volume& volume, const RecordFields& fields = {}, int brick_bits = kMemoryBrickBits,
+                         const ProgressCallback& progress = {});
   // Empty bricks to be filled (a store read whole: io/store/store_reader.h).
   static Hierarchy allocate(const std::array<int64_t, 3>& dims, int brick_bits, const RecordFields& fields);
 

@@ -13,25 +13,7 @@
 #include "engine/hierarchy/record_builder.h"
 
 namespace isotope {
-namespace {
-
-void validate_dims(const std::array<int64_t, 3>& dims) {
-  for (int i = 0; i < 3; ++i)
-    if (dims[i] < 2)
-      throw std::invalid_argument("volume dimensions must be at least 2 nodes per axis, got " +
-                                  std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
-                                  std::to_string(dims[2]));
-  for (int i = 0; i < 3; ++i)
-    if (dims[i] > (int64_t{1} << 19) + 1)  // the traversal packs coordinates in 21 bits
-      throw std::invalid_argument("volume dimensions above 524289 nodes per axis are not supported");
-}
-
-void validate(const Volume& volume) {
-  validate_dims(volume.dims);  // its own words for the dimensions, then the shared check
-  validate_volume(volume);
-}
-
-}  // namespace
+namespace {}  // namespace
 
 // The in-memory arrays as RecordBuilder's grid.
 namespace {
@@ -91,7 +73,7 @@ MultiresVolume MultiresVolume::allocate(const std::array<int64_t, 3>& dims, cons
 
 MultiresVolume MultiresVolume::build(const Volume& volume, const ProgressCallback& progress) {
   const auto start = std::chrono::steady_clock::now();
-  validate(volume);
+  validate_volume(volume);
   MultiresVolume mv = allocate(volume.dims, volume.spacing, volume.origin);
   std::vector<std::array<int64_t, 3>> scale_nodes;
   for (int j = 0; j <= mv.lattice_.k; ++j)

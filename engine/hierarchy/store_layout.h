@@ -47,6 +47,19 @@ class StoreLayout {
     brick_count_ = first;
   }
 
+  // The brick size for a hierarchy held whole in memory: the store's (16^3), unless the volume is so
+  // thin along an axis that such bricks would hold more than 4 slots per node of the bands (a
+  // 500000x2x2 volume: 28, which took 4 GB for 2 MB of data); then the smaller brick (8^3 or
+  // 4^3) that pads least. Meshes do not depend on the brick size.
+  static int memory_brick_bits(const std::array<int64_t, 3>& dims) {
+    auto slots = [&](int bits) { return StoreLayout(dims, bits).brick_count() << (3 * bits); };
+    int64_t nodes = 0;
+    const StoreLayout layout(dims, kDefaultBrickBits);
+    for (const Band& b : layout.bands()) nodes += b.nodes[0] * b.nodes[1] * b.nodes[2];
+    if (slots(kDefaultBrickBits) <= 4 * nodes) return kDefaultBrickBits;
+    return slots(2) < slots(3) ? 2 : 3;
+  }
+
   const Lattice& lattice() const { return lattice_; }
   const std::array<int64_t, 3>& dims() const { return dims_; }
   int brick_bits() const { return brick_bits_; }

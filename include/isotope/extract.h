@@ -61,7 +61,7 @@ struct ExtractOptions {
   SimplificationWeight weight = SimplificationWeight::interval;  // simplify mode only
   double delta = 0.0;  // simplify mode: critical points of weight < delta may be dropped
   std::optional<Focus> focus;
-  // > 0: ignore eps and take the finest eps whose mesh has at most this many triangles.
+  // > 0: the finest eps whose mesh has at most this many triangles (eps must then be 0).
   int64_t max_triangles = 0;
   // With max_triangles in simplify mode: choose delta too: the smallest delta whose coarsest mesh
   // takes at most half the budget (features of smallest weight dropped first), then the finest eps
@@ -81,7 +81,7 @@ struct ExtractOptions {
 
   // Throws OptionError naming the first option out of its range: iso not finite, eps or delta
   // negative or NaN (infinity is the coarsest), delta without `simplify`, a focus point not finite or a
-  // radius not > 0, a budget outside [0, kMaxTriangleBudget], auto_delta without a budget in
+  // radius not > 0, a budget outside [0, kMaxTriangleBudget] or with eps > 0, auto_delta without a budget in
   // simplify mode. Every extraction calls it; a face calls it to refuse before any work.
   void validate() const;
 };
@@ -96,7 +96,8 @@ struct OptionError : std::invalid_argument {
 
 // The options as text, by name: iso (required), eps, error, topology, weight, delta, focus ("X,Y,Z"),
 // radius, max-triangles. Numbers as a user types them ("0.25", "-3e-2", "1/64"). Each name at most
-// once; a budget in simplify mode without a delta sets auto_delta; the result is validated. Throws OptionError (an
+// once; eps and max-triangles not both (the budget chooses eps), a budget of at least 1; a budget in
+// simplify mode without a delta sets auto_delta; the result is validated. Throws OptionError (an
 // unknown name is reported under its own name, with the message "is not an extraction option").
 ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, std::string>>& given);
 
@@ -104,6 +105,14 @@ ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, st
 // validate() makes): for a face that lists values of one option (`isotope sweep --eps 0,1/64`).
 // Throws OptionError.
 void set_extract_option(ExtractOptions& options, std::string_view name, std::string_view text);
+
+// The most worker threads a face accepts.
+inline constexpr int kMaxThreads = 4096;
+
+// A thread count as a user types it: an integer in 0 (all cores) .. kMaxThreads. Throws
+// OptionError("threads", ...), in the words every face (the command's --threads, the Python
+// module's threads=) uses.
+int parse_thread_count(std::string_view text);
 
 // A real number as a user types it: "0.25", "-3e-2", "+1" or a fraction "1/64"; nullopt otherwise.
 std::optional<double> parse_real(std::string_view text);

@@ -18,7 +18,8 @@ struct Volume {
   std::vector<float> values;               // dims[0]*dims[1]*dims[2], x fastest
   // Instead of `values`: values that live elsewhere (a numpy array, a simulation's field), read
   // where they are, never copied. The caller keeps them alive and unchanged while this Volume, or
-  // a Source opened from it, is in use (the Python module holds the array: python/src/module.cpp).
+  // a Source opened from it, is in use (the Python module holds the array: python/src/module.cpp):
+  // its values are checked once, when it is opened, and read as they are at each later moment.
   std::span<const float> borrowed;
 
   int64_t node_count() const { return dims[0] * dims[1] * dims[2]; }
@@ -34,6 +35,9 @@ enum class ScalarType { uint8, uint16, int16, float32, float64 };
 
 std::optional<ScalarType> parse_scalar_type(const std::string& name);  // uint8|uint16|int16|float32|float64
 const char* scalar_type_name(ScalarType t);
+// "301x324x56" -> {301, 324, 56} (x, y, z), as --dims takes it; digits only and each >= 1, so signs
+// and blanks are rejected; nullopt otherwise.
+std::optional<std::array<int64_t, 3>> parse_dims(const std::string& text);
 int scalar_type_size(ScalarType t);
 
 }  // namespace isotope

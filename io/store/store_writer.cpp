@@ -537,8 +537,7 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
     throw OptionError("quantize", "must be 8 or 16");
   if (options.brick_bits < kMinBrickBits || options.brick_bits > kMaxBrickBits)
     throw OptionError("brick-bits", "must be " + std::to_string(kMinBrickBits) + ".." + std::to_string(kMaxBrickBits));
-  for (int64_t d : input.info().dims)
-    if (d < 2 || d > (int64_t{1} << 19) + 1) throw IoError("volume dimensions must be 2 .. 524289 nodes per axis");
+  validate_layout(input.info().dims, input.info().spacing, input.info().origin);
   // Distributed, the quantizer's pass over the input runs under settle_together: a rank whose
   // read fails stops every rank.
   std::optional<Converter> converter;

@@ -300,13 +300,16 @@ void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& s
 
 std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir) {
   const VolumeLocation at = locate_volume(source);
+  std::unique_ptr<BoxReader> reader;
   switch (at.format) {
-    case VolumeLocation::Format::hdf5: return open_hdf5(at.file, at.dataset);
-    case VolumeLocation::Format::nrrd: return open_nrrd(at.file, scratch_dir);
-    case VolumeLocation::Format::tiff: return open_tiff_stack(at.file);
-    case VolumeLocation::Format::raw: break;
+    case VolumeLocation::Format::hdf5: reader = open_hdf5(at.file, at.dataset); break;
+    case VolumeLocation::Format::nrrd: reader = open_nrrd(at.file, scratch_dir); break;
+    case VolumeLocation::Format::tiff: reader = open_tiff_stack(at.file); break;
+    case VolumeLocation::Format::raw: reader = open_raw(at.file, at.layout); break;
   }
-  return open_raw(at.file, at.layout);
+  const VolumeInfo& info = reader->info();
+  check_volume_layout(info.dims, info.spacing, info.origin, at.file);
+  return reader;
 }
 
 }  // namespace isotope

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "engine/core/parallel.h"
+#include "engine/core/volume_check.h"
 #include "io/file/checked_size.h"
 #include "io/file/input_file.h"
 #include "isotope/error.h"
@@ -185,6 +186,15 @@ int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes
   if (!count || !checked_mul(*count, int64_t{std::max(element_bytes, 1)}))
     throw IoError(file + ": dimensions " + dims_text(dims) + " too large");
   return *count;
+}
+
+void check_volume_layout(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
+                         const std::array<double, 3>& origin, const std::string& file) {
+  try {
+    validate_layout(dims, spacing, origin);
+  } catch (const std::invalid_argument& e) {
+    throw IoError(file + ": " + e.what());
+  }
 }
 
 void check_finite(const Volume& volume, const std::string& file) {

@@ -17,8 +17,6 @@ struct RawLayout {
 
 // "lobster_301x324x56_uint8.raw" -> {301,324,56}, uint8; nullopt when the name does not say.
 std::optional<RawLayout> parse_raw_name(const std::string& path);
-// "301x324x56" -> {301, 324, 56}; digits only and each >= 1, so signs and blanks are rejected.
-std::optional<std::array<int64_t, 3>> parse_dims(const std::string& text);
 
 // Throws IoError: missing/unreadable file, size not equal to the layout, NaN or infinite values.
 Volume read_raw(const std::string& path, const RawLayout& layout);
@@ -29,6 +27,11 @@ int64_t check_raw_file(const std::string& path, const RawLayout& layout);
 // Shared by the readers and writers. Throws IoError naming FILE when a dimension is < 1 or
 // dims[0]*dims[1]*dims[2]*element_bytes does not fit in int64; returns the node count.
 int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes, const std::string& file);
+
+// The volume's dimensions and geometry as every consumer takes them (engine/core/volume_check.h),
+// checked for FILE before its values are read; throws IoError naming FILE and the numbers.
+void check_volume_layout(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
+                         const std::array<double, 3>& origin, const std::string& file);
 // Throws IoError naming FILE and the (x, y, z) of the first NaN or infinite value.
 void check_finite(const Volume& volume, const std::string& file);
 // The same for a box of SIZE nodes at LO (x fastest); the message gives global coordinates.

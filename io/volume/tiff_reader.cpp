@@ -7,6 +7,8 @@
 #include <cctype>
 #include <cstdarg>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <optional>
 #include <system_error>
@@ -56,22 +58,54 @@ bool natural_less(const std::string& a, const std::string& b) {
 }
 
 // libtiff reports through handlers; these keep its first error of a handle for our message (the
-// first is the cause, later ones its consequences) and let it print nothing.
+// first is the cause, later ones its consequences), and its first warning that means the values
+// would not be the file's own (warning_affects_data), and let it print nothing.
 struct TiffErrors {
   std::string first;
+  std::string data_warning;
 };
+
+std::string libtiff_text(const char* module, const char* format, va_list args) {
+  char text[512];
+  std::vsnprintf(text, sizeof text, format, args);
+  return std::string(module ? module : "libtiff") + ": " + text;
+}
 
 int keep_error(TIFF*, void* user, const char* module, const char* format, va_list args) {
   auto* errors = static_cast<TiffErrors*>(user);
-  if (errors->first.empty()) {
-    char text[512];
-    std::vsnprintf(text, sizeof text, format, args);
-    errors->first = std::string(module ? module : "libtiff") + ": " + text;
-  }
+  if (errors->first.empty()) errors->first = libtiff_text(module, format, args);
   return 1;  // handled
 }
 
-int ignore_warning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
+// Whether a libtiff warning means that what it reads would not be the values the file holds: it
+// ignored or guessed a field that lays the data out ("Incorrect count for "StripOffsets"; tag
+// ignored": the strips then read from offset 0; "calculating from imagelength"), or assumed what
+// the file does not say. Warnings about other tags (a date, a resolution, a private tag of ImageJ
+// or a microscope) and about the file's tidiness leave the values as they are.
+bool warning_affects_data(const std::string& text) {
+  for (const char* harmless : {"Unknown field with tag", "Registering anonymous field", "ASCII value for",
+                               "tags are not sorted in ascending order", "Nonstandard tile"})
+    if (text.find(harmless) != std::string::npos) return false;
+  const size_t open = text.find('"'), close = open == std::string::npos ? open : text.find('"', open + 1);
+  if (close == std::string::npos) return true;  // names no tag: about the data itself
+  static const std::vector<std::string> kLayout = {
+      "ImageWidth",          "ImageLength",     "BitsPerSample",   "Compression",  "PhotometricInterpretation",
+      "FillOrder",           "StripOffsets",    "SamplesPerPixel", "RowsPerStrip", "StripByteCounts",
+      "PlanarConfiguration", "Predictor",       "ColorMap",        "TileWidth",    "TileLength",
+      "TileOffsets",         "TileByteCounts",  "TileDepth",       "ExtraSamples", "SampleFormat",
+      "JPEGTables",          "YCbCrSubsampling"};
+  const std::string tag = text.substr(open + 1, close - open - 1);
+  return std::find(kLayout.begin(), kLayout.end(), tag) != kLayout.end();
+}
+
+int keep_data_warning(TIFF*, void* user, const char* module, const char* format, va_list args) {
+  auto* errors = static_cast<TiffErrors*>(user);
+  if (errors->data_warning.empty()) {
+    std::string text = libtiff_text(module, format, args);
+    if (warning_affects_data(text)) errors->data_warning = std::move(text);
+  }
+  return 1;
+}
 
 class TiffFile {
  public:
@@ -80,7 +114,7 @@ class TiffFile {
     TIFFOpenOptions* options = TIFFOpenOptionsAlloc();
     TIFFOpenOptionsSetMaxSingleMemAlloc(options, kMaxTiffAllocation);
     TIFFOpenOptionsSetErrorHandlerExtR(options, keep_error, errors_.get());
-    TIFFOpenOptionsSetWarningHandlerExtR(options, ignore_warning, nullptr);
+    TIFFOpenOptionsSetWarningHandlerExtR(options, keep_data_warning, errors_.get());
     // "m": read, never map: a file truncated while mapped would end the process with SIGBUS.
     tif_ = TIFFOpenExt(path.c_str(), "rm", options);
     TIFFOpenOptionsFree(options);
@@ -100,6 +134,14 @@ class TiffFile {
     throw IoError(where_ + ": " + what + (errors_->first.empty() ? "" : " (" + errors_->first + ")"));
   }
   bool had_error() const { return !errors_->first.empty(); }
+  // Refuses a file of which libtiff would read values that are not the file's own (a field it
+  // ignored or guessed): tifffile and others may read such a file differently, and isotope does
+  // not guess.
+  void refuse_guessed_data(const std::string& page) const {
+    if (!errors_->data_warning.empty())
+      throw IoError(where_ + ": " + page + ": its directory does not describe its data consistently (" +
+                    errors_->data_warning + "); isotope does not read values that libtiff would guess");
+  }
   uint64_t size() const { return size_; }
 
  private:
@@ -132,6 +174,11 @@ PageFormat page_format(const TiffFile& file) {
   TIFFGetFieldDefaulted(tif, TIFFTAG_SAMPLEFORMAT, &format);
   if (samples != 1)
     file.fail(std::to_string(samples) + " samples per pixel; isotope reads one channel per pixel (a grayscale stack)");
+  uint16_t photometric = PHOTOMETRIC_MINISBLACK;
+  if (TIFFGetField(tif, TIFFTAG_PHOTOMETRIC, &photometric) && photometric == PHOTOMETRIC_PALETTE)
+    file.fail(
+        "a palette (indexed colour) image: its values are indices into a colour map, not measurements; "
+        "isotope reads grayscale stacks");
   const std::optional<ScalarType> type = format == SAMPLEFORMAT_UINT && bits == 8      ? ScalarType::uint8
                                          : format == SAMPLEFORMAT_UINT && bits == 16   ? ScalarType::uint16
                                          : format == SAMPLEFORMAT_INT && bits == 16    ? ScalarType::int16
@@ -184,6 +231,7 @@ uint64_t check_page_data(const TiffFile& file, const PageFormat& f, const std::s
   if (decoded / max_expansion(compression) > stored)
     file.fail(page + ": its strips hold " + std::to_string(stored) + " bytes, too few for " + describe(f) +
               " values (a damaged or lying header)");
+  file.refuse_guessed_data(page);
   return decoded;
 }
 
@@ -200,18 +248,70 @@ struct Stack {
 std::vector<std::string> folder_slices(const std::string& dir) {
   std::vector<std::string> names;
   std::error_code ec;
-  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
-    const std::string name = e.path().filename().string();
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
     // Hidden files (macOS's "._slice.tif" among them) are not slices.
-    if (!name.empty() && name[0] != '.' && has_tiff_extension(e.path()) && e.is_regular_file(ec)) names.push_back(name);
+    if (!name.empty() && name[0] != '.' && has_tiff_extension(it->path())) names.push_back(name);
   }
   if (ec) throw IoError(dir + ": cannot list the folder: " + ec.message());
   if (names.empty())
     throw IoError(
         dir + ": is a directory without .tif or .tiff files (a folder is read as a TIFF stack, one file per slice)");
   std::sort(names.begin(), names.end(), natural_less);
-  for (std::string& n : names) n = (fs::path(dir) / n).string();
+  // Every slice a regular file (links followed), checked in slice order: whatever order the
+  // directory lists them in, the same entry is named.
+  for (std::string& n : names) {
+    const fs::path p = fs::path(dir) / n;
+    std::error_code status_error;
+    const fs::file_status st = fs::status(p, status_error);
+    if (!fs::exists(st))
+      throw IoError(p.string() +
+                    ": a symbolic link that leads nowhere (dangling, or a loop); every .tif in a slice "
+                    "folder is a slice, so the stack would lack one");
+    if (!fs::is_regular_file(st))
+      throw IoError(p.string() + ": " + (fs::is_directory(st) ? "a directory" : "not a regular file") +
+                    " named like a slice; every .tif in a slice folder is a slice");
+    n = p.string();
+  }
   return names;
+}
+
+// A number after KEY= on a line of an ImageJ description ("channels=2\n"), or 1.
+int64_t imagej_count(const std::string& description, const std::string& key) {
+  for (size_t at = description.find(key + "="); at != std::string::npos; at = description.find(key + "=", at + 1)) {
+    if (at != 0 && description[at - 1] != '\n') continue;
+    return std::max<int64_t>(1, std::atoll(description.c_str() + at + key.size() + 1));
+  }
+  return 1;
+}
+
+// A count attribute of an OME-XML description (SizeC="2"), or 1.
+int64_t ome_count(const std::string& description, const std::string& attribute) {
+  const size_t at = description.find(attribute + "=\"");
+  return at == std::string::npos ? 1
+                                 : std::max<int64_t>(1, std::atoll(description.c_str() + at + attribute.size() + 2));
+}
+
+// A multi-page file whose pages are not one channel's slices in order: an ImageJ hyperstack or an
+// OME-TIFF whose pages interleave channels, or time points of several slices each. Read page by
+// page they would be stacked as one volume, silently wrong.
+void refuse_interleaved_pages(const TiffFile& file) {
+  char* text = nullptr;
+  if (!TIFFGetField(file.get(), TIFFTAG_IMAGEDESCRIPTION, &text) || text == nullptr) return;
+  const std::string d(text, strnlen(text, 1 << 20));
+  int64_t channels = 1, slices = 1, frames = 1;
+  if (d.rfind("ImageJ=", 0) == 0) {
+    channels = imagej_count(d, "channels"), slices = imagej_count(d, "slices"), frames = imagej_count(d, "frames");
+  } else if (d.find("<OME") != std::string::npos) {
+    channels = ome_count(d, "SizeC"), slices = ome_count(d, "SizeZ"), frames = ome_count(d, "SizeT");
+  }
+  if (channels > 1)
+    file.fail("a hyperstack of " + std::to_string(channels) +
+              " channels, whose pages interleave them; isotope reads one channel: save each channel as its own "
+              "stack (in Fiji: Image > Color > Split Channels)");
+  if (slices > 1 && frames > 1)
+    file.fail("a hyperstack of " + std::to_string(frames) + " time points of " + std::to_string(slices) +
+              " slices each; isotope reads one volume: save one time point as its own stack");
 }
 
 Stack open_stack(const std::string& path) {
@@ -237,6 +337,7 @@ Stack open_stack(const std::string& path) {
     s.files = {path};
     s.multipage = true;
     const TiffFile file(path, path);
+    refuse_interleaved_pages(file);
     uint64_t claimed = 0;  // the pages' values, in bytes: pages may share their strips
     do {
       const PageFormat f = page_format(file);
@@ -281,11 +382,13 @@ class TiffBoxReader final : public BoxReader {
         if (page_format(*multipage) != stack_.format)  // the file may have been replaced since
           multipage->fail("page " + std::to_string(z) + " changed since the stack was opened");
         read_rows(*multipage, lo, size, slice, buffer, "page " + std::to_string(z));
+        multipage->refuse_guessed_data("page " + std::to_string(z));
       } else {
         const TiffFile file(stack_.files[static_cast<size_t>(z)], stack_.files[static_cast<size_t>(z)]);
         // The file may have been replaced since the stack was opened.
         if (page_format(file) != stack_.format) file.fail("changed since the stack was opened");
         read_rows(file, lo, size, slice, buffer, "slice");
+        file.refuse_guessed_data("slice");
       }
     }
     check_finite(out, lo, size, stack_.where);

@@ -9,6 +9,7 @@
 #include "io/file/input_file.h"
 #include "io/volume/hdf5_reader.h"
 #include "io/volume/nrrd_reader.h"
+#include "io/volume/raw_reader.h"
 #include "io/volume/tiff_reader.h"
 #include "isotope/error.h"
 
@@ -82,13 +83,15 @@ VolumeLocation locate_volume(const VolumeSpec& source) {
 
 Volume read_volume(const VolumeSpec& source) {
   const VolumeLocation at = locate_volume(source);
+  Volume v;
   switch (at.format) {
-    case VolumeLocation::Format::hdf5: return read_hdf5(at.file, at.dataset);
-    case VolumeLocation::Format::nrrd: return read_nrrd(at.file);
-    case VolumeLocation::Format::tiff: return read_tiff_stack(at.file);
-    case VolumeLocation::Format::raw: break;
+    case VolumeLocation::Format::hdf5: v = read_hdf5(at.file, at.dataset); break;
+    case VolumeLocation::Format::nrrd: v = read_nrrd(at.file); break;
+    case VolumeLocation::Format::tiff: v = read_tiff_stack(at.file); break;
+    case VolumeLocation::Format::raw: v = read_raw(at.file, at.layout); break;
   }
-  return read_raw(at.file, at.layout);
+  check_volume_layout(v.dims, v.spacing, v.origin, at.file);
+  return v;
 }
 
 }  // namespace isotope

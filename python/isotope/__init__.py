@@ -10,11 +10,15 @@ Three lines from a numpy array to a mesh:
 (n, 3) float32 and ``mesh.stats`` a dict. A numpy array is indexed ``a[z, y, x]``, as numpy, HDF5
 and scikit-image users expect; the mesh's columns are x, y, z, in physical coordinates
 (``origin + spacing * index``, both given in x, y, z order). A float32 array in C order is read
-where it is, without a copy; uint8, uint16, int16 and float64 are converted once.
+where it is, without a copy, so it must not change while a call reads it (another thread writing
+into it meanwhile gives a mesh of whatever was read); uint8, uint16, int16 and float64 are
+converted once, and nested lists of numbers are read as float64.
 
 The work runs with the GIL released; Ctrl-C stops it. Errors are raised with the words of the
 command line: ``isotope.IoError`` (an OSError) for files, ``isotope.OptionError`` (a ValueError,
-with ``.option``) for options out of range, ValueError for arrays that are not volumes.
+with ``.option``) for options out of range, ValueError for arrays that are not volumes (a spacing
+or origin that is not finite, or a NaN, named by its x, y, z), RuntimeError for a Store used from
+its own progress callback.
 """
 
 import os
@@ -60,7 +64,9 @@ def _input(volume):
         return volume
     if isinstance(volume, (str, os.PathLike)):
         return os.fspath(volume)
-    return np.asarray(volume)  # an h5py dataset, a zarr array, nested lists
+    if isinstance(volume, (list, tuple)):  # nested lists of numbers: their values, as float64
+        return np.asarray(volume, dtype=np.float64)
+    return np.asarray(volume)  # an h5py dataset, a zarr array
 
 
 def _triple(name, value, kind):
@@ -69,7 +75,24 @@ def _triple(name, value, kind):
     value = tuple(value)
     if len(value) != 3:
         raise _option_error(name, f"must have three values (x, y, z), got {len(value)}")
-    return tuple(kind(v) for v in value)
+    if kind is int:  # as the command's --dims: "XxYxZ", read by the library's own parser
+        return "x".join(_integer_text(v) for v in value)
+    return tuple(float(v) for v in value)  # checked by the library with the volume
+
+
+def _integer_text(value):
+    """An integer as text, for the library's parsers to take or refuse in their own words."""
+    if isinstance(value, Integral) and not isinstance(value, bool):
+        return str(int(value))
+    return repr(value)
+
+
+def _integer(name, value):
+    """An integer option for the library, which checks its range: one beyond 64 bits is passed as
+    the nearest that fits, out of range too, so that the library refuses it in its own words."""
+    if not isinstance(value, Integral) or isinstance(value, bool):
+        raise _option_error(name, f"must be an integer, got {value!r}")
+    return max(-(1 << 62), min(int(value), 1 << 62))
 
 
 class Store:
@@ -85,31 +108,31 @@ class Store:
     def __init__(self, input, *, dims=None, type=None, spacing=None, origin=None, cache_mb=512, progress=None):
         self._source = _isotope.Source(_input(input), _triple("dims", dims, int), type,
                                        _triple("spacing", spacing, float), _triple("origin", origin, float),
-                                       int(cache_mb), progress)
+                                       _integer("cache-mb", cache_mb), progress)
 
     @property
     def info(self):
         """What the input is (dims in x, y, z; shape as numpy indexes it) and what was read so far."""
         return self._source.info
 
-    def extract(self, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
+    def extract(self, iso, *, eps=None, topology="preserve", error="bound", weight=None, delta=None, focus=None,
                 radius=None, max_triangles=None, threads=0):
         """The isosurface at ``iso`` (inside means value > iso), as a :class:`Mesh`.
 
-        ``eps`` (data units) is the coarse surface's error bound (0: full resolution, marching
-        tetrahedra on every cell). ``topology``: ``"preserve"`` (the exact rule: components and
+        ``eps`` (data units) is the coarse surface's error bound (0, the default: full resolution,
+        marching tetrahedra on every cell). ``topology``: ``"preserve"`` (the exact rule: components and
         Euler characteristic of eps = 0 kept), ``"simplify"`` (features of weight below ``delta``
         may go; ``weight`` = interval, gradient or size), ``"paper"`` or ``"none"``. ``focus`` =
         (x, y, z) and ``radius``: full resolution at the point, eps from radius on.
-        ``max_triangles``: the finest eps whose mesh fits (with simplify and no delta, delta
-        too). ``threads``: 0 for all cores; a limit holds for the whole process while the call
+        ``max_triangles`` (instead of ``eps``, at least 1): the finest eps whose mesh fits (with
+        simplify and no delta, delta too). ``threads``: 0 for all cores (up to 4096); a limit holds for the whole process while the call
         runs (oneTBB's), so concurrent calls share it.
         """
         options = _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles)
-        return self._source.extract(options, int(threads))
+        return self._source.extract(options, _integer_text(threads))
 
 
-def extract(volume, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
+def extract(volume, iso, *, eps=None, topology="preserve", error="bound", weight=None, delta=None, focus=None,
             radius=None, max_triangles=None, dims=None, type=None, spacing=None, origin=None, cache_mb=512,
             threads=0, progress=None):
     """One extraction: ``Store(volume, ...).extract(iso, ...)``; see :class:`Store`."""
@@ -128,5 +151,7 @@ def convert(volume, output, *, dims=None, type=None, spacing=None, origin=None, 
     code step). Written atomically. Returns what it measured (a dict).
     """
     return _isotope.convert(_input(volume), os.fspath(output), _triple("dims", dims, int), type,
-                            _triple("spacing", spacing, float), _triple("origin", origin, float), int(memory_mb),
-                            int(zstd_level), int(brick_bits), int(quantize_bits), int(threads), progress)
+                            _triple("spacing", spacing, float), _triple("origin", origin, float),
+                            _integer("memory-mb", memory_mb), _integer("zstd-level", zstd_level),
+                            _integer("brick-bits", brick_bits), _integer("quantize", quantize_bits),
+                            _integer_text(threads), progress)

@@ -7,7 +7,8 @@
 //   calling thread can hear Ctrl-C (Python handles signals on the main thread only) and cancel;
 // - progress reported to a Python callable; an exception it raises cancels the work and is raised;
 // - the library's exceptions as Python's, with the library's words: IoError (an OSError),
-//   OptionError (a ValueError) naming the option, ValueError, RuntimeError.
+//   OptionError (a ValueError) naming the option, ValueError, RuntimeError (a Store used from its own
+//   progress callback, refused rather than waiting for itself).
 // Options are parsed by the one parser every face uses (isotope/extract.h), from the text Python
 // hands over (python/isotope/__init__.py, _option_text).
 #include <oneapi/tbb/global_control.h>
@@ -24,6 +25,7 @@
 #include <exception>
 #include <functional>
 #include <future>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -195,10 +197,11 @@ Volume volume_of(const py::array& array, const std::optional<std::array<double, 
     throw py::type_error("isotope reads arrays of uint8, uint16, int16, float32 and float64, got " + kind +
                          " (convert it with a.astype(numpy.float32))");
   using Floats = py::array_t<float, py::array::c_style | py::array::forcecast>;
-  // The same array when it is float32 in C order and aligned, else a copy.
+  // The same array when it is float32 in C order and aligned, else a copy. Not Floats::ensure,
+  // which clears the error of a failed copy (a MemoryError) and leaves nothing to raise: this
+  // constructor raises it.
   const bool aligned = (array.flags() & py::detail::npy_api::NPY_ARRAY_ALIGNED_) != 0;
-  Floats floats = Floats::ensure(aligned ? array : py::array(array.attr("copy")()));
-  if (!floats) throw py::error_already_set();
+  Floats floats(aligned ? py::object(array) : array.attr("copy")());
   keep_alive = floats;
   Volume v;
   v.dims = {floats.shape(2), floats.shape(1), floats.shape(0)};
@@ -208,11 +211,14 @@ Volume volume_of(const py::array& array, const std::optional<std::array<double, 
   return v;
 }
 
-VolumeSpec spec_of(const std::string& path, const std::optional<std::array<int64_t, 3>>& dims,
+VolumeSpec spec_of(const std::string& path, const std::optional<std::string>& dims,
                    const std::optional<std::string>& type) {
   VolumeSpec spec;
   spec.path = path;
-  spec.dims = dims;
+  if (dims) {  // "XxYxZ", read as the command reads --dims
+    spec.dims = parse_dims(*dims);
+    if (!spec.dims) throw OptionError("dims", "must look like 64x64x32, got '" + dims->substr(0, 128) + "'");
+  }
   if (type) {
     spec.type = parse_scalar_type(*type);
     if (!spec.type) throw OptionError("type", "must be uint8, uint16, int16, float32 or float64, got '" + *type + "'");
@@ -283,9 +289,9 @@ py::dict info_dict(const SourceInfo& i) {
 // An opened input (isotope::Source) and the array it may borrow from.
 class PySource {
  public:
-  PySource(const py::object& input, const std::optional<std::array<int64_t, 3>>& dims,
-           const std::optional<std::string>& type, const std::optional<std::array<double, 3>>& spacing,
-           const std::optional<std::array<double, 3>>& origin, int64_t cache_mb, const py::object& progress)
+  PySource(const py::object& input, const std::optional<std::string>& dims, const std::optional<std::string>& type,
+           const std::optional<std::array<double, 3>>& spacing, const std::optional<std::array<double, 3>>& origin,
+           int64_t cache_mb, const py::object& progress)
       : progress_(progress) {
     OpenOptions options;
     options.cache_mb = cache_mb;
@@ -296,6 +302,7 @@ class PySource {
           const std::lock_guard lock(progress_mutex_);
           report = on_progress_;
         }
+        const Reporting reporting(this);
         if (report) report(f);
       };
     if (py::isinstance<py::array>(input)) {
@@ -311,8 +318,10 @@ class PySource {
     }
   }
 
-  py::object extract(const TextOptions& text, int threads) {
+  py::object extract(const TextOptions& text, const std::string& threads_text) {
+    refuse_reentry();
     ExtractOptions options = parse_extract_options(text);
+    const int threads = parse_thread_count(threads_text);
     const auto shared = std::make_shared<RunState>();
     RunState& state = *shared;
     options.cancel = &state.cancel;
@@ -331,6 +340,7 @@ class PySource {
   }
 
   py::dict info() const {
+    refuse_reentry();
     SourceInfo i;
     {  // it waits for a hierarchy being built, whose progress callback may wait for the GIL
       py::gil_scoped_release release;
@@ -340,6 +350,22 @@ class PySource {
   }
 
  private:
+  // The source whose hierarchy's build is reporting on this thread, if any: its progress callback
+  // runs while the build holds the source, so a callback that uses the same Store (its info, an
+  // extraction) would wait for itself forever.
+  static inline thread_local const PySource* reporting_ = nullptr;
+  struct Reporting {
+    const PySource* previous;
+    explicit Reporting(const PySource* source) : previous(std::exchange(reporting_, source)) {}
+    ~Reporting() { reporting_ = previous; }
+  };
+  void refuse_reentry() const {
+    if (reporting_ == this)
+      throw std::runtime_error(
+          "a progress callback may not use the Store that reports to it (its hierarchy is being built); use "
+          "the Store after the call that builds it returns");
+  }
+
   void set_progress(ProgressCallback callback) {
     const std::lock_guard lock(progress_mutex_);
     on_progress_ = std::move(callback);
@@ -352,18 +378,23 @@ class PySource {
   std::shared_ptr<Source> source_;
 };
 
-py::dict convert_any(const py::object& input, const std::string& output,
-                     const std::optional<std::array<int64_t, 3>>& dims, const std::optional<std::string>& type,
-                     const std::optional<std::array<double, 3>>& spacing,
-                     const std::optional<std::array<double, 3>>& origin, int64_t memory_mb, int zstd_level,
-                     int brick_bits, int quantize_bits, int threads, const py::object& progress) {
+py::dict convert_any(const py::object& input, const std::string& output, const std::optional<std::string>& dims,
+                     const std::optional<std::string>& type, const std::optional<std::array<double, 3>>& spacing,
+                     const std::optional<std::array<double, 3>>& origin, int64_t memory_mb, int64_t zstd_level,
+                     int64_t brick_bits, int64_t quantize_bits, const std::string& threads_text,
+                     const py::object& progress) {
+  const int threads = parse_thread_count(threads_text);
   const auto shared = std::make_shared<RunState>();
   RunState& state = *shared;
+  // Any 64-bit value taken, clamped into the options' ints: the library refuses it there, by name.
+  const auto small = [](int64_t v) {
+    return static_cast<int>(std::clamp<int64_t>(v, std::numeric_limits<int>::min(), std::numeric_limits<int>::max()));
+  };
   ConvertOptions options;
   options.memory_mb = memory_mb;
-  options.zstd_level = zstd_level;
-  options.brick_bits = brick_bits;
-  options.quantize_bits = quantize_bits;
+  options.zstd_level = small(zstd_level);
+  options.brick_bits = small(brick_bits);
+  options.quantize_bits = small(quantize_bits);
   options.progress = progress_of(progress, shared);
   options.cancel = &state.cancel;
   ConvertStats s;
@@ -467,7 +498,7 @@ PYBIND11_MODULE(_isotope, m) {
           "Components, Euler characteristic, boundary and non-manifold edges");
 
   py::class_<PySource>(m, "Source")
-      .def(py::init<const py::object&, const std::optional<std::array<int64_t, 3>>&, const std::optional<std::string>&,
+      .def(py::init<const py::object&, const std::optional<std::string>&, const std::optional<std::string>&,
                     const std::optional<std::array<double, 3>>&, const std::optional<std::array<double, 3>>&, int64_t,
                     const py::object&>(),
            py::arg("input"), py::arg("dims"), py::arg("type"), py::arg("spacing"), py::arg("origin"),

@@ -366,3 +366,105 @@ def test_a_forked_child_extracts_too(data):
         pytest.fail("the forked child hung")
     got = os.read(read, 64)
     assert int(got) == want
+
+
+def test_spacing_and_origin_are_checked_as_a_files_are(data, isotope_command, tmp_path):
+    # NaN or infinite positions, a mesh flattened or mirrored, and a .glb with "min":[nan,...]
+    # before: now refused by the library's one check of a volume, for arrays as for files.
+    volume = load(data, "neghip_66x66x66_uint8.raw")
+    for kw, words in ((dict(spacing=(float("nan"), 1, 1)), "spacing (nan, 1, 1) must be 3 finite numbers > 0"),
+                      (dict(spacing=(0, 1, 1)), "spacing (0, 1, 1) must be 3 finite numbers > 0"),
+                      (dict(spacing=(-1, 1, 1)), "spacing (-1, 1, 1) must be 3 finite numbers > 0"),
+                      (dict(origin=(float("inf"), 0, 0)), "origin (inf, 0, 0) must be 3 finite numbers"),
+                      (dict(spacing=(1e300, 1, 1)), "beyond the mesh's float32 coordinates")):
+        for call in (lambda: isotope.extract(volume, iso=30, **kw),
+                     lambda: isotope.convert(volume, tmp_path / "v.isotope", **kw)):
+            with pytest.raises(ValueError) as e:
+                call()
+            assert words in str(e.value), (kw, str(e.value))
+    assert list(tmp_path.iterdir()) == []
+    # A file's header that puts its far corner beyond float32: the command's words are the same.
+    nhdr = tmp_path / "far.nhdr"
+    volume.tofile(tmp_path / "far.raw")
+    nhdr.write_text("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 66 66 66\nspacings: 1e300 1 1\nencoding: raw\n"
+                    "data file: far.raw\n")
+    r = command(isotope_command, "extract", str(nhdr), "--iso", "30", "-o", str(tmp_path / "m.glb"))
+    assert r.returncode == 1 and "beyond the mesh's float32 coordinates" in r.stderr, r.stderr
+
+
+def test_options_that_mean_nothing_are_refused_with_the_commands_words(data, isotope_command, tmp_path):
+    volume = load(data, "bolt_70x123x66_uint8.raw")
+    raw = str(data / "bolt_70x123x66_uint8.raw")
+    cases = [(dict(max_triangles=0), ["--max-triangles", "0"], "max-triangles"),
+             (dict(max_triangles=1000, eps=2), ["--max-triangles", "1000", "--eps", "2"], "max-triangles"),
+             (dict(threads=-1), ["--threads", "-1"], "threads"),
+             (dict(threads=10 ** 6), ["--threads", "1000000"], "threads"),
+             (dict(threads=1.5), ["--threads", "1.5"], "threads")]
+    for kw, flags, option in cases:
+        with pytest.raises(isotope.OptionError) as e:
+            isotope.extract(volume, iso=64.5, **kw)
+        assert e.value.option == option, kw
+        cli = command(isotope_command, "extract", raw, "--iso", "64.5", *flags, "-o", str(tmp_path / "m.ply"))
+        assert cli.returncode == 2, (flags, cli.stderr)
+        assert f"--{option}: {str(e.value)[len(option) + 1:]}" in cli.stderr, (str(e.value), cli.stderr)
+    # Beyond 64 bits: refused by the library in its words, not by pybind11's "incompatible arguments".
+    for call, option in ((lambda: isotope.extract(volume, iso=64.5, threads=2 ** 70), "threads"),
+                         (lambda: isotope.extract(volume, iso=64.5, cache_mb=2 ** 70), "cache-mb"),
+                         (lambda: isotope.extract(raw, iso=64.5, dims=(2 ** 63, 2, 2), type="uint8"), "dims"),
+                         (lambda: isotope.convert(volume, tmp_path / "c.isotope", zstd_level=2 ** 70), "zstd-level"),
+                         (lambda: isotope.convert(volume, tmp_path / "c.isotope", threads=-3), "threads")):
+        with pytest.raises(isotope.OptionError) as e:
+            call()
+        assert e.value.option == option
+    assert not (tmp_path / "c.isotope").exists()
+
+
+def test_a_store_used_from_its_own_progress_callback_is_refused_not_a_hang(data):
+    import sys
+    # In a child with a timeout: before, the callback waited for the build it was called from.
+    script = ("import sys, numpy as np, isotope\n"
+              "a = np.fromfile(sys.argv[1], np.uint8).reshape(66, 66, 66)\n"
+              "for use in ('info', 'extract'):\n"
+              "    calls = []\n"
+              "    def report(fraction):\n"
+              "        if not calls:\n"
+              "            calls.append(1)\n"
+              "            store.info if use == 'info' else store.extract(32.5, eps=8)\n"
+              "    store = isotope.Store(a, progress=report)\n"
+              "    try:\n"
+              "        store.extract(32.5, eps=4)\n"
+              "    except RuntimeError as e:\n"
+              "        print(use, 'refused:', e, flush=True)\n"
+              "    print(use, 'then', len(store.extract(32.5, eps=4).faces) > 0, flush=True)\n")
+    r = subprocess.run([sys.executable, "-c", script, str(data / "neghip_66x66x66_uint8.raw")],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    for use in ("info", "extract"):
+        assert f"{use} refused: a progress callback may not use the Store that reports to it" in r.stdout, r.stdout
+        assert f"{use} then True" in r.stdout  # and the Store works once the call is over
+
+
+def test_messages_name_what_is_wrong(data, tmp_path):
+    import sys
+    a = np.zeros((4, 5, 6), dtype=np.float32)
+    a[1, 2, 3] = np.nan  # a[z, y, x]
+    with pytest.raises(ValueError, match=re.escape("volume value nan at (x,y,z) = (3,2,1) is not finite")):
+        isotope.extract(a, iso=0)
+    with pytest.raises(ValueError, match=re.escape("volume dimensions 1x1x1 (x by y by z): every axis needs 2")):
+        isotope.extract(np.zeros((1, 1, 1), dtype=np.float32), iso=0)
+    # Nested lists of Python numbers, as the docstring says: read as their values.
+    nested = [[[0, 1], [2, 3]], [[4, 5], [6, 7]]]
+    assert len(isotope.extract(nested, iso=3.5).faces) == len(isotope.extract(np.array(nested, np.float32), 3.5).faces) > 0
+    # A copy that fails (no memory for the float32 copy under a limit): Python's MemoryError, not
+    # "pybind11::error_already_set called while Python error indicator not set".
+    script = ("import resource, numpy as np, isotope\n"
+              "a = np.ones((256, 256, 512), np.uint8)\n"
+              "soft, hard = resource.getrlimit(resource.RLIMIT_AS)\n"
+              "used = int(open('/proc/self/statm').read().split()[0]) * resource.getpagesize()\n"
+              "resource.setrlimit(resource.RLIMIT_AS, (used + (96 << 20), hard))\n"
+              "try:\n"
+              "    isotope.extract(a, iso=0.5)\n"
+              "except MemoryError:\n"
+              "    print('MemoryError')\n")
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert "MemoryError" in r.stdout and "error_already_set" not in r.stderr, (r.stdout, r.stderr)

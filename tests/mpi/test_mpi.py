@@ -3,13 +3,14 @@ R = 1..4 and any threads per rank, balanced ranks, and failures that stop every 
 message and leave nothing behind."""
 
 import json
+import os
 import pathlib
 import time
 
 import numpy as np
 import pytest
 
-from conftest import mpirun, run
+from conftest import ISOTOPE, mpirun, run
 
 EXTRACTIONS = {
     "eps0": ["--iso", "50", "--eps", "0"],
@@ -211,14 +212,57 @@ def test_a_killed_rank_ends_a_conversion_and_rank_0_removes_its_temporaries(tmp_
     assert leftovers(out, set()) == []  # rank 0, ended by mpirun's SIGTERM, removed what it had made
 
 
-def test_parts_replace_the_folder_whole(tmp_path, isotope_command, embryo_store):
+@pytest.mark.parametrize("third", [
+    ["extract", "STORE", "--iso", "50", "--eps", "-1", "-o", "OUT"],   # refused by its own parse alone
+    ["info", "STORE"],                                                  # another command
+    ["extract", "STORE", "--iso", "60", "--eps", "8", "-o", "OUT"],    # another isovalue: a cracked mesh
+])
+def test_ranks_that_run_different_commands_all_stop_with_one_message(tmp_path, isotope_command, embryo_store, third):
+    out = tmp_path / "m.ply"
+    same = ["extract", embryo_store, "--iso", "50", "--eps", "8", "-o", out]
+    other = [embryo_store if a == "STORE" else out if a == "OUT" else a for a in third]
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    # MPMD: two ranks run one command, the third another.
+    r = run(["mpirun", "--oversubscribe", "-n", "2", isotope_command] + same +
+            [":", "-n", "1", isotope_command] + other, env=env, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("isotope: usage error: the ranks of this job run different commands: rank 0 'isotope "
+                          "extract") == 1, r.stderr
+    assert "rank 2 'isotope " + " ".join(str(a) for a in other) + "'" in r.stderr, r.stderr
+    assert not out.exists()
+
+
+def test_a_command_built_without_mpi_refuses_every_rank(tmp_path, embryo_store):
+    without = pathlib.Path(ISOTOPE).parents[1] / "tests" / "isotope_without_mpi"
+    assert without.is_file(), f"{without}: built with the tests (tests/CMakeLists.txt)"
+    out = tmp_path / "m.ply"
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    r = run(["mpirun", "--oversubscribe", "-n", "3", without, "extract", embryo_store, "--iso", "50", "--eps", "8",
+             "-o", out], env=env, timeout=120)
+    assert r.returncode == 1, r.stderr
+    assert r.stderr.count("but this isotope was built without MPI") == 1, r.stderr
+    assert not out.exists()
+
+
+def test_parts_replace_an_earlier_parts_folder_and_nothing_else(tmp_path, isotope_command, embryo_store):
     parts = tmp_path / "parts"
-    parts.mkdir()
-    (parts / "part-00007.vtp").write_text("stale, from a run with more ranks")
-    r = mpirun(2, ["extract", embryo_store, "--iso", "50", "--eps", "8", "--parts", parts, "--quiet"])
+    args = ["extract", embryo_store, "--iso", "50", "--eps", "8", "--parts", parts, "--quiet"]
+    r = mpirun(3, args)
     assert r.returncode == 0, r.stderr
-    assert sorted(p.name for p in parts.iterdir()) == ["mesh.pvtp", "part-00000.vtp", "part-00001.vtp"]
+    # Written again by fewer ranks: the earlier output's files (its manifest lists them) all go.
+    r = mpirun(2, args)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in parts.iterdir()) == [
+        "isotope-manifest.txt", "mesh.pvtp", "part-00000.vtp", "part-00001.vtp"]
     assert leftovers(tmp_path, {"parts"}) == []  # no folder moved aside, none half made
+    # A file isotope did not write: the folder is refused whole, on every rank, and left as it was.
+    (parts / "notes.txt").write_text("mine")
+    before = {p.name: p.read_bytes() for p in parts.iterdir()}
+    r = mpirun(2, args)
+    assert r.returncode == 1, r.stderr
+    assert r.stderr.count("holds 'notes.txt', which isotope did not write") == 1, r.stderr
+    assert {p.name: p.read_bytes() for p in parts.iterdir()} == before
+    assert leftovers(tmp_path, {"parts"}) == []
 
 
 @pytest.mark.parametrize("eps", [0, 4])
@@ -232,7 +276,7 @@ def test_parts_are_the_single_process_mesh_cut_at_the_ranks_boundaries(tmp_path,
     r = mpirun(3, args + ["--threads", 1, "--parts", tmp_path / "parts"])
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in (tmp_path / "parts").iterdir()) == [
-        "mesh.pvtp", "part-00000.vtp", "part-00001.vtp", "part-00002.vtp"]
+        "isotope-manifest.txt", "mesh.pvtp", "part-00000.vtp", "part-00001.vtp", "part-00002.vtp"]
     assert "mesh.pvtp: 3 parts" in r.stdout, r.stdout
 
     def read(reader_class, path):

@@ -66,26 +66,41 @@ def xxh64(data, seed=0):
 HEADER, BAND_TABLE, HEADER_SUM, ENTRY, SECTION_SUM = 1024, 256, 1016, 24, 8
 
 
-def tiff(pages):
+def tiff(pages, rows_per_strip=None, photometric=None, description=None):
     """A little-endian TIFF of one-strip pages: (width, height, bits, sample_format, samples, data,
-    strip_byte_count or None, strip_offset or None) each; what libtiff reads, written by hand."""
+    strip_byte_count or None, strip_offset or None) each; what libtiff reads, written by hand.
+    rows_per_strip (default: the height), photometric (3: a palette, with a colour map of zeros) and
+    description (the first page's) make a page claim something else."""
     out = bytearray(b'II*\0' + bytes(4))
     link = 4  # where the next IFD's offset goes
-    for width, height, bits, fmt, samples, data, count, offset in pages:
+    for n, (width, height, bits, fmt, samples, data, count, offset) in enumerate(pages):
         at = len(out)
         out += data
-        tags = [(256, 4, width), (257, 4, height), (258, 3, bits), (259, 3, 1), (262, 3, 2 if samples == 3 else 1),
-                (273, 4, at if offset is None else offset), (277, 3, samples), (278, 4, height),
-                (279, 4, len(data) if count is None else count), (339, 3, fmt)]
+        extra = b''  # values too large for their entry, after the IFD
+        tags = [(256, 4, 1, width), (257, 4, 1, height), (258, 3, 1, bits), (259, 3, 1, 1),
+                (262, 3, 1, photometric if photometric is not None else 2 if samples == 3 else 1),
+                (273, 4, 1, at if offset is None else offset), (277, 3, 1, samples),
+                (278, 4, 1, rows_per_strip or height), (279, 4, 1, len(data) if count is None else count),
+                (339, 3, 1, fmt)]
+        if description and n == 0:
+            tags.append((270, 2, len(description) + 1, description.encode() + b'\0'))
+        if photometric == 3:
+            tags.append((320, 3, 3 << bits, bytes(2 * (3 << bits))))
+        tags.sort()
         if len(out) % 2:
             out += b'\0'
         struct.pack_into('<I', out, link, len(out))
+        ifd_end = len(out) + 2 + 12 * len(tags) + 4
         out += struct.pack('<H', len(tags))
-        for tag, kind, value in tags:
-            out += struct.pack('<HHI', tag, kind, 1) + (struct.pack('<HH', value, 0) if kind == 3 else
-                                                       struct.pack('<I', value))
+        for tag, kind, number, value in tags:
+            if isinstance(value, bytes):
+                out += struct.pack('<HHII', tag, kind, number, ifd_end + len(extra))
+                extra += value + (b'\0' if len(value) % 2 else b'')
+            else:
+                out += struct.pack('<HHI', tag, kind, number) + (struct.pack('<HH', value, 0) if kind == 3 else
+                                                                 struct.pack('<I', value))
         link = len(out)
-        out += bytes(4)
+        out += bytes(4) + extra
     return bytes(out)
 
 
@@ -213,6 +228,17 @@ def main():
     volume_case('tiff-strip-beyond-end.tif', tiff([(4, 4, 8, 1, 1, gray, None, 1 << 20)] * 2),
                 'its strips hold 0 bytes, too few for 4x4 uint8')
     volume_case('tiff-not-tiff.tif', b'II*\0' + bytes(4) + b'not a TIFF directory', 'not a readable TIFF file')
+    # Pages that claim what their data is not: RowsPerStrip 3 of 4 rows wants 2 strips, the table
+    # holds 1 (libtiff would read from offset 0, the header); a palette's indices; an ImageJ
+    # hyperstack's interleaved channels; one page alone (no cells between slices).
+    volume_case('tiff-rows-per-strip-lie.tif', tiff([(4, 4, 8, 1, 1, gray, None, None)] * 2, rows_per_strip=3),
+                'does not describe its data consistently')
+    volume_case('tiff-palette.tif', tiff([(4, 4, 8, 1, 1, gray, None, None)] * 2, photometric=3),
+                'a palette (indexed colour) image')
+    volume_case('tiff-hyperstack-channels.tif', tiff([(4, 4, 8, 1, 1, gray, None, None)] * 2,
+                                                     description='ImageJ=1.54f\nimages=2\nchannels=2\nhyperstack=true\n'),
+                'a hyperstack of 2 channels')
+    volume_case('tiff-one-page.tif', tiff([(4, 4, 8, 1, 1, gray, None, None)]), 'volume dimensions 4x4x1')
 
     for f in os.listdir(HERE):
         if f not in ('make_rejects.py', 'README.md'):

@@ -21,6 +21,7 @@
 #include "isotope/error.h"
 #include "isotope/mesh.h"
 #include "isotope/source.h"
+#include "tools/serve/bounded_http.h"
 #include "tools/serve/serve_request.h"
 #include "tools/serve/supersession.h"
 #include "tools/serve/viewer_assets.h"
@@ -41,12 +42,8 @@ constexpr std::ptrdiff_t kConcurrentExtractions = 2;
 // crowd of clients can cause stay bounded (tests/serve_test.cpp, ACrowdIsAnsweredOrRefusedWithBoundedMemory).
 constexpr int kWaitingExtractions = 16;
 constexpr int kMaxWaitSeconds = 30;
-// Limits against hostile clients (docs/SERVE.md, "Limits"). Each connection holds a worker while
-// it sends its request, however slowly: the pool is bounded, but larger than what a handful of
-// slow clients hold (httplib's default is 8 on this machine). Requests carry no body.
-constexpr size_t kWorkers = 64;
+// Requests carry no body (docs/SERVE.md, "Limits"; the others are HttpLimits).
 constexpr size_t kMaxBodyBytes = 1024;
-constexpr time_t kReadTimeoutSeconds = 5;
 
 void answer_text(httplib::Response& res, int status, const std::string& message) {
   res.status = status;
@@ -96,13 +93,19 @@ struct ViewerServer::Impl {
   ExtractionSlots slots{kConcurrentExtractions};
   std::atomic<int> waiting{0};
   socket_t listen_socket = -1;
-  httplib::Server http;
+  ResponseBudget responses;  // the meshes being sent
+  BoundedHttpServer http;
   std::mutex log_mutex;
   std::mutex run_mutex;  // listen() and stop() from different threads, in either order
   bool stop_requested = false, listening = false;
   std::atomic<bool> finished{false};
 
-  explicit Impl(const Settings& s) : settings(s), input(open_store(s)), info(store_info_json(*input.store()).dump()) {
+  explicit Impl(const Settings& s)
+      : settings(s),
+        input(open_store(s)),
+        info(store_info_json(*input.store()).dump()),
+        responses(s.response_budget_bytes),
+        http(s.limits) {
     http.Get("/api/info", [this](const httplib::Request&, httplib::Response& res) {
       res.set_header("Cache-Control", "no-store");
       res.set_content(info, "application/json");
@@ -111,17 +114,15 @@ struct ViewerServer::Impl {
     http.Get(R"(/[^?]*)", [](const httplib::Request& req, httplib::Response& res) {
       const auto asset = viewer_asset(req.path);
       if (!asset) return answer_text(res, 404, "not found");
-      res.set_content(asset->bytes.data(), asset->bytes.size(), asset->content_type);
+      // Sent from the program's own bytes, not copied per request.
+      set_held_content(res, asset->bytes.data(), asset->bytes.size(), asset->content_type, nullptr);
     });
     const httplib::Server::Handler get_only = [](const httplib::Request&, httplib::Response& res) {
       res.set_header("Allow", "GET, HEAD");
       answer_text(res, 405, "method not allowed: the server answers GET only");
     };
     http.Post(".*", get_only).Put(".*", get_only).Delete(".*", get_only).Patch(".*", get_only).Options(".*", get_only);
-    http.new_task_queue = [] { return new httplib::ThreadPool(kWorkers); };
     http.set_payload_max_length(kMaxBodyBytes);
-    http.set_read_timeout(kReadTimeoutSeconds, 0);
-    http.set_keep_alive_timeout(kReadTimeoutSeconds);
     http.set_error_handler([](const httplib::Request&, httplib::Response& res) {
       if (res.body.empty()) answer_text(res, res.status, res.status == 404 ? "not found" : "bad request");
     });
@@ -139,6 +140,11 @@ struct ViewerServer::Impl {
   }
 
   void extract(const httplib::Request& req, httplib::Response& res) {
+    // Last out: what the extraction freed (its mesh, normals, topology) goes back to the system,
+    // not into an arena of this worker thread (release_free_memory).
+    const struct FreeOnExit {
+      ~FreeOnExit() { release_free_memory(); }
+    } free_on_exit;
     const auto start = std::chrono::steady_clock::now();
     res.set_header("Cache-Control", "no-store");
     try {
@@ -148,6 +154,7 @@ struct ViewerServer::Impl {
         ticket.emplace(supersession.enter(r.client, *r.seq));
         r.options.cancel = ticket->cancel();
       }
+      if (responses.exhausted()) return refuse_for_responses(res);
       if (!wait_for_slot(ticket ? &*ticket : nullptr)) {
         res.set_header("Retry-After", "1");
         return answer_text(
@@ -176,8 +183,17 @@ struct ViewerServer::Impl {
       nlohmann::ordered_json report = report_json(run);
       report["seq"] = r.seq ? nlohmann::ordered_json(*r.seq) : nlohmann::ordered_json(nullptr);
       report["server_seconds"] = seconds_since(start);
-      res.body = encode_mesh_wire(mesh, normals, report.dump());
-      res.set_header("Content-Type", "application/octet-stream");
+      // The body is held, against the budget, until its client has taken it (or the pace of
+      // tools/serve/bounded_http.h ends the connection).
+      struct Held {
+        std::shared_ptr<void> hold;  // released last, once the body is freed (the release trims)
+        std::string body;
+      };
+      auto held = std::make_shared<Held>();
+      held->body = encode_mesh_wire(mesh, normals, report.dump());
+      held->hold = responses.hold(held->body.size());
+      if (!held->hold) return refuse_for_responses(res);
+      set_held_content(res, held->body.data(), held->body.size(), "application/octet-stream", held);
       log(req, run);
     } catch (const BadRequest& e) {
       answer_text(res, 400, e.what());
@@ -190,6 +206,13 @@ struct ViewerServer::Impl {
     } catch (const std::exception& e) {  // IoError: a corrupt or unreadable brick, named
       answer_text(res, 500, e.what());
     }
+  }
+
+  void refuse_for_responses(httplib::Response& res) {
+    res.set_header("Retry-After", "1");
+    answer_text(res, 503,
+                "busy: meshes not yet taken by their clients hold the server's budget for responses (" +
+                    std::to_string(responses.budget() >> 20) + " MB); retry in a moment");
   }
 
   // Takes an extraction slot; false when too many wait already or the wait took too long. Throws
@@ -224,6 +247,10 @@ struct ViewerServer::Impl {
 ViewerServer::ViewerServer(const Settings& settings) : impl_(std::make_unique<Impl>(settings)) {}
 
 ViewerServer::~ViewerServer() = default;
+
+void ViewerServer::answer_connection(int socket) { impl_->http.serve_connection(socket); }
+
+size_t ViewerServer::response_bytes_held() const { return impl_->responses.held(); }
 
 int ViewerServer::bind(const std::string& host, int port) {
   const int bound = port == 0 ? impl_->http.bind_to_any_port(host) : (impl_->http.bind_to_port(host, port) ? port : -1);

@@ -25,6 +25,19 @@ CLI::Validator extract_option_check(std::string name) {
       "");
 }
 
+CLI::Validator thread_count_check() {
+  return CLI::Validator(
+      [](std::string& text) -> std::string {
+        try {
+          parse_thread_count(text);
+        } catch (const OptionError& e) {
+          return e.message;
+        }
+        return {};
+      },
+      "");
+}
+
 ExtractOptions parse_command_line_options(const std::vector<std::pair<std::string, std::string>>& given) {
   try {
     return parse_extract_options(given);
