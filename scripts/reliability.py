@@ -83,7 +83,9 @@ def expect_refusal(row, argv, cwd, code=1, message=None, unchanged=(), limit_fsi
     contents = {p: open(p, 'rb').read() for p in unchanged if os.path.isfile(p)}
     rc, out, secs, rss = run(argv, cwd=cwd, limit_fsize=limit_fsize)
     row.max_rss_mb, row.max_seconds = max(row.max_rss_mb, rss), max(row.max_seconds, secs)
-    first = out.strip().splitlines()[0] if out.strip() else ''
+    lines = out.strip().splitlines()
+    # isotope's own first line; under mpirun the launcher's banner may come before it.
+    first = next((l for l in lines if l.startswith('isotope:')), lines[0] if lines else '')
     row.got = f'exit {rc}' if isinstance(rc, int) and rc >= 0 else ('hang' if rc == 'hang' else f'signal {-rc}')
     row.message = row.message or first
     if rc != code:
