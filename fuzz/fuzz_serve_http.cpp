@@ -34,6 +34,9 @@ isotope::tools::ViewerServer& server() {
     settings.cache_mb = 16;
     auto* made = new isotope::tools::ViewerServer(settings);  // opened: the file may go
     std::filesystem::remove(store);
+    // Bound (never listening): a server that is not bound counts as stopping, and would close
+    // every connection unread.
+    made->bind("127.0.0.1", 0);
     return made;
   }();
   return *s;

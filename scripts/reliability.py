@@ -686,8 +686,9 @@ def write_table(out, fuzz_seconds):
              'overlapping; sizes and offsets from the file checked with io/file/checked_size.h, never by a sum that '
              'can wrap; nothing allocated by a file field before that check. Every byte of a store is under a '
              'checksum; `verify` also checks what a checksum cannot (bricks against their neighbours and bands).',
-             '- **Server** (docs/SERVE.md, Limits): 128 workers; 5 s for a whole request head and body, and 5 s '
-             'idle; a response taken at 256 KB/s on average after its first 10 s, or the connection is closed; '
+             '- **Server** (docs/SERVE.md, Limits): 128 workers; 5 s for a whole request head and body (a first '
+             'request from its accept), and 5 s idle; a response taken at 64 KB/s on average after its first 10 s, or '
+             'the connection is closed; '
              'Range headers ignored (the whole body once); 512 MB of responses in flight, 503 beyond; 1 KB '
              'bodies, 8 KB request lines and headers, 2 extractions at once and 16 waiting, 503 with Retry-After '
              'beyond.',

@@ -127,8 +127,8 @@ TEST(BandBuild, AHierarchyInMemoryPadsLittleWhateverTheVolumesShape) {
     for (const Band& b : layout.bands()) nodes += b.nodes[0] * b.nodes[1] * b.nodes[2];
     return static_cast<double>(layout.brick_count() << (3 * bits)) / static_cast<double>(nodes);
   };
-  std::vector<Box3> usual = {{33, 33, 33}, {129, 129, 129}, {65, 65, 65}, {257, 257, 257}, {513, 513, 513}, {2049, 2049, 2049},
-                             {512, 512, 300}, {301, 324, 56}};
+  std::vector<Box3> usual = {{33, 33, 33},    {129, 129, 129},    {65, 65, 65},    {257, 257, 257},
+                             {513, 513, 513}, {2049, 2049, 2049}, {512, 512, 300}, {301, 324, 56}};
   for (const auto& shared : testing::shared_volumes()) usual.push_back(testing::load_shared(shared).dims);
   for (const Box3& dims : usual) EXPECT_EQ(StoreLayout::memory_brick_bits(dims), 4) << dims[0] << "x" << dims[1];
   for (const Box3& dims : std::vector<Box3>{{500000, 2, 2}, {2000, 2000, 2}, {1000, 3, 3}, {4096, 4096, 3}}) {
@@ -141,7 +141,8 @@ TEST(BandBuild, AHierarchyInMemoryPadsLittleWhateverTheVolumesShape) {
   o.iso = thin.values[thin.values.size() / 2];  // a surface through the middle
   o.eps = 0.05;
   const RecordFields all{true, true, true, true};
-  const Mesh chosen = extract(Hierarchy::build(thin, all), o), store_bricks = extract(Hierarchy::build(thin, all, 4), o);
+  const Mesh chosen = extract(Hierarchy::build(thin, all), o),
+             store_bricks = extract(Hierarchy::build(thin, all, 4), o);
   EXPECT_GT(chosen.triangles.size(), 0u);
   EXPECT_TRUE(chosen.positions == store_bricks.positions && chosen.triangles == store_bricks.triangles);
 }

@@ -218,10 +218,10 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
 }
 
 // A volume's hierarchy held in memory (a raw file at eps > 0) takes memory in proportion to its
-// voxels whatever its shape: a thin volume (500000x2x2, 1000x1000x2) no more than twice what a cube
-// of as many voxels takes, with the same field across x. In bricks of 16^3 the long one took 4.0 GB
-// for 2 MB of data (28 slots a node, all but two in each brick's y and z padding), the flat one
-// 2.7 times the cube (engine/hierarchy/store_layout.h, memory_brick_bits).
+// voxels whatever its shape: a long volume (500000x2x2) under twice what a cube of as many voxels
+// takes, with the same field across x, and a flat one (1000x1000x2) under 1.25 times. In bricks of
+// 16^3 the long one took 4.0 GB for 2 MB of data (28 slots a node, all but two in each brick's y and
+// z padding), the flat one 1.94 times the cube (engine/hierarchy/store_layout.h, memory_brick_bits).
 TEST_F(ExtractMemory, ThinVolumesTakeMemoryInProportionToTheirVoxels) {
   auto write = [&](const std::string& name, std::array<int64_t, 3> dims) {
     std::vector<uint8_t> v(static_cast<size_t>(dims[0] * dims[1] * dims[2]));

@@ -509,7 +509,9 @@ TEST_F(IoTest, ReadVolumeRawUsesOverridesBeforeTheName) {
   const Volume wide = read_volume({named, std::array<int64_t, 3>{2, 2, 2}, ScalarType::uint16});
   EXPECT_EQ(wide.at(0, 0, 0), 256.0f);
   // A layout the volume cannot have is refused with the file and the dimensions named.
-  EXPECT_CONTAINS(io_error_of([&] { read_volume({named, std::array<int64_t, 3>{16, 1, 1}, {}}); }),
+  EXPECT_CONTAINS(io_error_of([&] {
+                    read_volume({named, std::array<int64_t, 3>{16, 1, 1}, {}});
+                  }),
                   "v_2x2x4_uint8.raw: volume dimensions 16x1x1 (x by y by z): every axis needs 2 .. 524289 nodes");
 }
 

@@ -334,6 +334,16 @@ TEST_F(TiffStack, StacksThatAreNotOneChannelsSlicesAsTheyClaimAreRefusedByName) 
              {.description = "<?xml version=\"1.0\"?><OME><Image><Pixels SizeC=\"2\" SizeZ=\"2\" SizeT=\"1\"/>"
                              "</Image></OME>"});
   EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("ome.tif"))); }), "ome.tif: a hyperstack of 2 channels");
+  // Bio-Formats writes PhysicalSizeZ before SizeZ: it is not the count of slices.
+  write_tiff(path("ome5d.tif"), 8, 16, four,
+             {.description = "<OME><Image><Pixels PhysicalSizeZ=\"0.3\" SizeC=\"1\" SizeT=\"2\" SizeZ=\"2\"/>"
+                             "</Image></OME>"});
+  EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("ome5d.tif"))); }),
+                  "ome5d.tif: a hyperstack of 2 time points of 2 slices each");
+  write_tiff(path("ome-time.tif"), 8, 16, four,
+             {.description = "<OME><Image><Pixels PhysicalSizeZ=\"2.5\" SizeC=\"1\" SizeT=\"4\" SizeZ=\"1\"/>"
+                             "</Image></OME>"});
+  EXPECT_EQ(read_volume(spec(path("ome-time.tif"))).dims, (std::array<int64_t, 3>{8, 16, 4}));
   write_tiff(path("slices.tif"), 8, 16, four, {.description = "ImageJ=1.54f\nimages=4\nslices=4\n"});
   EXPECT_EQ(read_volume(spec(path("slices.tif"))).dims, (std::array<int64_t, 3>{8, 16, 4}));
 

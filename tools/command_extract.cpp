@@ -39,7 +39,7 @@ namespace {
 struct ExtractArgs {
   std::string input;
   std::string iso;
-  std::string eps;  // "" : not given (0, full resolution, unless --max-triangles chooses it)
+  std::string eps = "0";
   std::string error = "bound";
   std::string topology = "preserve";
   std::string weight;
@@ -144,9 +144,8 @@ int run_extract(const ExtractArgs& a) {
   // The extraction's options through the parser every face shares (isotope/extract.h): the
   // same words, ranges and relations as `isotope serve` and `isotope sweep`.
   std::vector<std::pair<std::string, std::string>> given = {
-      {"iso", a.iso}, {"error", a.error}, {"topology", a.topology}};
-  for (const auto& [name, text] : {std::pair<const char*, const std::string&>{"eps", a.eps},
-                                   {"weight", a.weight},
+      {"iso", a.iso}, {"eps", a.eps}, {"error", a.error}, {"topology", a.topology}};
+  for (const auto& [name, text] : {std::pair<const char*, const std::string&>{"weight", a.weight},
                                    {"delta", a.delta},
                                    {"focus", a.focus},
                                    {"radius", a.radius},
@@ -296,10 +295,10 @@ Command add_extract_command(CLI::App& app) {
       ->required()
       ->check(extract_option_check("iso"))
       ->type_name("V");
-  cmd->add_option("--eps", a->eps,
-                  "Error threshold: refine while the error indicator is >= eps; 0 (the default) = full resolution")
+  cmd->add_option("--eps", a->eps, "Error threshold: refine while the error indicator is >= eps; 0 = full resolution")
       ->check(extract_option_check("eps"))
-      ->type_name("E");
+      ->type_name("E")
+      ->capture_default_str();
   cmd->add_option("--error", a->error,
                   "Error indicator: bound (guaranteed L-infinity bound of the coarse field) or surplus (the paper's)")
       ->check(extract_option_check("error"))
@@ -369,7 +368,8 @@ Command add_extract_command(CLI::App& app) {
       ->check(extract_option_check("radius"))
       ->type_name("R");
   cmd->add_option("--max-triangles", a->max_triangles,
-                  "Instead of --eps: the finest eps whose mesh has at most T triangles (T >= 1); with --topology "
+                  "Instead of --eps (other than 0): the finest eps whose mesh has at most T triangles (T >= 1); with "
+                  "--topology "
                   "simplify and no --delta, delta too: the features of smallest weight are dropped until the "
                   "coarsest mesh takes half the budget")
       ->check(extract_option_check("max-triangles"))

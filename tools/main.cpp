@@ -98,12 +98,12 @@ int main(int argc, char** argv) {
   // An MPI launcher started this isotope, built without MPI, as one of several ranks: each would run
   // the whole job alone, racing for the same outputs.
   if (launcher.launched && (launcher.ranks != 1 || launcher.rank != 0)) {
-    if (launcher.rank == 0)  // every rank refuses; one says why
-      std::cerr << "isotope: error: started by an MPI launcher as rank 0 of "
-                << (launcher.ranks > 0 ? std::to_string(launcher.ranks) : std::string("several"))
-                << ", but this isotope was built without MPI, so every rank would do the whole job alone; build it "
-                   "with MPI (Debian: apt-get install libopenmpi-dev openmpi-bin, then configure and build again; "
-                   "docs/DISTRIBUTED.md) or run it without mpirun\n";
+    std::cerr << "isotope: error: started by an MPI launcher as rank " << launcher.rank << " of "
+              << (launcher.ranks > 0 ? std::to_string(launcher.ranks) : std::string("several"))
+              << ", but this isotope was built without MPI, so every rank would do the whole job alone; build it "
+                 "with MPI (Debian: apt-get install libopenmpi-dev openmpi-bin, then configure and build again; "
+                 "docs/DISTRIBUTED.md), or run it without mpirun (started by a program that mpirun started: clear "
+                 "the launcher's variables, OMPI_* and PMI*, for this isotope to run alone)\n";
     return 1;
   }
 #endif

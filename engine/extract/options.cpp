@@ -132,8 +132,6 @@ ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, st
   }
   const auto has = [&](const char* name) { return seen.count(name) > 0; };
   if (!has("iso")) throw OptionError("iso", "is required");
-  if (has("max-triangles") && has("eps"))
-    throw OptionError("max-triangles", "chooses eps itself: give eps or max-triangles, not both");
   if (o.topology != TopologyMode::simplify && (has("delta") || has("weight")))
     throw OptionError(has("delta") ? "delta" : "weight", "applies to topology simplify only");
   if (has("focus") != has("radius"))
@@ -154,7 +152,8 @@ void ExtractOptions::validate() const {
   if (delta > 0 && topology != TopologyMode::simplify) throw OptionError("delta", "applies to topology simplify only");
   if (max_triangles < 0 || max_triangles > kMaxTriangleBudget)
     throw OptionError("max-triangles", "must be in 0 .. " + std::to_string(kMaxTriangleBudget));
-  if (max_triangles > 0 && eps != 0) throw OptionError("eps", "must be 0 with max-triangles, which chooses eps itself");
+  if (max_triangles > 0 && eps != 0)
+    throw OptionError("max-triangles", "chooses eps itself: give eps or max-triangles, not both");
   if (auto_delta && (topology != TopologyMode::simplify || max_triangles == 0 || delta != 0))
     throw OptionError("delta", "is chosen only with topology simplify, a triangle budget and no delta given");
   if (focus) {

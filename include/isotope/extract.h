@@ -96,9 +96,10 @@ struct OptionError : std::invalid_argument {
 
 // The options as text, by name: iso (required), eps, error, topology, weight, delta, focus ("X,Y,Z"),
 // radius, max-triangles. Numbers as a user types them ("0.25", "-3e-2", "1/64"). Each name at most
-// once; eps and max-triangles not both (the budget chooses eps), a budget of at least 1; a budget in
-// simplify mode without a delta sets auto_delta; the result is validated. Throws OptionError (an
-// unknown name is reported under its own name, with the message "is not an extraction option").
+// once; a budget of at least 1; a budget in simplify mode without a delta sets auto_delta; the
+// result is validated (an eps other than 0 with a budget among what validate() refuses). Throws
+// OptionError (an unknown name is reported under its own name, with the message "is not an
+// extraction option").
 ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, std::string>>& given);
 
 // One option's text into OPTIONS, without the checks that relate options to each other (which

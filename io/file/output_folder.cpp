@@ -27,13 +27,16 @@ constexpr const char* kManifestHeader = "isotope output folder 1";
 fs::path folder_target(const NamedPath& output) {
   const std::string& path = output.path;
   if (path.empty()) throw IoError(output.what + ": the path is empty");
-  fs::path target = path;
+  // "DIR/" is DIR: lstat of "link/" would follow the link and lose it.
+  std::string named = path;
+  while (named.size() > 1 && named.back() == '/') named.pop_back();
+  fs::path target = named;
   for (int links = 0;; ++links) {
     struct stat st {};
     if (::lstat(target.c_str(), &st) != 0 || S_ISDIR(st.st_mode)) break;
     if (!S_ISLNK(st.st_mode))
       throw IoError(output.what + " " + path + ": " +
-                    (target.string() == path ? "is" : "names '" + target.string() + "',") +
+                    (target.string() == named ? "is" : "names '" + target.string() + "',") +
                     " not a folder; isotope writes a new folder there and never replaces a file with it");
     if (links == 40) throw IoError(output.what + " " + path + ": too many levels of symbolic links");
     std::error_code ec;
@@ -85,9 +88,17 @@ std::optional<std::set<std::string>> replaceable(const NamedPath& output, const 
   const std::string advice =
       "; isotope replaces only a new or empty folder or one it wrote before, and never deletes a "
       "file it did not write";
-  if (!names)
+  if (!names) {
+    // Parts an isotope before the manifest wrote: the same names, and nothing else.
+    const bool old_parts = std::all_of(entries.begin(), entries.end(), [](const std::string& e) {
+      return e == "mesh.pvtp" || (e.size() == 14 && e.rfind("part-", 0) == 0 && e.ends_with(".vtp"));
+    });
+    if (old_parts)
+      throw IoError(refusal + "holds the parts of an earlier isotope, which wrote no " + OutputFolder::kManifestName +
+                    "; remove them or give a new folder" + advice);
     throw IoError(refusal + "is a folder that isotope did not write (it holds '" + entries.front() + "' and no " +
                   OutputFolder::kManifestName + ")" + advice);
+  }
   for (const std::string& e : entries) {
     if (e == OutputFolder::kManifestName) continue;
     struct stat st {};

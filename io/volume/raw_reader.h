@@ -29,7 +29,8 @@ int64_t check_raw_file(const std::string& path, const RawLayout& layout);
 int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes, const std::string& file);
 
 // The volume's dimensions and geometry as every consumer takes them (engine/core/volume_check.h),
-// checked for FILE before its values are read; throws IoError naming FILE and the numbers.
+// checked for FILE: by open_box_reader before any value is read, by read_volume once it has read
+// them; throws IoError naming FILE and the numbers.
 void check_volume_layout(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
                          const std::array<double, 3>& origin, const std::string& file);
 // Throws IoError naming FILE and the (x, y, z) of the first NaN or infinite value.

@@ -78,16 +78,17 @@ int keep_error(TIFF*, void* user, const char* module, const char* format, va_lis
 }
 
 // Whether a libtiff warning means that what it reads would not be the values the file holds: it
-// ignored or guessed a field that lays the data out ("Incorrect count for "StripOffsets"; tag
-// ignored": the strips then read from offset 0; "calculating from imagelength"), or assumed what
-// the file does not say. Warnings about other tags (a date, a resolution, a private tag of ImageJ
-// or a microscope) and about the file's tidiness leave the values as they are.
+// ignored, trimmed or guessed a field that lays the data out ("Incorrect count for "StripOffsets";
+// tag ignored": the strips then read from offset 0; "calculating from imagelength"), or assumed
+// what the file does not say ("BitsPerSample tag is missing, assuming 8 bits per sample").
+// Warnings about other tags (a date, a resolution, a private tag of ImageJ or a microscope) and
+// about the file's age or tidiness ("Old-style LZW codes", which libtiff decodes as they are)
+// leave the values as they are.
 bool warning_affects_data(const std::string& text) {
-  for (const char* harmless : {"Unknown field with tag", "Registering anonymous field", "ASCII value for",
-                               "tags are not sorted in ascending order", "Nonstandard tile"})
-    if (text.find(harmless) != std::string::npos) return false;
+  for (const char* guess : {"calculating from", "assuming", "assumed"})
+    if (text.find(guess) != std::string::npos) return true;
   const size_t open = text.find('"'), close = open == std::string::npos ? open : text.find('"', open + 1);
-  if (close == std::string::npos) return true;  // names no tag: about the data itself
+  if (close == std::string::npos) return false;  // names no tag
   static const std::vector<std::string> kLayout = {
       "ImageWidth",          "ImageLength",     "BitsPerSample",   "Compression",  "PhotometricInterpretation",
       "FillOrder",           "StripOffsets",    "SamplesPerPixel", "RowsPerStrip", "StripByteCounts",
@@ -135,8 +136,8 @@ class TiffFile {
   }
   bool had_error() const { return !errors_->first.empty(); }
   // Refuses a file of which libtiff would read values that are not the file's own (a field it
-  // ignored or guessed): tifffile and others may read such a file differently, and isotope does
-  // not guess.
+  // ignored or guessed): another reader may read such a file differently, and isotope does not
+  // guess.
   void refuse_guessed_data(const std::string& page) const {
     if (!errors_->data_warning.empty())
       throw IoError(where_ + ": " + page + ": its directory does not describe its data consistently (" +
@@ -264,10 +265,14 @@ std::vector<std::string> folder_slices(const std::string& dir) {
     const fs::path p = fs::path(dir) / n;
     std::error_code status_error;
     const fs::file_status st = fs::status(p, status_error);
-    if (!fs::exists(st))
-      throw IoError(p.string() +
-                    ": a symbolic link that leads nowhere (dangling, or a loop); every .tif in a slice "
-                    "folder is a slice, so the stack would lack one");
+    if (!fs::exists(st)) {
+      std::error_code link_error;
+      if (fs::is_symlink(fs::symlink_status(p, link_error)))
+        throw IoError(p.string() +
+                      ": a symbolic link that leads nowhere (dangling, or a loop); every .tif in a "
+                      "slice folder is a slice, so the stack would lack one");
+      throw IoError(p.string() + ": cannot be read (" + status_error.message() + ")");
+    }
     if (!fs::is_regular_file(st))
       throw IoError(p.string() + ": " + (fs::is_directory(st) ? "a directory" : "not a regular file") +
                     " named like a slice; every .tif in a slice folder is a slice");
@@ -285,11 +290,14 @@ int64_t imagej_count(const std::string& description, const std::string& key) {
   return 1;
 }
 
-// A count attribute of an OME-XML description (SizeC="2"), or 1.
+// A count attribute of an OME-XML description (SizeC="2"), or 1; the attribute's whole name, not
+// the end of another's (PhysicalSizeZ="0.3" is no SizeZ).
 int64_t ome_count(const std::string& description, const std::string& attribute) {
-  const size_t at = description.find(attribute + "=\"");
-  return at == std::string::npos ? 1
-                                 : std::max<int64_t>(1, std::atoll(description.c_str() + at + attribute.size() + 2));
+  const std::string key = attribute + "=\"";
+  for (size_t at = description.find(key); at != std::string::npos; at = description.find(key, at + 1))
+    if (at > 0 && std::isspace(static_cast<unsigned char>(description[at - 1])))
+      return std::max<int64_t>(1, std::atoll(description.c_str() + at + key.size()));
+  return 1;
 }
 
 // A multi-page file whose pages are not one channel's slices in order: an ImageJ hyperstack or an

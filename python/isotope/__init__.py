@@ -115,7 +115,7 @@ class Store:
         """What the input is (dims in x, y, z; shape as numpy indexes it) and what was read so far."""
         return self._source.info
 
-    def extract(self, iso, *, eps=None, topology="preserve", error="bound", weight=None, delta=None, focus=None,
+    def extract(self, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
                 radius=None, max_triangles=None, threads=0):
         """The isosurface at ``iso`` (inside means value > iso), as a :class:`Mesh`.
 
@@ -124,7 +124,7 @@ class Store:
         Euler characteristic of eps = 0 kept), ``"simplify"`` (features of weight below ``delta``
         may go; ``weight`` = interval, gradient or size), ``"paper"`` or ``"none"``. ``focus`` =
         (x, y, z) and ``radius``: full resolution at the point, eps from radius on.
-        ``max_triangles`` (instead of ``eps``, at least 1): the finest eps whose mesh fits (with
+        ``max_triangles`` (at least 1; instead of an ``eps`` other than 0): the finest eps whose mesh fits (with
         simplify and no delta, delta too). ``threads``: 0 for all cores (up to 4096); a limit holds for the whole process while the call
         runs (oneTBB's), so concurrent calls share it.
         """
@@ -132,7 +132,7 @@ class Store:
         return self._source.extract(options, _integer_text(threads))
 
 
-def extract(volume, iso, *, eps=None, topology="preserve", error="bound", weight=None, delta=None, focus=None,
+def extract(volume, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
             radius=None, max_triangles=None, dims=None, type=None, spacing=None, origin=None, cache_mb=512,
             threads=0, progress=None):
     """One extraction: ``Store(volume, ...).extract(iso, ...)``; see :class:`Store`."""

@@ -240,7 +240,8 @@ def test_a_command_built_without_mpi_refuses_every_rank(tmp_path, embryo_store):
     r = run(["mpirun", "--oversubscribe", "-n", "3", without, "extract", embryo_store, "--iso", "50", "--eps", "8",
              "-o", out], env=env, timeout=120)
     assert r.returncode == 1, r.stderr
-    assert r.stderr.count("but this isotope was built without MPI") == 1, r.stderr
+    # Each rank says so; mpirun may end the others before they do.
+    assert 1 <= r.stderr.count("but this isotope was built without MPI") <= 3, r.stderr
     assert not out.exists()
 
 

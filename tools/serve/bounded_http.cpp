@@ -10,7 +10,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <functional>
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace isotope::tools {
@@ -20,18 +22,43 @@ using Clock = std::chrono::steady_clock;
 
 constexpr size_t kPiece = size_t{1} << 20;  // a response body is handed to the socket this much at a time
 
+// When the connection a worker is serving was accepted: the pool's job sets it before the server
+// serves the connection on the same thread (AcceptOrderPool).
+thread_local Clock::time_point t_accepted;
+
+// cpp-httplib's thread pool, with each connection's accept time handed to the worker that serves it.
+class AcceptOrderPool final : public httplib::TaskQueue {
+ public:
+  explicit AcceptOrderPool(size_t workers) : pool_(workers) {}
+  void enqueue(std::function<void()> fn) override {
+    pool_.enqueue([fn = std::move(fn), accepted = Clock::now()] {
+      t_accepted = accepted;
+      fn();
+    });
+  }
+  void shutdown() override { pool_.shutdown(); }
+
+ private:
+  httplib::ThreadPool pool_;
+};
+
 // A connection's socket as cpp-httplib's Stream, with the deadlines of HttpLimits. Reads are
 // buffered (the request line and headers are read a byte at a time by the library).
 class BoundedStream final : public httplib::Stream {
  public:
-  BoundedStream(socket_t sock, const HttpLimits& limits, const std::atomic<socket_t>& server_socket)
-      : sock_(sock), limits_(limits), server_socket_(server_socket) {}
+  BoundedStream(socket_t sock, const HttpLimits& limits, const std::atomic<socket_t>& server_socket,
+                Clock::time_point accepted)
+      : sock_(sock), limits_(limits), server_socket_(server_socket), accepted_(accepted) {}
 
   // Waits up to the idle timeout for a request's first byte; false when none came or the server
-  // stops. Then the request's deadline counts from now, and the next response's pace anew.
+  // stops. The first request's deadline counts from the accept, a later one's from now; the next
+  // response's pace anew.
   bool next_request() {
-    if (expired_ || (buffered_ == 0 && !wait(POLLIN, Clock::now() + limits_.idle_timeout))) return false;
-    read_deadline_ = Clock::now() + limits_.request_deadline;
+    const bool first = !served_;
+    served_ = true;
+    const Clock::time_point from = first ? accepted_ : Clock::now();
+    if (expired_ || (buffered_ == 0 && !wait(POLLIN, from + limits_.idle_timeout))) return false;
+    read_deadline_ = (first ? accepted_ : Clock::now()) + limits_.request_deadline;
     send_start_.reset();
     sent_ = 0;
     return true;
@@ -90,16 +117,17 @@ class BoundedStream final : public httplib::Stream {
   }
 
   // Waits for EVENTS on the socket until DEADLINE, in slices, so that a stopping server is seen
-  // at once; false when the deadline passed, the server stops, or the peer is gone.
+  // at once; false when the deadline passed with nothing ready, the server stops, or the peer is
+  // gone. What is ready already is taken whatever the time.
   bool wait(short events, Clock::time_point deadline) const {
     for (;;) {
       if (server_socket_ == INVALID_SOCKET) return false;
       const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-      if (left <= 0) return false;
       pollfd p{sock_, events, 0};
-      const int r = ::poll(&p, 1, static_cast<int>(std::min<long long>(left, 100)));
+      const int r = ::poll(&p, 1, static_cast<int>(std::clamp<long long>(left, 0, 100)));
       if (r < 0 && errno != EINTR) return false;
       if (r > 0) return (p.revents & events) != 0 || (p.revents & POLLHUP && events == POLLIN);
+      if (left <= 0) return false;
     }
   }
 
@@ -126,7 +154,8 @@ class BoundedStream final : public httplib::Stream {
   socket_t sock_;
   HttpLimits limits_;
   const std::atomic<socket_t>& server_socket_;
-  Clock::time_point read_deadline_;
+  Clock::time_point accepted_, read_deadline_;
+  bool served_ = false;
   std::optional<Clock::time_point> send_start_;
   size_t sent_ = 0;
   std::vector<char> buffer_ = std::vector<char>(4096);
@@ -137,17 +166,22 @@ class BoundedStream final : public httplib::Stream {
 }  // namespace
 
 BoundedHttpServer::BoundedHttpServer(const HttpLimits& limits) : limits_(limits) {
-  new_task_queue = [workers = limits.workers] { return new httplib::ThreadPool(workers); };
+  new_task_queue = [workers = limits.workers] { return new AcceptOrderPool(workers); };
 }
 
 bool BoundedHttpServer::process_and_close_socket(socket_t sock) {
   bool ok = false;
   {
-    BoundedStream stream(sock, limits_, svr_sock_);
+    // Served outside the pool (a test, the fuzzer): accepted now.
+    const Clock::time_point accepted = t_accepted == Clock::time_point{} ? Clock::now() : t_accepted;
+    t_accepted = {};
+    BoundedStream stream(sock, limits_, svr_sock_, accepted);
     for (size_t left = keep_alive_max_count_; left > 0 && stream.next_request(); --left) {
       bool closed = false;
-      // The ranges parsed from a Range header, dropped: the whole body, once (200, not 206).
-      ok = process_request(stream, left == 1, closed, [](httplib::Request& req) { req.ranges.clear(); });
+      ok = process_request(stream, left == 1, closed, [](httplib::Request& req) {
+        req.ranges.clear();           // the whole body, once (200, not 206)
+        req.headers.erase("Expect");  // no interim 100 Continue to start the response's pace early
+      });
       if (!ok || closed) break;
     }
   }
@@ -167,18 +201,33 @@ std::shared_ptr<void> ResponseBudget::hold(size_t bytes) {
 }
 
 void ResponseBudget::release(size_t bytes) {
-  {
-    const std::lock_guard<std::mutex> lock(mutex_);
-    held_ -= bytes;
-  }
-  release_free_memory();
+  const std::lock_guard<std::mutex> lock(mutex_);
+  held_ -= bytes;
 }
 
-void release_free_memory() {
-  // Kept up to a bound: an extraction reuses what the last one freed (trimming after each would
-  // have it fault every page in again, 20 ms of a 120 ms extraction at 117 k triangles).
-  constexpr size_t kKeptFreeBytes = size_t{256} << 20;
-  if (mallinfo2().fordblks > kKeptFreeBytes) malloc_trim(0);
+MemoryReturner::MemoryReturner() : thread_([this] { run(); }) {}
+
+MemoryReturner::~MemoryReturner() {
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_one();
+  thread_.join();
+}
+
+void MemoryReturner::busy() {
+  last_busy_ns_ = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+}
+
+void MemoryReturner::run() {
+  constexpr size_t kKeptBusy = size_t{256} << 20, kKeptIdle = size_t{64} << 20;
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!wake_.wait_for(lock, std::chrono::milliseconds(250), [this] { return stop_; })) {
+    const auto since_busy = Clock::now().time_since_epoch() - std::chrono::nanoseconds(last_busy_ns_.load());
+    const size_t kept = since_busy > std::chrono::seconds(1) ? kKeptIdle : kKeptBusy;
+    if (mallinfo2().fordblks > kept) malloc_trim(0);
+  }
 }
 
 bool ResponseBudget::exhausted() const {

@@ -1,33 +1,32 @@
 #pragma once
 // What one HTTP client can hold of `isotope serve` (docs/SERVE.md, "Limits"), on top of cpp-httplib:
-// - a deadline for each whole request, head and body, from its first byte: a client that drips
-//   its header lines one at a time loses the connection when the deadline passes, however often it
-//   sends (cpp-httplib's read timeout restarts with every byte that arrives);
+// - a deadline for each whole request, head and body (HttpLimits): a client that drips its header
+//   lines one at a time loses the connection when the deadline passes, however often it sends
+//   (cpp-httplib's read timeout restarts with every byte that arrives); a connection's first
+//   request counts from its accept, so that a crowd of such clients queued for a worker is cut as
+//   soon as each is reached;
 // - a pace for each response: after a grace period, a client must have taken the response at no
 //   less than a minimum average rate, or the connection is closed and what it held freed;
 // - Range headers ignored: the whole body is sent once (RFC 9110 allows a server to), so that no
-//   request can multiply a body by the ranges it lists;
-// - a budget for the bodies of responses in flight (ResponseBudget), which the handlers consult.
+//   request can multiply a body by the ranges it lists; Expect headers ignored too (no request
+//   here has a body worth waiting for);
+// - a budget for the bodies of responses in flight (ResponseBudget), which the handlers consult,
+//   and freed memory given back to the system (MemoryReturner).
 // Connections are served as cpp-httplib serves them otherwise (keep-alive, its limits on the
 // request line and headers).
 #include <httplib.h>
 
+#include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstddef>
 #include <memory>
 #include <mutex>
+#include <thread>
+
+#include "tools/serve/http_limits.h"
 
 namespace isotope::tools {
-
-struct HttpLimits {
-  // Threads answering connections: each holds one while it reads a request (at most the deadline),
-  // runs it and sends the response. More connections wait for a thread in accept order.
-  size_t workers = 128;
-  std::chrono::milliseconds request_deadline{5000};  // a request's head and body, from its first byte
-  std::chrono::milliseconds idle_timeout{5000};      // between the requests of a kept-alive connection
-  std::chrono::milliseconds send_grace{10000};       // a response's start, before the pace counts
-  double min_send_bytes_per_second = 256 * 1024;     // the pace, on average, after the grace
-};
 
 class BoundedHttpServer : public httplib::Server {
  public:
@@ -60,11 +59,29 @@ class ResponseBudget {
   size_t budget_, held_ = 0;
 };
 
-// Gives the memory freed so far back to the system once more than 256 MB of it is kept. glibc keeps
-// freed memory in its arenas (up to 8 per core, one per thread that allocated, each keeping up to
-// the trim threshold, which isotope::open_volume raises for the brick cache): a server's worker
-// threads would otherwise keep a crowd's meshes in its RSS long after their clients left.
-void release_free_memory();
+// Gives freed memory back to the system from a thread of its own, every quarter second: once more
+// than 256 MB of it is kept, or 64 MB after a second without an extraction. glibc keeps freed
+// memory in its arenas (up to 8 per core, one per thread that allocated, each keeping up to the trim
+// threshold, which isotope::open_volume raises for the brick cache): a server's worker threads would
+// otherwise keep a crowd's meshes in its RSS long after their clients left. Not after every
+// request: the next extraction reuses what the last one freed, and giving it back would have it
+// fault every page in again (20 ms of a 120 ms extraction of 117 k triangles).
+class MemoryReturner {
+ public:
+  MemoryReturner();
+  ~MemoryReturner();
+  MemoryReturner(const MemoryReturner&) = delete;
+  MemoryReturner& operator=(const MemoryReturner&) = delete;
+  void busy();  // an extraction starts or ends now
+
+ private:
+  void run();
+  std::atomic<int64_t> last_busy_ns_{0};
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_ = false;
+  std::thread thread_;
+};
 
 // BODY as RES's content, sent from where it lies (no copy) in pieces; HOLD (e.g. a ResponseBudget
 // hold, or the owner of BODY) is kept until the response is destroyed.

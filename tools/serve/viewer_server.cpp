@@ -94,6 +94,7 @@ struct ViewerServer::Impl {
   std::atomic<int> waiting{0};
   socket_t listen_socket = -1;
   ResponseBudget responses;  // the meshes being sent
+  MemoryReturner memory;
   BoundedHttpServer http;
   std::mutex log_mutex;
   std::mutex run_mutex;  // listen() and stop() from different threads, in either order
@@ -140,11 +141,13 @@ struct ViewerServer::Impl {
   }
 
   void extract(const httplib::Request& req, httplib::Response& res) {
-    // Last out: what the extraction freed (its mesh, normals, topology) goes back to the system,
-    // not into an arena of this worker thread (release_free_memory).
-    const struct FreeOnExit {
-      ~FreeOnExit() { release_free_memory(); }
-    } free_on_exit;
+    // Marks the extraction's start and end for the memory returner (it keeps freed memory while
+    // extractions run).
+    const struct Busy {
+      MemoryReturner& m;
+      explicit Busy(MemoryReturner& returner) : m(returner) { m.busy(); }
+      ~Busy() { m.busy(); }
+    } busy{memory};
     const auto start = std::chrono::steady_clock::now();
     res.set_header("Cache-Control", "no-store");
     try {

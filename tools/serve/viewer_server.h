@@ -7,7 +7,7 @@
 #include <memory>
 #include <string>
 
-#include "tools/serve/bounded_http.h"
+#include "tools/serve/http_limits.h"
 
 namespace isotope::tools {
 
