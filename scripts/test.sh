@@ -70,20 +70,21 @@ phase "ASan+UBSan tests"
 #   18 s) and the budget search sweep (15 s): the preserve, simplify and budget paths run in the
 #   topology, simplify and paged tests that stay;
 # - the crack sweeps over the shared volumes at their isovalues and at integer ties (30 s, 34 s):
-#   the same traversal runs in the closed-shape crack test and every other extraction test.
+#   the same traversal runs in the closed-shape crack test and every other extraction test;
+# - the budget search against its reference on stores (25 s): TriangleBudgetParallel runs it paged;
 # - the viewer's browser test (label e2e, 20 s in Release): test_serve runs the server's code here.
 run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "slow|e2e" \
-  -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)'
+  -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)|TriangleBudget\.CountsEveryCutAsTheWalkDownTheCutDoesPaged'
 
 # The parallel paths under ThreadSanitizer (engine/core/parallel.h runs them on std::threads there), and
 # the server: its worker threads, concurrent extractions and supersession.
 phase "RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF
-cmake --build build-tsan --target test_determinism test_distribution test_store test_paged_extract test_exact_full_resolution test_serve -j "$jobs"
+cmake --build build-tsan --target test_determinism test_distribution test_store test_paged_extract test_triangle_budget test_exact_full_resolution test_serve -j "$jobs"
 phase "TSan tests"
 TSAN_OPTIONS="halt_on_error=1 suppressions=$PWD/tests/tsan.supp" run_ctest --test-dir build-tsan --output-on-failure --no-tests=error \
-  -R 'Determinism|SettleTogether\.|Distributed(Extract|Store)\.|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount|Serve(TightLimits|StalledReaders|StalledReadersPaced)?\.|Supersession\.'
+  -R 'Determinism|SettleTogether\.|Distributed(Extract|Store)\.|Store\.(FileDoesNotDependOnThreadsOrMemoryBudget|RoundTripIsExactOnOddDimensions|CancelledConvert)|PagedParallel\.|TriangleBudgetParallel\.|FullResolutionSlabs\.|ExactAtEpsZero\.AnyThreadCount|Serve(TightLimits|StalledReaders|StalledReadersPaced)?\.|Supersession\.'
 
 # Every parser fuzzed for a bounded time (clang-14, libFuzzer, ASan+UBSan; build-fuzz), then the
 # hostile-user table of docs/RELIABILITY.md regenerated into a scratch file: CI fails when a row of

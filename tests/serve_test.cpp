@@ -79,6 +79,7 @@ TEST(ServeRequest, TakesWhatExtractTakes) {
   EXPECT_EQ(r.options.focus->radius, 4);
   EXPECT_EQ(r.client, "a-Z_9");
   EXPECT_EQ(r.seq, 17);
+  EXPECT_EQ(parse_extract_request(query({{"iso", "1"}, {"max-triangles", "1000"}})).options.max_triangles, 1000);
 
   const auto d = parse_extract_request(query({{"iso", "-2"}}));  // extract's defaults
   EXPECT_EQ(d.options.eps, 0);
@@ -108,7 +109,8 @@ TEST(ServeRequest, RefusesWhatIsNotAnExtractionWithAMessage) {
       {query({{"iso", "1"}, {"focus", "1,x,3"}, {"radius", "1"}}), "focus must be a finite number"},
       {query({{"iso", "1"}, {"focus", "1,2,3"}, {"radius", "0"}}), "radius must be > 0"},
       {query({{"iso", "1"}, {"foo", "2"}}), "unknown parameter 'foo'"},
-      {query({{"iso", "1"}, {"max-triangles", "1000"}}), "unknown parameter 'max-triangles'"},
+      {query({{"iso", "1"}, {"max-triangles", "0"}}), "max-triangles must be"},
+      {query({{"iso", "1"}, {"max-triangles", "1000"}, {"eps", "2"}}), "max-triangles chooses eps itself"},
       {query({{"iso", "1"}, {"iso", "2"}}), "iso is given twice"},
       {query({{"iso", std::string(200, '1')}}), "iso is too long"},
       {query({{"iso", "1"}, {"client", "../etc"}}), "client must be 1-64 characters"},
@@ -312,6 +314,31 @@ TEST_F(Serve, ExtractAnswersTheMeshExtractGivesWithItsReport) {
     EXPECT_EQ(report["seq"], 1);
     EXPECT_GT(report["server_seconds"].get<double>(), 0);
     EXPECT_TRUE(w.normals == vertex_normals(w.mesh));
+  }
+}
+
+// A triangle budget: the server's search chooses the eps the command's does, and the report says
+// which, with the next finer step's count beyond the budget. A budget below the coarsest mesh is
+// the client's to change: 400, with how many triangles that mesh has.
+TEST_F(Serve, ATriangleBudgetChoosesTheEpsExtractChooses) {
+  const auto below = get("/api/extract?iso=" + exact(iso_) + "&topology=none&max-triangles=10");
+  ASSERT_TRUE(below);
+  EXPECT_EQ(below->status, 400);
+  EXPECT_NE(below->body.find("is below the coarsest mesh this topology mode allows"), std::string::npos) << below->body;
+  for (const int64_t budget : {2000, 5000, 50000}) {
+    ExtractOptions o;
+    o.iso = iso_, o.topology = TopologyMode::none, o.max_triangles = budget;
+    SCOPED_TRACE("max-triangles " + std::to_string(budget));
+    const auto res = get("/api/extract?iso=" + exact(o.iso) + "&topology=none&max-triangles=" + std::to_string(budget));
+    ASSERT_TRUE(res);
+    ASSERT_EQ(res->status, 200) << res->body;
+    const MeshWire w = decode_mesh_wire(res->body);
+    expect_same_mesh(w.mesh, expected(o));
+    EXPECT_LE(static_cast<int64_t>(w.mesh.triangles.size()), budget);
+    const auto report = nlohmann::json::parse(w.report_json);
+    EXPECT_EQ(report["max_triangles"], budget);
+    EXPECT_GT(report["chosen_eps"].get<double>(), 0);
+    EXPECT_GT(report["next_triangles"].get<int64_t>(), budget);
   }
 }
 

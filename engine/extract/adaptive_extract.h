@@ -56,7 +56,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       BudgetChoice d;
       try {
         d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
-      } catch (const std::runtime_error&) {
+      } catch (const TriangleBudgetTooSmall&) {
         d = choose_delta_for_budget(source, rule, options.max_triangles);
       }
       in_codes.delta = d.eps;

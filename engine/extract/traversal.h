@@ -232,10 +232,14 @@ class Traversal {
     *weight = rule_.topology_weight(reader_.topology(h, rule_.fields()));
     return Fate::split_key;
   }
-  int triangles(const PackedTet& t, int level) {
+  int triangles(const PackedTet& t, int level) { return triangles_of(corner_values(t, level), rule_.options().iso); }
+  // The values marching tetrahedra reads at a level-`level` tetrahedron's corners, and at one
+  // node of such a tetrahedron (a node's value does not depend on the level it is read at).
+  std::array<float, 4> corner_values(const PackedTet& t, int level) {
     const int j = band_of(level);
-    return triangles_of({value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)}, rule_.options().iso);
+    return {value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)};
   }
+  float node_value(Packed p, int level) { return value(p, band_of(level)); }
 
   void keep_keys() { builder_.keep_keys(); }
   std::vector<uint64_t> take_keys() { return builder_.take_keys(); }

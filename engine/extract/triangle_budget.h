@@ -1,22 +1,39 @@
 #pragma once
-// The finest uniform eps whose mesh stays within a triangle budget, in one walk of the tree.
+// The finest uniform eps whose mesh stays within a triangle budget, counted in parallel passes
+// without building any mesh.
 //
 // A tetrahedron bisected at diamond v is refined iff key(v) >= eps (engine/extract/traversal.h), and keys
 // never grow downwards, so the mesh for eps is the cut "every tetrahedron with key >= eps split".
-// Starting from the roots, the walk keeps the current cut (its front) in a max-heap by key and
-// splits the front in decreasing key order, one group of equal keys at a time; after a group of
-// key x the front is exactly the mesh for eps = x, and its triangle count is kept as a running
-// sum. It stops at the first group that would exceed the budget. Cost: one traversal down to the
-// answer's cut, memory proportional to that cut, instead of one extraction per trial eps.
+// A tetrahedron t whose parent has key kp and whose own key is kt (-infinity at a leaf) lies on
+// that cut exactly for eps in (kt, kp]. Hence the triangle count of every cut at once:
+//
+//   T(x) = sum over keys k >= x of D[k],   D[k] = sum of tris(children) - tris(t) over the t of key k,
+//
+// with the roots counted at kp = +infinity (docs/METHOD.md, "Focus and triangle budget"). A pass with a
+// lower bound L descends every tetrahedron with key >= L, so it knows D, and T, exactly for every
+// key >= L, without building any mesh. The tetrahedra it reaches but does not split (key < L) are
+// its frontier, kept compactly (a root and one bit per level) for the next pass, which resumes
+// there with a lower L: over all passes each tetrahedron is judged once, as in one traversal to
+// the cut just below the budget. The first pass runs the subtrees a few levels down in parallel,
+// later ones the frontier; each thread sums into its own table, and the sums are exact integers,
+// so the choice does not depend on the thread count. L starts at +infinity and falls by at most
+// 4x a pass, guided by the growth of T so far. Memory: the frontier (24 bytes a tetrahedron) and
+// the distinct keys.
+#include <algorithm>
+#include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <queue>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
+#include "engine/core/parallel.h"
 #include "engine/extract/traversal.h"
+#include "isotope/extract.h"
 
 namespace isotope {
 
@@ -28,11 +45,11 @@ struct BudgetChoice {
   int64_t steps = 0;
 };
 
-// The walk for any key that never grows from a diamond to its children: `key(t, level, &k)`
+// The search for any key that never grows from a diamond to its children: `key(t, level, &k)`
 // judges tetrahedron t (engine/extract/traversal.h, Traversal::judge's fates) and, when it may be split,
 // sets its key. Returns the smallest threshold x (a key, or just above the largest) such that
 // splitting every tetrahedron with key >= x gives at most max_triangles; throws when even the
-// keys of +infinity alone exceed it.
+// keys of +infinity alone exceed it (TriangleBudgetTooSmall).
 template <TraversalSource Source, class Key>
 BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
                                    const Key& judge);
@@ -62,68 +79,317 @@ BudgetChoice choose_delta_for_budget(const Source& source, const traversal::Spli
                                });
 }
 
+namespace budget_detail {
+
+// D of the passes so far (see the top of this file), exact for the keys >= the last bound.
+struct KeyTable {
+  std::unordered_map<double, int64_t> d;
+
+  // Consecutive tetrahedra often share a key (saturated errors): one pending sum saves most
+  // lookups.
+  void add(double key, int64_t delta) {
+    if (key != pending_key_ || !has_pending_) {
+      flush();
+      pending_key_ = key, has_pending_ = true;
+    }
+    pending_ += delta;
+  }
+  void flush() {
+    if (has_pending_) d[pending_key_] += pending_;
+    has_pending_ = false, pending_ = 0;
+  }
+  void merge(KeyTable& other) {
+    other.flush();
+    for (const auto& [k, v] : other.d) d[k] += v;
+    other.d.clear();
+  }
+
+ private:
+  double pending_key_ = 0;
+  int64_t pending_ = 0;
+  bool has_pending_ = false;
+};
+
+// A tetrahedron the last pass reached but did not split (its key is below the bound), kept for
+// the next pass by the way down to it: which root, then one bit per level for the child taken
+// (at most 57 levels: 3 per doubling of a lattice of at most 2^19 cells a side).
+struct FrontierItem {
+  double key;
+  uint64_t path;
+  uint8_t root, level;
+  bool positive;
+};
+
+// The passes of one search: the first descends from the roots (the subtrees at a few levels down
+// in parallel), each later one descends, in parallel, the frontier items whose key reaches its
+// bound and keeps the rest. Every tetrahedron is judged once over all passes.
+template <TraversalSource Source, class Key>
+class CountPasses {
+ public:
+  using Walk = traversal::Traversal<Source>;
+  CountPasses(const Source& source, const traversal::SplitRule& rule, const Key& judge)
+      : source_(source), rule_(rule), judge_(judge) {
+    const auto threads =
+        static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+    workers_.resize(static_cast<size_t>(std::max<int64_t>(threads, 1)));
+  }
+
+  const std::unordered_map<double, int64_t>& d() const { return table_.d; }
+  // The largest key of the frontier: -infinity once every split is counted.
+  double largest_below() const { return largest_below_; }
+
+  void first(double bound, int seed_level) {
+    bound_ = bound;
+    std::vector<Seed> seeds;
+    Worker top;
+    {
+      Walk walk(source_, rule_);
+      roots_ = walk.roots();
+      for (size_t r = 0; r < roots_.size(); ++r) {
+        const traversal::Child& c = roots_[r];
+        top.table.add(kInf, visit(walk, top, c.tet, walk.corner_values(c.tet, 0), 0, c.positive,
+                                  static_cast<uint8_t>(r), 0, seed_level, &seeds, kInf));
+      }
+    }
+    absorb(top);
+    run_parallel(static_cast<int64_t>(seeds.size()), [&](Walk& walk, Worker& w, int64_t i) {
+      const Seed& s = seeds[static_cast<size_t>(i)];
+      w.table.add(s.parent_key,
+                  visit(walk, w, s.tet, s.values, s.level, s.positive, s.root, s.path, -1, nullptr, s.parent_key));
+    });
+    finish_pass();
+  }
+
+  void next(double bound) {
+    bound_ = bound;
+    // Chunks of the frontier's lists: each compacts what it keeps in place.
+    struct Chunk {
+      size_t list, begin, end, kept = 0;
+    };
+    std::vector<Chunk> chunks;
+    constexpr size_t kChunk = 4096;
+    for (size_t l = 0; l < frontier_.size(); ++l)
+      for (size_t b = 0; b < frontier_[l].size(); b += kChunk)
+        chunks.push_back({l, b, std::min(frontier_[l].size(), b + kChunk)});
+    run_parallel(static_cast<int64_t>(chunks.size()), [&](Walk& walk, Worker& w, int64_t i) {
+      Chunk& c = chunks[static_cast<size_t>(i)];
+      std::vector<FrontierItem>& list = frontier_[c.list];
+      size_t out = c.begin;
+      for (size_t j = c.begin; j < c.end; ++j) {
+        const FrontierItem item = list[j];
+        if (!(item.key >= bound_)) {
+          list[out++] = item;
+          continue;
+        }
+        traversal::PackedTet t = roots_[item.root].tet;
+        bool positive = roots_[item.root].positive;
+        for (int l = 0; l < item.level; ++l) {
+          const traversal::Child ch = traversal::bisect(t, l, positive)[(item.path >> l) & 1];
+          t = ch.tet, positive = ch.positive;
+        }
+        const Corners f = walk.corner_values(t, item.level);
+        descend(walk, w, t, f, item.level, positive, item.root, item.path, item.key, tris_of(f), -1, nullptr);
+      }
+      c.kept = out - c.begin;
+    });
+    // Close the gaps the chunks left, list by list.
+    size_t c = 0;
+    for (size_t l = 0; l < frontier_.size(); ++l) {
+      size_t end = 0;
+      for (; c < chunks.size() && chunks[c].list == l; ++c) {
+        std::move(frontier_[l].begin() + static_cast<std::ptrdiff_t>(chunks[c].begin),
+                  frontier_[l].begin() + static_cast<std::ptrdiff_t>(chunks[c].begin + chunks[c].kept),
+                  frontier_[l].begin() + static_cast<std::ptrdiff_t>(end));
+        end += chunks[c].kept;
+      }
+      frontier_[l].resize(end);
+      if (end < frontier_[l].capacity() / 4) frontier_[l].shrink_to_fit();
+    }
+    std::erase_if(frontier_, [](const std::vector<FrontierItem>& v) { return v.empty(); });
+    finish_pass();
+  }
+
+ private:
+  static constexpr double kInf = std::numeric_limits<double>::infinity();
+  using Corners = std::array<float, 4>;
+  struct Seed {
+    traversal::PackedTet tet;
+    Corners values;
+    int level;
+    bool positive;
+    uint8_t root;
+    uint64_t path;
+    double parent_key;
+  };
+  struct Worker {
+    KeyTable table;
+    // New items of this pass, in blocks of a fixed size: a growing vector would copy them.
+    std::vector<std::vector<FrontierItem>> frontier;
+    void push(const FrontierItem& item) {
+      constexpr size_t kBlock = size_t{1} << 16;
+      if (frontier.empty() || frontier.back().size() == kBlock) {
+        frontier.emplace_back();
+        frontier.back().reserve(kBlock);
+      }
+      frontier.back().push_back(item);
+    }
+  };
+
+  // body(walk, worker, i) for i in [0, n), each worker with a walk (a reader) of its own.
+  template <class Body>
+  void run_parallel(int64_t n, const Body& body) {
+    const int64_t workers = std::clamp<int64_t>(static_cast<int64_t>(workers_.size()), 1, std::max<int64_t>(n, 1));
+    std::atomic<int64_t> next{0};
+    parallel_for(int64_t{0}, workers, [&](int64_t k) {
+      Walk walk(source_, rule_);
+      Worker& w = workers_[static_cast<size_t>(k)];
+      for (int64_t i = next++; i < n; i = next++) {
+        throw_if_cancelled(rule_.options());
+        body(walk, w, i);
+      }
+    });
+  }
+  void absorb(Worker& w) {
+    table_.merge(w.table);
+    for (std::vector<FrontierItem>& block : w.frontier) frontier_.push_back(std::move(block));
+    w.frontier.clear();
+  }
+  void finish_pass() {
+    for (Worker& w : workers_) absorb(w);
+    largest_below_ = -kInf;
+    for (const std::vector<FrontierItem>& list : frontier_)
+      for (const FrontierItem& item : list) largest_below_ = std::max(largest_below_, item.key);
+  }
+
+  // The triangles of t itself (0 when culled); t's descent goes into w.
+  // `f`: the values at t's corners, handed down from its parent.
+  int64_t visit(Walk& walk, Worker& w, const traversal::PackedTet& t, const Corners& f, int level, bool positive,
+                uint8_t root, uint64_t path, int seed_level, std::vector<Seed>* seeds, double parent_key) {
+    if (seeds && level == seed_level) {
+      seeds->push_back({t, f, level, positive, root, path, parent_key});
+      return 0;  // counted by the seed's own task
+    }
+    double key = 0;
+    const auto fate = judge_(walk, t, level, &key);
+    if (fate == Walk::Fate::culled) return 0;
+    const int64_t tris = tris_of(f);
+    // A key of -infinity is never split (choose_delta_for_budget: no critical point below).
+    if (fate != Walk::Fate::split_key || !(key > -kInf)) return tris;
+    if (!(key >= bound_)) {
+      w.push({key, path, root, static_cast<uint8_t>(level), positive});
+      return tris;
+    }
+    descend(walk, w, t, f, level, positive, root, path, key, tris, seed_level, seeds);
+    return tris;
+  }
+  void descend(Walk& walk, Worker& w, const traversal::PackedTet& t, const Corners& f, int level, bool positive,
+               uint8_t root, uint64_t path, double key, int64_t tris, int seed_level, std::vector<Seed>* seeds) {
+    int64_t children = 0;
+    const auto cs = traversal::bisect(t, level, positive);
+    // A child's corners: three of t's and the midpoint, the one value to read.
+    const traversal::Packed mid = (t[0] + t[1]) >> 1;
+    const float at_mid = walk.node_value(mid, level + 1);
+    for (uint64_t i = 0; i < 2; ++i) {
+      Corners g;
+      for (int c = 0; c < 4; ++c) {
+        const traversal::Packed p = cs[i].tet[static_cast<size_t>(c)];
+        g[static_cast<size_t>(c)] = p == mid ? at_mid : p == t[0] ? f[0] : p == t[1] ? f[1] : p == t[2] ? f[2] : f[3];
+      }
+      children +=
+          visit(walk, w, cs[i].tet, g, level + 1, cs[i].positive, root, path | (i << level), seed_level, seeds, key);
+    }
+    w.table.add(key, children - tris);
+  }
+  int64_t tris_of(const Corners& f) const { return traversal::triangles_of(f, rule_.options().iso); }
+
+  const Source& source_;
+  const traversal::SplitRule& rule_;
+  const Key& judge_;
+  double bound_ = kInf;
+  std::vector<traversal::Child> roots_;
+  KeyTable table_;
+  std::vector<std::vector<FrontierItem>> frontier_;
+  double largest_below_ = -kInf;
+  std::vector<Worker> workers_;
+};
+
+}  // namespace budget_detail
+
 template <TraversalSource Source, class Key>
 BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
                                    const Key& judge) {
-  using namespace traversal;
-  struct Item {
-    double key;
-    PackedTet tet;
-    int level;
-    bool positive;
-    int triangles;
-    bool operator<(const Item& o) const { return key < o.key; }
-  };
-  Traversal<Source> walk(source, rule);
-  std::priority_queue<Item> front;
-  int64_t count = 0;
-  auto add = [&](const PackedTet& t, int level, bool positive) {
-    double key = 0;
-    const auto fate = judge(walk, t, level, &key);
-    if (fate == Traversal<Source>::Fate::culled) return;
-    const int tris = walk.triangles(t, level);
-    count += tris;
-    // A key of -infinity is never split (choose_delta_for_budget: no critical point below).
-    if (fate == Traversal<Source>::Fate::split_key && key > -std::numeric_limits<double>::infinity())
-      front.push({key, t, level, positive, tris});
-  };
-  auto split_group = [&](double key) {
-    while (!front.empty() && front.top().key == key) {
-      const Item it = front.top();
-      front.pop();
-      count -= it.triangles;
-      for (const Child& c : bisect(it.tet, it.level, it.positive)) add(c.tet, it.level + 1, c.positive);
-    }
-  };
-  for (const Child& r : walk.roots()) add(r.tet, 0, r.positive);
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  split_group(kInf);  // what the topology mode refines whatever eps is
-  if (count > max_triangles) {
-    const TopologyMode mode = rule.options().topology;
-    throw std::runtime_error(
-        "a budget of " + std::to_string(max_triangles) +
-        " triangles is below the coarsest mesh this topology mode allows (" + std::to_string(count) + " triangles)" +
-        (mode == TopologyMode::preserve || mode == TopologyMode::paper
-             ? "; topology mode simplify with a budget and no delta drops the smallest features to fit"
-             : ""));
-  }
-  BudgetChoice choice;
-  choice.triangles = count;
-  choice.eps = front.empty() ? 0 : std::nextafter(front.top().key, kInf);
-  while (!front.empty()) {
-    const double key = front.top().key;
-    split_group(key);
-    ++choice.steps;
+  // Subtrees for the threads in the first pass: a few thousand at most, as the extraction's pieces.
+  const int seed_level = std::min(source.lattice().max_level(), 9);
+  budget_detail::CountPasses<Source, Key> passes(source, rule, judge);
+  double bound = kInf;
+  for (bool first = true;; first = false) {
+    if (first)
+      passes.first(bound, seed_level);
+    else
+      passes.next(bound);
+    // T at every key >= bound, from +infinity down.
+    std::vector<std::pair<double, int64_t>> d(passes.d().begin(), passes.d().end());
+    std::sort(d.begin(), d.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    const double largest_below = passes.largest_below();
+    size_t i = 0;
+    int64_t count = 0;
+    for (; i < d.size() && d[i].first == kInf; ++i) count += d[i].second;
+    const int64_t infinite = count;
     if (count > max_triangles) {
-      choice.next_eps = key;
-      choice.next_triangles = count;
+      const TopologyMode mode = rule.options().topology;
+      throw TriangleBudgetTooSmall(
+          "a budget of " + std::to_string(max_triangles) +
+          " triangles is below the coarsest mesh this topology mode allows (" + std::to_string(count) + " triangles)" +
+          (mode == TopologyMode::preserve || mode == TopologyMode::paper
+               ? "; topology mode simplify with a budget and no delta drops the smallest features to fit"
+               : ""));
+    }
+    const bool more_below = largest_below > -kInf;
+    BudgetChoice choice;
+    choice.triangles = count;
+    // The largest finite key: the first one the walk down from +infinity meets.
+    choice.eps = i < d.size() ? std::nextafter(d[i].first, kInf) : more_below ? std::nextafter(largest_below, kInf) : 0;
+    // T at the keys >= bound, in decreasing order: each key is one step finer.
+    for (; i < d.size(); ++i) {
+      count += d[i].second;
+      ++choice.steps;
+      if (count > max_triangles) {
+        choice.next_eps = d[i].first;
+        choice.next_triangles = count;
+        return choice;
+      }
+      choice.eps = d[i].first;
+      choice.triangles = count;
+    }
+    if (!more_below) {
+      choice.eps = 0;  // everything refined: the full-resolution mesh
       return choice;
     }
-    choice.eps = key;
-    choice.triangles = count;
+    // Every key >= bound fits: lower the bound, at most 4x a pass so that no pass descends far
+    // beyond the cut asked for. Below the keys of +infinity (what the topology mode refines
+    // whatever eps is), T grows about as a power of 1/eps: fit it locally, to T at the smallest
+    // key known and at the smallest key at least 1.5 times that, and aim a little above the budget:
+    // a pass that stops short costs only the next one, as each resumes where the last stopped.
+    const double x = !d.empty() && d.back().first < kInf ? d.back().first : largest_below;
+    double lowest = x / 4;
+    if (!d.empty() && x == d.back().first && count > infinite) {
+      double x2 = 0;
+      int64_t at_x2 = 0, sum = 0;
+      for (const auto& [k, v] : d) {
+        if (k < 1.5 * x) break;
+        sum += v;
+        if (k < kInf) x2 = k, at_x2 = sum;
+      }
+      if (x2 > x && at_x2 > infinite && count > at_x2) {
+        const double grown = static_cast<double>(count - infinite), before = static_cast<double>(at_x2 - infinite);
+        const double exponent = std::log(grown / before) / std::log(x2 / x);
+        const double target = 1.25 * static_cast<double>(max_triangles - infinite);
+        lowest = std::clamp(x * std::pow(grown / target, 1.0 / exponent), x / 4, x / 1.25);
+      }
+    }
+    bound = std::min(lowest, largest_below);
   }
-  choice.eps = 0;  // everything refined: the full-resolution mesh
-  return choice;
 }
 
 }  // namespace isotope

@@ -161,12 +161,19 @@ struct ExtractionCancelled : std::exception {
   const char* what() const noexcept override { return "extraction cancelled"; }
 };
 
+// What an extraction with a triangle budget throws when even the coarsest mesh its topology mode
+// allows (eps = infinity) has more triangles; the message says how many. No eps meets such a
+// budget: the server answers 400, the command exits 1.
+struct TriangleBudgetTooSmall : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // One extraction from an array in memory, with only the hierarchy the options need: at eps = 0
 // (no triangle budget) none at all, since the mesh is marching tetrahedra over every cut cell;
 // otherwise the hierarchy with the record fields the mode reads. The same mesh, byte for byte, as
 // from a store of the same volume (isotope::Source). Throws OptionError for options out of range,
 // std::invalid_argument for dimensions below 2 or values that are not finite, and
-// std::runtime_error when max_triangles is below the coarsest mesh the topology mode allows.
+// TriangleBudgetTooSmall when max_triangles is below the coarsest mesh the topology mode allows.
 Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
 }  // namespace isotope

@@ -11,7 +11,8 @@ namespace {
 
 // The extraction options a client may set (docs/SERVE.md); the rest of isotope/extract.h's are the
 // command line's.
-const std::set<std::string> kServedOptions = {"iso", "eps", "topology", "delta", "weight", "error", "focus", "radius"};
+const std::set<std::string> kServedOptions = {"iso",   "eps",   "topology", "delta",        "weight",
+                                              "error", "focus", "radius",   "max-triangles"};
 
 bool valid_client(const std::string& c) {
   return !c.empty() && c.size() <= 64 && std::all_of(c.begin(), c.end(), [](char ch) {
@@ -41,7 +42,7 @@ ServeRequest parse_extract_request(const std::multimap<std::string, std::string>
       slot = value;
     } else if (kServedOptions.count(name)) {
       options.emplace_back(name, value);
-    } else {  // max-triangles too: its search is neither cancellable nor bounded in memory here
+    } else {
       throw BadRequest("unknown parameter '" + name.substr(0, 64) + "'");
     }
   }

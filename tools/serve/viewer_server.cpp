@@ -202,6 +202,8 @@ struct ViewerServer::Impl {
       answer_text(res, 400, e.what());
     } catch (const std::invalid_argument& e) {  // the engine's own checks of the options
       answer_text(res, 400, e.what());
+    } catch (const TriangleBudgetTooSmall& e) {  // no eps meets max-triangles
+      answer_text(res, 400, e.what());
     } catch (const ExtractionCancelled&) {
       answer_text(res, 409, "superseded by a newer request of the same client");
     } catch (const std::bad_alloc&) {
