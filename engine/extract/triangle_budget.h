@@ -197,9 +197,10 @@ class CountPasses {
     for (size_t l = 0; l < frontier_.size(); ++l) {
       size_t end = 0;
       for (; c < chunks.size() && chunks[c].list == l; ++c) {
-        std::move(frontier_[l].begin() + static_cast<std::ptrdiff_t>(chunks[c].begin),
-                  frontier_[l].begin() + static_cast<std::ptrdiff_t>(chunks[c].begin + chunks[c].kept),
-                  frontier_[l].begin() + static_cast<std::ptrdiff_t>(end));
+        const auto from = frontier_[l].begin() + static_cast<std::ptrdiff_t>(chunks[c].begin);
+        if (end != chunks[c].begin)  // a chunk already in place stays (std::move may not overlap it)
+          std::move(from, from + static_cast<std::ptrdiff_t>(chunks[c].kept),
+                    frontier_[l].begin() + static_cast<std::ptrdiff_t>(end));
         end += chunks[c].kept;
       }
       frontier_[l].resize(end);
