@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """What the Python path costs over the C++ path on the same extraction, in the same run, with
-scikit-image's measure.marching_cubes on the same array beside them (issue 20: at most 10%).
+scikit-image's measure.marching_cubes on the same array beside them (the module's overhead target: at most 10%).
 
 The C++ path is timed in process by isotope_bench_api (bench/bench_api.cpp, Google Benchmark):
 open_volume on a float array it borrows, or on the file, then Source::extract, exactly what

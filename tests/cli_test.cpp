@@ -892,7 +892,7 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
   EXPECT_EQ(targets["warm store within 1.25x of memory"], 12) << j["targets"];
   EXPECT_EQ(targets["eps 0 at least as fast as the baseline, same triangles"], 8) << j["targets"];
   EXPECT_EQ(targets["store no larger than format 2's"], 1) << "neghip has a format-2 size; algebraic 65^3 not";
-  EXPECT_EQ(targets.count("convert >= 50% of the zstd ceiling"), 0u) << "only the volumes issue 17 names";
+  EXPECT_EQ(targets.count("convert >= 50% of the zstd ceiling"), 0u) << "only the volumes the speed targets name";
 
   // The paper's Table 1 beside ours: its numbers, our eps-0 count, fewer triangles as eps grows.
   const auto& t1 = j["paper_table1"];

@@ -165,7 +165,7 @@ TEST(PaperRule, MissesTheRootCubeCounterexampleThatTheExactRuleCatches) {
   EXPECT_EQ(kept.euler_characteristic, full.euler_characteristic);
 }
 
-// The paper's Table 1 setting and its shifted variant (issue 2, the demo): at the paper's
+// The paper's Table 1 setting and its shifted variant (the demo's): at the paper's
 // setting every mode keeps the one component; shifted, the modes part.
 TEST(AlgebraicFunction, ShiftedSingularityPartsTheModesAndPreserveKeepsOneComponent) {
   const MultiresVolume mv = MultiresVolume::build(generate_algebraic(65, {0.15625, 0.09375, 0}));

@@ -6,7 +6,7 @@
 // extraction from the raw file, the whole process with its mesh written; convert against its
 // ceiling (zstd over the values as float32 on all threads). Beside them: scikit-image's
 // marching_cubes on the same file (python3-skimage, run here), VTK's Flying Edges (quoted,
-// measured on the development machine) and the paper's Table 1. Then issue 17's targets, row by
+// measured on the development machine) and the paper's Table 1. Then the speed targets (README, "Performance"), row by
 // row, met or missed. `--scale` runs the large-volume row instead.
 #include "bench/suite/bench_suite.h"
 
@@ -92,7 +92,8 @@ const std::vector<DatasetSpec>& suite() {
 }
 
 // VTK 9.1's vtkFlyingEdges3D on the development machine (2 x 2.1 GHz): full resolution, wall time
-// without loading, marching cubes triangles. Quoted from issues 6 and 17; VTK is not installed here.
+// without loading, marching cubes triangles. Quoted from the measurements the speed targets were set against; VTK is
+// not installed here.
 struct Reference {
   const char* dataset;
   const char* what;
@@ -107,7 +108,7 @@ constexpr Reference kFlyingEdges[] = {
 };
 
 // Store sizes of format version 2 (README, measured the day it landed; embryo and algebraic 257^3
-// by this bench's predecessor), over the raw input: issue 17 asks for no larger.
+// by this bench's predecessor), over the raw input: the store must be no larger.
 const std::map<std::string, double> kFormat2Ratio = {{"bolt", 0.268},     {"neghip", 0.804}, {"ironProt", 0.819},
                                                      {"hydrogen", 0.956}, {"embryo", 0.547}, {"algebraic257", 1.285}};
 
@@ -731,7 +732,7 @@ const Row* find_row(const std::vector<Row>& rows, const std::string& dataset, co
   return nullptr;
 }
 
-// Issue 17's targets (and issue 6's eps-0 one), each one line per dataset it applies to.
+// The speed targets (and eps 0 at least the baseline's speed), each one line per dataset it applies to.
 struct Target {
   std::string what, dataset, value;
   bool met = false;
@@ -746,7 +747,7 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
   char buf[256];
   for (const DatasetResult& d : ds) {
     const std::string name = d.spec->name;
-    // The volumes issue 17 names for its speed targets; the small ones run in milliseconds,
+    // The volumes the speed targets name; the small ones run in milliseconds,
     // where a process's start-up is most of what is measured.
     const bool named = name == "algebraic257" || name == "embryo" || name == "noise513";
     for (const int n : !named ? std::vector<int>{} : threads > 1 ? std::vector<int>{1, threads} : std::vector<int>{1}) {
@@ -831,7 +832,7 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
       std::snprintf(buf, sizeof buf, "%.3f of the raw input (format 2: %.3f)", now, old->second);
       add("store no larger than format 2's", name, buf, now <= old->second * 1.005);
     }
-    // eps 0 gives the baseline's mesh, and at least its speed (issue 6).
+    // eps 0 gives the baseline's mesh, and at least its speed.
     for (const Row& r : rows)
       if (r.dataset == name && r.eps == 0 && r.mode != "baseline" && (r.input == "memory" || r.input == "store-warm")) {
         std::snprintf(buf, sizeof buf, "%s, %s, %d thr: %s", r.input.c_str(), r.mode.c_str(), r.threads,
@@ -850,7 +851,7 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
 }
 
 json print_targets(const std::vector<Target>& targets) {
-  std::printf("\nTargets (issue 17; each measured in this run)\n");
+  std::printf("\nTargets (each measured in this run)\n");
   json out = json::array();
   std::string last;
   int met = 0;

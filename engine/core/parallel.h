@@ -1,5 +1,5 @@
 #pragma once
-// The one place that runs the engine's loops in parallel (style.md, habit 9). oneTBB normally;
+// The one place that runs the engine's loops in parallel. oneTBB normally;
 // plain std::threads when built for ThreadSanitizer (ISOTOPE_STD_THREADS), because Debian's
 // libtbb is not instrumented and TSan would report TBB's own task hand-offs as races, hiding
 // any of ours. Both honour tbb::global_control's max_allowed_parallelism, so one thread runs

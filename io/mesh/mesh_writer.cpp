@@ -68,7 +68,7 @@ void check_count(size_t count, size_t limit, const std::string& path, const char
 
 // Encodes `count` items a window of blocks at a time, the blocks of a window on all threads, so a
 // large mesh costs a few hundred writes and a few blocks of memory, and its encoding scales with
-// the threads (a whole extraction written on one thread did not: issue 17). ENCODE(begin, end,
+// the threads (a whole extraction written on one thread did not). ENCODE(begin, end,
 // buffer) appends items [begin, end) to an empty buffer.
 template <typename Encode>
 void write_blocks(AtomicFile& out, size_t count, Encode encode) {
