@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets of fuzz/ with clang-14 under ASan+UBSan (build-fuzz) and runs each
 # one for a bounded time from its seed corpus (fuzz/corpus/TARGET, copied: the repository is not
-# changed). A finding (crash, sanitizer report, leak, timeout, out-of-memory) fails the script and
+# changed), one target per core at a time. A finding (crash, sanitizer report, leak, timeout, out-of-memory) fails the script and
 # leaves its reproducer in build-fuzz/findings; add it to tests/reject (docs/RELIABILITY.md) once
 # fixed. CI runs this after the tests (scripts/test.sh).
 #
@@ -37,20 +37,39 @@ mkdir -p build-fuzz/findings
 [ -z "$stats" ] || : > "$stats"
 for t in "${targets[@]}"; do
   [ -d "fuzz/corpus/$t" ] || { echo "fuzz.sh: no corpus fuzz/corpus/$t" >&2; exit 2; }
+done
+# One target per core at a time: each gets its whole time on a core of its own, and the run takes
+# the sum of the times divided by the cores.
+fuzz_one() {
+  local t="$1"
   mkdir -p "$work/$t"
   cp fuzz/corpus/"$t"/* "$work/$t/"
-  log="$work/$t.log"
-  echo "== fuzz_$t for ${seconds} s"
   # -timeout: one input taking 10 s is a hang; -rss_limit_mb: memory must stay bounded whatever
   # the input says (a store of 64 KB may not make the reader allocate gigabytes).
-  if ! ASAN_OPTIONS="detect_leaks=1" UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1" \
-      "build-fuzz/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
-      -print_final_stats=1 -artifact_prefix="build-fuzz/findings/$t-" "$work/$t" > "$log" 2>&1; then
-    grep -A40 -E "ERROR|WARNING|runtime error|Deadly|timeout|out-of-memory" "$log" | head -80 >&2 || tail -40 "$log" >&2
-    echo "fuzz.sh: fuzz_$t found a failure; reproducer in build-fuzz/findings/" >&2
-    exit 1
-  fi
-  runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
-  echo "fuzz_$t: $runs executions in ${seconds} s, no finding"
-  [ -z "$stats" ] || echo "$t $runs $seconds" >> "$stats"
+  ASAN_OPTIONS="detect_leaks=1" UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1" \
+    "build-fuzz/fuzz/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
+    -print_final_stats=1 -artifact_prefix="build-fuzz/findings/$t-" "$work/$t" > "$work/$t.log" 2>&1
+}
+cores=$(nproc)
+for ((first = 0; first < ${#targets[@]}; first += cores)); do
+  batch=("${targets[@]:first:cores}")
+  pids=()
+  for t in "${batch[@]}"; do
+    echo "== fuzz_$t for ${seconds} s"
+    fuzz_one "$t" &
+    pids+=($!)
+  done
+  for i in "${!batch[@]}"; do
+    t="${batch[$i]}"
+    log="$work/$t.log"
+    if ! wait "${pids[$i]}"; then
+      grep -A40 -E "ERROR|WARNING|runtime error|Deadly|timeout|out-of-memory" "$log" | head -80 >&2 || tail -40 "$log" >&2
+      echo "fuzz.sh: fuzz_$t found a failure; reproducer in build-fuzz/findings/" >&2
+      kill "${pids[@]}" 2> /dev/null || true
+      exit 1
+    fi
+    runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
+    echo "fuzz_$t: $runs executions in ${seconds} s, no finding"
+    [ -z "$stats" ] || echo "$t $runs $seconds" >> "$stats"
+  done
 done
