@@ -628,14 +628,20 @@ TEST_F(Cli, TriangleBudgetPicksTheFinestEpsWithinIt) {
     eps.precision(17), next.precision(17);
     eps << r["chosen_eps"].get<double>();
     next << r["next_eps"].get<double>();
-    // The eps reported gives the same mesh by itself; the next finer step exceeds the budget.
-    extract_report(quote(store) + " --iso 64 --eps " + eps.str());
-    EXPECT_TRUE(slurp(work() / "mesh.ply") == chosen) << "budget " << budget << " eps " << eps.str();
+    // The eps and tie classes reported give the same mesh by themselves; the next finer step
+    // exceeds the budget.
+    auto ties = [&](const char* key) {
+      const int t = r[key].get<int>();
+      return t >= 0 ? " --eps-ties " + std::to_string(t) : std::string();
+    };
+    extract_report(quote(store) + " --iso 64 --eps " + eps.str() + ties("chosen_eps_ties"));
+    EXPECT_TRUE(slurp(work() / "mesh.ply") == chosen)
+        << "budget " << budget << " eps " << eps.str() << ties("chosen_eps_ties");
     if (r["next_triangles"].get<int64_t>() == 0) {
       EXPECT_EQ(r["triangles"], full["triangles"]) << "no finer step left: the full-resolution mesh";
       continue;
     }
-    const nlohmann::json finer = extract_report(quote(store) + " --iso 64 --eps " + next.str());
+    const nlohmann::json finer = extract_report(quote(store) + " --iso 64 --eps " + next.str() + ties("next_eps_ties"));
     EXPECT_GT(finer["triangles"].get<int64_t>(), budget);
     EXPECT_EQ(finer["triangles"], r["next_triangles"]);
   }

@@ -64,6 +64,74 @@ TEST(CrackFree, ClosedShapesStayClosedManifoldAndOrientedAtEveryEps) {
   }
 }
 
+// A triangle budget's steps within one key (tie classes, docs/METHOD.md): every refined diamond's
+// parents are refined there too, so the meshes stay closed, and with preserve keep their topology.
+TEST(CrackFree, TieClassStepsOfATriangleBudgetStayClosed) {
+  const Shape shapes[] = {
+      {"sphere 33", generate_sphere(33), 1, 2},
+      {"torus 41", generate_torus(41), 1, 0},
+      {"nested spheres 45", generate_nested_spheres(45), 3, 6},
+  };
+  int with_ties = 0;
+  for (const Shape& s : shapes) {
+    const MultiresVolume mv = MultiresVolume::build(s.volume);
+    const auto full = static_cast<int64_t>(extract(mv, ExtractOptions{}).triangles.size());
+    for (TopologyMode mode : {TopologyMode::none, TopologyMode::preserve})
+      for (int64_t percent : {3, 7, 12, 20, 30, 45, 60, 80}) {
+        ExtractOptions o;
+        o.topology = mode;
+        o.max_triangles = full * percent / 100;
+        ExtractStats stats;
+        Mesh m;
+        const std::string what =
+            std::string(s.name) + " " + std::string(to_string(mode)) + " budget " + std::to_string(o.max_triangles);
+        try {
+          m = extract(mv, o, &stats);
+        } catch (const TriangleBudgetTooSmall&) {
+          continue;
+        }
+        with_ties += stats.chosen_eps_ties >= 0;
+        const MeshTopology t = measure_topology(m);
+        EXPECT_LE(t.triangles, o.max_triangles) << what;
+        EXPECT_EQ(t.boundary_edges, 0) << what << ", eps-ties " << stats.chosen_eps_ties;
+        EXPECT_EQ(t.nonmanifold_edges, 0) << what << ", eps-ties " << stats.chosen_eps_ties;
+        EXPECT_EQ(orientation_defects(m), 0) << what << ", eps-ties " << stats.chosen_eps_ties;
+        if (mode == TopologyMode::preserve) {
+          EXPECT_EQ(t.components, s.components) << what;
+          EXPECT_EQ(t.euler_characteristic, s.euler) << what;
+        }
+      }
+  }
+  // uint8 volumes: integer values make many errors 0 along an edge, so a diamond often has its
+  // child's key exactly, and the parent must be among the classes refined before the child.
+  for (const auto& s : testing::shared_volumes()) {
+    const Volume v = testing::load_shared(s);
+    const MultiresVolume mv = MultiresVolume::build(v);
+    for (float iso : s.isovalues) {
+      ExtractOptions base;
+      base.iso = iso;
+      base.topology = TopologyMode::none;
+      const auto full = static_cast<int64_t>(extract(mv, base).triangles.size());
+      for (int64_t percent : {5, 10, 20, 40, 70}) {
+        ExtractOptions o = base;
+        o.max_triangles = std::max<int64_t>(1, full * percent / 100);
+        ExtractStats stats;
+        Mesh m;
+        const std::string what = s.name + " iso " + std::to_string(iso) + " budget " + std::to_string(o.max_triangles);
+        try {
+          m = extract(mv, o, &stats);
+        } catch (const TriangleBudgetTooSmall&) {
+          continue;
+        }
+        with_ties += stats.chosen_eps_ties >= 0;
+        EXPECT_EQ(measure_topology(m).nonmanifold_edges, 0) << what << ", eps-ties " << stats.chosen_eps_ties;
+        EXPECT_EQ(testing::interior_boundary_edges(m, v), 0) << what << ", eps-ties " << stats.chosen_eps_ties;
+      }
+    }
+  }
+  EXPECT_GT(with_ties, 30);
+}
+
 void expect_crack_free(const Volume& v, float iso, const std::string& name) {
   const MultiresVolume mv = MultiresVolume::build(v);
   float lo = *std::min_element(v.values.begin(), v.values.end());

@@ -489,7 +489,7 @@ TEST_F(PagedExtract, TriangleBudgetTakesTheFinestEpsThatFits) {
       {"hydrogen q8", testing::load_shared(testing::shared_volumes()[2]), 0.05f, 8},
       {"sphere 33", as_raw(generate_sphere(33)), 0.0f, 0},  // 2^k + 1: nothing leaves the data box
   };
-  int budgets_run = 0, thrown = 0;
+  int budgets_run = 0, thrown = 0, ties_chosen = 0;
   for (const Case& c : cases) {
     const Hierarchy memory = Hierarchy::build(c.volume);
     const StoreReader store(convert(c.volume, "budget", 4, c.quantize_bits));
@@ -541,32 +541,41 @@ TEST_F(PagedExtract, TriangleBudgetTakesTheFinestEpsThatFits) {
           ExtractStats ms;
           EXPECT_TRUE(same_mesh(m, extract(memory, o, &ms))) << what << ": in memory";
           EXPECT_EQ(ms.chosen_eps, s.chosen_eps) << what;
+          EXPECT_EQ(ms.chosen_eps_ties, s.chosen_eps_ties) << what;
           EXPECT_EQ(ms.next_eps, s.next_eps) << what;
+          EXPECT_EQ(ms.next_eps_ties, s.next_eps_ties) << what;
           EXPECT_EQ(ms.next_triangles, s.next_triangles) << what;
         }
-        // The plain mesh at the chosen eps is the budget's mesh.
+        // The plain mesh at the chosen eps and tie classes is the budget's mesh.
         ExtractOptions chosen = base;
-        chosen.eps = s.chosen_eps;
+        chosen.eps = s.chosen_eps, chosen.eps_ties = s.chosen_eps_ties;
         EXPECT_TRUE(same_mesh(m, extract(paged, chosen)))
-            << what << ": plain extraction at chosen eps " << s.chosen_eps;
+            << what << ": plain extraction at chosen eps " << s.chosen_eps << ", eps-ties " << s.chosen_eps_ties;
+        ties_chosen += s.chosen_eps_ties >= 0;
         if (budget >= n) {
           EXPECT_EQ(s.next_triangles, 0) << what;
           EXPECT_EQ(s.chosen_eps, 0) << what;
           EXPECT_TRUE(same_mesh(m, full)) << what << ": the budget holds the full mesh";
           continue;
         }
-        // One step finer does not fit.
+        // One step finer does not fit: a smaller eps, or more tie classes of the same one.
         EXPECT_GT(s.next_triangles, budget) << what;
-        EXPECT_LT(s.next_eps, s.chosen_eps) << what;
+        if (s.next_eps == s.chosen_eps) {
+          EXPECT_GE(s.chosen_eps_ties, 0) << what;
+          EXPECT_TRUE(s.next_eps_ties == -1 || s.next_eps_ties > s.chosen_eps_ties) << what;
+        } else {
+          EXPECT_LT(s.next_eps, s.chosen_eps) << what;
+        }
         ExtractOptions next = base;
-        next.eps = s.next_eps;
+        next.eps = s.next_eps, next.eps_ties = s.next_eps_ties;
         EXPECT_EQ(static_cast<int64_t>(extract(paged, next).triangles.size()), s.next_triangles)
-            << what << ": plain extraction at next eps " << s.next_eps;
+            << what << ": plain extraction at next eps " << s.next_eps << ", eps-ties " << s.next_eps_ties;
       }
     }
   }
   EXPECT_GT(budgets_run, 20);
   EXPECT_GT(thrown, 0);
+  EXPECT_GT(ties_chosen, 5);  // steps within a key were taken
 }
 
 // 6. The cache: when the store fits, each brick is read at most once and no more bytes than the

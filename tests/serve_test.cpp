@@ -80,6 +80,7 @@ TEST(ServeRequest, TakesWhatExtractTakes) {
   EXPECT_EQ(r.client, "a-Z_9");
   EXPECT_EQ(r.seq, 17);
   EXPECT_EQ(parse_extract_request(query({{"iso", "1"}, {"max-triangles", "1000"}})).options.max_triangles, 1000);
+  EXPECT_EQ(parse_extract_request(query({{"iso", "1"}, {"eps", "2"}, {"eps-ties", "40"}})).options.eps_ties, 40);
 
   const auto d = parse_extract_request(query({{"iso", "-2"}}));  // extract's defaults
   EXPECT_EQ(d.options.eps, 0);
@@ -111,6 +112,7 @@ TEST(ServeRequest, RefusesWhatIsNotAnExtractionWithAMessage) {
       {query({{"iso", "1"}, {"foo", "2"}}), "unknown parameter 'foo'"},
       {query({{"iso", "1"}, {"max-triangles", "0"}}), "max-triangles must be"},
       {query({{"iso", "1"}, {"max-triangles", "1000"}, {"eps", "2"}}), "max-triangles chooses eps itself"},
+      {query({{"iso", "1"}, {"eps-ties", "3"}}), "eps-ties applies to a finite eps other than 0 only"},
       {query({{"iso", "1"}, {"iso", "2"}}), "iso is given twice"},
       {query({{"iso", std::string(200, '1')}}), "iso is too long"},
       {query({{"iso", "1"}, {"client", "../etc"}}), "client must be 1-64 characters"},
@@ -339,6 +341,15 @@ TEST_F(Serve, ATriangleBudgetChoosesTheEpsExtractChooses) {
     EXPECT_EQ(report["max_triangles"], budget);
     EXPECT_GT(report["chosen_eps"].get<double>(), 0);
     EXPECT_GT(report["next_triangles"].get<int64_t>(), budget);
+    // The same mesh again from the eps and tie classes the report names.
+    ExtractOptions again;
+    again.iso = iso_, again.topology = TopologyMode::none, again.eps = report["chosen_eps"].get<double>();
+    again.eps_ties = report["chosen_eps_ties"].get<int>();
+    const auto res2 = get("/api/extract?iso=" + exact(o.iso) + "&topology=none&eps=" + exact(again.eps) +
+                          (again.eps_ties >= 0 ? "&eps-ties=" + std::to_string(again.eps_ties) : std::string()));
+    ASSERT_TRUE(res2);
+    ASSERT_EQ(res2->status, 200) << res2->body;
+    expect_same_mesh(decode_mesh_wire(res2->body).mesh, w.mesh);
   }
 }
 

@@ -373,9 +373,11 @@ TEST(SimplifyBudget, ChoosesTheSmallestDeltaThatLeavesHalfTheBudget) {
       EXPECT_LE(s.delta_floor_triangles, budget / 2) << what;
       // The chosen delta and eps, given as they are, make the same mesh.
       ExtractOptions plain = options(iso, s.chosen_eps, TopologyMode::simplify, s.chosen_delta, w);
+      plain.eps_ties = s.chosen_eps_ties;
       EXPECT_TRUE(triangle_set(extract(mv, plain)) == triangle_set(m)) << what;
       // And its coarsest mesh is the floor reported.
       plain.eps = std::numeric_limits<double>::infinity();
+      plain.eps_ties = -1;
       EXPECT_EQ(static_cast<int64_t>(extract(mv, plain).triangles.size()), s.delta_floor_triangles) << what;
       if (w == SimplificationWeight::interval) {
         EXPECT_LE(s.chosen_delta, last_delta) << what << ": a larger budget drops no more";

@@ -1,8 +1,9 @@
 // The triangle budget's search (engine/extract/triangle_budget.h) against the walk it replaced: the
 // cut moved down one group of equal keys at a time through a max-heap, the running triangle count
 // of the front checked after each group (docs/METHOD.md, "Focus and triangle budget"). That walk
-// is kept here as the reference. The passes that count every cut at once must choose the same eps,
-// report the same triangles, the same next finer step and its triangles, the same number of steps,
+// is kept here as the reference, its groups cut by tie class within a key (SplitRule::refines) as
+// the search's steps are. The passes that count every cut at once must choose the same eps and
+// tie classes, report the same triangles, the same next finer step and its triangles, the same number of steps,
 // and throw the same message below the coarsest mesh, on one thread and on several; for keys that
 // take few values (a quantized store: halves of a code), for keys that take many (float data, a
 // focus), for the choice of delta (simplify), on a clipped lattice and on a 2^k + 1 one, in memory
@@ -38,19 +39,21 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-// The reference: the front of the cut in a max-heap by key, split one group of equal keys at a
-// time from +infinity down, stopping at the first group whose mesh exceeds the budget.
+// The reference: the front of the cut in a max-heap by key (and, with `ties`, by tie class, coarse
+// first), split one group of equal keys (and classes) at a time from +infinity down, stopping at
+// the first group whose mesh exceeds the budget.
 template <TraversalSource Source, class Key>
-BudgetChoice walk_the_cut(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
+BudgetChoice walk_the_cut(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles, bool ties,
                           const Key& judge) {
   using namespace traversal;
   struct Item {
     double key;
+    int tie;
     PackedTet tet;
     int level;
     bool positive;
     int triangles;
-    bool operator<(const Item& o) const { return key < o.key; }
+    bool operator<(const Item& o) const { return key != o.key ? key < o.key : tie > o.tie; }
   };
   Traversal<Source> walk(source, rule);
   std::priority_queue<Item> front;
@@ -61,10 +64,12 @@ BudgetChoice walk_the_cut(const Source& source, const traversal::SplitRule& rule
     if (fate == Traversal<Source>::Fate::culled) return;
     const int tris = walk.triangles(t, level);
     count += tris;
-    if (fate == Traversal<Source>::Fate::split_key && key > -kInf) front.push({key, t, level, positive, tris});
+    const int tie = ties ? SplitRule::tie_class((t[0] + t[1]) >> 1, level) : 0;
+    if (fate == Traversal<Source>::Fate::split_key && key > -kInf) front.push({key, tie, t, level, positive, tris});
   };
-  auto split_group = [&](double key) {
-    while (!front.empty() && front.top().key == key) {
+  // Every item of this key and class (at +infinity: of this key).
+  auto split_group = [&](double key, int tie) {
+    while (!front.empty() && front.top().key == key && (key == kInf || front.top().tie == tie)) {
       const Item it = front.top();
       front.pop();
       count -= it.triangles;
@@ -72,20 +77,23 @@ BudgetChoice walk_the_cut(const Source& source, const traversal::SplitRule& rule
     }
   };
   for (const Child& r : walk.roots()) add(r.tet, 0, r.positive);
-  split_group(kInf);
+  split_group(kInf, 0);
   if (count > max_triangles) throw std::runtime_error("below the coarsest: " + std::to_string(count));
   BudgetChoice choice;
   choice.triangles = count;
   choice.eps = front.empty() ? 0 : std::nextafter(front.top().key, kInf);
   while (!front.empty()) {
     const double key = front.top().key;
-    split_group(key);
+    const int tie = front.top().tie;
+    split_group(key, tie);
     ++choice.steps;
+    // Classes of this key still to split: the cut is "key > eps, or key = eps and class <= tie".
+    const int ties_after = !front.empty() && front.top().key == key ? tie + 1 : -1;
     if (count > max_triangles) {
-      choice.next_eps = key, choice.next_triangles = count;
+      choice.next_eps = key, choice.next_ties = ties_after, choice.next_triangles = count;
       return choice;
     }
-    choice.eps = key, choice.triangles = count;
+    choice.eps = key, choice.ties = ties_after, choice.triangles = count;
   }
   choice.eps = 0;
   return choice;
@@ -93,7 +101,7 @@ BudgetChoice walk_the_cut(const Source& source, const traversal::SplitRule& rule
 
 template <TraversalSource Source>
 BudgetChoice reference_eps(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
-  return walk_the_cut(source, rule, max_triangles,
+  return walk_the_cut(source, rule, max_triangles, true,
                       [](traversal::Traversal<Source>& walk, const traversal::PackedTet& t, int level, double* key) {
                         return walk.judge(t, level, key);
                       });
@@ -102,7 +110,7 @@ BudgetChoice reference_eps(const Source& source, const traversal::SplitRule& rul
 template <TraversalSource Source>
 BudgetChoice reference_delta(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
   using Walk = traversal::Traversal<Source>;
-  return walk_the_cut(source, rule, max_triangles,
+  return walk_the_cut(source, rule, max_triangles, false,
                       [](Walk& walk, const traversal::PackedTet& t, int level, double* key) {
                         double error_key = 0;
                         const auto fate = walk.judge_topology(t, level, &error_key, key);
@@ -170,8 +178,10 @@ class TriangleBudget : public testing::TempDirTest {
           continue;
         }
         EXPECT_EQ(got.choice->eps, want.choice->eps) << what;
+        EXPECT_EQ(got.choice->ties, want.choice->ties) << what;
         EXPECT_EQ(got.choice->triangles, want.choice->triangles) << what;
         EXPECT_EQ(got.choice->next_eps, want.choice->next_eps) << what;
+        EXPECT_EQ(got.choice->next_ties, want.choice->next_ties) << what;
         EXPECT_EQ(got.choice->next_triangles, want.choice->next_triangles) << what;
         EXPECT_EQ(got.choice->steps, want.choice->steps) << what;
       }

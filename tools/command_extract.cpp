@@ -58,6 +58,7 @@ struct ExtractArgs {
   std::string focus;
   std::string radius;
   std::string max_triangles;
+  std::string eps_ties;
   bool quiet = false;
 };
 
@@ -149,7 +150,8 @@ int run_extract(const ExtractArgs& a) {
                                    {"delta", a.delta},
                                    {"focus", a.focus},
                                    {"radius", a.radius},
-                                   {"max-triangles", a.max_triangles}})
+                                   {"max-triangles", a.max_triangles},
+                                   {"eps-ties", a.eps_ties}})
     if (!text.empty()) given.emplace_back(name, text);
   // A budget in simplify mode without a delta chooses delta too (the parser sets auto_delta).
   run.options = parse_command_line_options(given);
@@ -374,6 +376,12 @@ Command add_extract_command(CLI::App& app) {
                   "coarsest mesh takes half the budget")
       ->check(extract_option_check("max-triangles"))
       ->type_name("T");
+  cmd->add_option("--eps-ties", a->eps_ties,
+                  "With --eps: of the diamonds whose error equals eps exactly, refine only those of the N coarsest "
+                  "tie classes (16 per level, coarse to fine; docs/METHOD.md): the finer steps --max-triangles "
+                  "takes and reports, to reproduce its mesh")
+      ->check(extract_option_check("eps-ties"))
+      ->type_name("N");
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");
 
   return [a] { return run_extract(*a); };

@@ -24,6 +24,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -344,7 +345,8 @@ class Suite {
   }
 
   // The finest eps whose mesh without topology control has at most 10% of the full triangles
-  // (the triangle budget's search, untimed); every coarse row uses it, whatever its mode.
+  // (the triangle budget's search, untimed); every coarse row uses it, whatever its mode. A plain
+  // eps: where the search stepped into the tie classes of a key, the eps just above that key.
   double coarse_eps(const std::string& store, const DatasetSpec& spec, const DatasetResult& d) const {
     say(spec, "choosing the coarse eps");
     const Source volume = open_store(store);
@@ -354,7 +356,8 @@ class Suite {
     o.max_triangles = std::max<int64_t>(1, static_cast<int64_t>(kCoarseShare * static_cast<double>(d.full_triangles)));
     ExtractStats stats;
     volume.extract(o, &stats);
-    return stats.chosen_eps;
+    return stats.chosen_eps_ties >= 0 ? std::nextafter(stats.chosen_eps, std::numeric_limits<double>::infinity())
+                                      : stats.chosen_eps;
   }
 
   // A store as isotope extract and isotope serve open it (isotope/source.h), through --cache-mb.

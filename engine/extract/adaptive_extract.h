@@ -67,8 +67,11 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
       const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);
       in_codes.eps = c.eps;
+      in_codes.eps_ties = c.ties;
       total.chosen_eps = c.eps * scale;
+      total.chosen_eps_ties = c.ties;
       total.next_eps = c.next_eps * scale;
+      total.next_eps_ties = c.next_ties;
       total.next_triangles = c.next_triangles;
       total.budget_steps = c.steps;
     }

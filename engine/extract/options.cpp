@@ -117,6 +117,12 @@ void set_extract_option(ExtractOptions& o, std::string_view name, std::string_vi
     o.error = *e;
   } else if (name == "max-triangles") {
     o.max_triangles = triangle_budget(text);
+  } else if (name == "eps-ties") {
+    const auto v = integer_in(text, 0, kMaxTieClasses);
+    if (!v)
+      throw OptionError("eps-ties", "must be an integer in 0 .. " + std::to_string(kMaxTieClasses) +
+                                        " (the tie classes refined at key = eps), got " + quoted(text));
+    o.eps_ties = static_cast<int>(*v);
   } else {
     throw OptionError(std::string(name.substr(0, kMaxValueChars)), "is not an extraction option");
   }
@@ -154,6 +160,12 @@ void ExtractOptions::validate() const {
     throw OptionError("max-triangles", "must be in 0 .. " + std::to_string(kMaxTriangleBudget));
   if (max_triangles > 0 && eps != 0)
     throw OptionError("max-triangles", "chooses eps itself: give eps or max-triangles, not both");
+  if (eps_ties < -1 || eps_ties > kMaxTieClasses)
+    throw OptionError("eps-ties", "must be in 0 .. " + std::to_string(kMaxTieClasses));
+  if (eps_ties >= 0 && max_triangles > 0)
+    throw OptionError("eps-ties", "is chosen by max-triangles: give eps-ties with eps only");
+  if (eps_ties >= 0 && !(eps > 0 && std::isfinite(eps)))
+    throw OptionError("eps-ties", "applies to a finite eps other than 0 only");
   if (auto_delta && (topology != TopologyMode::simplify || max_triangles == 0 || delta != 0))
     throw OptionError("delta", "is chosen only with topology simplify, a triangle budget and no delta given");
   if (focus) {

@@ -109,6 +109,19 @@ class SplitRule {
   bool dropped(const DiamondTopology& t) const {
     return options_.topology == TopologyMode::simplify && exact_fires(t) && !heavy(t);
   }
+  // Whether a diamond whose key (or error key) is `key` is refined: key >= eps, where a key equal to
+  // eps refines only the tie classes below eps_ties when those are given. Classes grow downwards
+  // (a child's level is its parent's plus one), so the rule still refines every refined diamond's
+  // parents, as key >= eps alone does.
+  bool refines(double key, Packed v, int level) const {
+    if (key != options_.eps || options_.eps_ties < 0) return key >= options_.eps;
+    return tie_class(v, level) < options_.eps_ties;
+  }
+  // Level-major, then one of kTieBuckets buckets by a hash of the diamond's centre.
+  static int tie_class(Packed v, int level) {
+    static_assert(kTieBuckets == 16, "the bucket is the hash's top 4 bits");
+    return level * kTieBuckets + static_cast<int>((v * 0x9E3779B97F4A7C15ull) >> 60);
+  }
   bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
   const ExtractOptions& options() const { return options_; }
   // The fields error_key(), critical() and dropped() read beyond the range and the bound.
@@ -260,7 +273,8 @@ class Traversal {
     if (level == lattice_.max_level()) return Step::stop;
     const DiamondBounds b = reader_.bounds(h, rule_.fields());
     if (!rule_.in_range(b)) return Step::cull;
-    if (!(rule_.error_key(b, (t[0] + t[1]) >> 1, level) >= rule_.options().eps)) {
+    const Packed v = (t[0] + t[1]) >> 1;
+    if (!rule_.refines(rule_.error_key(b, v, level), v, level)) {
       if (!rule_.fields().topology()) return Step::stop;  // topology none: nothing more to read
       const DiamondTopology topology = reader_.topology(h, rule_.fields());
       if (!rule_.critical(topology)) {

@@ -39,8 +39,10 @@ namespace isotope {
 
 struct BudgetChoice {
   double eps = 0;  // in the source's value units (codes, for a quantized store)
+  int ties = -1;   // ExtractOptions::eps_ties: -1, every diamond of key eps refined
   int64_t triangles = 0;
   double next_eps = 0;  // the next finer step, and its triangles (0: eps is full resolution)
+  int next_ties = -1;
   int64_t next_triangles = 0;
   int64_t steps = 0;
 };
@@ -49,14 +51,15 @@ struct BudgetChoice {
 // judges tetrahedron t (engine/extract/traversal.h, Traversal::judge's fates) and, when it may be split,
 // sets its key. Returns the smallest threshold x (a key, or just above the largest) such that
 // splitting every tetrahedron with key >= x gives at most max_triangles; throws when even the
-// keys of +infinity alone exceed it (TriangleBudgetTooSmall).
+// keys of +infinity alone exceed it (TriangleBudgetTooSmall). With `ties`, the steps go on within
+// one key by tie class (SplitRule::refines): the cut "key > x, or key = x and class < ties".
 template <TraversalSource Source, class Key>
 BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
-                                   const Key& judge);
+                                   bool ties, const Key& judge);
 
 template <TraversalSource Source>
 BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
-  return choose_cut_for_budget(source, rule, max_triangles,
+  return choose_cut_for_budget(source, rule, max_triangles, true,
                                [](traversal::Traversal<Source>& walk, const traversal::PackedTet& t, int level,
                                   double* key) { return walk.judge(t, level, key); });
 }
@@ -69,7 +72,7 @@ BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitR
 template <TraversalSource Source>
 BudgetChoice choose_delta_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
   using Walk = traversal::Traversal<Source>;
-  return choose_cut_for_budget(source, rule, max_triangles,
+  return choose_cut_for_budget(source, rule, max_triangles, false,
                                [&](Walk& walk, const traversal::PackedTet& t, int level, double* key) {
                                  double error_key = 0;
                                  const auto fate = walk.judge_topology(t, level, &error_key, key);
@@ -81,22 +84,35 @@ BudgetChoice choose_delta_for_budget(const Source& source, const traversal::Spli
 
 namespace budget_detail {
 
-// D of the passes so far (see the top of this file), exact for the keys >= the last bound.
-struct KeyTable {
-  std::unordered_map<double, int64_t> d;
+// A key and a tie class (SplitRule::tie_class; 0 where ties are not counted).
+struct TieKey {
+  double key;
+  int tie;
+  bool operator==(const TieKey&) const = default;
+};
+struct TieKeyHash {
+  size_t operator()(const TieKey& k) const {
+    return std::hash<double>()(k.key) ^ (static_cast<size_t>(k.tie) * 0x9E3779B97F4A7C15ull);
+  }
+};
 
-  // Consecutive tetrahedra often share a key (saturated errors): one pending sum saves most
-  // lookups.
-  void add(double key, int64_t delta) {
-    if (key != pending_key_ || !has_pending_) {
+// D of the passes so far (see the top of this file) by key and tie class, exact for the keys >=
+// the last bound.
+struct KeyTable {
+  std::unordered_map<TieKey, int64_t, TieKeyHash> d;
+
+  // Consecutive tetrahedra often share a key and class (saturated errors, siblings): one pending
+  // sum saves many lookups.
+  void add(double key, int tie, int64_t delta) {
+    if (key != pending_.key || tie != pending_.tie || !has_pending_) {
       flush();
-      pending_key_ = key, has_pending_ = true;
+      pending_ = {key, tie}, has_pending_ = true;
     }
-    pending_ += delta;
+    pending_sum_ += delta;
   }
   void flush() {
-    if (has_pending_) d[pending_key_] += pending_;
-    has_pending_ = false, pending_ = 0;
+    if (has_pending_) d[pending_] += pending_sum_;
+    has_pending_ = false, pending_sum_ = 0;
   }
   void merge(KeyTable& other) {
     other.flush();
@@ -105,8 +121,8 @@ struct KeyTable {
   }
 
  private:
-  double pending_key_ = 0;
-  int64_t pending_ = 0;
+  TieKey pending_{0, 0};
+  int64_t pending_sum_ = 0;
   bool has_pending_ = false;
 };
 
@@ -127,14 +143,14 @@ template <TraversalSource Source, class Key>
 class CountPasses {
  public:
   using Walk = traversal::Traversal<Source>;
-  CountPasses(const Source& source, const traversal::SplitRule& rule, const Key& judge)
-      : source_(source), rule_(rule), judge_(judge) {
+  CountPasses(const Source& source, const traversal::SplitRule& rule, bool ties, const Key& judge)
+      : source_(source), rule_(rule), ties_(ties), judge_(judge) {
     const auto threads =
         static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
     workers_.resize(static_cast<size_t>(std::max<int64_t>(threads, 1)));
   }
 
-  const std::unordered_map<double, int64_t>& d() const { return table_.d; }
+  const std::unordered_map<TieKey, int64_t, TieKeyHash>& d() const { return table_.d; }
   // The largest key of the frontier: -infinity once every split is counted.
   double largest_below() const { return largest_below_; }
 
@@ -147,15 +163,17 @@ class CountPasses {
       roots_ = walk.roots();
       for (size_t r = 0; r < roots_.size(); ++r) {
         const traversal::Child& c = roots_[r];
-        top.table.add(kInf, visit(walk, top, c.tet, walk.corner_values(c.tet, 0), 0, c.positive,
-                                  static_cast<uint8_t>(r), 0, seed_level, &seeds, kInf));
+        top.table.add(kInf, 0,
+                      visit(walk, top, c.tet, walk.corner_values(c.tet, 0), 0, c.positive, static_cast<uint8_t>(r), 0,
+                            seed_level, &seeds, kInf, 0));
       }
     }
     absorb(top);
     run_parallel(static_cast<int64_t>(seeds.size()), [&](Walk& walk, Worker& w, int64_t i) {
       const Seed& s = seeds[static_cast<size_t>(i)];
-      w.table.add(s.parent_key,
-                  visit(walk, w, s.tet, s.values, s.level, s.positive, s.root, s.path, -1, nullptr, s.parent_key));
+      w.table.add(s.parent_key, s.parent_tie,
+                  visit(walk, w, s.tet, s.values, s.level, s.positive, s.root, s.path, -1, nullptr, s.parent_key,
+                        s.parent_tie));
     });
     finish_pass();
   }
@@ -221,6 +239,7 @@ class CountPasses {
     uint8_t root;
     uint64_t path;
     double parent_key;
+    int parent_tie;
   };
   struct Worker {
     KeyTable table;
@@ -265,9 +284,10 @@ class CountPasses {
   // The triangles of t itself (0 when culled); t's descent goes into w.
   // `f`: the values at t's corners, handed down from its parent.
   int64_t visit(Walk& walk, Worker& w, const traversal::PackedTet& t, const Corners& f, int level, bool positive,
-                uint8_t root, uint64_t path, int seed_level, std::vector<Seed>* seeds, double parent_key) {
+                uint8_t root, uint64_t path, int seed_level, std::vector<Seed>* seeds, double parent_key,
+                int parent_tie) {
     if (seeds && level == seed_level) {
-      seeds->push_back({t, f, level, positive, root, path, parent_key});
+      seeds->push_back({t, f, level, positive, root, path, parent_key, parent_tie});
       return 0;  // counted by the seed's own task
     }
     double key = 0;
@@ -290,21 +310,23 @@ class CountPasses {
     // A child's corners: three of t's and the midpoint, the one value to read.
     const traversal::Packed mid = (t[0] + t[1]) >> 1;
     const float at_mid = walk.node_value(mid, level + 1);
+    const int tie = ties_ ? traversal::SplitRule::tie_class(mid, level) : 0;
     for (uint64_t i = 0; i < 2; ++i) {
       Corners g;
       for (int c = 0; c < 4; ++c) {
         const traversal::Packed p = cs[i].tet[static_cast<size_t>(c)];
         g[static_cast<size_t>(c)] = p == mid ? at_mid : p == t[0] ? f[0] : p == t[1] ? f[1] : p == t[2] ? f[2] : f[3];
       }
-      children +=
-          visit(walk, w, cs[i].tet, g, level + 1, cs[i].positive, root, path | (i << level), seed_level, seeds, key);
+      children += visit(walk, w, cs[i].tet, g, level + 1, cs[i].positive, root, path | (i << level), seed_level, seeds,
+                        key, tie);
     }
-    w.table.add(key, children - tris);
+    w.table.add(key, tie, children - tris);
   }
   int64_t tris_of(const Corners& f) const { return traversal::triangles_of(f, rule_.options().iso); }
 
   const Source& source_;
   const traversal::SplitRule& rule_;
+  const bool ties_;
   const Key& judge_;
   double bound_ = kInf;
   std::vector<traversal::Child> roots_;
@@ -318,24 +340,32 @@ class CountPasses {
 
 template <TraversalSource Source, class Key>
 BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
-                                   const Key& judge) {
+                                   bool ties, const Key& judge) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   // Subtrees for the threads in the first pass: a few thousand at most, as the extraction's pieces.
   const int seed_level = std::min(source.lattice().max_level(), 9);
-  budget_detail::CountPasses<Source, Key> passes(source, rule, judge);
+  budget_detail::CountPasses<Source, Key> passes(source, rule, ties, judge);
   double bound = kInf;
   for (bool first = true;; first = false) {
     if (first)
       passes.first(bound, seed_level);
     else
       passes.next(bound);
-    // T at every key >= bound, from +infinity down.
-    std::vector<std::pair<double, int64_t>> d(passes.d().begin(), passes.d().end());
-    std::sort(d.begin(), d.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    // T at every key >= bound, from +infinity down, each key's tie classes coarse to fine.
+    struct Step {
+      double key;
+      int tie;
+      int64_t delta;
+    };
+    std::vector<Step> d;
+    d.reserve(passes.d().size());
+    for (const auto& [k, v] : passes.d()) d.push_back({k.key, k.tie, v});
+    std::sort(d.begin(), d.end(),
+              [](const Step& a, const Step& b) { return a.key != b.key ? a.key > b.key : a.tie < b.tie; });
     const double largest_below = passes.largest_below();
     size_t i = 0;
     int64_t count = 0;
-    for (; i < d.size() && d[i].first == kInf; ++i) count += d[i].second;
+    for (; i < d.size() && d[i].key == kInf; ++i) count += d[i].delta;
     const int64_t infinite = count;
     if (count > max_triangles) {
       const TopologyMode mode = rule.options().topology;
@@ -350,17 +380,21 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
     BudgetChoice choice;
     choice.triangles = count;
     // The largest finite key: the first one the walk down from +infinity meets.
-    choice.eps = i < d.size() ? std::nextafter(d[i].first, kInf) : more_below ? std::nextafter(largest_below, kInf) : 0;
-    // T at the keys >= bound, in decreasing order: each key is one step finer.
+    choice.eps = i < d.size() ? std::nextafter(d[i].key, kInf) : more_below ? std::nextafter(largest_below, kInf) : 0;
+    // T at the keys >= bound, in decreasing order: each key, and within it each tie class but its
+    // last (after which the cut is "key >= eps": ties -1), is one step finer.
     for (; i < d.size(); ++i) {
-      count += d[i].second;
+      count += d[i].delta;
       ++choice.steps;
+      const int tie = i + 1 < d.size() && d[i + 1].key == d[i].key ? d[i].tie + 1 : -1;
       if (count > max_triangles) {
-        choice.next_eps = d[i].first;
+        choice.next_eps = d[i].key;
+        choice.next_ties = tie;
         choice.next_triangles = count;
         return choice;
       }
-      choice.eps = d[i].first;
+      choice.eps = d[i].key;
+      choice.ties = tie;
       choice.triangles = count;
     }
     if (!more_below) {
@@ -372,15 +406,15 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
     // whatever eps is), T grows about as a power of 1/eps: fit it locally, to T at the smallest
     // key known and at the smallest key at least 1.5 times that, and aim a little above the budget:
     // a pass that stops short costs only the next one, as each resumes where the last stopped.
-    const double x = !d.empty() && d.back().first < kInf ? d.back().first : largest_below;
+    const double x = !d.empty() && d.back().key < kInf ? d.back().key : largest_below;
     double lowest = x / 4;
-    if (!d.empty() && x == d.back().first && count > infinite) {
+    if (!d.empty() && x == d.back().key && count > infinite) {
       double x2 = 0;
       int64_t at_x2 = 0, sum = 0;
-      for (const auto& [k, v] : d) {
-        if (k < 1.5 * x) break;
-        sum += v;
-        if (k < kInf) x2 = k, at_x2 = sum;
+      for (const Step& s : d) {  // a key's classes are adjacent: x2's sum ends with its last
+        if (s.key < 1.5 * x) break;
+        sum += s.delta;
+        if (s.key < kInf) x2 = s.key, at_x2 = sum;
       }
       if (x2 > x && at_x2 > infinite && count > at_x2) {
         const double grown = static_cast<double>(count - infinite), before = static_cast<double>(at_x2 - infinite);

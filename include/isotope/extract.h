@@ -53,9 +53,19 @@ struct Focus {
 // The largest triangle budget any face accepts.
 inline constexpr int64_t kMaxTriangleBudget = int64_t{1} << 40;
 
+// Tie classes (ExtractOptions::eps_ties): a diamond of level l falls in class l * kTieBuckets plus
+// one of kTieBuckets buckets by a hash of its position, so the classes run coarse to fine and each
+// level's are spread evenly over the volume. Class numbers stay below kMaxTieClasses.
+inline constexpr int kTieBuckets = 16;
+inline constexpr int kMaxTieClasses = 64 * kTieBuckets;
+
 struct ExtractOptions {
   float iso = 0.0f;  // inside means value > iso
   double eps = 0.0;  // refine while the chosen error is >= eps; 0 gives full resolution
+  // >= 0: of the diamonds whose key equals eps exactly, refine only those of tie class < eps_ties
+  // (docs/METHOD.md, "Focus and triangle budget"): a step between eps and the next key above it,
+  // which a triangle budget takes to land closer to what it was given. -1: all of them (key >= eps).
+  int eps_ties = -1;
   ErrorIndicator error = ErrorIndicator::bound;
   TopologyMode topology = TopologyMode::preserve;
   SimplificationWeight weight = SimplificationWeight::interval;  // simplify mode only
@@ -80,7 +90,8 @@ struct ExtractOptions {
   bool keep_shares = false;
 
   // Throws OptionError naming the first option out of its range: iso not finite, eps or delta
-  // negative or NaN (infinity is the coarsest), delta without `simplify`, a focus point not finite or a
+  // negative or NaN (infinity is the coarsest), eps_ties outside -1 .. kMaxTieClasses or without a
+  // finite eps > 0 (or with a budget), delta without `simplify`, a focus point not finite or a
   // radius not > 0, a budget outside [0, kMaxTriangleBudget] or with eps > 0, auto_delta without a budget in
   // simplify mode. Every extraction calls it; a face calls it to refuse before any work.
   void validate() const;
@@ -95,7 +106,7 @@ struct OptionError : std::invalid_argument {
 };
 
 // The options as text, by name: iso (required), eps, error, topology, weight, delta, focus ("X,Y,Z"),
-// radius, max-triangles. Numbers as a user types them ("0.25", "-3e-2", "1/64"). Each name at most
+// radius, max-triangles, eps-ties. Numbers as a user types them ("0.25", "-3e-2", "1/64"). Each name at most
 // once; a budget of at least 1; a budget in simplify mode without a delta sets auto_delta; the
 // result is validated (an eps other than 0 with a budget among what validate() refuses). Throws
 // OptionError (an unknown name is reported under its own name, with the message "is not an
@@ -145,9 +156,11 @@ struct ExtractStats {
   // With max_triangles: the eps chosen (in data units), and the next finer eps step and the
   // triangles it would give (next_triangles = 0 when the chosen mesh is already full resolution).
   double chosen_eps = 0;
+  int chosen_eps_ties = -1;  // ExtractOptions::eps_ties of the chosen mesh (-1: every tie refined)
   double next_eps = 0;
+  int next_eps_ties = -1;
   int64_t next_triangles = 0;
-  int64_t budget_steps = 0;  // distinct eps values the budget search went through
+  int64_t budget_steps = 0;  // steps (eps values, and tie classes within one) the budget search went through
   // With auto_delta: the delta chosen (in data units; -1 when none was), and the triangles of its
   // coarsest mesh (eps = infinity).
   double chosen_delta = -1;

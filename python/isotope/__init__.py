@@ -53,9 +53,9 @@ def _option_text(name, value):
     raise _option_error(name, f"must be a number, got {value!r}")
 
 
-def _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles):
+def _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles, eps_ties):
     given = {"iso": iso, "eps": eps, "topology": topology, "error": error, "weight": weight, "delta": delta,
-             "focus": focus, "radius": radius, "max-triangles": max_triangles}
+             "focus": focus, "radius": radius, "max-triangles": max_triangles, "eps-ties": eps_ties}
     return [(name, _option_text(name, value)) for name, value in given.items() if value is not None]
 
 
@@ -116,7 +116,7 @@ class Store:
         return self._source.info
 
     def extract(self, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
-                radius=None, max_triangles=None, threads=0):
+                radius=None, max_triangles=None, eps_ties=None, threads=0):
         """The isosurface at ``iso`` (inside means value > iso), as a :class:`Mesh`.
 
         ``eps`` (data units) is the coarse surface's error bound (0, the default: full resolution,
@@ -125,20 +125,23 @@ class Store:
         may go; ``weight`` = interval, gradient or size), ``"paper"`` or ``"none"``. ``focus`` =
         (x, y, z) and ``radius``: full resolution at the point, eps from radius on.
         ``max_triangles`` (at least 1; instead of an ``eps`` other than 0): the finest eps whose mesh fits (with
-        simplify and no delta, delta too). ``threads``: 0 for all cores (up to 4096); a limit holds for the whole process while the call
+        simplify and no delta, delta too; ``stats["chosen_eps_ties"]`` is the ``eps_ties`` that, with
+        ``eps=stats["chosen_eps"]``, gives the same mesh). ``eps_ties`` (with an ``eps`` other than 0):
+        of the diamonds whose error equals eps exactly, refine only those of the N coarsest tie
+        classes. ``threads``: 0 for all cores (up to 4096); a limit holds for the whole process while the call
         runs (oneTBB's), so concurrent calls share it.
         """
-        options = _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles)
+        options = _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles, eps_ties)
         return self._source.extract(options, _integer_text(threads))
 
 
 def extract(volume, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
-            radius=None, max_triangles=None, dims=None, type=None, spacing=None, origin=None, cache_mb=512,
+            radius=None, max_triangles=None, eps_ties=None, dims=None, type=None, spacing=None, origin=None, cache_mb=512,
             threads=0, progress=None):
     """One extraction: ``Store(volume, ...).extract(iso, ...)``; see :class:`Store`."""
     store = Store(volume, dims=dims, type=type, spacing=spacing, origin=origin, cache_mb=cache_mb, progress=progress)
     return store.extract(iso, eps=eps, topology=topology, error=error, weight=weight, delta=delta, focus=focus,
-                         radius=radius, max_triangles=max_triangles, threads=threads)
+                         radius=radius, max_triangles=max_triangles, eps_ties=eps_ties, threads=threads)
 
 
 def convert(volume, output, *, dims=None, type=None, spacing=None, origin=None, memory_mb=1024, zstd_level=3,

@@ -256,7 +256,9 @@ py::dict stats_dict(const Mesh& mesh, const ExtractStats& s) {
   d["tets_emitted"] = s.tets_emitted;
   d["tets_simplified"] = s.tets_simplified;
   d["chosen_eps"] = s.chosen_eps;
+  d["chosen_eps_ties"] = s.chosen_eps_ties;
   d["next_eps"] = s.next_eps;
+  d["next_eps_ties"] = s.next_eps_ties;
   d["next_triangles"] = s.next_triangles;
   d["chosen_delta"] = s.chosen_delta;
   return d;

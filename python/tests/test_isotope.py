@@ -129,6 +129,10 @@ def test_options_reach_the_library(data):
     full = isotope.extract(volume, iso=64.5)
     budget = isotope.extract(volume, iso=64.5, max_triangles=20000)
     assert len(budget.faces) <= 20000 < len(full.faces) and budget.stats["chosen_eps"] > 0
+    # the budget's mesh again from its eps and tie classes
+    again = isotope.extract(volume, iso=64.5, eps=budget.stats["chosen_eps"], eps_ties=budget.stats["chosen_eps_ties"])
+    assert budget.stats["chosen_eps_ties"] >= 0
+    np.testing.assert_array_equal(again.faces, budget.faces)
     simplified = isotope.extract(volume, iso=64.5, eps=32, topology="simplify", delta=50)
     preserved = isotope.extract(volume, iso=64.5, eps=32)
     assert len(simplified.faces) <= len(preserved.faces)
@@ -397,6 +401,9 @@ def test_options_that_mean_nothing_are_refused_with_the_commands_words(data, iso
     raw = str(data / "bolt_70x123x66_uint8.raw")
     cases = [(dict(max_triangles=0), ["--max-triangles", "0"], "max-triangles"),
              (dict(max_triangles=1000, eps=2), ["--max-triangles", "1000", "--eps", "2"], "max-triangles"),
+             (dict(eps_ties=3), ["--eps-ties", "3"], "eps-ties"),
+             (dict(eps=2, eps_ties=-1), ["--eps", "2", "--eps-ties", "-1"], "eps-ties"),
+             (dict(max_triangles=1000, eps_ties=3), ["--max-triangles", "1000", "--eps-ties", "3"], "eps-ties"),
              (dict(threads=-1), ["--threads", "-1"], "threads"),
              (dict(threads=10 ** 6), ["--threads", "1000000"], "threads"),
              (dict(threads=1.5), ["--threads", "1.5"], "threads")]

@@ -11,8 +11,8 @@ namespace {
 
 // The extraction options a client may set (docs/SERVE.md); the rest of isotope/extract.h's are the
 // command line's.
-const std::set<std::string> kServedOptions = {"iso",   "eps",   "topology", "delta",        "weight",
-                                              "error", "focus", "radius",   "max-triangles"};
+const std::set<std::string> kServedOptions = {"iso",   "eps",   "topology", "delta",         "weight",
+                                              "error", "focus", "radius",   "max-triangles", "eps-ties"};
 
 bool valid_client(const std::string& c) {
   return !c.empty() && c.size() <= 64 && std::all_of(c.begin(), c.end(), [](char ch) {

@@ -151,6 +151,7 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["output"] = run.output;
   j["iso"] = run.options.iso;
   j["eps"] = run.options.eps;
+  if (run.options.eps_ties >= 0) j["eps_ties"] = run.options.eps_ties;
   j["error"] = std::string(to_string(run.options.error));
   j["topology"] = std::string(to_string(run.options.topology));
   if (run.options.topology == TopologyMode::simplify) {
@@ -164,7 +165,9 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   if (run.options.max_triangles > 0) {
     j["max_triangles"] = run.options.max_triangles;
     j["chosen_eps"] = run.extract.chosen_eps;
+    j["chosen_eps_ties"] = run.extract.chosen_eps_ties;
     j["next_eps"] = run.extract.next_eps;
+    j["next_eps_ties"] = run.extract.next_eps_ties;
     j["next_triangles"] = run.extract.next_triangles;
   }
   if (run.extract.chosen_delta >= 0) {
@@ -227,6 +230,8 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
 std::string summary_line(const ExtractionRun& run) {
   const MeshTopology& t = run.topology;
   std::string chosen = run.options.max_triangles > 0 ? "; eps " + std::to_string(run.extract.chosen_eps) : "";
+  if (run.options.max_triangles > 0 && run.extract.chosen_eps_ties >= 0)
+    chosen += ", eps-ties " + std::to_string(run.extract.chosen_eps_ties);
   if (run.extract.chosen_delta >= 0) chosen += ", delta " + std::to_string(run.extract.chosen_delta);
   char buf[640];
   std::snprintf(buf, sizeof buf,
