@@ -26,10 +26,12 @@
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
+#include "engine/extract/options.h"
 #include "engine/extract/traversal.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
+#include "io/store/store_format.h"
 #include "io/store/store_reader.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
@@ -275,6 +277,46 @@ TEST_F(TriangleBudgetParallel, SameChoiceOnAnyThreadCount) {
   const PagedVolume paged(cache);
   compared += compare("small noise paged", paged, o, false, 4, {2, 4});
   EXPECT_GT(compared, 5 * 5);
+}
+
+// A budget's cut is reported in the data's units (chosen_eps = key x scale) and typed back to get
+// its mesh again; on a quantized store the key must come back exactly, or the cut is lost (key
+// >= eps no longer holds, or its tie classes, which need key == eps, no longer apply). Keys as a
+// store makes them: a float error in codes plus the quantization's half code; scales as convert
+// makes them, (hi - lo) / (2^bits - 1), and their squares for the weights of delta.
+TEST(QuantizedThreshold, AKeyReportedInTheDatasUnitsComesBackExactly) {
+  uint64_t state = 12345;
+  auto next_unit = [&state] {  // in [0, 1)
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<double>(state >> 11) / 9007199254740992.0;
+  };
+  int checked = 0, plain_quotient_misses = 0;
+  for (int s = 0; s < 200; ++s) {
+    const auto lo = static_cast<float>(-1000 * next_unit());
+    const auto hi = static_cast<float>(lo + 1e-3 + 5000 * next_unit() * next_unit());
+    const int bits = s % 2 == 0 ? 8 : 16;
+    const double scale = (static_cast<double>(hi) - lo) / static_cast<double>((1 << bits) - 1);
+    for (const double factor : {scale, scale * scale}) {
+      for (int k = 0; k < 200; ++k) {
+        const auto error =
+            static_cast<float>(k % 2 == 0 ? std::ldexp(std::floor(next_unit() * 4096), -4) : 300 * next_unit());
+        const double key = static_cast<double>(error) + static_cast<double>(kQuantizationError);
+        const double reported = threshold_in_data(key, factor);
+        ASSERT_EQ(threshold_in_codes(reported, factor), key)
+            << "key " << key << " factor " << factor << " reported " << reported;
+        plain_quotient_misses += reported / factor != key;
+        ++checked;
+      }
+    }
+  }
+  EXPECT_EQ(checked, 80000);
+  // What the plain quotient gets wrong, so that this test covers the case it is about.
+  EXPECT_GT(plain_quotient_misses, checked / 50) << plain_quotient_misses << " of " << checked;
+  RecordProperty("plain quotient misses", std::to_string(plain_quotient_misses) + " of " + std::to_string(checked));
+  // A value typed by hand that no key's product gives is the plain quotient; 0 and infinity stay.
+  EXPECT_EQ(threshold_in_codes(0.0, 0.37), 0.0);
+  EXPECT_EQ(threshold_in_codes(std::numeric_limits<double>::infinity(), 0.37), std::numeric_limits<double>::infinity());
+  EXPECT_EQ(threshold_in_codes(3.0, 1.0), 3.0);
 }
 
 }  // namespace

@@ -31,10 +31,10 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   const double offset = source.value_offset(), scale = source.value_scale();
   if (offset != 0 || scale != 1) {
     in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale);
-    in_codes.eps = options.eps / scale;
+    in_codes.eps = threshold_in_codes(options.eps, scale);
     // Weights in codes: |X| scales with the values, |X| times a gradient with their square.
     const double weight_scale[3] = {scale, scale * scale, 1.0};
-    in_codes.delta = options.delta / weight_scale[static_cast<size_t>(options.weight)];
+    in_codes.delta = threshold_in_codes(options.delta, weight_scale[static_cast<size_t>(options.weight)]);
   }
   ExtractStats total;
   const Distribution* group = options.distribution;
@@ -60,7 +60,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
         d = choose_delta_for_budget(source, rule, options.max_triangles);
       }
       in_codes.delta = d.eps;
-      total.chosen_delta = d.eps * weight_scale[static_cast<size_t>(options.weight)];
+      total.chosen_delta = threshold_in_data(d.eps, weight_scale[static_cast<size_t>(options.weight)]);
       total.delta_floor_triangles = d.triangles;
     }
     if (options.max_triangles > 0) {
@@ -68,9 +68,9 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);
       in_codes.eps = c.eps;
       in_codes.eps_ties = c.ties;
-      total.chosen_eps = c.eps * scale;
+      total.chosen_eps = threshold_in_data(c.eps, scale);
       total.chosen_eps_ties = c.ties;
-      total.next_eps = c.next_eps * scale;
+      total.next_eps = threshold_in_data(c.next_eps, scale);
       total.next_eps_ties = c.next_ties;
       total.next_triangles = c.next_triangles;
       total.budget_steps = c.steps;

@@ -2,8 +2,10 @@
 // parser, and one validation.
 #include "engine/extract/options.h"
 
+#include <bit>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <optional>
 #include <set>
@@ -240,6 +242,25 @@ RecordFields fields_for(const ExtractOptions& o) {
   f.paper = o.topology == TopologyMode::paper;
   f.surplus = o.error == ErrorIndicator::surplus;
   return f;
+}
+
+double threshold_in_codes(double value, double factor) {
+  const double quotient = value / factor;
+  if (!std::isfinite(quotient) || quotient == 0) return quotient;
+  // The doubles whose product rounds to `value` lie within a few ulps of the quotient.
+  constexpr int kReach = 4;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  double x = quotient;
+  for (int i = 0; i < kReach; ++i) x = std::nextafter(x, -kInf);
+  double best = quotient;
+  int best_zeros = -1;
+  for (int i = 0; i <= 2 * kReach; ++i, x = std::nextafter(x, kInf)) {
+    if (x * factor != value) continue;
+    constexpr uint64_t kMantissa = (uint64_t{1} << 52) - 1;
+    const int zeros = std::countr_zero((std::bit_cast<uint64_t>(x) & kMantissa) | (uint64_t{1} << 52));
+    if (zeros > best_zeros) best = x, best_zeros = zeros;
+  }
+  return best;
 }
 
 }  // namespace isotope

@@ -23,6 +23,17 @@ struct RecordFields {
 // leaves, so no topology is ever asked).
 RecordFields fields_for(const ExtractOptions& options);
 
+// A threshold (eps, delta) given in the data's units, as the codes of a quantized store are
+// compared with it (`factor`: what one code is worth in those units), and a threshold in codes as
+// it is reported. A key c reported as c * factor and read back as a plain quotient can come back
+// an ulp off c, and then the cut a budget chose is lost: the key is no longer >= eps, or its tie
+// classes (which need key == eps) no longer apply. So of the doubles x whose product x * factor
+// rounds to the value given, the one with the fewest significant bits is taken: a key is a float
+// error plus the rounding of quantization (a few dozen bits), its neighbours have 53. A value no
+// product of a code gives (typed by hand) is the plain quotient.
+double threshold_in_codes(double value, double factor);
+inline double threshold_in_data(double codes, double factor) { return codes * factor; }
+
 // Throws ExtractionCancelled when `options` asks to stop; cheap enough for every piece or slab.
 inline void throw_if_cancelled(const ExtractOptions& options) {
   if (options.cancel && options.cancel->load(std::memory_order_relaxed)) throw ExtractionCancelled{};
