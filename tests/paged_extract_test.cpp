@@ -472,6 +472,12 @@ TEST_F(PagedExtract, FocusIsFullResolutionAtItsPoint) {
   EXPECT_EQ(tried, 2 * 3 * 3 * 2);
 }
 
+// v's values as a * v + b.
+Volume rescaled(Volume v, float a, float b) {
+  for (float& x : v.values) x = a * x + b;
+  return v;
+}
+
 // 5. A triangle budget: the mesh fits, it is exactly the plain mesh at the chosen eps, the next
 // finer eps step gives next_triangles > budget, a budget above the full mesh gives the full mesh,
 // and a budget below the coarsest mesh the mode allows (the eps = infinity mesh) throws. In memory,
@@ -487,6 +493,10 @@ TEST_F(PagedExtract, TriangleBudgetTakesTheFinestEpsThatFits) {
       {"noise", as_raw(testing::crop(generate_noise(50, 17), {45, 50, 39})), 0.05f, 0},
       {"neghip", testing::load_shared(testing::shared_volumes()[1]), 32.5f, 0},
       {"hydrogen q8", testing::load_shared(testing::shared_volumes()[2]), 0.05f, 8},
+      // The same over a range whose code step is no round number: a budget's eps, reported in
+      // the data's units, must select the same keys when it is given back (docs/FORMAT.md).
+      {"hydrogen q8 over [-1013, 2259]",
+       rescaled(testing::load_shared(testing::shared_volumes()[2]), 3271.9f, -1013.37f), 0.05f * 3271.9f - 1013.37f, 8},
       {"sphere 33", as_raw(generate_sphere(33)), 0.0f, 0},  // 2^k + 1: nothing leaves the data box
   };
   int budgets_run = 0, thrown = 0, ties_chosen = 0;
