@@ -310,6 +310,20 @@ TEST(QuantizedThreshold, AKeyReportedInTheDatasUnitsComesBackExactly) {
     }
   }
   EXPECT_EQ(checked, 80000);
+  // Keys of arbitrary low bits (a focus divides the error by its factor) come back as the plain
+  // quotient brings them: never worse.
+  int arbitrary = 0, arbitrary_exact = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const double factor = 0.001 + 20 * next_unit();
+    const double key = (1 + 300 * next_unit()) / (0.05 + next_unit());
+    const double reported = threshold_in_data(key, factor);
+    if (reported / factor == key) {
+      ASSERT_EQ(threshold_in_codes(reported, factor), key) << "key " << key << " factor " << factor;
+      ++arbitrary_exact;
+    }
+    ++arbitrary;
+  }
+  EXPECT_GT(arbitrary_exact, arbitrary / 2);
   // What the plain quotient gets wrong, so that this test covers the case it is about.
   EXPECT_GT(plain_quotient_misses, checked / 50) << plain_quotient_misses << " of " << checked;
   RecordProperty("plain quotient misses", std::to_string(plain_quotient_misses) + " of " + std::to_string(checked));

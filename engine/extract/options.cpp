@@ -247,17 +247,22 @@ RecordFields fields_for(const ExtractOptions& o) {
 double threshold_in_codes(double value, double factor) {
   const double quotient = value / factor;
   if (!std::isfinite(quotient) || quotient == 0) return quotient;
-  // The doubles whose product rounds to `value` lie within a few ulps of the quotient.
-  constexpr int kReach = 4;
+  auto trailing_zeros = [](double x) {  // of the significand: 52 for a power of two
+    constexpr uint64_t kSignificand = (uint64_t{1} << 52) - 1;
+    return std::countr_zero((std::bit_cast<uint64_t>(x) & kSignificand) | (uint64_t{1} << 52));
+  };
+  // The doubles whose product rounds to `value` lie within a few ulps of the quotient. One of
+  // them replaces the quotient only when it is clearly rounder: a key with arbitrary low bits (a
+  // focus divides the error by its factor) keeps the quotient, as before.
+  constexpr int kReach = 4, kRounder = 16;
   constexpr double kInf = std::numeric_limits<double>::infinity();
   double x = quotient;
   for (int i = 0; i < kReach; ++i) x = std::nextafter(x, -kInf);
   double best = quotient;
-  int best_zeros = -1;
+  int best_zeros = trailing_zeros(quotient) + kRounder;
   for (int i = 0; i <= 2 * kReach; ++i, x = std::nextafter(x, kInf)) {
     if (x * factor != value) continue;
-    constexpr uint64_t kMantissa = (uint64_t{1} << 52) - 1;
-    const int zeros = std::countr_zero((std::bit_cast<uint64_t>(x) & kMantissa) | (uint64_t{1} << 52));
+    const int zeros = trailing_zeros(x);
     if (zeros > best_zeros) best = x, best_zeros = zeros;
   }
   return best;

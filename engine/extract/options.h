@@ -27,10 +27,11 @@ RecordFields fields_for(const ExtractOptions& options);
 // compared with it (`factor`: what one code is worth in those units), and a threshold in codes as
 // it is reported. A key c reported as c * factor and read back as a plain quotient can come back
 // an ulp off c, and then the cut a budget chose is lost: the key is no longer >= eps, or its tie
-// classes (which need key == eps) no longer apply. So of the doubles x whose product x * factor
-// rounds to the value given, the one with the fewest significant bits is taken: a key is a float
-// error plus the rounding of quantization (a few dozen bits), its neighbours have 53. A value no
-// product of a code gives (typed by hand) is the plain quotient.
+// classes (which need key == eps) no longer apply. A key is mostly a float error plus the
+// rounding of quantization, a few dozen significant bits, where its neighbours have 53: so of the
+// doubles x whose product x * factor rounds to the value given, one with at least 16 more trailing
+// zero bits than the quotient replaces it. Keys with arbitrary low bits (under a focus) and
+// values no code's product gives (typed by hand) keep the plain quotient.
 double threshold_in_codes(double value, double factor);
 inline double threshold_in_data(double codes, double factor) { return codes * factor; }
 
