@@ -294,7 +294,10 @@ def test_ctrl_c_stops_the_work_and_leaves_nothing(tmp_path):
     import sys
 
     # Noise of 320^3 takes seconds to convert on 2 cores: long enough to be interrupted anywhere.
-    script = ("import sys, numpy as np, isotope\n"
+    # Python leaves SIGINT ignored when it starts ignored (as in a job a shell put in the
+    # background): the child asks for Ctrl-C's usual handler, as an interactive session has it.
+    script = ("import signal, sys, numpy as np, isotope\n"
+              "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
               "a = np.random.default_rng(0).random((320, 320, 320), dtype=np.float32)\n"
               "print('ready', flush=True)\n"
               "isotope.convert(a, sys.argv[1])\n"
