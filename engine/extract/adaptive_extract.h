@@ -2,6 +2,7 @@
 // Adaptive extraction over any source of values and records (engine/extract/traversal.h): the traversal
 // is cut into pieces, the pieces run as parallel tasks, and their meshes are welded in order.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -29,12 +30,13 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   options.validate();
   ExtractOptions in_codes = options;  // identity unless the source holds quantized codes
   const double offset = source.value_offset(), scale = source.value_scale();
+  // What one code of delta's weight is worth: |X| scales with the values, |X| times a gradient
+  // with their square.
+  const double weight_scale = std::array<double, 3>{scale, scale * scale, 1.0}[static_cast<size_t>(options.weight)];
   if (offset != 0 || scale != 1) {
     in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale);
     in_codes.eps = threshold_in_codes(options.eps, scale);
-    // Weights in codes: |X| scales with the values, |X| times a gradient with their square.
-    const double weight_scale[3] = {scale, scale * scale, 1.0};
-    in_codes.delta = threshold_in_codes(options.delta, weight_scale[static_cast<size_t>(options.weight)]);
+    in_codes.delta = threshold_in_codes(options.delta, weight_scale);
   }
   ExtractStats total;
   const Distribution* group = options.distribution;
@@ -50,7 +52,6 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     if (options.auto_delta) {
       // Half the budget for the features kept, half for the geometry around them; when even with
       // every feature dropped the coarsest mesh takes more than half, all of it for the features.
-      const double weight_scale[3] = {scale, scale * scale, 1.0};
       in_codes.delta = 0;
       const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
       BudgetChoice d;
@@ -60,7 +61,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
         d = choose_delta_for_budget(source, rule, options.max_triangles);
       }
       in_codes.delta = d.eps;
-      total.chosen_delta = threshold_in_data(d.eps, weight_scale[static_cast<size_t>(options.weight)]);
+      total.chosen_delta = threshold_in_data(d.eps, weight_scale);
       total.delta_floor_triangles = d.triangles;
     }
     if (options.max_triangles > 0) {
