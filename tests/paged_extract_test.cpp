@@ -704,6 +704,33 @@ void PagedTest::expect_corrupt_bricks_named(size_t stride, const std::vector<std
 }
 
 // Every brick; every thread count, each with both cache budgets across the bricks' runs.
+// The cache's bookkeeping for a brick is made when the brick is first asked for, not for every
+// brick of the store when the cache opens: a coarse extraction asks for a few thousand of a big
+// store's hundreds of thousands (millions at 2048^3), and a slot for each, made up front, was tens
+// of MB of memory touched before the first brick was read.
+TEST_F(PagedExtract, CacheMakesSlotsOnlyForTheBricksAskedFor) {
+  const StoreReader store(convert(testing::load_shared(testing::shared_volumes()[1]), "neghip", 3));
+  const int64_t bricks = store.layout().brick_count();
+  BrickCache cache(store, kHugeBudget);
+  EXPECT_EQ(cache.stats().slots, 0);
+  const PagedVolume paged(cache);
+  ExtractOptions o;
+  o.iso = 128.5f, o.eps = 64, o.topology = TopologyMode::none;
+  EXPECT_FALSE(extract(paged, o).triangles.empty());
+  const BrickCacheStats coarse = cache.stats();
+  RecordProperty("bricks", std::to_string(bricks));
+  RecordProperty("slots after a coarse extraction", std::to_string(coarse.slots));
+  EXPECT_GE(coarse.slots, coarse.bricks_read);  // nothing evicted: every brick read has its slot
+  EXPECT_LT(coarse.slots, bricks / 2);          // 334 of 893 when written
+  // Asking for a brick makes its slot, once.
+  int64_t fresh = 0;
+  while (fresh < bricks && cache.stats().slots == coarse.slots) cache.get(fresh++);
+  EXPECT_EQ(cache.stats().slots, coarse.slots + 1);
+  cache.get(fresh - 1);
+  EXPECT_EQ(cache.stats().slots, coarse.slots + 1);
+  EXPECT_EQ(cache.stats().bricks_read, coarse.bricks_read + 1);
+}
+
 TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
   expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});
 }

@@ -1,6 +1,7 @@
 #include "io/store/brick_cache.h"
 
 #include <algorithm>
+#include <new>
 
 namespace isotope {
 namespace {
@@ -25,7 +26,23 @@ BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
     : store_(store),
       budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
       pool_(std::make_shared<BrickPool>(core_bytes(store.layout()))),
-      slots_(new Slot[static_cast<size_t>(store.layout().brick_count())]) {}
+      slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
+  if (!slot_table_) throw std::bad_alloc();
+}
+
+BrickCache::Slot& BrickCache::slot(int64_t index) {
+  if (Slot* s = find_slot(index)) return *s;
+  const std::lock_guard<std::mutex> lock(slots_mutex_);
+  std::atomic_ref<Slot*> entry(slot_table_[static_cast<size_t>(index)]);
+  if (Slot* s = entry.load(std::memory_order_relaxed)) return *s;  // made meanwhile
+  Slot* s = &slots_.emplace_back();
+  entry.store(s, std::memory_order_release);
+  return *s;
+}
+
+BrickCache::Slot* BrickCache::find_slot(int64_t index) const {
+  return std::atomic_ref<Slot*>(slot_table_[static_cast<size_t>(index)]).load(std::memory_order_acquire);
+}
 
 uint64_t BrickCache::brick_bytes() const {
   return static_cast<uint64_t>(store_.layout().brick_nodes()) * (4 + 8 + 2 + 4 + 4 + 8);
@@ -96,20 +113,22 @@ void BrickCache::require(CachedBrick& brick, int64_t index, const RecordFields& 
 }
 
 void BrickCache::prefetch(int64_t index) {
-  Slot& slot = slots_[static_cast<size_t>(index)];
-  if (slot.prefetched.load(std::memory_order_relaxed)) return;
-  slot.prefetched.store(true, std::memory_order_relaxed);
+  Slot& s = slot(index);
+  if (s.prefetched.load(std::memory_order_relaxed)) return;
+  s.prefetched.store(true, std::memory_order_relaxed);
   if (resident(index)) return;
   store_.prefetch(index, {true, false, false, false});
 }
 
 std::shared_ptr<CachedBrick> BrickCache::resident(int64_t index) {
+  const Slot* s = find_slot(index);
+  if (!s) return nullptr;
   const std::lock_guard<std::mutex> lock(slot_locks_[static_cast<size_t>(index) % kStripes]);
-  return slots_[static_cast<size_t>(index)].brick;
+  return s->brick;
 }
 
 std::shared_ptr<CachedBrick> BrickCache::get(int64_t index) {
-  Slot& slot = slots_[static_cast<size_t>(index)];
+  Slot& slot = this->slot(index);
   auto found = resident(index);
   if (!found) {
     const std::lock_guard<std::mutex> lock(load_locks_[static_cast<size_t>(index) % kStripes]);
@@ -145,7 +164,8 @@ void BrickCache::grow(int64_t index, CachedBrick& brick, uint64_t bytes) {
   bool is_resident = false;
   {
     const std::lock_guard<std::mutex> slot_lock(slot_locks_[static_cast<size_t>(index) % kStripes]);
-    is_resident = slots_[static_cast<size_t>(index)].brick.get() == &brick;
+    const Slot* s = find_slot(index);
+    is_resident = s && s->brick.get() == &brick;
   }
   if (!is_resident) return;
   resident_bytes_ += bytes;
@@ -165,7 +185,7 @@ void BrickCache::evict_to_budget(int64_t index) {
   while (resident_bytes_ > budget_ && resident_.size() > 1) {
     if (hand_ >= resident_.size()) hand_ = 0;
     const int64_t victim = resident_[hand_];
-    Slot& slot = slots_[static_cast<size_t>(victim)];
+    Slot& slot = *find_slot(victim);  // resident, so made
     if (victim == index || slot.referenced.exchange(false, std::memory_order_relaxed)) {
       ++hand_;  // a second chance
       continue;
@@ -189,6 +209,10 @@ BrickCacheStats BrickCache::stats() const {
   s.bricks_read = bricks_read_.load();
   s.bytes_read = bytes_read_.load();
   s.hits = hits_.load();
+  {
+    const std::lock_guard<std::mutex> lock(slots_mutex_);
+    s.slots = static_cast<int64_t>(slots_.size());
+  }
   const std::lock_guard<std::mutex> lock(clock_mutex_);
   s.peak_bytes = peak_bytes_;
   return s;

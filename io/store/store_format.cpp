@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -232,17 +233,25 @@ std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries) {
   return bytes;
 }
 
+static_assert(sizeof(BrickEntry) == kEntryBytes && std::is_trivially_copyable_v<BrickEntry> &&
+              offsetof(BrickEntry, bytes) == sizeof(uint64_t) && std::endian::native == std::endian::little);
+
 std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
                                          uint64_t area_end, const std::string& file) {
   if (size != d.bytes || size != static_cast<uint64_t>(count) * kEntryBytes)
     throw IoError(file + ": directory is truncated");
-  if (store_checksum(bytes, size) != d.checksum)
-    throw IoError(file + ": directory checksum mismatch (corrupt directory)");
   std::vector<BrickEntry> entries(static_cast<size_t>(count));
-  Reader r(bytes);
-  for (BrickEntry& e : entries) {
-    e.offset = r.get<uint64_t>();
-    for (uint32_t& b : e.bytes) b = r.get<uint32_t>();
+  if (size != 0) std::memcpy(entries.data(), bytes, size);
+  check_directory(entries, d, area_end, file);
+  return entries;
+}
+
+void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d, uint64_t area_end,
+                     const std::string& file) {
+  if (entries.size_bytes() != d.bytes) throw IoError(file + ": directory is truncated");
+  if (store_checksum(entries.data(), entries.size_bytes()) != d.checksum)
+    throw IoError(file + ": directory checksum mismatch (corrupt directory)");
+  for (const BrickEntry& e : entries) {
     if (e.offset < kHeaderBytes || !range_within(e.offset, e.total(), area_end))
       throw IoError(file + ": directory entry " + std::to_string(&e - entries.data()) +
                     " points outside the brick area");
@@ -268,7 +277,6 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
                     (order[i].first < end ? " overlaps entry " : " leaves a gap after entry ") +
                     std::to_string(order[i - 1].second) + " (corrupt directory)");
   }
-  return entries;
 }
 
 BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick) {

@@ -7,6 +7,7 @@
 // into structs and back and checks them; it never touches a file.
 #include <array>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -81,6 +82,11 @@ std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries);
 // Throws IoError naming `file` when the size, checksum or an entry is wrong.
 std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
                                          uint64_t area_end, const std::string& file);
+// The same checks on a directory read straight into its entries (an entry's 24 bytes are its
+// fields in order, little-endian as the host), which spares a copy of the bytes: a 2048^3
+// volume's band 0 has 2 M entries, 50 MB.
+void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d, uint64_t area_end,
+                     const std::string& file);
 
 // Whether band j's bricks have records (bands 1 .. k-1 store them; band 0's are rebuilt from its
 // values, the corners of band k have none).

@@ -100,10 +100,11 @@ const std::vector<BrickEntry>& StoreReader::band_directory(int band) const {
   const std::lock_guard<std::mutex> lock(d.mutex);
   if (!d.entries) {
     const BandDirectory& where = header_.bands[static_cast<size_t>(band)];
-    std::vector<uint8_t> bytes(where.bytes);
-    pread_all(fd_, bytes.data(), bytes.size(), where.offset, path_);
-    d.entries = std::make_shared<const std::vector<BrickEntry>>(
-        decode_directory(bytes.data(), bytes.size(), where, layout_.band(band).brick_count(), area_end_, path_));
+    auto entries = std::make_shared<std::vector<BrickEntry>>(static_cast<size_t>(layout_.band(band).brick_count()));
+    if (where.bytes != entries->size() * kEntryBytes) throw IoError(path_ + ": directory is truncated");
+    pread_all(fd_, entries->data(), where.bytes, where.offset, path_);
+    check_directory(*entries, where, area_end_, path_);
+    d.entries = std::move(entries);
   }
   return *d.entries;
 }
