@@ -731,6 +731,43 @@ TEST_F(PagedExtract, CacheMakesSlotsOnlyForTheBricksAskedFor) {
   EXPECT_EQ(cache.stats().bricks_read, coarse.bricks_read + 1);
 }
 
+// A cache keeps a quarter of its budget while an extraction reads each brick once (one pass in
+// traversal order): the rest would be memory filled once and never read again. When the bricks it
+// reads are ones it read before (an extraction asked for again, a budget's search and extraction),
+// it keeps the whole budget from then on, and an extraction asked for again reads nothing.
+TEST_F(PagedExtract, CacheKeepsAQuarterOfItsBudgetUntilItReadsBricksAgain) {
+  const StoreReader store(convert(testing::load_shared(testing::shared_volumes()[1]), "neghip", 3));
+  const DecodedSizes sizes = decoded_sizes(store);
+  ExtractOptions o;
+  o.iso = 128.5f, o.topology = TopologyMode::none;
+  const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+  BrickCache cache(store, sizes.total);
+  ASSERT_EQ(cache.budget_bytes(), sizes.total);
+  const PagedVolume paged(cache);
+  const Mesh expected = extract(paged, o);
+  const BrickCacheStats first = cache.stats();
+  RecordProperty("decoded MB, whole store", std::to_string(sizes.total >> 20));
+  RecordProperty("bricks read, first extraction", std::to_string(first.bricks_read));
+  EXPECT_EQ(first.working_bytes, sizes.total / 4);
+  // Within a quarter, give or take the bricks the reader holds (16) and the one being admitted.
+  EXPECT_LE(first.peak_bytes, sizes.total / 4 + 17 * sizes.largest);
+  EXPECT_GT(first.bricks_read * static_cast<int64_t>(sizes.largest), static_cast<int64_t>(sizes.total / 2))
+      << "the extraction must read more than the quarter holds";
+  int64_t read_before = first.bricks_read;
+  int asked = 1;
+  for (; asked < 4; ++asked) {
+    EXPECT_TRUE(same_mesh(expected, extract(paged, o))) << "asked " << asked + 1 << " times";
+    const BrickCacheStats now = cache.stats();
+    const int64_t read = now.bricks_read - read_before;
+    read_before = now.bricks_read;
+    RecordProperty("bricks read, asked " + std::to_string(asked + 1) + " times", std::to_string(read));
+    if (read == 0) break;
+    EXPECT_EQ(now.working_bytes, sizes.total) << "asked " << asked + 1 << " times, read " << read << " bricks";
+  }
+  EXPECT_LT(asked, 4) << "an extraction asked for again keeps reading bricks";
+  EXPECT_LE(cache.stats().peak_bytes, sizes.total + 17 * sizes.largest);
+}
+
 TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
   expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});
 }

@@ -28,6 +28,8 @@ BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
       pool_(std::make_shared<BrickPool>(core_bytes(store.layout()))),
       slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
   if (!slot_table_) throw std::bad_alloc();
+  // The working budget starts at a quarter (at least kMinBricks bricks, at most the budget).
+  working_ = std::max<uint64_t>(budget_ / 4, std::min<uint64_t>(budget_, kMinBricks * core_bytes(store.layout())));
 }
 
 BrickCache::Slot& BrickCache::slot(int64_t index) {
@@ -139,16 +141,19 @@ std::shared_ptr<CachedBrick> BrickCache::get(int64_t index) {
         found = slot.evicted.lock();
       }
       const bool fresh = !found;
+      bool again = false;
       if (fresh) {
         found = decode(index);
         bricks_read_.fetch_add(1, std::memory_order_relaxed);
+        again = slot.decoded;
+        slot.decoded = true;
       }
       {
         const std::lock_guard<std::mutex> slot_lock(slot_locks_[static_cast<size_t>(index) % kStripes]);
         slot.brick = found;
       }
       slot.referenced.store(true, std::memory_order_relaxed);
-      admit(index, found->bytes_.load(std::memory_order_relaxed));
+      admit(index, found->bytes_.load(std::memory_order_relaxed), fresh ? (again ? 1 : 0) : -1);
       if (fresh) return found;
     }
   }
@@ -173,8 +178,16 @@ void BrickCache::grow(int64_t index, CachedBrick& brick, uint64_t bytes) {
   evict_to_budget(index);
 }
 
-void BrickCache::admit(int64_t index, uint64_t bytes) {
+void BrickCache::admit(int64_t index, uint64_t bytes, int again) {
   const std::lock_guard<std::mutex> lock(clock_mutex_);
+  if (again >= 0) {  // a miss: is the cache reading bricks again, i.e. would keeping more pay?
+    constexpr int64_t kWindow = 512;
+    ++window_misses_, window_again_ += again;
+    if (window_misses_ == kWindow) {
+      if (window_again_ * 4 > window_misses_) working_ = budget_;
+      window_misses_ = window_again_ = 0;
+    }
+  }
   resident_.push_back(index);
   resident_bytes_ += bytes;
   peak_bytes_ = std::max(peak_bytes_, resident_bytes_);
@@ -182,7 +195,7 @@ void BrickCache::admit(int64_t index, uint64_t bytes) {
 }
 
 void BrickCache::evict_to_budget(int64_t index) {
-  while (resident_bytes_ > budget_ && resident_.size() > 1) {
+  while (resident_bytes_ > working_ && resident_.size() > 1) {
     if (hand_ >= resident_.size()) hand_ = 0;
     const int64_t victim = resident_[hand_];
     Slot& slot = *find_slot(victim);  // resident, so made
@@ -215,6 +228,7 @@ BrickCacheStats BrickCache::stats() const {
   }
   const std::lock_guard<std::mutex> lock(clock_mutex_);
   s.peak_bytes = peak_bytes_;
+  s.working_bytes = working_;
   return s;
 }
 

@@ -11,7 +11,8 @@
 // takes one of 64 other striped locks, so two threads wanting the same brick decode it once, then
 // reads it with pread and admits it. Eviction is CLOCK, a cheap LRU approximation: a hit sets the
 // brick's reference bit, and the hand evicts bricks whose bit it finds clear until the decoded bytes
-// are within the budget. A brick evicted while a reader still holds it lives on until that reader
+// are within the working budget: a quarter of the budget while each brick is read once, all of it
+// once bricks are read again. A brick evicted while a reader still holds it lives on until that reader
 // lets go (io/store/paged_volume.h keeps a few per thread), so the memory in use stays within the budget
 // plus those few bricks per thread; and a miss on such a brick takes it back instead of decoding it
 // again.
@@ -69,11 +70,12 @@ class CachedBrick {
 };
 
 struct BrickCacheStats {
-  int64_t bricks_read = 0;  // misses: bricks read, checked and decoded
-  uint64_t bytes_read = 0;  // compressed bytes read, core and other sections
-  int64_t hits = 0;         // lookups served from memory
-  uint64_t peak_bytes = 0;  // most decoded bytes held at once
-  int64_t slots = 0;        // bricks asked for or prefetched at least once: each has a slot
+  int64_t bricks_read = 0;     // misses: bricks read, checked and decoded
+  uint64_t bytes_read = 0;     // compressed bytes read, core and other sections
+  int64_t hits = 0;            // lookups served from memory
+  uint64_t peak_bytes = 0;     // most decoded bytes held at once
+  int64_t slots = 0;           // bricks asked for or prefetched at least once: each has a slot
+  uint64_t working_bytes = 0;  // what the cache keeps now: a quarter of the budget, or all of it
 };
 
 class BrickCache {
@@ -112,6 +114,7 @@ class BrickCache {
     std::weak_ptr<CachedBrick> evicted;
     std::atomic<bool> referenced{false};
     std::atomic<bool> prefetched{false};
+    bool decoded = false;  // once at least (under the brick's load lock): a miss now reads it again
   };
   // Brick `index`'s slot, made the first time the brick is asked for (thread-safe); find_slot
   // gives null until then.
@@ -119,7 +122,7 @@ class BrickCache {
   Slot* find_slot(int64_t index) const;
   std::shared_ptr<CachedBrick> decode(int64_t index);
   std::shared_ptr<CachedBrick> resident(int64_t index);
-  void admit(int64_t index, uint64_t bytes);
+  void admit(int64_t index, uint64_t bytes, int again);          // again: -1 taken back, 0 first read, 1 read again
   void evict_to_budget(int64_t keep);                            // under clock_mutex_; CLOCK, sparing brick `keep`
   void grow(int64_t index, CachedBrick& brick, uint64_t bytes);  // a brick took more memory
 
@@ -144,6 +147,10 @@ class BrickCache {
   std::vector<int64_t> resident_;
   size_t hand_ = 0;
   uint64_t resident_bytes_ = 0, peak_bytes_ = 0;
+  // The bytes the cache keeps: a quarter of the budget until a window of misses finds too many
+  // bricks read again, then all of it (docs/METHOD.md, "working budget").
+  uint64_t working_ = 0;
+  int64_t window_misses_ = 0, window_again_ = 0;
   std::atomic<int64_t> hits_{0}, bricks_read_{0};
   std::atomic<uint64_t> bytes_read_{0};
 };
