@@ -703,11 +703,10 @@ void PagedTest::expect_corrupt_bricks_named(size_t stride, const std::vector<std
   }
 }
 
-// Every brick; every thread count, each with both cache budgets across the bricks' runs.
 // The cache's bookkeeping for a brick is made when the brick is first asked for, not for every
 // brick of the store when the cache opens: a coarse extraction asks for a few thousand of a big
-// store's hundreds of thousands (millions at 2048^3), and a slot for each, made up front, was tens
-// of MB of memory touched before the first brick was read.
+// store's hundreds of thousands (millions at 2048^3), and a slot for each, made up front, was
+// 13 MB of memory touched at 1024^3 before the first brick was read.
 TEST_F(PagedExtract, CacheMakesSlotsOnlyForTheBricksAskedFor) {
   const StoreReader store(convert(testing::load_shared(testing::shared_volumes()[1]), "neghip", 3));
   const int64_t bricks = store.layout().brick_count();
@@ -768,6 +767,7 @@ TEST_F(PagedExtract, CacheKeepsAQuarterOfItsBudgetUntilItReadsBricksAgain) {
   EXPECT_LE(cache.stats().peak_bytes, sizes.total + 17 * sizes.largest);
 }
 
+// Every brick; every thread count, each with both cache budgets across the bricks' runs.
 TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
   expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});
 }

@@ -153,7 +153,10 @@ std::shared_ptr<CachedBrick> BrickCache::get(int64_t index) {
         slot.brick = found;
       }
       slot.referenced.store(true, std::memory_order_relaxed);
-      admit(index, found->bytes_.load(std::memory_order_relaxed), fresh ? (again ? 1 : 0) : -1);
+      admit(index, found->bytes_.load(std::memory_order_relaxed),
+            !fresh  ? Admitted::taken_back
+            : again ? Admitted::read_again
+                    : Admitted::first_read);
       if (fresh) return found;
     }
   }
@@ -178,11 +181,11 @@ void BrickCache::grow(int64_t index, CachedBrick& brick, uint64_t bytes) {
   evict_to_budget(index);
 }
 
-void BrickCache::admit(int64_t index, uint64_t bytes, int again) {
+void BrickCache::admit(int64_t index, uint64_t bytes, Admitted how) {
   const std::lock_guard<std::mutex> lock(clock_mutex_);
-  if (again >= 0) {  // a miss: is the cache reading bricks again, i.e. would keeping more pay?
+  if (how != Admitted::taken_back) {  // a miss: is the cache reading bricks again, i.e. would keeping more pay?
     constexpr int64_t kWindow = 512;
-    ++window_misses_, window_again_ += again;
+    ++window_misses_, window_again_ += how == Admitted::read_again;
     if (window_misses_ == kWindow) {
       if (window_again_ * 4 > window_misses_) working_ = budget_;
       window_misses_ = window_again_ = 0;

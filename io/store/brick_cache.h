@@ -122,7 +122,8 @@ class BrickCache {
   Slot* find_slot(int64_t index) const;
   std::shared_ptr<CachedBrick> decode(int64_t index);
   std::shared_ptr<CachedBrick> resident(int64_t index);
-  void admit(int64_t index, uint64_t bytes, int again);          // again: -1 taken back, 0 first read, 1 read again
+  enum class Admitted { taken_back, first_read, read_again };  // from a reader, or decoded once or again
+  void admit(int64_t index, uint64_t bytes, Admitted how);
   void evict_to_budget(int64_t keep);                            // under clock_mutex_; CLOCK, sparing brick `keep`
   void grow(int64_t index, CachedBrick& brick, uint64_t bytes);  // a brick took more memory
 

@@ -248,7 +248,6 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
 
 void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d, uint64_t area_end,
                      const std::string& file) {
-  if (entries.size_bytes() != d.bytes) throw IoError(file + ": directory is truncated");
   if (store_checksum(entries.data(), entries.size_bytes()) != d.checksum)
     throw IoError(file + ": directory checksum mismatch (corrupt directory)");
   for (const BrickEntry& e : entries) {

@@ -84,7 +84,7 @@ std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, cons
                                          uint64_t area_end, const std::string& file);
 // The same checks on a directory read straight into its entries (an entry's 24 bytes are its
 // fields in order, little-endian as the host), which spares a copy of the bytes: a 2048^3
-// volume's band 0 has 2 M entries, 50 MB.
+// volume's band 0 has 2 M entries, 50 MB. The caller has read d.bytes into `entries`.
 void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d, uint64_t area_end,
                      const std::string& file);
 
