@@ -5,6 +5,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <vector>
 
@@ -112,11 +113,13 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   const auto work_start = std::chrono::steady_clock::now();
   double work_seconds = 0;  // this process's share of the pieces, without waiting for the others
   std::vector<PartMesh> parts(last - first);
+  LevelScratchPool<Source> levels;
   auto run_share = [&] {
     parallel_for_in_order(int64_t{0}, static_cast<int64_t>(parts.size()), [&](int64_t j) {
       const int64_t i = static_cast<int64_t>(first) + j;
       throw_if_cancelled(rule.options());
-      Traversal<Source> t(source, rule);
+      std::unique_ptr<LevelScratch<Source>> scratch = levels.take();
+      Traversal<Source> t(source, rule, scratch.get());
       t.keep_keys();
       t.run(pieces[static_cast<size_t>(i)]);
       PartMesh& part = parts[static_cast<size_t>(j)];
@@ -127,6 +130,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       part.tets_simplified = t.tets_simplified();
       part.keys = t.take_keys();
       part.mesh = t.take();
+      levels.give(std::move(scratch));  // t no longer walks
     });
     work_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - work_start).count();
   };

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <utility>
 #include <vector>
 
@@ -155,6 +156,56 @@ class SplitRule {
   std::vector<double> reach_;  // per level; empty without a focus
 };
 
+// An array that grows without initializing: the levels' tetrahedra are written before read.
+template <class T>
+class Scratch {
+ public:
+  void reserve(size_t n) {
+    if (n <= capacity_) return;
+    capacity_ = std::max(n, 2 * capacity_);
+    data_ = std::make_unique_for_overwrite<T[]>(capacity_);
+  }
+  T& operator[](size_t i) { return data_[i]; }
+
+ private:
+  std::unique_ptr<T[]> data_;
+  size_t capacity_ = 0;
+};
+
+// What a level-by-level walk keeps of one level and the next (Traversal::visit_by_levels).
+// Megabytes over a piece's deepest levels: lent from piece to piece (LevelScratchPool), it is
+// memory touched about once per extraction, where one per traversal was fresh memory every piece
+// (docs/METHOD.md, "In parallel").
+template <TraversalSource Source>
+struct LevelScratch {
+  Scratch<Child> frontier, next;
+  Scratch<typename Source::Reader::Handle> handles;  // of frontier
+};
+
+// The scratches of one extraction's pieces: a piece takes one and gives it back when done, so the
+// next piece reuses memory already touched, and there are never more than pieces run at once. A
+// mutex, not per-thread storage: two lock operations a piece, and ThreadSanitizer sees them (oneTBB's
+// thread-local storage is not instrumented, engine/core/parallel.h).
+template <TraversalSource Source>
+class LevelScratchPool {
+ public:
+  std::unique_ptr<LevelScratch<Source>> take() {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (free_.empty()) return std::make_unique<LevelScratch<Source>>();
+    auto s = std::move(free_.back());
+    free_.pop_back();
+    return s;
+  }
+  void give(std::unique_ptr<LevelScratch<Source>> s) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    free_.push_back(std::move(s));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<LevelScratch<Source>>> free_;
+};
+
 // A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
 struct Piece {
   PackedTet tet{};
@@ -168,11 +219,13 @@ struct Piece {
 template <TraversalSource Source>
 class Traversal {
  public:
-  Traversal(const Source& source, const SplitRule& rule)
+  // levels: scratch for visit_by_levels lent for this traversal's life (LevelScratchPool), or null.
+  Traversal(const Source& source, const SplitRule& rule, LevelScratch<Source>* levels = nullptr)
       : reader_(source.reader()),
         lattice_(source.lattice()),
         rule_(rule),
-        builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing()) {
+        builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing()),
+        levels_(levels) {
     for (int i = 0; i < 3; ++i) {
       box_max_[i] = source.data_dims()[i] - 1;
       clip_ = clip_ || box_max_[i] < lattice_.n;
@@ -305,32 +358,33 @@ class Traversal {
   // before any is read, so their cache misses overlap instead of queuing one behind the other.
   // The same tetrahedra stop and are emitted as in visit(), in another order.
   void visit_by_levels(const PackedTet& t, int level, bool positive) {
-    frontier_.reserve(1);
-    frontier_[0] = Child{t, positive};
+    LevelScratch<Source>& s = levels_ ? *levels_ : own_levels_;
+    s.frontier.reserve(1);
+    s.frontier[0] = Child{t, positive};
     size_t n = 1;
     for (int l = level; n > 0; ++l) {
-      handles_.reserve(n);
-      next_.reserve(2 * n);  // written by index: a refined tetrahedron has two children
+      s.handles.reserve(n);
+      s.next.reserve(2 * n);  // written by index: a refined tetrahedron has two children
       if (l < lattice_.max_level())
         for (size_t i = 0; i < n; ++i) {
-          if (clip_ && outside_box(frontier_[i].tet)) continue;  // see locate() below
-          handles_[i] = reader_.locate((frontier_[i].tet[0] + frontier_[i].tet[1]) >> 1);
-          reader_.prefetch(handles_[i]);
+          if (clip_ && outside_box(s.frontier[i].tet)) continue;  // see locate() below
+          s.handles[i] = reader_.locate((s.frontier[i].tet[0] + s.frontier[i].tet[1]) >> 1);
+          reader_.prefetch(s.handles[i]);
         }
       size_t next = 0;
       for (size_t i = 0; i < n; ++i) {
-        const Child& c = frontier_[i];
-        switch (step(c.tet, l, handles_[i])) {
+        const Child& c = s.frontier[i];
+        switch (step(c.tet, l, s.handles[i])) {
           case Step::cull: break;
           case Step::stop: emit(c.tet, l, c.positive); break;
           case Step::refine: {
             const auto children = bisect(c.tet, l, c.positive);
-            next_[next++] = children[0];
-            next_[next++] = children[1];
+            s.next[next++] = children[0];
+            s.next[next++] = children[1];
           }
         }
       }
-      std::swap(frontier_, next_);
+      std::swap(s.frontier, s.next);
       n = next;
     }
   }
@@ -371,23 +425,8 @@ class Traversal {
   bool clip_ = false;  // the data box is smaller than the lattice
   int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;
   std::vector<Piece>* pieces_ = nullptr;  // while splitting
-  // An array that grows without initializing: the levels' tetrahedra are written before read.
-  template <class T>
-  class Scratch {
-   public:
-    void reserve(size_t n) {
-      if (n <= capacity_) return;
-      capacity_ = std::max(n, 2 * capacity_);
-      data_ = std::make_unique_for_overwrite<T[]>(capacity_);
-    }
-    T& operator[](size_t i) { return data_[i]; }
-
-   private:
-    std::unique_ptr<T[]> data_;
-    size_t capacity_ = 0;
-  };
-  Scratch<Child> frontier_, next_;  // visit_by_levels
-  Scratch<Handle> handles_;         // of frontier_
+  LevelScratch<Source> own_levels_;
+  LevelScratch<Source>* levels_ = nullptr;  // another's, lent for this traversal; else own_levels_
   int split_level_ = 0;
 };
 

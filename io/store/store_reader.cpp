@@ -95,12 +95,12 @@ StoreReader::StoreReader(const std::string& path) : path_(path) {
 
 StoreReader::~StoreReader() { ::close(fd_); }
 
-const std::vector<BrickEntry>& StoreReader::band_directory(int band) const {
+const StoreReader::Directory& StoreReader::band_directory(int band) const {
   LazyDirectory& d = directories_[static_cast<size_t>(band)];
   const std::lock_guard<std::mutex> lock(d.mutex);
   if (!d.entries) {
     const BandDirectory& where = header_.bands[static_cast<size_t>(band)];
-    auto entries = std::make_shared<std::vector<BrickEntry>>(static_cast<size_t>(layout_.band(band).brick_count()));
+    auto entries = std::make_shared<Directory>(static_cast<size_t>(layout_.band(band).brick_count()));
     if (where.bytes != entries->size() * kEntryBytes) throw IoError(path_ + ": directory is truncated");
     pread_all(fd_, entries->data(), where.bytes, where.offset, path_);
     check_directory(*entries, where, area_end_, path_);
