@@ -17,11 +17,12 @@
 // the cut just below the budget. The first pass runs the subtrees a few levels down in parallel,
 // later ones the frontier; each thread sums into its own table, and the sums are exact integers,
 // so the choice does not depend on the thread count. L starts at +infinity and falls by at most
-// 4x a pass, guided by the growth of T so far. Memory: the frontier (24 bytes a tetrahedron) and
+// 4x a pass, guided by the growth of T so far. Memory: the frontier (16 bytes a tetrahedron) and
 // the distinct keys.
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -127,13 +128,21 @@ struct KeyTable {
 };
 
 // A tetrahedron the last pass reached but did not split (its key is below the bound), kept for
-// the next pass by the way down to it: which root, then one bit per level for the child taken
-// (at most 57 levels: 3 per doubling of a lattice of at most 2^19 cells a side).
+// the next pass by the way down to it: which root, then one bit per level for the child taken,
+// packed with a marker bit above the path that tells its length (at most 57 levels: 3 per doubling
+// of a lattice of at most 2^19 cells a side). 16 bytes: the frontier is most of the fresh memory a
+// search touches.
 struct FrontierItem {
+  static constexpr int kRootShift = 58;
   double key;
-  uint64_t path;
-  uint8_t root, level;
-  bool positive;
+  uint64_t where;
+
+  static FrontierItem at(double key, uint8_t root, int level, uint64_t path) {
+    return {key, (uint64_t{root} << kRootShift) | (uint64_t{1} << level) | path};
+  }
+  uint8_t root() const { return static_cast<uint8_t>(where >> kRootShift); }
+  int level() const { return static_cast<int>(std::bit_width(where & ((uint64_t{1} << kRootShift) - 1))) - 1; }
+  uint64_t path() const { return where & ((uint64_t{1} << level()) - 1); }
 };
 
 // The passes of one search: the first descends from the roots (the subtrees at a few levels down
@@ -161,6 +170,8 @@ class CountPasses {
     {
       Walk walk(source_, rule_);
       roots_ = walk.roots();
+      if (roots_.size() > (size_t{1} << (64 - FrontierItem::kRootShift)))
+        throw std::logic_error("the budget search's frontier cannot name more than 64 roots");
       for (size_t r = 0; r < roots_.size(); ++r) {
         const traversal::Child& c = roots_[r];
         top.table.add(kInf, 0,
@@ -193,20 +204,33 @@ class CountPasses {
       Chunk& c = chunks[static_cast<size_t>(i)];
       std::vector<FrontierItem>& list = frontier_[c.list];
       size_t out = c.begin;
+      // The way down to the last item descended: items in a list come in depth-first order, so
+      // the next one shares most of it, and only the levels below the first different bit are
+      // bisected again.
+      std::array<traversal::Child, 64> way;
+      uint64_t way_path = 0;
+      int way_level = -1;
+      uint8_t way_root = 0;
       for (size_t j = c.begin; j < c.end; ++j) {
         const FrontierItem item = list[j];
         if (!(item.key >= bound_)) {
           list[out++] = item;
           continue;
         }
-        traversal::PackedTet t = roots_[item.root].tet;
-        bool positive = roots_[item.root].positive;
-        for (int l = 0; l < item.level; ++l) {
-          const traversal::Child ch = traversal::bisect(t, l, positive)[(item.path >> l) & 1];
-          t = ch.tet, positive = ch.positive;
+        const uint8_t root = item.root();
+        const int level = item.level();
+        const uint64_t path = item.path();
+        int from = 0;
+        if (way_level >= 0 && root == way_root) from = std::min({std::countr_zero(path ^ way_path), level, way_level});
+        if (from == 0) way[0] = roots_[root];
+        for (int l = from; l < level; ++l) {
+          const traversal::Child& up = way[static_cast<size_t>(l)];
+          way[static_cast<size_t>(l) + 1] = traversal::bisect(up.tet, l, up.positive)[(path >> l) & 1];
         }
-        const Corners f = walk.corner_values(t, item.level);
-        descend(walk, w, t, f, item.level, positive, item.root, item.path, item.key, tris_of(f), -1, nullptr);
+        way_path = path, way_level = level, way_root = root;
+        const traversal::Child& at = way[static_cast<size_t>(level)];
+        const Corners f = walk.corner_values(at.tet, level);
+        descend(walk, w, at.tet, f, level, at.positive, root, path, item.key, tris_of(f), -1, nullptr);
       }
       c.kept = out - c.begin;
     });
@@ -297,7 +321,7 @@ class CountPasses {
     // A key of -infinity is never split (choose_delta_for_budget: no critical point below).
     if (fate != Walk::Fate::split_key || !(key > -kInf)) return tris;
     if (!(key >= bound_)) {
-      w.push({key, path, root, static_cast<uint8_t>(level), positive});
+      w.push(FrontierItem::at(key, root, level, path));
       return tris;
     }
     descend(walk, w, t, f, level, positive, root, path, key, tris, seed_level, seeds);
