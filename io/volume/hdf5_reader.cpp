@@ -152,7 +152,7 @@ Volume read_hdf5(const std::string& file, const std::string& dataset) {
   const int64_t count = checked_node_count(volume.dims, static_cast<int>(sizeof(float)), where);
   read_hdf5_geometry(ds.get(), where, volume.spacing, volume.origin);
   try {
-    volume.values.resize(static_cast<size_t>(count));
+    size_volume_values(volume.values, static_cast<size_t>(count));
   } catch (const std::bad_alloc&) {
     throw IoError(where + ": volume does not fit in memory");
   }

@@ -515,7 +515,7 @@ Volume empty_volume(const NrrdLayout& layout, const std::string& path) {
   volume.spacing = layout.spacing;
   volume.origin = layout.origin;
   try {
-    volume.values.resize(static_cast<size_t>(volume.node_count()));
+    size_volume_values(volume.values, static_cast<size_t>(volume.node_count()));
   } catch (const std::bad_alloc&) {
     throw IoError(path + ": volume of " + std::to_string(volume.node_count()) + " nodes does not fit in memory");
   }

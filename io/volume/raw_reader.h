@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "isotope/volume.h"  // Volume, ScalarType
 
@@ -38,6 +39,10 @@ void check_finite(const Volume& volume, const std::string& file);
 // The same for a box of SIZE nodes at LO (x fastest); the message gives global coordinates.
 void check_finite(const float* values, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
                   const std::string& file);
+// Sizes a volume's values to COUNT nodes, asking the kernel for transparent huge pages first:
+// the values are written once, right after, and on 4 KB pages the page faults of that first
+// write cost more than reading the file (docs/METHOD.md, "Per-vertex records"). Throws std::bad_alloc.
+void size_volume_values(std::vector<float>& values, size_t count);
 // COUNT values stored as TYPE in the given byte order at IN, converted to float. A float64 beyond
 // float range becomes infinite, so check_finite reports it instead of the conversion being undefined.
 void decode_scalars(ScalarType type, bool big_endian, const unsigned char* in, size_t count, float* out);

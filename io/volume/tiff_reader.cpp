@@ -471,7 +471,7 @@ Volume read_tiff_stack(const std::string& path) {
   v.dims = reader->info().dims;
   v.spacing = reader->info().spacing;
   v.origin = reader->info().origin;
-  v.values.resize(static_cast<size_t>(v.node_count()));
+  size_volume_values(v.values, static_cast<size_t>(v.node_count()));
   reader->read_box({0, 0, 0}, v.dims, v.values.data());
   return v;
 }
