@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
@@ -113,12 +114,13 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   const auto work_start = std::chrono::steady_clock::now();
   double work_seconds = 0;  // this process's share of the pieces, without waiting for the others
   std::vector<PartMesh> parts(last - first);
-  LevelScratchPool<Source> levels;
+  LendingPool<LevelScratch<Source>> levels;
   auto run_share = [&] {
     parallel_for_in_order(int64_t{0}, static_cast<int64_t>(parts.size()), [&](int64_t j) {
       const int64_t i = static_cast<int64_t>(first) + j;
       throw_if_cancelled(rule.options());
-      std::unique_ptr<LevelScratch<Source>> scratch = levels.take();
+      std::unique_ptr<LevelScratch<Source>> scratch =
+          levels.take([] { return std::make_unique<LevelScratch<Source>>(); });
       Traversal<Source> t(source, rule, scratch.get());
       t.keep_keys();
       t.run(pieces[static_cast<size_t>(i)]);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <memory>
 #include <mutex>
 #include <numeric>
 #include <optional>
@@ -9,6 +10,7 @@
 #include <vector>
 
 #include "engine/core/byte_codec.h"
+#include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/edge_vertex_map.h"
 
@@ -27,16 +29,24 @@ struct Slab {
   std::vector<PlaneVertex> bottom, top;
 };
 
+// A slab's builder is lent from slab to slab (LendingPool): its welding table grows to hundreds of
+// thousands of slots, and a table per slab was fresh memory, grown by doubling, every time
+// (docs/METHOD.md, "eps = 0 by blocks").
+using BuilderPool = LendingPool<MeshBuilder>;
+
 // One slab's own welded mesh. Only an edge lying in the plane z = z0 between two slabs can be cut
 // in both (its p + q has z 2 z0; every other edge has both ends in one slab), so those vertices
 // are the only ones the merge has to look up.
-Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, int64_t z_begin, int64_t z_end, bool below,
-                  bool above) {
-  MeshBuilder builder(plan.iso, plan.side, plan.origin, plan.spacing);
-  builder.keep_keys();
-  march(z_begin, z_end, builder);
-  Slab slab{builder.take(), {}, {}};
-  const std::vector<uint64_t> keys = builder.take_keys();
+Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, BuilderPool& builders, int64_t z_begin, int64_t z_end,
+                  bool below, bool above) {
+  std::unique_ptr<MeshBuilder> builder =
+      builders.take([&] { return std::make_unique<MeshBuilder>(plan.iso, plan.side, plan.origin, plan.spacing); });
+  builder->keep_keys();
+  march(z_begin, z_end, *builder);
+  Slab slab{builder->take(), {}, {}};
+  const std::vector<uint64_t> keys = builder->take_keys();
+  builder->reset();
+  builders.give(std::move(builder));
   if (!below && !above) return slab;
   for (size_t k = 0; k < keys.size(); ++k) {
     const int64_t z = edge_key_sum(keys[k], plan.side)[2];
@@ -87,11 +97,12 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
                     int64_t last, double* seconds, bool keep_share) {
   const int64_t count = slab_count(plan);
   std::vector<Slab> mine(static_cast<size_t>(last - first));
+  BuilderPool builders;
   settle_together(group, [&] {
     const auto start = std::chrono::steady_clock::now();
     parallel_for_in_order(first, last, [&](int64_t s) {
       const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
-      mine[static_cast<size_t>(s - first)] = extract_slab(plan, march, z_begin, z_end, s > 0, s + 1 < count);
+      mine[static_cast<size_t>(s - first)] = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
     });
     *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   });
@@ -146,9 +157,10 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march) {
   std::mutex mutex;
   int64_t next = 0;      // the next slab to merge
   bool merging = false;  // a thread is merging, and takes any slab that becomes next meanwhile
+  BuilderPool builders;
   parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
     const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
-    Slab slab = extract_slab(plan, march, z_begin, z_end, s > 0, s + 1 < count);
+    Slab slab = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
     std::unique_lock<std::mutex> lock(mutex);
     done[static_cast<size_t>(s)] = std::move(slab);
     if (merging) return;

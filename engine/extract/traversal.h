@@ -9,7 +9,6 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <utility>
 #include <vector>
 
@@ -173,37 +172,13 @@ class Scratch {
 };
 
 // What a level-by-level walk keeps of one level and the next (Traversal::visit_by_levels).
-// Megabytes over a piece's deepest levels: lent from piece to piece (LevelScratchPool), it is
+// Megabytes over a piece's deepest levels: lent from piece to piece (LendingPool), it is
 // memory touched about once per extraction, where one per traversal was fresh memory every piece
 // (docs/METHOD.md, "In parallel").
 template <TraversalSource Source>
 struct LevelScratch {
   Scratch<Child> frontier, next;
   Scratch<typename Source::Reader::Handle> handles;  // of frontier
-};
-
-// The scratches of one extraction's pieces: a piece takes one and gives it back when done, so the
-// next piece reuses memory already touched, and there are never more than pieces run at once. A
-// mutex, not per-thread storage: two lock operations a piece, and ThreadSanitizer sees them (oneTBB's
-// thread-local storage is not instrumented, engine/core/parallel.h).
-template <TraversalSource Source>
-class LevelScratchPool {
- public:
-  std::unique_ptr<LevelScratch<Source>> take() {
-    const std::lock_guard<std::mutex> lock(mutex_);
-    if (free_.empty()) return std::make_unique<LevelScratch<Source>>();
-    auto s = std::move(free_.back());
-    free_.pop_back();
-    return s;
-  }
-  void give(std::unique_ptr<LevelScratch<Source>> s) {
-    const std::lock_guard<std::mutex> lock(mutex_);
-    free_.push_back(std::move(s));
-  }
-
- private:
-  std::mutex mutex_;
-  std::vector<std::unique_ptr<LevelScratch<Source>>> free_;
 };
 
 // A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
@@ -219,7 +194,7 @@ struct Piece {
 template <TraversalSource Source>
 class Traversal {
  public:
-  // levels: scratch for visit_by_levels lent for this traversal's life (LevelScratchPool), or null.
+  // levels: scratch for visit_by_levels lent for this traversal's life (LendingPool), or null.
   Traversal(const Source& source, const SplitRule& rule, LevelScratch<Source>* levels = nullptr)
       : reader_(source.reader()),
         lattice_(source.lattice()),

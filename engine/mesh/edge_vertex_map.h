@@ -4,6 +4,7 @@
 // never erased, and it sits in the innermost loop. Linear probing over one flat array, no
 // per-entry allocation. (Slots taken straight from the brick-ordered keys were tried: they
 // cluster, and extraction got 20% slower than with this multiplicative hash.)
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -17,6 +18,12 @@ class EdgeVertexMap {
   static constexpr uint32_t kAbsent = 0xffffffffu;
 
   explicit EdgeVertexMap(size_t expected = 1024) { rehash(capacity_for(expected)); }
+
+  // Empty again, keeping the table's size: a table reused this way is memory already touched.
+  void clear() {
+    std::fill(keys_.begin(), keys_.end(), uint64_t{0});
+    size_ = 0;
+  }
 
   // Returns the index stored for key, or stores `fresh` and returns kAbsent.
   uint32_t find_or_insert(uint64_t key, uint32_t fresh) {

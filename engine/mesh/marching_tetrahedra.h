@@ -64,6 +64,12 @@ class MeshBuilder {
   // engine/extract/full_resolution.cpp).
   void keep_keys() { keep_keys_ = true; }
   std::vector<uint64_t> take_keys() { return std::move(keys_); }
+  // Ready for another mesh with the same isovalue and grid, its welding table kept at its size.
+  void reset() {
+    mesh_ = Mesh{};
+    keys_.clear();
+    map_.clear();
+  }
 
  private:
   uint64_t edge_key(const Coord& p, const Coord& q) const;
