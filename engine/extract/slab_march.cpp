@@ -97,8 +97,8 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
                     int64_t last, double* seconds, bool keep_share) {
   const int64_t count = slab_count(plan);
   std::vector<Slab> mine(static_cast<size_t>(last - first));
-  BuilderPool builders;
   settle_together(group, [&] {
+    BuilderPool builders;  // gone before the slabs are sent and merged
     const auto start = std::chrono::steady_clock::now();
     parallel_for_in_order(first, last, [&](int64_t s) {
       const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
@@ -157,7 +157,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march) {
   std::mutex mutex;
   int64_t next = 0;      // the next slab to merge
   bool merging = false;  // a thread is merging, and takes any slab that becomes next meanwhile
-  BuilderPool builders;
+  BuilderPool builders;  // a welding table per thread while the slabs are marched and merged
   parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
     const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
     Slab slab = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);

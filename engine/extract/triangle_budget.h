@@ -23,6 +23,7 @@
 #include <array>
 #include <atomic>
 #include <bit>
+#include <cassert>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -138,12 +139,14 @@ struct FrontierItem {
   uint64_t where;
 
   static FrontierItem at(double key, uint8_t root, int level, uint64_t path) {
+    assert(level < kRootShift && root < (1 << (64 - kRootShift)));
     return {key, (uint64_t{root} << kRootShift) | (uint64_t{1} << level) | path};
   }
   uint8_t root() const { return static_cast<uint8_t>(where >> kRootShift); }
   int level() const { return static_cast<int>(std::bit_width(where & ((uint64_t{1} << kRootShift) - 1))) - 1; }
   uint64_t path() const { return where & ((uint64_t{1} << level()) - 1); }
 };
+static_assert(sizeof(FrontierItem) == 16);
 
 // The passes of one search: the first descends from the roots (the subtrees at a few levels down
 // in parallel), each later one descends, in parallel, the frontier items whose key reaches its
@@ -170,8 +173,7 @@ class CountPasses {
     {
       Walk walk(source_, rule_);
       roots_ = walk.roots();
-      if (roots_.size() > (size_t{1} << (64 - FrontierItem::kRootShift)))
-        throw std::logic_error("the budget search's frontier cannot name more than 64 roots");
+      assert(roots_.size() <= (size_t{1} << (64 - FrontierItem::kRootShift)));  // 6 Kuhn tetrahedra
       for (size_t r = 0; r < roots_.size(); ++r) {
         const traversal::Child& c = roots_[r];
         top.table.add(kInf, 0,
@@ -207,7 +209,7 @@ class CountPasses {
       // The way down to the last item descended: items in a list come in depth-first order, so
       // the next one shares most of it, and only the levels below the first different bit are
       // bisected again.
-      std::array<traversal::Child, 64> way;
+      std::array<traversal::Child, FrontierItem::kRootShift> way;  // by level, at most 57
       uint64_t way_path = 0;
       int way_level = -1;
       uint8_t way_root = 0;
