@@ -1,16 +1,12 @@
 #include "io/store/brick_pool.h"
 
-#include <sys/mman.h>
-
+#include <algorithm>
 #include <cstdlib>
 #include <new>
 
+#include "isotope/detail/huge_page_allocator.h"
+
 namespace isotope {
-namespace {
-
-constexpr size_t kHugePage = size_t{2} << 20;
-
-}  // namespace
 
 BrickPool::BrickPool(size_t block_bytes) : block_((block_bytes + 63) / 64 * 64) {}
 
@@ -26,10 +22,11 @@ void* BrickPool::allocate() {
     return p;
   }
   if (next_ == nullptr || static_cast<size_t>(end_ - next_) < block_) {
-    const size_t chunk = std::max<size_t>(8 * kHugePage, (block_ + kHugePage - 1) / kHugePage * kHugePage);
-    void* c = std::aligned_alloc(kHugePage, chunk);
+    constexpr size_t kHuge = detail::kHugePage;
+    const size_t chunk = std::max<size_t>(8 * kHuge, (block_ + kHuge - 1) / kHuge * kHuge);
+    void* c = std::aligned_alloc(kHuge, chunk);
     if (!c) throw std::bad_alloc();
-    madvise(c, chunk, MADV_HUGEPAGE);  // a hint: without it, only slower
+    detail::advise_huge_pages(c, chunk);
     chunks_.push_back(c);
     next_ = static_cast<char*>(c);
     end_ = next_ + chunk;

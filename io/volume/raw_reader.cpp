@@ -1,7 +1,6 @@
 #include "io/volume/raw_reader.h"
 
 #include <fcntl.h>
-#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -25,6 +24,7 @@
 #include "engine/core/volume_check.h"
 #include "io/file/checked_size.h"
 #include "io/file/input_file.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -217,11 +217,7 @@ void check_finite(const float* values, const std::array<int64_t, 3>& lo, const s
 
 void size_volume_values(std::vector<float>& values, size_t count) {
   values.reserve(count);
-  // The whole huge pages inside the allocation (a hint: failure only costs speed).
-  constexpr uintptr_t kHugePage = uintptr_t{2} << 20;
-  const auto first = (reinterpret_cast<uintptr_t>(values.data()) + kHugePage - 1) & ~(kHugePage - 1);
-  const auto end = reinterpret_cast<uintptr_t>(values.data() + count) & ~(kHugePage - 1);
-  if (end > first) madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
+  detail::advise_huge_pages(values.data(), count * sizeof(float));
   values.resize(count);
 }
 

@@ -6,15 +6,26 @@
 #include <sys/mman.h>
 
 #include <cstddef>
+#include <cstdint>
 #include <cstdlib>
 #include <new>
 
 namespace isotope::detail {
 
+inline constexpr size_t kHugePage = size_t{2} << 20;
+
+// Asks the kernel for transparent huge pages over the whole 2 MB pages that lie inside
+// [p, p + bytes): a hint, whose failure only costs speed.
+inline void advise_huge_pages(void* p, size_t bytes) {
+  const auto begin = reinterpret_cast<uintptr_t>(p);
+  const uintptr_t first = (begin + kHugePage - 1) & ~(uintptr_t{kHugePage} - 1);
+  const uintptr_t end = (begin + bytes) & ~(uintptr_t{kHugePage} - 1);
+  if (end > first) madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
+}
+
 template <class T>
 struct HugePageAllocator {
   using value_type = T;
-  static constexpr size_t kHugePage = size_t{2} << 20;
 
   HugePageAllocator() = default;
   template <class U>
@@ -30,7 +41,7 @@ struct HugePageAllocator {
     const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
     void* p = std::aligned_alloc(kHugePage, rounded);
     if (!p) throw std::bad_alloc();
-    madvise(p, rounded, MADV_HUGEPAGE);  // a hint: failure only costs speed
+    advise_huge_pages(p, rounded);
     return static_cast<T*>(p);
   }
   void deallocate(T* p, size_t) noexcept { std::free(p); }
