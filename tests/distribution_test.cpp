@@ -20,6 +20,8 @@
 #include <vector>
 
 #include "engine/core/fields.h"
+#include "engine/extract/adaptive_extract.h"
+#include "engine/hierarchy/hierarchy.h"
 #include "isotope/convert.h"
 #include "isotope/error.h"
 #include "isotope/extract.h"
@@ -199,6 +201,40 @@ TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
         EXPECT_TRUE(mesh.triangles.empty() && mesh.positions.empty());
     }
   }
+}
+
+// A budget from a sample (engine/extract/adaptive_extract.h): every rank counts the guess's whole
+// mesh, so all of them stand by it or all fall back to the exact choice, as one process does, and
+// rank 0 has that process's mesh. Both outcomes are met: a sample of level 9 stands, one of 48
+// subtrees at level 4 does not.
+TEST(DistributedExtract, ASampledBudgetStandsOrFallsBackOnEveryRankAlike) {
+  const Hierarchy hierarchy = Hierarchy::build(generate_noise(61, 3));
+  int stood = 0, fell_back = 0;
+  for (const BudgetSample sample : {BudgetSample{9, 3}, BudgetSample{4, 3}}) {
+    for (const int64_t budget : {int64_t{20000}, int64_t{40000}}) {
+      const ExtractOptions o = options_for(0, budget);
+      ExtractStats single_stats;
+      const Mesh single = extract_adaptive(hierarchy, o, &single_stats, sample);
+      ++(single_stats.budget_sampled ? stood : fell_back);
+      const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(3, [&](const Distribution& g) {
+        ExtractOptions mine = o;
+        mine.distribution = &g;
+        ExtractStats stats;
+        Mesh mesh = extract_adaptive(hierarchy, mine, &stats, sample);
+        return std::pair{std::move(mesh), stats};
+      });
+      for (int r = 0; r < 3; ++r) {
+        ASSERT_FALSE(out[static_cast<size_t>(r)].error) << "rank " << r;
+        const auto& [mesh, stats] = *out[static_cast<size_t>(r)].value;
+        EXPECT_EQ(stats.budget_sampled, single_stats.budget_sampled) << "rank " << r << " budget " << budget;
+        EXPECT_EQ(stats.chosen_eps, single_stats.chosen_eps) << "rank " << r << " budget " << budget;
+        EXPECT_EQ(stats.chosen_eps_ties, single_stats.chosen_eps_ties) << "rank " << r << " budget " << budget;
+        if (r == 0) expect_same(mesh, single);
+      }
+    }
+  }
+  EXPECT_GT(stood, 0);
+  EXPECT_GT(fell_back, 0);
 }
 
 // A fresh folder per test (tests/temp_dir_test.h): what a failed convert must leave empty.

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "engine/core/fields.h"
+#include "engine/extract/adaptive_extract.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "io/store/brick_cache.h"
@@ -27,6 +28,7 @@
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
+#include "io/volume/raw_reader.h"
 #include "isotope/error.h"
 #include "isotope/mesh.h"
 #include "tests/byte_files.h"
@@ -586,6 +588,68 @@ TEST_F(PagedExtract, TriangleBudgetTakesTheFinestEpsThatFits) {
   EXPECT_GT(budgets_run, 20);
   EXPECT_GT(thrown, 0);
   EXPECT_GT(ties_chosen, 5);  // steps within a key were taken
+}
+
+// 5b. A triangle budget from a sample (engine/extract/adaptive_extract.h, BudgetSample): where
+// the guess stands, its mesh holds between 90% and 100% of the budget and is the plain mesh at
+// the eps and tie classes reported; where it does not, the choice is the exact search's, mesh for
+// mesh. Paged = in memory, one thread = two, and a sample too coarse to be trusted falls back.
+// Volumes over 257 a side sample by default, smaller ones never.
+TEST_F(PagedExtract, TriangleBudgetFromASampleLandsWithinTenPercentOrFallsBack) {
+  Lattice small, large;
+  small.k = 8, large.k = 9;
+  EXPECT_TRUE(budget_sample_for(small).exact());
+  EXPECT_FALSE(budget_sample_for(large).exact());
+  const std::string path = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
+  // 2^7 + 1 a side: no diamond leaves the data box.
+  const Volume embryo = testing::crop(read_raw(path, *parse_raw_name(path)), {129, 129, 129});
+  const Hierarchy memory = Hierarchy::build(embryo);
+  const StoreReader store(convert(embryo, "embryo"));
+  BrickCache cache(store, kHugeBudget);
+  const PagedVolume paged(cache);
+  int stood = 0, fell_back = 0;
+  // The default's level 18 lies below most of a 129^3 volume's cuts; 12 is where the default sits
+  // relative to the cut of a budget of about 1 M at 1024^3.
+  for (const BudgetSample sample : {BudgetSample{12, 3}, BudgetSample{6, 3}}) {
+    for (const int64_t budget : {int64_t{5000}, int64_t{15000}, int64_t{40000}}) {
+      ExtractOptions o;
+      o.iso = 64.5f, o.topology = TopologyMode::none, o.max_triangles = budget;
+      const std::string what = describe(o) + " sample level " + std::to_string(sample.level);
+      ExtractStats s, exact_s, memory_s, one_s;
+      const Mesh m = extract_adaptive(paged, o, &s, sample);
+      const Mesh exact = extract_adaptive(paged, o, &exact_s, BudgetSample{});
+      EXPECT_FALSE(exact_s.budget_sampled) << what;
+      EXPECT_TRUE(same_mesh(m, extract_adaptive(memory, o, &memory_s, sample))) << what << ": in memory";
+      EXPECT_EQ(memory_s.chosen_eps, s.chosen_eps) << what;
+      EXPECT_EQ(memory_s.budget_sampled, s.budget_sampled) << what;
+      {
+        const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        EXPECT_TRUE(same_mesh(m, extract_adaptive(paged, o, &one_s, sample))) << what << ": one thread";
+      }
+      const auto count = static_cast<int64_t>(m.triangles.size());
+      EXPECT_LE(count, budget) << what;
+      if (!s.budget_sampled) {
+        ++fell_back;
+        EXPECT_TRUE(same_mesh(m, exact)) << what << ": the fallback is the exact choice";
+        EXPECT_EQ(s.chosen_eps, exact_s.chosen_eps) << what;
+        EXPECT_EQ(s.next_triangles, exact_s.next_triangles) << what;
+        continue;
+      }
+      ++stood;
+      EXPECT_GE(static_cast<double>(count), 0.9 * static_cast<double>(budget)) << what;
+      EXPECT_GT(s.chosen_eps, 0) << what;
+      // No finer than the exact choice, which is the finest within the budget.
+      EXPECT_LE(count, static_cast<int64_t>(exact.triangles.size())) << what;
+      ExtractOptions chosen;
+      chosen.iso = o.iso, chosen.topology = o.topology, chosen.eps = s.chosen_eps, chosen.eps_ties = s.chosen_eps_ties;
+      EXPECT_TRUE(same_mesh(m, extract(paged, chosen)))
+          << what << ": plain extraction at chosen eps " << s.chosen_eps << ", eps-ties " << s.chosen_eps_ties;
+    }
+  }
+  RecordProperty("stood", stood);
+  RecordProperty("fell_back", fell_back);
+  EXPECT_GE(stood, 3);      // the finer sample stood on every budget here
+  EXPECT_GE(fell_back, 1);  // 48 subtrees, 6 of them kept, do not make a trustworthy estimate
 }
 
 // 6. The cache: when the store fits, each brick is read at most once and no more bytes than the

@@ -5,7 +5,9 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -25,70 +27,17 @@ namespace isotope {
 // not depend on the thread count.
 constexpr int kPieceLevel = 6;
 
-template <TraversalSource Source>
-Mesh extract_adaptive(const Source& source, const ExtractOptions& options, ExtractStats* stats) {
+// The adaptive extraction at the options' eps (in the source's value units): the traversal cut
+// into pieces run as parallel tasks (shared among processes with a group), their meshes welded in
+// piece order into *mesh (on rank 0; on every rank with keep_shares), the counts added to *total.
+// With `check`, this process's triangle count goes to it before the weld, which is skipped
+// (returning false) when it says no.
+template <TraversalSource Source, class Together>
+bool extract_pieces(const Source& source, const ExtractOptions& options, const Together& together, ExtractStats& total,
+                    Mesh* mesh, const std::function<bool(int64_t)>& check) {
   using namespace traversal;
-  const auto start = std::chrono::steady_clock::now();
-  options.validate();
-  ExtractOptions in_codes = options;  // identity unless the source holds quantized codes
-  const double offset = source.value_offset(), scale = source.value_scale();
-  // What one code of delta's weight is worth: |X| scales with the values, |X| times a gradient
-  // with their square.
-  const double weight_scale = std::array<double, 3>{scale, scale * scale, 1.0}[static_cast<size_t>(options.weight)];
-  if (offset != 0 || scale != 1) {
-    in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale);
-    in_codes.eps = threshold_in_codes(options.eps, scale);
-    in_codes.delta = threshold_in_codes(options.delta, weight_scale);
-  }
-  ExtractStats total;
   const Distribution* group = options.distribution;
-  // Distributed, each step that may fail runs under settle_together, so that a rank whose read
-  // fails stops every rank instead of leaving them waiting at the next gather.
-  auto together = [group](const auto& work) {
-    if (group)
-      settle_together(*group, work);
-    else
-      work();
-  };
-  together([&] {
-    if (options.auto_delta) {
-      // Half the budget for the features kept, half for the geometry around them; when even with
-      // every feature dropped the coarsest mesh takes more than half, all of it for the features.
-      in_codes.delta = 0;
-      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
-      BudgetChoice d;
-      try {
-        d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
-      } catch (const TriangleBudgetTooSmall&) {
-        d = choose_delta_for_budget(source, rule, options.max_triangles);
-      }
-      in_codes.delta = d.eps;
-      total.chosen_delta = threshold_in_data(d.eps, weight_scale);
-      total.delta_floor_triangles = d.triangles;
-    }
-    if (options.max_triangles > 0) {
-      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
-      const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles);
-      in_codes.eps = c.eps;
-      in_codes.eps_ties = c.ties;
-      total.chosen_eps = threshold_in_data(c.eps, scale);
-      total.chosen_eps_ties = c.ties;
-      total.next_eps = threshold_in_data(c.next_eps, scale);
-      total.next_eps_ties = c.next_ties;
-      total.next_triangles = c.next_triangles;
-      total.budget_steps = c.steps;
-    }
-  });
-  const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
-  auto finish = [&](Mesh mesh) {
-    if (stats) {
-      *stats = total;
-      stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    }
-    return mesh;
-  };
-  if (in_codes.eps == 0 && finest_extract_applies(source.lattice()))
-    return finish(extract_finest(source, rule, &total));
+  const SplitRule rule(options, source.lattice(), source.origin(), source.spacing(), source.error_fold());
   std::vector<Piece> pieces;
   // Spread over processes: this one runs its share of the pieces, and rank 0 welds them all
   // (engine/extract/distributed_parts.h). Every other rank returns an empty mesh.
@@ -145,21 +94,141 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     load.seconds = work_seconds;
     if constexpr (requires { source.bytes_read(); }) load.bytes_read = source.bytes_read();
     total.ranks = gather_loads(*group, load);
-    if (!options.keep_shares) parts = gather_parts(*group, std::move(parts));  // rank 0's parts: all of them
   } else {
     run_share();
   }
+  if (check) {
+    int64_t mine = 0;
+    for (const PartMesh& p : parts) mine += static_cast<int64_t>(p.mesh.triangles.size());
+    if (!check(mine)) return false;
+  }
+  if (group && !options.keep_shares) parts = gather_parts(*group, std::move(parts));  // rank 0's parts: all of them
   for (const PartMesh& p : parts) {
     total.tets_visited += p.tets_visited;
     total.tets_emitted += p.tets_emitted;
     total.tets_simplified += p.tets_simplified;
   }
-  Mesh mesh;
   // Rank 0 (or every rank, keeping its share) welds; the others wait, so that running out of
   // memory in the weld stops them too.
   together([&] {
-    if (!group || options.keep_shares || group->rank() == 0) mesh = weld(parts, source.lattice().side);
+    if (!group || options.keep_shares || group->rank() == 0) *mesh = weld(parts, source.lattice().side);
   });
+  return true;
+}
+
+// Where a triangle budget samples the volume instead of counting all of it (BudgetSample): on
+// lattices of 513 a side and up (volumes over 257 samples on a side), where the exact search costs
+// more than the extraction it chooses for; smaller volumes keep the exact search, cheap there. The
+// subtrees are those of level 18 (1.6 M tetrahedra, a 64th of the side across), one in 8 kept: at
+// 1024^3 the estimates of T were within 1% of the meshes' counts for budgets of 100 k to 2 M, where
+// level 12 (24,576 subtrees) missed by up to 8% and level 15 by up to 11%.
+inline BudgetSample budget_sample_for(const Lattice& lattice) {
+  return lattice.k >= 9 ? BudgetSample{18, 3} : BudgetSample{};
+}
+
+// `sample`: as budget_sample_for(the source's lattice) unless given (tests choose it).
+template <TraversalSource Source>
+Mesh extract_adaptive(const Source& source, const ExtractOptions& options, ExtractStats* stats,
+                      std::optional<BudgetSample> sample = std::nullopt) {
+  using namespace traversal;
+  const auto start = std::chrono::steady_clock::now();
+  options.validate();
+  ExtractOptions in_codes = options;  // identity unless the source holds quantized codes
+  const double offset = source.value_offset(), scale = source.value_scale();
+  // What one code of delta's weight is worth: |X| scales with the values, |X| times a gradient
+  // with their square.
+  const double weight_scale = std::array<double, 3>{scale, scale * scale, 1.0}[static_cast<size_t>(options.weight)];
+  if (offset != 0 || scale != 1) {
+    in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale);
+    in_codes.eps = threshold_in_codes(options.eps, scale);
+    in_codes.delta = threshold_in_codes(options.delta, weight_scale);
+  }
+  ExtractStats total;
+  const Distribution* group = options.distribution;
+  // Distributed, each step that may fail runs under settle_together, so that a rank whose read
+  // fails stops every rank instead of leaving them waiting at the next gather.
+  auto together = [group](const auto& work) {
+    if (group)
+      settle_together(*group, work);
+    else
+      work();
+  };
+  // The eps a triangle budget chose, into in_codes and the stats.
+  auto take_choice = [&](const BudgetChoice& c) {
+    in_codes.eps = c.eps;
+    in_codes.eps_ties = c.ties;
+    total.chosen_eps = threshold_in_data(c.eps, scale);
+    total.chosen_eps_ties = c.ties;
+    total.next_eps = threshold_in_data(c.next_eps, scale);
+    total.next_eps_ties = c.next_ties;
+    total.next_triangles = c.next_triangles;
+    total.budget_steps = c.steps;
+    total.budget_sampled = c.sampled;
+  };
+  auto choose_exactly = [&] {
+    in_codes.eps = 0, in_codes.eps_ties = -1;  // as the options gave them with a budget
+    together([&] {
+      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+      take_choice(choose_eps_for_budget(source, rule, options.max_triangles));
+    });
+  };
+  bool sampled = false;  // the eps is a sample's guess, for the mesh's count to confirm
+  together([&] {
+    if (options.auto_delta) {
+      // Half the budget for the features kept, half for the geometry around them; when even with
+      // every feature dropped the coarsest mesh takes more than half, all of it for the features.
+      in_codes.delta = 0;
+      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+      BudgetChoice d;
+      try {
+        d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
+      } catch (const TriangleBudgetTooSmall&) {
+        d = choose_delta_for_budget(source, rule, options.max_triangles);
+      }
+      in_codes.delta = d.eps;
+      total.chosen_delta = threshold_in_data(d.eps, weight_scale);
+      total.delta_floor_triangles = d.triangles;
+    }
+    if (options.max_triangles > 0) {
+      const BudgetSample s = sample.value_or(budget_sample_for(source.lattice()));
+      if (!s.exact()) {
+        const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+        const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles, s);
+        // A guess of full resolution, or none, is left to the exact search: it alone can tell
+        // whether the whole mesh fits, or that no mesh does.
+        if (c.fits && c.eps != 0) take_choice(c), sampled = true;
+      }
+    }
+  });
+  if (options.max_triangles > 0 && !sampled) choose_exactly();
+  auto finish = [&](Mesh mesh) {
+    if (stats) {
+      *stats = total;
+      stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
+    return mesh;
+  };
+  // A sampled guess stands when its mesh holds between kSampleFloor and all of the budget; else
+  // the exact search chooses, and the extraction runs again (docs/METHOD.md, "Focus and triangle
+  // budget"). Every process counts the whole mesh, so all of them decide alike.
+  const std::function<bool(int64_t)> guess_stands = [&](int64_t mine) {
+    const int64_t count = group ? sum_over_ranks(*group, mine) : mine;
+    return count <= options.max_triangles &&
+           static_cast<double>(count) >= kSampleFloor * static_cast<double>(options.max_triangles);
+  };
+  Mesh mesh;
+  if (sampled) {
+    if (extract_pieces(source, in_codes, together, total, &mesh, guess_stands)) return finish(std::move(mesh));
+    // The guess did not stand: the exact choice, and its mesh.
+    total.tets_visited = total.tets_emitted = total.tets_simplified = 0;
+    total.ranks.clear();
+    choose_exactly();
+  }
+  if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) {
+    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+    return finish(extract_finest(source, rule, &total));
+  }
+  extract_pieces(source, in_codes, together, total, &mesh, nullptr);
   return finish(std::move(mesh));
 }
 

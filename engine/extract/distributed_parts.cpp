@@ -26,6 +26,17 @@ std::vector<double> share_costs(const Distribution& group, size_t n,
   return all;
 }
 
+int64_t sum_over_ranks(const Distribution& group, int64_t mine) {
+  ByteWriter w;
+  w.put(mine);
+  int64_t sum = 0;
+  for (const std::vector<uint8_t>& bytes : group.all_gather(w.bytes())) {
+    ByteReader r(bytes);
+    sum += r.get<int64_t>();
+  }
+  return sum;
+}
+
 std::vector<RankLoad> gather_loads(const Distribution& group, const RankLoad& mine) {
   ByteWriter w;
   w.put(mine);

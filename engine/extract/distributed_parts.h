@@ -42,6 +42,9 @@ void piece_costs(const Source& source, const traversal::SplitRule& rule, const s
 std::vector<double> share_costs(const Distribution& group, size_t n,
                                 const std::function<void(size_t first, size_t last, double* out)>& compute);
 
+// Collective: the sum of every process's count, on every process.
+int64_t sum_over_ranks(const Distribution& group, int64_t mine);
+
 // Collective: every process's load, on every process, in rank order.
 std::vector<RankLoad> gather_loads(const Distribution& group, const RankLoad& mine);
 

@@ -47,6 +47,31 @@ struct BudgetChoice {
   int next_ties = -1;
   int64_t next_triangles = 0;
   int64_t steps = 0;
+  // From a sample (BudgetSample): the triangle counts are estimates, and `fits` is false when
+  // even the keys of +infinity alone seemed to exceed the budget (no eps was chosen).
+  bool sampled = false;
+  bool fits = true;
+};
+
+// Which subtrees a search counts. Exact by default. With a level and a stride of 2^bits, of every
+// 2^bits tetrahedra of that level below one of the level `bits` above, one only, chosen by a hash of
+// their common ancestor, is descended, and what it adds below that level counts 2^bits times: an
+// estimate of T stratified over the whole volume, for about 1 / 2^bits of the work
+// (docs/METHOD.md, "Focus and triangle budget"). The choice depends on the tree alone, never on the
+// threads or the cache.
+struct BudgetSample {
+  int level = -1;  // < 0: every subtree (exact)
+  int bits = 0;
+  bool exact() const { return level < 0 || bits == 0; }
+  bool keeps(uint8_t root, uint64_t path) const {
+    const int group = level - bits;  // the common ancestor's level: its path is the low bits
+    uint64_t h = (path & ((uint64_t{1} << group) - 1)) ^ (uint64_t{root} << 58);
+    h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;  // splitmix64's finalizer
+    h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
+    h ^= h >> 31;
+    const uint64_t mask = (uint64_t{1} << bits) - 1;
+    return ((path >> group) & mask) == (h & mask);
+  }
 };
 
 // The search for any key that never grows from a diamond to its children: `key(t, level, &k)`
@@ -55,15 +80,27 @@ struct BudgetChoice {
 // splitting every tetrahedron with key >= x gives at most max_triangles; throws when even the
 // keys of +infinity alone exceed it (TriangleBudgetTooSmall). With `ties`, the steps go on within
 // one key by tie class (SplitRule::refines): the cut "key > x, or key = x and class < ties".
+// With a sample (not exact()), the counts are estimates and the threshold aims at
+// kSampleAim of max_triangles; a budget the estimate cannot meet returns fits = false instead of
+// throwing.
 template <TraversalSource Source, class Key>
 BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
-                                   bool ties, const Key& judge);
+                                   bool ties, const Key& judge, BudgetSample sample = {});
+
+// Where a sampled choice aims, and the least part of the budget its mesh must reach to be kept
+// (engine/extract/adaptive_extract.h): an estimate off by up to 5% either way still lands in
+// [kSampleFloor, 1] of the budget.
+inline constexpr double kSampleAim = 0.95, kSampleFloor = 0.9;
 
 template <TraversalSource Source>
-BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
-  return choose_cut_for_budget(source, rule, max_triangles, true,
-                               [](traversal::Traversal<Source>& walk, const traversal::PackedTet& t, int level,
-                                  double* key) { return walk.judge(t, level, key); });
+BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
+                                   BudgetSample sample = {}) {
+  return choose_cut_for_budget(
+      source, rule, max_triangles, true,
+      [](traversal::Traversal<Source>& walk, const traversal::PackedTet& t, int level, double* key) {
+        return walk.judge(t, level, key);
+      },
+      sample);
 }
 
 // Simplify mode with a budget and no delta (engine/extract/options.h, ExtractOptions::auto_delta): at
@@ -155,8 +192,8 @@ template <TraversalSource Source, class Key>
 class CountPasses {
  public:
   using Walk = traversal::Traversal<Source>;
-  CountPasses(const Source& source, const traversal::SplitRule& rule, bool ties, const Key& judge)
-      : source_(source), rule_(rule), ties_(ties), judge_(judge) {
+  CountPasses(const Source& source, const traversal::SplitRule& rule, bool ties, const Key& judge, BudgetSample sample)
+      : source_(source), rule_(rule), ties_(ties), judge_(judge), sample_(sample) {
     const auto threads =
         static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
     workers_.resize(static_cast<size_t>(std::max<int64_t>(threads, 1)));
@@ -320,6 +357,8 @@ class CountPasses {
     const auto fate = judge_(walk, t, level, &key);
     if (fate == Walk::Fate::culled) return 0;
     const int64_t tris = tris_of(f);
+    // Outside the sample: t counts on the cuts above it, exactly, and not below.
+    if (level == sample_.level && !sample_.exact() && !sample_.keeps(root, path)) return tris;
     // A key of -infinity is never split (choose_delta_for_budget: no critical point below).
     if (fate != Walk::Fate::split_key || !(key > -kInf)) return tris;
     if (!(key >= bound_)) {
@@ -346,7 +385,9 @@ class CountPasses {
       children += visit(walk, w, cs[i].tet, g, level + 1, cs[i].positive, root, path | (i << level), seed_level, seeds,
                         key, tie);
     }
-    w.table.add(key, tie, children - tris);
+    // Below the sample's level, each subtree kept stands for 2^bits.
+    const int64_t weight = !sample_.exact() && level >= sample_.level ? int64_t{1} << sample_.bits : 1;
+    w.table.add(key, tie, weight * (children - tris));
   }
   int64_t tris_of(const Corners& f) const { return traversal::triangles_of(f, rule_.options().iso); }
 
@@ -354,6 +395,7 @@ class CountPasses {
   const traversal::SplitRule& rule_;
   const bool ties_;
   const Key& judge_;
+  const BudgetSample sample_;
   double bound_ = kInf;
   std::vector<traversal::Child> roots_;
   KeyTable table_;
@@ -366,11 +408,15 @@ class CountPasses {
 
 template <TraversalSource Source, class Key>
 BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles,
-                                   bool ties, const Key& judge) {
+                                   bool ties, const Key& judge, BudgetSample sample) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   // Subtrees for the threads in the first pass: a few thousand at most, as the extraction's pieces.
   const int seed_level = std::min(source.lattice().max_level(), 9);
-  budget_detail::CountPasses<Source, Key> passes(source, rule, ties, judge);
+  if (sample.level >= source.lattice().max_level()) sample = {};
+  const bool sampled = !sample.exact();
+  // What the steps must not exceed: the budget itself, or where a sample aims within it.
+  const int64_t limit = sampled ? static_cast<int64_t>(kSampleAim * static_cast<double>(max_triangles)) : max_triangles;
+  budget_detail::CountPasses<Source, Key> passes(source, rule, ties, judge, sample);
   double bound = kInf;
   for (bool first = true;; first = false) {
     if (first)
@@ -393,6 +439,11 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
     int64_t count = 0;
     for (; i < d.size() && d[i].key == kInf; ++i) count += d[i].delta;
     const int64_t infinite = count;
+    if (sampled && count > limit) {
+      BudgetChoice none;
+      none.sampled = true, none.fits = false;
+      return none;
+    }
     if (count > max_triangles) {
       const TopologyMode mode = rule.options().topology;
       throw TriangleBudgetTooSmall(
@@ -404,6 +455,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
     }
     const bool more_below = largest_below > -kInf;
     BudgetChoice choice;
+    choice.sampled = sampled;
     choice.triangles = count;
     // The largest finite key: the first one the walk down from +infinity meets.
     choice.eps = i < d.size() ? std::nextafter(d[i].key, kInf) : more_below ? std::nextafter(largest_below, kInf) : 0;
@@ -413,7 +465,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
       count += d[i].delta;
       ++choice.steps;
       const int tie = i + 1 < d.size() && d[i + 1].key == d[i].key ? d[i].tie + 1 : -1;
-      if (count > max_triangles) {
+      if (count > limit) {
         choice.next_eps = d[i].key;
         choice.next_ties = tie;
         choice.next_triangles = count;
@@ -445,7 +497,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
       if (x2 > x && at_x2 > infinite && count > at_x2) {
         const double grown = static_cast<double>(count - infinite), before = static_cast<double>(at_x2 - infinite);
         const double exponent = std::log(grown / before) / std::log(x2 / x);
-        const double target = 1.25 * static_cast<double>(max_triangles - infinite);
+        const double target = 1.25 * static_cast<double>(limit - infinite);
         lowest = std::clamp(x * std::pow(grown / target, 1.0 / exponent), x / 4, x / 1.25);
       }
     }

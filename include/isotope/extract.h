@@ -71,7 +71,9 @@ struct ExtractOptions {
   SimplificationWeight weight = SimplificationWeight::interval;  // simplify mode only
   double delta = 0.0;  // simplify mode: critical points of weight < delta may be dropped
   std::optional<Focus> focus;
-  // > 0: the finest eps whose mesh has at most this many triangles (eps must then be 0).
+  // > 0: the finest eps whose mesh has at most this many triangles (eps must then be 0); on
+  // volumes over 257 samples on a side, an eps whose mesh has between 90% and 100% of them, chosen from a
+  // sample, when one does (ExtractStats::budget_sampled).
   int64_t max_triangles = 0;
   // With max_triangles in simplify mode: choose delta too: the smallest delta whose coarsest mesh
   // takes at most half the budget (features of smallest weight dropped first), then the finest eps
@@ -161,6 +163,10 @@ struct ExtractStats {
   int next_eps_ties = -1;
   int64_t next_triangles = 0;
   int64_t budget_steps = 0;  // steps (eps values, and tie classes within one) the budget search went through
+  // Whether the eps came from a sample of the volume (over 257 samples on a side; docs/METHOD.md, "Focus and
+  // triangle budget"): the mesh then has between 90% and 100% of the budget, and next_triangles is
+  // the sample's estimate. Otherwise the choice is exact: the finest step within the budget.
+  bool budget_sampled = false;
   // With auto_delta: the delta chosen (in data units; -1 when none was), and the triangles of its
   // coarsest mesh (eps = infinity).
   double chosen_delta = -1;

@@ -260,6 +260,7 @@ py::dict stats_dict(const Mesh& mesh, const ExtractStats& s) {
   d["next_eps"] = s.next_eps;
   d["next_eps_ties"] = s.next_eps_ties;
   d["next_triangles"] = s.next_triangles;
+  d["budget_sampled"] = s.budget_sampled;
   d["chosen_delta"] = s.chosen_delta;
   return d;
 }

@@ -169,6 +169,7 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
     j["next_eps"] = run.extract.next_eps;
     j["next_eps_ties"] = run.extract.next_eps_ties;
     j["next_triangles"] = run.extract.next_triangles;
+    j["budget_sampled"] = run.extract.budget_sampled;
   }
   if (run.extract.chosen_delta >= 0) {
     j["chosen_delta"] = run.extract.chosen_delta;
