@@ -10,6 +10,7 @@
 #include <benchmark/benchmark.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <cstdio>
@@ -20,6 +21,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <random>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -400,6 +402,30 @@ void BM_Preprocess(benchmark::State& state, Dataset d, int threads) {
 }
 
 // is_critical_pattern() over every pattern of the three polyhedron types (2^8 + 2^6 + 2^10).
+// Opening a band of a store checks that its directory's entries tile one run of the file
+// (io/store/store_format.h, check_directory): 2 M entries are a 2048^3 volume's band 0, checked once
+// per process that reads it. The entries tile the run in a shuffled order, as the writer's tiles
+// leave them relative to the brick indices.
+void BM_StoreDirectoryCheck(benchmark::State& state) {
+  const auto n = static_cast<size_t>(state.range(0));
+  std::vector<isotope::BrickEntry> entries(n);
+  std::vector<size_t> file_order(n);
+  for (size_t i = 0; i < n; ++i) file_order[i] = i;
+  std::mt19937_64 rng(7);
+  std::shuffle(file_order.begin(), file_order.end(), rng);
+  uint64_t at = isotope::kHeaderBytes;
+  for (size_t i : file_order) {
+    entries[i].offset = at;
+    entries[i].bytes[0] = static_cast<uint32_t>(isotope::kChecksumBytes + 100 + rng() % 4000);
+    at += entries[i].total();
+  }
+  isotope::BandDirectory d;
+  d.checksum = isotope::store_checksum(entries.data(), n * sizeof(isotope::BrickEntry));
+  for (auto _ : state) isotope::check_directory(entries, d, at, "bench.isotope");
+  state.counters["entries/s"] =
+      benchmark::Counter(static_cast<double>(n), benchmark::Counter::kIsIterationInvariantRate);
+}
+
 void BM_CriticalTableLookup(benchmark::State& state) {
   constexpr isotope::PolyhedronType types[] = {isotope::PolyhedronType::cube, isotope::PolyhedronType::octahedron,
                                                isotope::PolyhedronType::diamond};
@@ -505,6 +531,9 @@ void register_benchmarks() {
           ->UseRealTime()
           ->MinTime(kMinSeconds);
   benchmark::RegisterBenchmark("BM_CriticalTableLookup", BM_CriticalTableLookup)->Unit(benchmark::kMicrosecond);
+  benchmark::RegisterBenchmark("BM_StoreDirectoryCheck", BM_StoreDirectoryCheck)
+      ->Arg(int64_t{1} << 21)
+      ->Unit(benchmark::kMillisecond);
 }
 
 }  // namespace

@@ -261,20 +261,45 @@ void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d
   // The band's bricks tile one run of the file (the writer puts them one after the other): no two
   // share bytes, since an entry that points into another brick (a copy of one passes every
   // checksum) would give a silently wrong brick, and none leaves a gap. verify checks that the
-  // bands tile the whole brick area; a band read alone checks its own, sorted by offset (2 M
-  // entries, a 2048^3 volume's band 0: about 140 ms, once per process).
-  std::vector<std::pair<uint64_t, uint32_t>> order;  // an entry of no bytes takes no room: left out
-  order.reserve(entries.size());
-  for (size_t i = 0; i < entries.size(); ++i)
-    if (entries[i].total() != 0) order.emplace_back(entries[i].offset, static_cast<uint32_t>(i));
-  std::sort(order.begin(), order.end());
+  // bands tile the whole brick area; a band read alone checks its own, in the order of offsets.
+  // That order comes from a bucket sort: the run's bytes cut into as many equal spans as there are
+  // entries, each entry in the span of its offset, a span's few entries sorted among themselves:
+  // linear, and the order a sort of (offset, entry) pairs gives, so the same first fault is named.
+  uint64_t first = std::numeric_limits<uint64_t>::max(), last = 0;
+  size_t with_bytes = 0;  // an entry of no bytes takes no room: left out
+  for (const BrickEntry& e : entries)
+    if (e.total() != 0) {
+      ++with_bytes;
+      first = std::min(first, e.offset);
+      last = std::max(last, e.offset + e.total());  // no wrap: checked above
+    }
+  if (with_bytes < 2) return;
+  const double per_span = static_cast<double>(last - first) / static_cast<double>(with_bytes);
+  auto span_of = [&](uint64_t offset) {
+    return std::min(with_bytes - 1, static_cast<size_t>(static_cast<double>(offset - first) / per_span));
+  };
+  // Counting sort by span, of entry numbers only (4 bytes each: this is most of the fresh memory
+  // the check touches), then each span's few entries by offset, ties by number.
+  std::vector<uint32_t> ends(with_bytes + 1, 0);  // where each span's entries end in `order`
+  for (const BrickEntry& e : entries)
+    if (e.total() != 0) ++ends[span_of(e.offset)];
+  for (size_t b = 1; b <= with_bytes; ++b) ends[b] += ends[b - 1];
+  std::vector<uint32_t> order(with_bytes);
+  for (size_t i = entries.size(); i-- > 0;)  // from the back, so that each span's entries fill it from its end
+    if (entries[i].total() != 0) order[--ends[span_of(entries[i].offset)]] = static_cast<uint32_t>(i);
+  // ends[b] is now where span b begins (ends[with_bytes] stayed the count).
+  auto by_offset = [&](uint32_t x, uint32_t y) {
+    return entries[x].offset != entries[y].offset ? entries[x].offset < entries[y].offset : x < y;
+  };
+  for (size_t b = 0; b < with_bytes; ++b)
+    if (ends[b + 1] - ends[b] > 1) std::sort(order.begin() + ends[b], order.begin() + ends[b + 1], by_offset);
   for (size_t i = 1; i < order.size(); ++i) {
-    const BrickEntry& before = entries[order[i - 1].second];
-    const uint64_t end = before.offset + before.total();  // no wrap: checked against the area above
-    if (order[i].first != end)
-      throw IoError(file + ": directory entry " + std::to_string(order[i].second) +
-                    (order[i].first < end ? " overlaps entry " : " leaves a gap after entry ") +
-                    std::to_string(order[i - 1].second) + " (corrupt directory)");
+    const BrickEntry& before = entries[order[i - 1]];
+    const uint64_t at = entries[order[i]].offset, end = before.offset + before.total();
+    if (at != end)
+      throw IoError(file + ": directory entry " + std::to_string(order[i]) +
+                    (at < end ? " overlaps entry " : " leaves a gap after entry ") + std::to_string(order[i - 1]) +
+                    " (corrupt directory)");
   }
 }
 
