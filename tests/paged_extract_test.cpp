@@ -646,6 +646,17 @@ TEST_F(PagedExtract, TriangleBudgetFromASampleLandsWithinTenPercentOrFallsBack) 
           << what << ": plain extraction at chosen eps " << s.chosen_eps << ", eps-ties " << s.chosen_eps_ties;
     }
   }
+  // A sample of subtrees the lattice does not have (below its finest level, or above the level of
+  // their common ancestors) is the exact search.
+  for (const BudgetSample none : {BudgetSample{40, 3}, BudgetSample{2, 3}}) {
+    ExtractOptions o;
+    o.iso = 64.5f, o.topology = TopologyMode::none, o.max_triangles = 15000;
+    ExtractStats s, exact_s;
+    EXPECT_TRUE(same_mesh(extract_adaptive(paged, o, &s, none), extract_adaptive(paged, o, &exact_s, BudgetSample{})))
+        << "sample level " << none.level;
+    EXPECT_FALSE(s.budget_sampled);
+    EXPECT_EQ(s.next_triangles, exact_s.next_triangles);
+  }
   RecordProperty("stood", stood);
   RecordProperty("fell_back", fell_back);
   EXPECT_GE(stood, 3);      // the finer sample stood on every budget here

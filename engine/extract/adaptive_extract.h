@@ -121,7 +121,7 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
 // more than the extraction it chooses for; smaller volumes keep the exact search, cheap there. The
 // subtrees are those of level 18 (1.6 M tetrahedra, a 64th of the side across), one in 8 kept: at
 // 1024^3 the estimates of T were within 1% of the meshes' counts for budgets of 100 k to 2 M, where
-// level 12 (24,576 subtrees) missed by up to 8% and level 15 by up to 11%.
+// level 12 (24,576 subtrees) missed by up to 9% and level 15 by up to 11%.
 inline BudgetSample budget_sample_for(const Lattice& lattice) {
   return lattice.k >= 9 ? BudgetSample{18, 3} : BudgetSample{};
 }
@@ -172,7 +172,8 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       take_choice(choose_eps_for_budget(source, rule, options.max_triangles));
     });
   };
-  bool sampled = false;  // the eps is a sample's guess, for the mesh's count to confirm
+  bool chosen = false;   // an eps is chosen for the budget
+  bool sampled = false;  // and it is a sample's guess, for the mesh's count to confirm
   together([&] {
     if (options.auto_delta) {
       // Half the budget for the features kept, half for the geometry around them; when even with
@@ -195,12 +196,13 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
         const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
         const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles, s);
         // A guess of full resolution, or none, is left to the exact search: it alone can tell
-        // whether the whole mesh fits, or that no mesh does.
-        if (c.fits && c.eps != 0) take_choice(c), sampled = true;
+        // whether the whole mesh fits, or that no mesh does. (A lattice without the sample's
+        // subtrees is counted exactly at once.)
+        if (!c.sampled || (c.fits && c.eps != 0)) take_choice(c), chosen = true, sampled = c.sampled;
       }
     }
   });
-  if (options.max_triangles > 0 && !sampled) choose_exactly();
+  if (options.max_triangles > 0 && !chosen) choose_exactly();
   auto finish = [&](Mesh mesh) {
     if (stats) {
       *stats = total;

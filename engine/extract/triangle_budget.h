@@ -412,7 +412,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
   constexpr double kInf = std::numeric_limits<double>::infinity();
   // Subtrees for the threads in the first pass: a few thousand at most, as the extraction's pieces.
   const int seed_level = std::min(source.lattice().max_level(), 9);
-  if (sample.level >= source.lattice().max_level()) sample = {};
+  if (sample.level >= source.lattice().max_level() || sample.level < sample.bits) sample = {};  // no such subtrees
   const bool sampled = !sample.exact();
   // What the steps must not exceed: the budget itself, or where a sample aims within it.
   const int64_t limit = sampled ? static_cast<int64_t>(kSampleAim * static_cast<double>(max_triangles)) : max_triangles;
