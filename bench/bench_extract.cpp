@@ -401,7 +401,6 @@ void BM_Preprocess(benchmark::State& state, Dataset d, int threads) {
   set_thread_counter(state);
 }
 
-// is_critical_pattern() over every pattern of the three polyhedron types (2^8 + 2^6 + 2^10).
 // Opening a band of a store checks that its directory's entries tile one run of the file
 // (io/store/store_format.h, check_directory): 2 M entries are a 2048^3 volume's band 0, checked once
 // per process that reads it. The entries tile the run in a shuffled order, as the writer's tiles
@@ -426,6 +425,7 @@ void BM_StoreDirectoryCheck(benchmark::State& state) {
       benchmark::Counter(static_cast<double>(n), benchmark::Counter::kIsIterationInvariantRate);
 }
 
+// is_critical_pattern() over every pattern of the three polyhedron types (2^8 + 2^6 + 2^10).
 void BM_CriticalTableLookup(benchmark::State& state) {
   constexpr isotope::PolyhedronType types[] = {isotope::PolyhedronType::cube, isotope::PolyhedronType::octahedron,
                                                isotope::PolyhedronType::diamond};

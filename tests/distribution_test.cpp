@@ -205,8 +205,8 @@ TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
 
 // A budget from a sample (engine/extract/adaptive_extract.h): every rank counts the guess's whole
 // mesh, so all of them stand by it or all fall back to the exact choice, as one process does, and
-// rank 0 has that process's mesh. Both outcomes are met: a sample of level 9 stands, one of 48
-// subtrees at level 4 does not.
+// rank 0 has that process's mesh. Both outcomes are met: a sample of level 9 stands, one of 12 of
+// the 96 subtrees of level 4 does not.
 TEST(DistributedExtract, ASampledBudgetStandsOrFallsBackOnEveryRankAlike) {
   const Hierarchy hierarchy = Hierarchy::build(generate_noise(61, 3));
   int stood = 0, fell_back = 0;

@@ -660,7 +660,7 @@ TEST_F(PagedExtract, TriangleBudgetFromASampleLandsWithinTenPercentOrFallsBack) 
   RecordProperty("stood", stood);
   RecordProperty("fell_back", fell_back);
   EXPECT_GE(stood, 3);      // the finer sample stood on every budget here
-  EXPECT_GE(fell_back, 1);  // 48 subtrees, 6 of them kept, do not make a trustworthy estimate
+  EXPECT_GE(fell_back, 1);  // 48 of the 384 subtrees of level 6 do not make a trustworthy estimate
 }
 
 // 6. The cache: when the store fits, each brick is read at most once and no more bytes than the

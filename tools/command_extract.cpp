@@ -370,9 +370,10 @@ Command add_extract_command(CLI::App& app) {
       ->check(extract_option_check("radius"))
       ->type_name("R");
   cmd->add_option("--max-triangles", a->max_triangles,
-                  "Instead of --eps (other than 0): the finest eps whose mesh has at most T triangles (T >= 1); with "
-                  "--topology "
-                  "simplify and no --delta, delta too: the features of smallest weight are dropped until the "
+                  "Instead of --eps (other than 0): the finest eps whose mesh has at most T triangles (T >= 1; on "
+                  "volumes over 257 a side, one whose mesh has 90-100% of T, chosen from a sample, where one "
+                  "does); with --topology simplify and no --delta, delta too: the features of smallest weight are "
+                  "dropped until the "
                   "coarsest mesh takes half the budget")
       ->check(extract_option_check("max-triangles"))
       ->type_name("T");

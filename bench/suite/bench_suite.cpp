@@ -344,8 +344,9 @@ class Suite {
     return n;
   }
 
-  // The finest eps whose mesh without topology control has at most 10% of the full triangles
-  // (the triangle budget's search, untimed); every coarse row uses it, whatever its mode. A plain
+  // The eps a triangle budget of 10% of the full triangles chooses without topology control (the
+  // finest whose mesh fits; on volumes over 257 a side, one whose mesh holds 90-100% of it, chosen
+  // from a sample: docs/METHOD.md), untimed; every coarse row uses it, whatever its mode. A plain
   // eps: where the search stepped into the tie classes of a key, the eps just above that key.
   double coarse_eps(const std::string& store, const DatasetSpec& spec, const DatasetResult& d) const {
     say(spec, "choosing the coarse eps");

@@ -48,7 +48,8 @@ struct BudgetChoice {
   int64_t next_triangles = 0;
   int64_t steps = 0;
   // From a sample (BudgetSample): the triangle counts are estimates, and `fits` is false when
-  // even the keys of +infinity alone seemed to exceed the budget (no eps was chosen).
+  // the keys of +infinity alone seemed to take more than the sample aims at (kSampleAim of the
+  // budget): no eps was chosen.
   bool sampled = false;
   bool fits = true;
 };
@@ -412,7 +413,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
   constexpr double kInf = std::numeric_limits<double>::infinity();
   // Subtrees for the threads in the first pass: a few thousand at most, as the extraction's pieces.
   const int seed_level = std::min(source.lattice().max_level(), 9);
-  if (sample.level >= source.lattice().max_level() || sample.level < sample.bits) sample = {};  // no such subtrees
+  if (sample.bits < 1 || sample.level < sample.bits || sample.level >= source.lattice().max_level()) sample = {};
   const bool sampled = !sample.exact();
   // What the steps must not exceed: the budget itself, or where a sample aims within it.
   const int64_t limit = sampled ? static_cast<int64_t>(kSampleAim * static_cast<double>(max_triangles)) : max_triangles;

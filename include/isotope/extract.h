@@ -156,7 +156,8 @@ struct ExtractStats {
   int64_t tets_simplified = 0;
   double seconds = 0;
   // With max_triangles: the eps chosen (in data units), and the next finer eps step and the
-  // triangles it would give (next_triangles = 0 when the chosen mesh is already full resolution).
+  // triangles it would give (next_triangles = 0 when the chosen mesh is already full resolution;
+  // with budget_sampled, the sample's estimate: above 95% of the budget, maybe within it).
   double chosen_eps = 0;
   int chosen_eps_ties = -1;  // ExtractOptions::eps_ties of the chosen mesh (-1: every tie refined)
   double next_eps = 0;

@@ -278,8 +278,8 @@ void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d
   auto span_of = [&](uint64_t offset) {
     return std::min(with_bytes - 1, static_cast<size_t>(static_cast<double>(offset - first) / per_span));
   };
-  // Counting sort by span, of entry numbers only (4 bytes each: this is most of the fresh memory
-  // the check touches), then each span's few entries by offset, ties by number.
+  // Counting sort by span, of entry numbers only (4 bytes each, and as many span bounds: half the
+  // fresh memory of (offset, entry) pairs), then each span's few entries by offset, ties by number.
   std::vector<uint32_t> ends(with_bytes + 1, 0);  // where each span's entries end in `order`
   for (const BrickEntry& e : entries)
     if (e.total() != 0) ++ends[span_of(e.offset)];

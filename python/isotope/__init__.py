@@ -124,7 +124,9 @@ class Store:
         Euler characteristic of eps = 0 kept), ``"simplify"`` (features of weight below ``delta``
         may go; ``weight`` = interval, gradient or size), ``"paper"`` or ``"none"``. ``focus`` =
         (x, y, z) and ``radius``: full resolution at the point, eps from radius on.
-        ``max_triangles`` (at least 1; instead of an ``eps`` other than 0): the finest eps whose mesh fits (with
+        ``max_triangles`` (at least 1; instead of an ``eps`` other than 0): the finest eps whose mesh fits,
+        or on volumes over 257 a side one whose mesh holds 90-100% of it, chosen from a sample
+        (``stats["budget_sampled"]``; with
         simplify and no delta, delta too; ``stats["chosen_eps_ties"]`` is the ``eps_ties`` that, with
         ``eps=stats["chosen_eps"]``, gives the same mesh). ``eps_ties`` (with an ``eps`` other than 0):
         of the diamonds whose error equals eps exactly, refine only those of the N coarsest tie
