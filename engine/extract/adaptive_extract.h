@@ -143,6 +143,10 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     in_codes.eps = threshold_in_codes(options.eps, scale);
     in_codes.delta = threshold_in_codes(options.delta, weight_scale);
   }
+  // The split rule of in_codes as it stands: the budget's choices change its eps and delta.
+  auto rule_now = [&] {
+    return SplitRule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+  };
   ExtractStats total;
   const Distribution* group = options.distribution;
   // Distributed, each step that may fail runs under settle_together, so that a rank whose read
@@ -168,7 +172,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   auto choose_exactly = [&] {
     in_codes.eps = 0, in_codes.eps_ties = -1;  // as the options gave them with a budget
     together([&] {
-      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+      const SplitRule rule = rule_now();
       take_choice(choose_eps_for_budget(source, rule, options.max_triangles));
     });
   };
@@ -179,7 +183,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       // Half the budget for the features kept, half for the geometry around them; when even with
       // every feature dropped the coarsest mesh takes more than half, all of it for the features.
       in_codes.delta = 0;
-      const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+      const SplitRule rule = rule_now();
       BudgetChoice d;
       try {
         d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
@@ -193,7 +197,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     if (options.max_triangles > 0) {
       const BudgetSample s = sample.value_or(budget_sample_for(source.lattice()));
       if (!s.exact()) {
-        const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+        const SplitRule rule = rule_now();
         const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles, s);
         // A guess of full resolution, or none, is left to the exact search: it alone can tell
         // whether the whole mesh fits, or that no mesh does. (A lattice without the sample's
@@ -227,7 +231,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     choose_exactly();
   }
   if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) {
-    const SplitRule rule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
+    const SplitRule rule = rule_now();
     return finish(extract_finest(source, rule, &total));
   }
   extract_pieces(source, in_codes, together, total, &mesh, nullptr);

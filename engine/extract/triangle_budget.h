@@ -33,6 +33,7 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/mix_hash.h"
 #include "engine/core/parallel.h"
 #include "engine/extract/traversal.h"
 #include "isotope/extract.h"
@@ -66,10 +67,7 @@ struct BudgetSample {
   bool exact() const { return level < 0 || bits == 0; }
   bool keeps(uint8_t root, uint64_t path) const {
     const int group = level - bits;  // the common ancestor's level: its path is the low bits
-    uint64_t h = (path & ((uint64_t{1} << group) - 1)) ^ (uint64_t{root} << 58);
-    h = (h ^ (h >> 30)) * 0xBF58476D1CE4E5B9ull;  // splitmix64's finalizer
-    h = (h ^ (h >> 27)) * 0x94D049BB133111EBull;
-    h ^= h >> 31;
+    const uint64_t h = mix64((path & ((uint64_t{1} << group) - 1)) ^ (uint64_t{root} << 58));
     const uint64_t mask = (uint64_t{1} << bits) - 1;
     return ((path >> group) & mask) == (h & mask);
   }

@@ -9,6 +9,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "engine/core/mix_hash.h"
+
 namespace isotope {
 namespace {
 
@@ -140,14 +142,6 @@ constexpr double kMinLatticeBudget = 4.0 * 1024 * 1024;  // extra samples on lon
 constexpr size_t kMaxQueries = 200000;                   // samples per mesh that look for a neighbour
 constexpr size_t kMinQueries = 64;                       // ... at least, per component
 
-uint64_t mix(uint64_t x) {  // splitmix64's finalizer
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ull;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
-
 struct Cell {
   int32_t x = 0, y = 0, z = 0;
   bool operator==(const Cell&) const = default;
@@ -182,7 +176,7 @@ class CellMap {
   size_t probe(const Cell& k) const {
     const uint64_t xy = uint64_t{static_cast<uint32_t>(k.x)} | uint64_t{static_cast<uint32_t>(k.y)} << 32;
     const size_t mask = slots_.size() - 1;
-    size_t i = static_cast<size_t>(mix(xy ^ mix(static_cast<uint32_t>(k.z)))) & mask;
+    size_t i = static_cast<size_t>(mix64(xy ^ mix64(static_cast<uint32_t>(k.z)))) & mask;
     while (slots_[i].value != kAbsent && !(slots_[i].key == k)) i = (i + 1) & mask;
     return i;
   }
@@ -346,7 +340,7 @@ std::vector<uint32_t> query_subset(const std::vector<Sample>& samples, size_t co
   for (size_t i = 0; i < samples.size(); ++i) {
     const auto c = static_cast<size_t>(samples[i].component);
     const size_t own = std::clamp<size_t>(per[c] / kMinQueries, 1, stride);
-    if (seen[c]++ == 0 || mix(i) % own == 0) chosen.push_back(static_cast<uint32_t>(i));
+    if (seen[c]++ == 0 || mix64(i) % own == 0) chosen.push_back(static_cast<uint32_t>(i));
   }
   return chosen;
 }
