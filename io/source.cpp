@@ -11,6 +11,7 @@
 #include <utility>
 
 #include "engine/core/volume_check.h"
+#include "engine/extract/budget_memo.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"
@@ -54,6 +55,8 @@ struct Source::Impl {
   // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
   // that reads more fields builds the next (Source::extract may run on several threads at once).
   mutable std::shared_ptr<const Hierarchy> memory;
+  // The triangle budgets settled so far: the same data whether paged or in memory.
+  BudgetMemo budgets;
   mutable double preprocess_seconds = 0;
   double read_seconds = 0;
 
@@ -105,10 +108,10 @@ Source open_volume(Volume volume, const OpenOptions& options) {
 }
 
 Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
-  if (impl_->paged) return isotope::extract(*impl_->paged, options, stats);
+  if (impl_->paged) return isotope::extract(*impl_->paged, options, stats, &impl_->budgets);
   if (!needs_hierarchy(options)) return isotope::extract(*impl_->volume, options, stats);
   const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(options));
-  return isotope::extract(*hierarchy, options, stats);
+  return isotope::extract(*hierarchy, options, stats, &impl_->budgets);
 }
 
 void Source::prepare(const std::vector<ExtractOptions>& planned) const {

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <condition_variable>
 #include <exception>
 #include <filesystem>
@@ -21,6 +22,7 @@
 
 #include "engine/core/fields.h"
 #include "engine/extract/adaptive_extract.h"
+#include "engine/extract/budget_memo.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "isotope/convert.h"
 #include "isotope/error.h"
@@ -216,17 +218,23 @@ TEST(DistributedExtract, ASampledBudgetStandsOrFallsBackOnEveryRankAlike) {
       ExtractStats single_stats;
       const Mesh single = extract_adaptive(hierarchy, o, &single_stats, sample);
       ++(single_stats.budget_sampled ? stood : fell_back);
+      // Each rank with a memo that holds a wrong choice for these options: a distributed
+      // extraction neither looks there (every rank must search alike) nor remembers.
+      std::array<BudgetMemo, 3> memos;
+      for (BudgetMemo& memo : memos) memo.remember(o, sample, BudgetMemo::Choice{1e30, -1, 0, {}});
       const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(3, [&](const Distribution& g) {
         ExtractOptions mine = o;
         mine.distribution = &g;
         ExtractStats stats;
-        Mesh mesh = extract_adaptive(hierarchy, mine, &stats, sample);
+        Mesh mesh = extract_adaptive(hierarchy, mine, &stats, sample, &memos[static_cast<size_t>(g.rank())]);
         return std::pair{std::move(mesh), stats};
       });
+      for (const BudgetMemo& memo : memos) EXPECT_EQ(memo.size(), 1u);
       for (int r = 0; r < 3; ++r) {
         ASSERT_FALSE(out[static_cast<size_t>(r)].error) << "rank " << r;
         const auto& [mesh, stats] = *out[static_cast<size_t>(r)].value;
         EXPECT_EQ(stats.budget_sampled, single_stats.budget_sampled) << "rank " << r << " budget " << budget;
+        EXPECT_FALSE(stats.budget_remembered) << "rank " << r << " budget " << budget;
         EXPECT_EQ(stats.chosen_eps, single_stats.chosen_eps) << "rank " << r << " budget " << budget;
         EXPECT_EQ(stats.chosen_eps_ties, single_stats.chosen_eps_ties) << "rank " << r << " budget " << budget;
         if (r == 0) expect_same(mesh, single);

@@ -21,6 +21,7 @@
 
 #include "engine/core/fields.h"
 #include "engine/extract/adaptive_extract.h"
+#include "engine/extract/budget_memo.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "io/store/brick_cache.h"
@@ -31,6 +32,7 @@
 #include "io/volume/raw_reader.h"
 #include "isotope/error.h"
 #include "isotope/mesh.h"
+#include "isotope/source.h"
 #include "tests/byte_files.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
@@ -661,6 +663,95 @@ TEST_F(PagedExtract, TriangleBudgetFromASampleLandsWithinTenPercentOrFallsBack) 
   RecordProperty("fell_back", fell_back);
   EXPECT_GE(stood, 3);      // the finer sample stood on every budget here
   EXPECT_GE(fell_back, 1);  // 48 of the 384 subtrees of level 6 do not make a trustworthy estimate
+}
+
+// 5c. A budget asked for again over a source kept open (engine/extract/budget_memo.h) is the
+// choice made the first time, taken without the search: the same mesh, byte for byte, and the
+// same report, at the cost of the plain extraction at the chosen eps (the cache's lookups, on one
+// thread, are that extraction's). A sampled guess that stood and one that fell back are remembered
+// alike. Any option that decides the choice asks anew. Through isotope::Source, paged and in
+// memory, the second extraction is the remembered one.
+TEST_F(PagedExtract, ABudgetAskedForAgainIsTheFirstChoiceWithoutTheSearch) {
+  const std::string path = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
+  const Volume embryo = testing::crop(read_raw(path, *parse_raw_name(path)), {129, 129, 129});
+  const std::string store_path = convert(embryo, "embryo");
+  const StoreReader store(store_path);
+  BrickCache cache(store, kHugeBudget);
+  const PagedVolume paged(cache);
+  const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+  auto lookups = [&] { return cache.stats().hits + cache.stats().bricks_read; };
+  BudgetMemo memo;
+  int stood = 0, fell_back = 0, exact = 0;
+  // Level 12 stands, level 6 falls back on some budgets (5b); no sample is the exact search.
+  for (const BudgetSample sample : {BudgetSample{12, 3}, BudgetSample{6, 3}, BudgetSample{}}) {
+    for (const int64_t budget : {int64_t{5000}, int64_t{15000}, int64_t{40000}}) {
+      ExtractOptions o;
+      o.iso = 64.5f, o.topology = TopologyMode::none, o.max_triangles = budget;
+      const std::string what = describe(o) + " sample level " + std::to_string(sample.level);
+      ExtractStats first, again, alone, plain;
+      int64_t before = lookups();
+      const Mesh m = extract_adaptive(paged, o, &first, sample, &memo);
+      const int64_t searched = lookups() - before;
+      EXPECT_FALSE(first.budget_remembered) << what;
+      before = lookups();
+      const Mesh m2 = extract_adaptive(paged, o, &again, sample, &memo);
+      const int64_t remembered = lookups() - before;
+      EXPECT_TRUE(again.budget_remembered) << what;
+      EXPECT_TRUE(same_mesh(m, m2)) << what;
+      EXPECT_EQ(again.chosen_eps, first.chosen_eps) << what;
+      EXPECT_EQ(again.chosen_eps_ties, first.chosen_eps_ties) << what;
+      EXPECT_EQ(again.next_eps, first.next_eps) << what;
+      EXPECT_EQ(again.next_eps_ties, first.next_eps_ties) << what;
+      EXPECT_EQ(again.next_triangles, first.next_triangles) << what;
+      EXPECT_EQ(again.budget_steps, first.budget_steps) << what;
+      EXPECT_EQ(again.budget_sampled, first.budget_sampled) << what;
+      EXPECT_EQ(again.tets_visited, first.tets_visited) << what;
+      // The memo changes nothing the first time.
+      EXPECT_TRUE(same_mesh(m, extract_adaptive(paged, o, &alone, sample))) << what;
+      EXPECT_EQ(alone.chosen_eps, first.chosen_eps) << what;
+      // The second time is the plain extraction at the chosen eps, and no more.
+      ExtractOptions chosen;
+      chosen.iso = o.iso, chosen.topology = o.topology, chosen.eps = first.chosen_eps;
+      chosen.eps_ties = first.chosen_eps_ties;
+      before = lookups();
+      if (first.chosen_eps > 0) EXPECT_TRUE(same_mesh(m, extract(paged, chosen, &plain))) << what;
+      if (first.chosen_eps > 0) EXPECT_EQ(remembered, lookups() - before) << what;
+      EXPECT_LT(remembered, searched) << what;
+      ++(sample.exact() ? exact : first.budget_sampled ? stood : fell_back);
+    }
+  }
+  EXPECT_EQ(memo.size(), 9u);
+  EXPECT_GE(stood, 1);
+  EXPECT_GE(fell_back, 1);
+  EXPECT_EQ(exact, 3);
+  // Each option that decides the choice asks anew, and is then remembered on its own.
+  ExtractOptions base;
+  base.iso = 64.5f, base.topology = TopologyMode::none, base.max_triangles = 15000;
+  std::vector<ExtractOptions> others(6, base);
+  others[0].iso = 70.5f;
+  others[1].max_triangles = 15001;
+  others[2].error = ErrorIndicator::surplus;
+  others[3].topology = TopologyMode::simplify, others[3].auto_delta = true;  // preserve's coarsest is over 15000
+  others[4].focus = Focus{{64, 64, 64}, 30};
+  others[5].focus = Focus{{64, 64, 64}, 31};
+  for (const ExtractOptions& o : others) {
+    ExtractStats s;
+    extract_adaptive(paged, o, &s, BudgetSample{}, &memo);
+    EXPECT_FALSE(s.budget_remembered) << describe(o);
+  }
+  EXPECT_EQ(memo.size(), 15u);
+  // Through isotope::Source, the store and the array alike.
+  const Source from_store = open_volume(VolumeSpec{store_path, std::nullopt, std::nullopt});
+  const Source from_array = open_volume(embryo);
+  for (const Source* source : {&from_store, &from_array}) {
+    ExtractStats s1, s2;
+    const Mesh a = source->extract(base, &s1);
+    const Mesh b = source->extract(base, &s2);
+    EXPECT_FALSE(s1.budget_remembered);
+    EXPECT_TRUE(s2.budget_remembered);
+    EXPECT_TRUE(same_mesh(a, b));
+    EXPECT_TRUE(same_mesh(a, extract_adaptive(paged, base, nullptr, BudgetSample{})));
+  }
 }
 
 // 6. The cache: when the store fits, each brick is read at most once and no more bytes than the

@@ -320,8 +320,10 @@ TEST_F(Serve, ExtractAnswersTheMeshExtractGivesWithItsReport) {
 }
 
 // A triangle budget: the server's search chooses the eps the command's does, and the report says
-// which, with the next finer step's count beyond the budget. A budget below the coarsest mesh is
-// the client's to change: 400, with how many triangles that mesh has.
+// which, with the next finer step's count beyond the budget. The same budget asked for again is
+// that choice remembered (engine/extract/budget_memo.h): the same mesh and report, without the
+// search. A budget below the coarsest mesh is the client's to change: 400, with how many triangles
+// that mesh has.
 TEST_F(Serve, ATriangleBudgetChoosesTheEpsExtractChooses) {
   const auto below = get("/api/extract?iso=" + exact(iso_) + "&topology=none&max-triangles=10");
   ASSERT_TRUE(below);
@@ -341,6 +343,17 @@ TEST_F(Serve, ATriangleBudgetChoosesTheEpsExtractChooses) {
     EXPECT_EQ(report["max_triangles"], budget);
     EXPECT_GT(report["chosen_eps"].get<double>(), 0);
     EXPECT_GT(report["next_triangles"].get<int64_t>(), budget);
+    EXPECT_FALSE(report["budget_remembered"].get<bool>());
+    const auto repeated =
+        get("/api/extract?iso=" + exact(o.iso) + "&topology=none&max-triangles=" + std::to_string(budget));
+    ASSERT_TRUE(repeated);
+    ASSERT_EQ(repeated->status, 200) << repeated->body;
+    const MeshWire r = decode_mesh_wire(repeated->body);
+    expect_same_mesh(r.mesh, w.mesh);
+    const auto repeated_report = nlohmann::json::parse(r.report_json);
+    EXPECT_TRUE(repeated_report["budget_remembered"].get<bool>());
+    for (const char* field : {"chosen_eps", "chosen_eps_ties", "next_eps", "next_eps_ties", "next_triangles"})
+      EXPECT_EQ(repeated_report[field], report[field]) << field;
     // The same mesh again from the eps and tie classes the report names.
     ExtractOptions again;
     again.iso = iso_, again.topology = TopologyMode::none, again.eps = report["chosen_eps"].get<double>();

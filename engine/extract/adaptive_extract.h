@@ -13,6 +13,7 @@
 
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
+#include "engine/extract/budget_memo.h"
 #include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
 #include "engine/extract/finest_extract.h"
@@ -126,10 +127,13 @@ inline BudgetSample budget_sample_for(const Lattice& lattice) {
   return lattice.k >= 9 ? BudgetSample{18, 3} : BudgetSample{};
 }
 
-// `sample`: as budget_sample_for(the source's lattice) unless given (tests choose it).
+// `sample`: as budget_sample_for(the source's lattice) unless given (tests choose it). `memo`: the
+// budgets already settled over this source (an open isotope::Source's); a budget found there is
+// extracted at once, one not found is remembered once settled. A distributed extraction neither
+// looks nor remembers, so that every rank searches alike.
 template <TraversalSource Source>
 Mesh extract_adaptive(const Source& source, const ExtractOptions& options, ExtractStats* stats,
-                      std::optional<BudgetSample> sample = std::nullopt) {
+                      std::optional<BudgetSample> sample = std::nullopt, BudgetMemo* memo = nullptr) {
   using namespace traversal;
   const auto start = std::chrono::steady_clock::now();
   options.validate();
@@ -178,7 +182,20 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   };
   bool chosen = false;   // an eps is chosen for the budget
   bool sampled = false;  // and it is a sample's guess, for the mesh's count to confirm
+  const BudgetSample budget_sample = sample.value_or(budget_sample_for(source.lattice()));
+  if (group) memo = nullptr;
+  const std::optional<BudgetMemo::Choice> remembered =
+      memo && options.max_triangles > 0 ? memo->find(options, budget_sample) : std::nullopt;
+  if (remembered) {
+    in_codes.eps = remembered->eps;
+    in_codes.eps_ties = remembered->eps_ties;
+    in_codes.delta = remembered->delta;
+    BudgetMemo::take_budget_part(remembered->stats, total);
+    total.budget_remembered = true;
+    chosen = true;
+  }
   together([&] {
+    if (remembered) return;
     if (options.auto_delta) {
       // Half the budget for the features kept, half for the geometry around them; when even with
       // every feature dropped the coarsest mesh takes more than half, all of it for the features.
@@ -195,10 +212,9 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       total.delta_floor_triangles = d.triangles;
     }
     if (options.max_triangles > 0) {
-      const BudgetSample s = sample.value_or(budget_sample_for(source.lattice()));
-      if (!s.exact()) {
+      if (!budget_sample.exact()) {
         const SplitRule rule = rule_now();
-        const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles, s);
+        const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles, budget_sample);
         // A guess of full resolution, or none, is left to the exact search: it alone can tell
         // whether the whole mesh fits, or that no mesh does. (A lattice without the sample's
         // subtrees is counted exactly at once.)
@@ -208,6 +224,11 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   });
   if (options.max_triangles > 0 && !chosen) choose_exactly();
   auto finish = [&](Mesh mesh) {
+    if (memo && options.max_triangles > 0 && !remembered) {
+      BudgetMemo::Choice settled{in_codes.eps, in_codes.eps_ties, in_codes.delta, {}};
+      BudgetMemo::take_budget_part(total, settled.stats);
+      memo->remember(options, budget_sample, settled);
+    }
     if (stats) {
       *stats = total;
       stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -114,11 +114,11 @@ Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int
   return h;
 }
 
-Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats, BudgetMemo* memo) {
   if (!hierarchy.fields().covers(fields_for(options)))
     throw std::invalid_argument("this hierarchy was built without the records topology mode " +
                                 std::string(to_string(options.topology)) + " reads");
-  return extract_adaptive(hierarchy, options, stats);
+  return extract_adaptive(hierarchy, options, stats, std::nullopt, memo);
 }
 
 }  // namespace isotope

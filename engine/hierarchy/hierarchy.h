@@ -259,8 +259,11 @@ class Hierarchy::Reader : public CompactLookup<hierarchy_internal::MemoryBricks>
 };
 inline Hierarchy::Reader Hierarchy::reader() const { return Reader(*this); }
 
+class BudgetMemo;
 // extract() (engine/extract/extract.h) over an in-memory hierarchy. Throws std::invalid_argument when the
-// options read a field the hierarchy was built without.
-Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats = nullptr);
+// options read a field the hierarchy was built without. `memo`: as extract_adaptive's
+// (engine/extract/adaptive_extract.h), for a hierarchy kept open.
+Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats = nullptr,
+             BudgetMemo* memo = nullptr);
 
 }  // namespace isotope

@@ -168,6 +168,10 @@ struct ExtractStats {
   // triangle budget"): the mesh then has between 90% and 100% of the budget, and next_triangles is
   // the sample's estimate. Otherwise the choice is exact: the finest step within the budget.
   bool budget_sampled = false;
+  // Whether the choice is one made before over the same open source (isotope::Source) with the
+  // same isovalue, budget, error, topology mode, weight, delta and focus, taken as it was instead of
+  // searched again: the same eps, the same report fields, the same mesh.
+  bool budget_remembered = false;
   // With auto_delta: the delta chosen (in data units; -1 when none was), and the triangles of its
   // coarsest mesh (eps = infinity).
   double chosen_delta = -1;

@@ -203,8 +203,8 @@ void PagedVolume::Pager::prefetch(int64_t index, uint32_t m) {
     volume_->cache_.prefetch(index);
 }
 
-Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats) {
-  return extract_adaptive(volume, options, stats);
+Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats, BudgetMemo* memo) {
+  return extract_adaptive(volume, options, stats, std::nullopt, memo);
 }
 
 Hierarchy load_hierarchy(const PagedVolume& volume, const RecordFields& fields) {

@@ -101,8 +101,11 @@ class PagedVolume {
   std::array<uint32_t, 256> spread_{};  // spread_bits_3, by table
 };
 
-// extract() (engine/extract/extract.h) over a store, paged through the volume's cache.
-Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
+class BudgetMemo;
+// extract() (engine/extract/extract.h) over a store, paged through the volume's cache. `memo`: as
+// extract_adaptive's (engine/extract/adaptive_extract.h), for a store kept open.
+Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr,
+             BudgetMemo* memo = nullptr);
 
 // The whole store in memory with the record fields asked for, every brick read as an extraction
 // reads it (band 0's records computed from its values): what a store holds, made comparable with

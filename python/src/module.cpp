@@ -261,6 +261,7 @@ py::dict stats_dict(const Mesh& mesh, const ExtractStats& s) {
   d["next_eps_ties"] = s.next_eps_ties;
   d["next_triangles"] = s.next_triangles;
   d["budget_sampled"] = s.budget_sampled;
+  d["budget_remembered"] = s.budget_remembered;
   d["chosen_delta"] = s.chosen_delta;
   return d;
 }

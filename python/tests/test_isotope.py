@@ -119,6 +119,12 @@ def test_a_store_is_opened_once_and_extracted_from_repeatedly(data, tmp_path):
         np.testing.assert_array_equal(a.vertices, b.vertices)
         np.testing.assert_array_equal(a.faces, b.faces)
     assert store.info["bytes_read"] > 0
+    # a budget asked for again of the same Store is the first choice, remembered
+    first, again = (store.extract(iso=64.5, topology="none", max_triangles=5000) for _ in range(2))
+    assert not first.stats["budget_remembered"] and again.stats["budget_remembered"]
+    assert again.stats["chosen_eps"] == first.stats["chosen_eps"] > 0
+    np.testing.assert_array_equal(again.faces, first.faces)
+    np.testing.assert_array_equal(again.vertices, first.vertices)
     # the file converted by the command is the same store
     isotope.convert(data / "bolt_70x123x66_uint8.raw", tmp_path / "from_file.isotope")
     assert (tmp_path / "from_file.isotope").read_bytes() != b""

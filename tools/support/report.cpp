@@ -170,6 +170,7 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
     j["next_eps_ties"] = run.extract.next_eps_ties;
     j["next_triangles"] = run.extract.next_triangles;
     j["budget_sampled"] = run.extract.budget_sampled;
+    j["budget_remembered"] = run.extract.budget_remembered;
   }
   if (run.extract.chosen_delta >= 0) {
     j["chosen_delta"] = run.extract.chosen_delta;
