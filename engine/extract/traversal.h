@@ -171,12 +171,17 @@ class Scratch {
   size_t capacity_ = 0;
 };
 
-// What a level-by-level walk keeps of one level and the next (Traversal::visit_by_levels).
-// Megabytes over a piece's deepest levels: lent from piece to piece (LendingPool), it is
-// memory touched about once per extraction, where one per traversal was fresh memory every piece
-// (docs/METHOD.md, "In parallel").
+// What a level-by-level walk holds (Traversal::visit_by_levels): the roots of the chunks of levels
+// still to walk, and one level of a chunk and the next. Lent from piece to piece
+// (LendingPool), it is memory touched about once per extraction, where one per traversal was fresh
+// memory every piece (docs/METHOD.md, "In parallel").
 template <TraversalSource Source>
 struct LevelScratch {
+  struct Root {
+    Child tet;
+    int level;
+  };
+  std::vector<Root> roots;  // of the chunks still to walk, the next one last
   Scratch<Child> frontier, next;
   Scratch<typename Source::Reader::Handle> handles;  // of frontier
 };
@@ -330,37 +335,53 @@ class Traversal {
   }
 
   // The subtree of t level by level, not depth first: a whole level's records are asked for
-  // before any is read, so their cache misses overlap instead of queuing one behind the other.
-  // The same tetrahedra stop and are emitted as in visit(), in another order.
+  // before any is read, so their cache misses overlap instead of queuing one behind the other. The
+  // levels go in chunks of kChunkLevels: the tetrahedra a chunk reaches at its last level are the
+  // roots of the next chunks, walked depth first, so that the levels in flight stay within the
+  // processor's cache however large the subtree (and the order depends on the tree alone, not on
+  // which tetrahedra were culled). The same tetrahedra stop and are emitted as in visit(), in
+  // another order.
+  static constexpr int kChunkLevels = 12;
   void visit_by_levels(const PackedTet& t, int level, bool positive) {
     LevelScratch<Source>& s = levels_ ? *levels_ : own_levels_;
-    s.frontier.reserve(1);
-    s.frontier[0] = Child{t, positive};
-    size_t n = 1;
-    for (int l = level; n > 0; ++l) {
-      s.handles.reserve(n);
-      s.next.reserve(2 * n);  // written by index: a refined tetrahedron has two children
-      if (l < lattice_.max_level())
+    s.roots.clear();
+    s.roots.push_back({Child{t, positive}, level});
+    while (!s.roots.empty()) {
+      const auto root = s.roots.back();
+      s.roots.pop_back();
+      s.frontier.reserve(1);
+      s.frontier[0] = root.tet;
+      size_t n = 1;
+      int l = root.level;
+      // Chunks end where a whole number of them reaches just past the finest level, so that the
+      // last one holds the finest levels whole.
+      const int end = root.level + 1 + (lattice_.max_level() - root.level) % kChunkLevels;
+      for (; n > 0 && l < end; ++l) {
+        s.handles.reserve(n);
+        s.next.reserve(2 * n);  // written by index: a refined tetrahedron has two children
+        if (l < lattice_.max_level())
+          for (size_t i = 0; i < n; ++i) {
+            if (clip_ && outside_box(s.frontier[i].tet)) continue;  // see locate() below
+            s.handles[i] = reader_.locate((s.frontier[i].tet[0] + s.frontier[i].tet[1]) >> 1);
+            reader_.prefetch(s.handles[i]);
+          }
+        size_t next = 0;
         for (size_t i = 0; i < n; ++i) {
-          if (clip_ && outside_box(s.frontier[i].tet)) continue;  // see locate() below
-          s.handles[i] = reader_.locate((s.frontier[i].tet[0] + s.frontier[i].tet[1]) >> 1);
-          reader_.prefetch(s.handles[i]);
-        }
-      size_t next = 0;
-      for (size_t i = 0; i < n; ++i) {
-        const Child& c = s.frontier[i];
-        switch (step(c.tet, l, s.handles[i])) {
-          case Step::cull: break;
-          case Step::stop: emit(c.tet, l, c.positive); break;
-          case Step::refine: {
-            const auto children = bisect(c.tet, l, c.positive);
-            s.next[next++] = children[0];
-            s.next[next++] = children[1];
+          const Child& c = s.frontier[i];
+          switch (step(c.tet, l, s.handles[i])) {
+            case Step::cull: break;
+            case Step::stop: emit(c.tet, l, c.positive); break;
+            case Step::refine: {
+              const auto children = bisect(c.tet, l, c.positive);
+              s.next[next++] = children[0];
+              s.next[next++] = children[1];
+            }
           }
         }
+        std::swap(s.frontier, s.next);
+        n = next;
       }
-      std::swap(s.frontier, s.next);
-      n = next;
+      for (size_t i = n; i-- > 0;) s.roots.push_back({s.frontier[i], l});  // the first on top
     }
   }
 
