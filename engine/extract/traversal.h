@@ -337,10 +337,10 @@ class Traversal {
   // The subtree of t level by level, not depth first: a whole level's records are asked for
   // before any is read, so their cache misses overlap instead of queuing one behind the other. The
   // levels go in chunks of kChunkLevels: the tetrahedra a chunk reaches at its last level are the
-  // roots of the next chunks, walked depth first, so that the levels in flight stay within the
-  // processor's cache however large the subtree (and the order depends on the tree alone, not on
-  // which tetrahedra were culled). The same tetrahedra stop and are emitted as in visit(), in
-  // another order.
+  // roots of the next chunks, walked depth first, so that a chunk stays within a region a few
+  // bricks across however large the subtree (docs/METHOD.md, "In parallel"), and the order depends
+  // on the tree alone, not on which tetrahedra were culled. The same tetrahedra stop and are
+  // emitted as in visit(), in another order.
   static constexpr int kChunkLevels = 12;
   void visit_by_levels(const PackedTet& t, int level, bool positive) {
     LevelScratch<Source>& s = levels_ ? *levels_ : own_levels_;
