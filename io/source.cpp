@@ -55,8 +55,9 @@ struct Source::Impl {
   // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
   // that reads more fields builds the next (Source::extract may run on several threads at once).
   mutable std::shared_ptr<const Hierarchy> memory;
-  // The triangle budgets settled so far: the same data whether paged or in memory.
-  BudgetMemo budgets;
+  // The triangle budgets settled so far: the same data whether paged or in memory. Forgotten when
+  // the hierarchy is built again, which reads the array again (a borrowed one may have changed).
+  mutable BudgetMemo budgets;
   mutable double preprocess_seconds = 0;
   double read_seconds = 0;
 
@@ -65,6 +66,7 @@ struct Source::Impl {
     if (memory && memory->fields().covers(fields)) return memory;
     const RecordFields all = memory ? memory->fields() | fields : fields;
     memory.reset();  // freed now unless an extraction still holds it
+    budgets.clear();
     const auto start = std::chrono::steady_clock::now();
     memory = std::make_shared<const Hierarchy>(Hierarchy::build(*volume, all, Hierarchy::kMemoryBrickBits, progress));
     preprocess_seconds += seconds_since(start);

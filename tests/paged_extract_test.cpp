@@ -714,8 +714,10 @@ TEST_F(PagedExtract, ABudgetAskedForAgainIsTheFirstChoiceWithoutTheSearch) {
       chosen.iso = o.iso, chosen.topology = o.topology, chosen.eps = first.chosen_eps;
       chosen.eps_ties = first.chosen_eps_ties;
       before = lookups();
-      if (first.chosen_eps > 0) EXPECT_TRUE(same_mesh(m, extract(paged, chosen, &plain))) << what;
-      if (first.chosen_eps > 0) EXPECT_EQ(remembered, lookups() - before) << what;
+      if (first.chosen_eps > 0) {
+        EXPECT_TRUE(same_mesh(m, extract(paged, chosen, &plain))) << what;
+        EXPECT_EQ(remembered, lookups() - before) << what;
+      }
       EXPECT_LT(remembered, searched) << what;
       ++(sample.exact() ? exact : first.budget_sampled ? stood : fell_back);
     }
@@ -727,19 +729,24 @@ TEST_F(PagedExtract, ABudgetAskedForAgainIsTheFirstChoiceWithoutTheSearch) {
   // Each option that decides the choice asks anew, and is then remembered on its own.
   ExtractOptions base;
   base.iso = 64.5f, base.topology = TopologyMode::none, base.max_triangles = 15000;
-  std::vector<ExtractOptions> others(6, base);
+  std::vector<ExtractOptions> others(9, base);
   others[0].iso = 70.5f;
   others[1].max_triangles = 15001;
   others[2].error = ErrorIndicator::surplus;
   others[3].topology = TopologyMode::simplify, others[3].auto_delta = true;  // preserve's coarsest is over 15000
   others[4].focus = Focus{{64, 64, 64}, 30};
   others[5].focus = Focus{{64, 64, 64}, 31};
+  others[6].topology = TopologyMode::simplify, others[6].delta = 40;         // a delta given, not chosen
+  others[7] = others[6], others[7].delta = 41;                               // that alone differs
+  others[6].max_triangles = others[7].max_triangles = 40000;                 // the coarsest at delta 40: 23,462
+  others[8].topology = TopologyMode::simplify, others[8].auto_delta = true;  // as 3, by another weight
+  others[8].weight = SimplificationWeight::gradient;
   for (const ExtractOptions& o : others) {
     ExtractStats s;
     extract_adaptive(paged, o, &s, BudgetSample{}, &memo);
     EXPECT_FALSE(s.budget_remembered) << describe(o);
   }
-  EXPECT_EQ(memo.size(), 15u);
+  EXPECT_EQ(memo.size(), 18u);
   // Through isotope::Source, the store and the array alike.
   const Source from_store = open_volume(VolumeSpec{store_path, std::nullopt, std::nullopt});
   const Source from_array = open_volume(embryo);

@@ -222,13 +222,17 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
       }
     }
   });
+  // A choice is kept once settled: an exact one at once (its extraction may yet be cancelled), a
+  // sampled guess once its mesh confirmed it or the exact search replaced it.
+  auto keep = [&] {
+    if (!memo || options.max_triangles <= 0 || remembered) return;
+    BudgetMemo::Choice settled{in_codes.eps, in_codes.eps_ties, in_codes.delta, {}};
+    BudgetMemo::take_budget_part(total, settled.stats);
+    memo->remember(options, budget_sample, settled);
+  };
   if (options.max_triangles > 0 && !chosen) choose_exactly();
+  if (!sampled) keep();
   auto finish = [&](Mesh mesh) {
-    if (memo && options.max_triangles > 0 && !remembered) {
-      BudgetMemo::Choice settled{in_codes.eps, in_codes.eps_ties, in_codes.delta, {}};
-      BudgetMemo::take_budget_part(total, settled.stats);
-      memo->remember(options, budget_sample, settled);
-    }
     if (stats) {
       *stats = total;
       stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -245,11 +249,15 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
   };
   Mesh mesh;
   if (sampled) {
-    if (extract_pieces(source, in_codes, together, total, &mesh, guess_stands)) return finish(std::move(mesh));
+    if (extract_pieces(source, in_codes, together, total, &mesh, guess_stands)) {
+      keep();
+      return finish(std::move(mesh));
+    }
     // The guess did not stand: the exact choice, and its mesh.
     total.tets_visited = total.tets_emitted = total.tets_simplified = 0;
     total.ranks.clear();
     choose_exactly();
+    keep();
   }
   if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) {
     const SplitRule rule = rule_now();

@@ -52,6 +52,10 @@ class BudgetMemo {
     to.budget_steps = from.budget_steps, to.budget_sampled = from.budget_sampled;
     to.chosen_delta = from.chosen_delta, to.delta_floor_triangles = from.delta_floor_triangles;
   }
+  void clear() {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    entries_.clear();
+  }
   size_t size() const {
     const std::lock_guard<std::mutex> lock(mutex_);
     return entries_.size();

@@ -163,7 +163,9 @@ struct ExtractStats {
   double next_eps = 0;
   int next_eps_ties = -1;
   int64_t next_triangles = 0;
-  int64_t budget_steps = 0;  // steps (eps values, and tie classes within one) the budget search went through
+  // Steps (eps values, and tie classes within one) the budget search went through (remembered: the
+  // first search's).
+  int64_t budget_steps = 0;
   // Whether the eps came from a sample of the volume (over 257 samples on a side; docs/METHOD.md, "Focus and
   // triangle budget"): the mesh then has between 90% and 100% of the budget, and next_triangles is
   // the sample's estimate. Otherwise the choice is exact: the finest step within the budget.

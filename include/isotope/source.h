@@ -78,7 +78,9 @@ class Source {
   ~Source();
 
   // The mesh of the isosurface these options choose. Throws as isotope::extract() does
-  // (isotope/extract.h), and IoError when a store's brick cannot be read or is corrupt.
+  // (isotope/extract.h), and IoError when a store's brick cannot be read or is corrupt. A triangle
+  // budget asked for again is the choice this Source made the first time, without the search
+  // (ExtractStats::budget_remembered).
   Mesh extract(const ExtractOptions& options, ExtractStats* stats = nullptr) const;
   // Builds now what extractions with these options will need (a volume's hierarchy, with every
   // record field they read), so that a series of them builds it once. A store needs nothing.
