@@ -32,15 +32,12 @@ class BudgetMemo {
 
   std::optional<Choice> find(const ExtractOptions& options, const BudgetSample& sample) const {
     const std::lock_guard<std::mutex> lock(mutex_);
-    for (const Entry& e : entries_)
-      if (e.sample.level == sample.level && e.sample.bits == sample.bits && same_question(e.options, options))
-        return e.choice;
-    return std::nullopt;
+    const Entry* e = entry(options, sample);
+    return e ? std::optional<Choice>(e->choice) : std::nullopt;
   }
   void remember(const ExtractOptions& options, const BudgetSample& sample, const Choice& choice) {
     const std::lock_guard<std::mutex> lock(mutex_);
-    for (const Entry& e : entries_)  // two threads settled the same budget at once
-      if (e.sample.level == sample.level && e.sample.bits == sample.bits && same_question(e.options, options)) return;
+    if (entry(options, sample)) return;  // two threads settled the same budget at once
     if (entries_.size() == kCapacity) entries_.pop_front();
     Entry& e = entries_.emplace_back(Entry{options, sample, choice});
     e.options.cancel = nullptr, e.options.distribution = nullptr;  // not the question's; may not outlive it
@@ -78,6 +75,13 @@ class BudgetMemo {
     BudgetSample sample;
     Choice choice;
   };
+  // The entry of this question, or null; under mutex_.
+  const Entry* entry(const ExtractOptions& options, const BudgetSample& sample) const {
+    for (const Entry& e : entries_)
+      if (e.sample.level == sample.level && e.sample.bits == sample.bits && same_question(e.options, options))
+        return &e;
+    return nullptr;
+  }
   mutable std::mutex mutex_;
   std::deque<Entry> entries_;
 };
