@@ -940,6 +940,30 @@ TEST_F(PagedExtract, CacheKeepsAQuarterOfItsBudgetUntilItReadsBricksAgain) {
   EXPECT_LE(cache.stats().peak_bytes, sizes.total + 17 * sizes.largest);
 }
 
+// A triangle budget's search reads the bricks its extraction reads next: the cache keeps its whole
+// budget from the start of the search, where a fixed eps keeps a quarter (above). The mesh is the
+// same either way.
+TEST_F(PagedExtract, ABudgetSearchKeepsTheWholeCacheBudgetFromItsStart) {
+  const StoreReader store(convert(testing::load_shared(testing::shared_volumes()[1]), "neghip", 3));
+  const DecodedSizes sizes = decoded_sizes(store);
+  ExtractOptions o;
+  o.iso = 128.5f, o.topology = TopologyMode::none, o.max_triangles = 20000;
+  const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+  BrickCache cache(store, sizes.total);
+  const PagedVolume paged(cache);
+  ExtractStats stats;
+  const Mesh budgeted = extract(paged, o, &stats);
+  const BrickCacheStats after = cache.stats();
+  EXPECT_EQ(after.working_bytes, sizes.total);
+  // Not because the search found itself reading bricks again: fewer misses than one window.
+  EXPECT_LT(after.bricks_read, 512);
+  ExtractOptions fixed = o;
+  fixed.max_triangles = 0, fixed.eps = stats.chosen_eps, fixed.eps_ties = stats.chosen_eps_ties;
+  BrickCache fresh(store, sizes.total);
+  EXPECT_TRUE(same_mesh(budgeted, extract(PagedVolume(fresh), fixed)));
+  EXPECT_EQ(fresh.stats().working_bytes, sizes.total / 4);
+}
+
 // Every brick; every thread count, each with both cache budgets across the bricks' runs.
 TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
   expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});

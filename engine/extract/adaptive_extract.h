@@ -194,6 +194,10 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     total.budget_remembered = true;
     chosen = true;
   }
+  // The search reads the bricks its extraction will read: a paged source keeps its whole budget
+  // from the start instead of finding that out after a window of misses.
+  if constexpr (RereadHint<Source>)
+    if (!remembered && options.max_triangles > 0) source.will_read_again();
   together([&] {
     if (remembered) return;
     if (options.auto_delta) {

@@ -80,4 +80,12 @@ concept TraversalSource = ValueSource<S> && requires(const S& s) {
   { s.error_fold() } -> std::convertible_to<double>;
 };
 
+// A source that keeps what it reads under a budget may be told that what comes next will be read
+// twice (a triangle budget's search, then the extraction at the eps it chose), so that it keeps
+// all it may from the start.
+template <class S>
+concept RereadHint = requires(const S& s) {
+  s.will_read_again();
+};
+
 }  // namespace isotope

@@ -481,8 +481,12 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
     // Every key >= bound fits: lower the bound, at most 4x a pass so that no pass descends far
     // beyond the cut asked for. Below the keys of +infinity (what the topology mode refines
     // whatever eps is), T grows about as a power of 1/eps: fit it locally, to T at the smallest
-    // key known and at the smallest key at least 1.5 times that, and aim a little above the budget:
-    // a pass that stops short costs only the next one, as each resumes where the last stopped.
+    // key known and at the smallest key at least 1.5 times that, and aim above the budget: a pass
+    // that stops short costs the next one (it resumes where the last stopped, but walks down to
+    // its frontier and reads those bricks again), one that goes too far descends what no cut
+    // needs. An exact search aims at 1.25x; a sample descends 1 / 2^bits of what lies below its
+    // level, so going too far costs less and it aims at 2x (at 1024^3, 300 k to 2 M triangles:
+    // 2-10% faster for the process; on embryo's exact search, 2x was 23% slower).
     const double x = !d.empty() && d.back().key < kInf ? d.back().key : largest_below;
     double lowest = x / 4;
     if (!d.empty() && x == d.back().key && count > infinite) {
@@ -496,7 +500,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
       if (x2 > x && at_x2 > infinite && count > at_x2) {
         const double grown = static_cast<double>(count - infinite), before = static_cast<double>(at_x2 - infinite);
         const double exponent = std::log(grown / before) / std::log(x2 / x);
-        const double target = 1.25 * static_cast<double>(limit - infinite);
+        const double target = (sampled ? 2.0 : 1.25) * static_cast<double>(limit - infinite);
         lowest = std::clamp(x * std::pow(grown / target, 1.0 / exponent), x / 4, x / 1.25);
       }
     }

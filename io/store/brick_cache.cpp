@@ -181,6 +181,11 @@ void BrickCache::grow(int64_t index, CachedBrick& brick, uint64_t bytes) {
   evict_to_budget(index);
 }
 
+void BrickCache::keep_whole_budget() {
+  const std::lock_guard<std::mutex> lock(clock_mutex_);
+  working_ = budget_;
+}
+
 void BrickCache::admit(int64_t index, uint64_t bytes, Admitted how) {
   const std::lock_guard<std::mutex> lock(clock_mutex_);
   if (how != Admitted::taken_back) {  // a miss: is the cache reading bricks again, i.e. would keeping more pay?

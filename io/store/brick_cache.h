@@ -93,6 +93,10 @@ class BrickCache {
   // Makes the arrays of `fields` present in brick `index` (decoding their sections; band 0:
   // unset, to be filled by the reader). Thread-safe; throws as get().
   void require(CachedBrick& brick, int64_t index, const RecordFields& fields);
+  // The caller will read again what it reads next (a triangle budget's search, then the
+  // extraction at the eps it chose): the whole budget is kept from now on, without a window of
+  // misses first (docs/METHOD.md, "working budget"). Thread-safe.
+  void keep_whole_budget();
   // A hint: brick `index` will be asked for soon. Starts the kernel reading it if it is not
   // resident (and was not asked for before).
   void prefetch(int64_t index);

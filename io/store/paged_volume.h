@@ -33,6 +33,7 @@ class PagedVolume {
   const BrickIndexer& indexer() const { return indexer_; }
   BrickCache& cache() const { return cache_; }
   uint64_t bytes_read() const { return cache_.stats().bytes_read; }  // a distributed rank's load
+  void will_read_again() const { cache_.keep_whole_budget(); }       // RereadHint
 
   // One per task: pins the bricks it used last (direct-mapped by brick index), so most lookups
   // touch no shared state at all.
