@@ -9,6 +9,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -962,6 +963,47 @@ TEST_F(PagedExtract, ABudgetSearchKeepsTheWholeCacheBudgetFromItsStart) {
   BrickCache fresh(store, sizes.total);
   EXPECT_TRUE(same_mesh(budgeted, extract(PagedVolume(fresh), fixed)));
   EXPECT_EQ(fresh.stats().working_bytes, sizes.total / 4);
+}
+
+// The cache holds a brick's values in the fewest bytes that keep every one of them bit for bit:
+// band 0's bricks along x hold integers of 0..255, integers up to 1000, integers with one -0.0,
+// and halves. Every value reads back as the float it was, and a brick of bytes takes 9 bytes a
+// node with its bounds.
+TEST_F(PagedExtract, ABrickIsHeldInTheFewestBytesThatKeepItsValues) {
+  Volume v;
+  v.dims = {64, 16, 16};
+  v.values.resize(64 * 16 * 16);
+  auto at = [&](int64_t x, int64_t y, int64_t z) -> float& {
+    return v.values[static_cast<size_t>((z * 16 + y) * 64 + x)];
+  };
+  for (int64_t z = 0; z < 16; ++z)
+    for (int64_t y = 0; y < 16; ++y)
+      for (int64_t x = 0; x < 64; ++x) {
+        const auto i = static_cast<float>((x * 7 + y * 3 + z * 5) % 200);
+        at(x, y, z) = x < 16 ? i : x < 32 ? 4 * i + 200 : x < 48 ? i : i + 0.5f;
+      }
+  at(40, 3, 5) = -0.0f;
+  const StoreReader store(convert(v, "widths"));
+  const StoreLayout& layout = store.layout();
+  BrickCache cache(store, kHugeBudget);
+  const auto nodes = static_cast<uint64_t>(layout.brick_nodes());
+  const std::array<int, 4> expected_bytes = {1, 2, 4, 4};
+  for (int64_t bx = 0; bx < 4; ++bx) {
+    const int64_t index = layout.brick_index(0, {bx, 0, 0});
+    const uint64_t before = cache.stats().peak_bytes;
+    const std::shared_ptr<CachedBrick> brick = cache.get(index);
+    EXPECT_EQ(brick->values().bytes(), expected_bytes[static_cast<size_t>(bx)]) << "brick " << bx;
+    EXPECT_EQ(cache.stats().peak_bytes - before, nodes * (8 + static_cast<uint64_t>(brick->values().bytes())))
+        << "brick " << bx;
+    int64_t differ = 0;
+    for (int64_t z = 0; z < 16; ++z)
+      for (int64_t y = 0; y < 16; ++y)
+        for (int64_t x = 0; x < 16; ++x) {
+          const float held = brick->values()[brick_morton(x, y, z, layout.brick_bits())];
+          differ += std::bit_cast<uint32_t>(held) != std::bit_cast<uint32_t>(at(bx * 16 + x, y, z));
+        }
+    EXPECT_EQ(differ, 0) << "brick " << bx;
+  }
 }
 
 // Every brick; every thread count, each with both cache budgets across the bricks' runs.

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
+#include <type_traits>
 
 #include "engine/core/progress.h"
 #include "engine/extract/extract.h"
@@ -167,6 +168,16 @@ class Hierarchy {
 // (bounds_word, topology). Lookups as MultiresVolume's: a node's value is read from band j (its
 // coordinates lie on G_j), clamped into the data box beyond band j's grid; a record from the band
 // of the node's scale.
+// f(p) over a brick's values: p is the array itself where they are floats (a hierarchy in
+// memory), or what a paged brick holds them in (io/store/brick_cache.h, BrickValues::visit).
+template <class Values, class F>
+decltype(auto) with_values(const Values& values, F&& f) {
+  if constexpr (std::is_pointer_v<Values>)
+    return f(values);
+  else
+    return values.visit(f);
+}
+
 template <class Bricks>
 class CompactLookup {
  public:
@@ -214,16 +225,18 @@ class CompactLookup {
       for (int64_t by = lo[1] >> bits; by <= (lo[1] + n[1]) >> bits; ++by)
         for (int64_t bx = lo[0] >> bits; bx <= (lo[0] + n[0]) >> bits; ++bx) {
           uint32_t unused = 0;
-          const float* values = bricks_.values(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused));
           const int64_t x0 = std::max(lo[0], bx * t), x1 = std::min(lo[0] + n[0], bx * t + t - 1);
           const int64_t y0 = std::max(lo[1], by * t), y1 = std::min(lo[1] + n[1], by * t + t - 1);
           const int64_t z0 = std::max(lo[2], bz * t), z1 = std::min(lo[2] + n[2], bz * t + t - 1);
-          for (int64_t z = z0; z <= z1; ++z)
-            for (int64_t y = y0; y <= y1; ++y) {
-              float* row = f + ((z - lo[2]) * stride + (y - lo[1])) * stride - lo[0];
-              const uint32_t yz = spread_bits_3(y & (t - 1)) << 1 | spread_bits_3(z & (t - 1)) << 2;
-              for (int64_t x = x0; x <= x1; ++x) row[x] = values[yz | spread_bits_3(x & (t - 1))];
-            }
+          with_values(bricks_.values(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused)),
+                      [&](const auto* values) {
+                        for (int64_t z = z0; z <= z1; ++z)
+                          for (int64_t y = y0; y <= y1; ++y) {
+                            float* row = f + ((z - lo[2]) * stride + (y - lo[1])) * stride - lo[0];
+                            const uint32_t yz = spread_bits_3(y & (t - 1)) << 1 | spread_bits_3(z & (t - 1)) << 2;
+                            for (int64_t x = x0; x <= x1; ++x) row[x] = values[yz | spread_bits_3(x & (t - 1))];
+                          }
+                      });
         }
     return true;
   }

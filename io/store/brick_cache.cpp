@@ -1,13 +1,29 @@
 #include "io/store/brick_cache.h"
 
 #include <algorithm>
+#include <bit>
 #include <new>
+#include <span>
 
 namespace isotope {
 namespace {
 
 size_t core_bytes(const StoreLayout& layout) {
   return static_cast<size_t>(layout.brick_nodes()) * (sizeof(float) + sizeof(uint64_t));
+}
+
+// The fewest bytes (1, 2 or 4) that hold every value exactly (BrickValues). Bit operations only,
+// so that it vectorizes: every brick read is checked.
+int value_bytes(std::span<const float> values) {
+  uint32_t not_short = 0, not_byte = 0;
+  for (const float v : values) {
+    // Clamped first, so that the conversion is defined (a NaN clamps to 0). The integer's float
+    // must be v's very bits: that rejects -0.0, NaN, fractions and what the clamp moved.
+    const int32_t k = static_cast<int32_t>(std::min(65535.0f, std::max(0.0f, v)));
+    not_short |= std::bit_cast<uint32_t>(static_cast<float>(k)) ^ std::bit_cast<uint32_t>(v);
+    not_byte |= static_cast<uint32_t>(k) & ~0xffu;
+  }
+  return not_short != 0 ? 4 : not_byte != 0 ? 2 : 1;
 }
 
 template <class T>
@@ -25,7 +41,7 @@ CachedBrick::~CachedBrick() = default;
 BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
     : store_(store),
       budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
-      pool_(std::make_shared<BrickPool>(core_bytes(store.layout()))),
+      pools_(std::make_shared<Pools>(static_cast<size_t>(store.layout().brick_nodes()))),
       slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
   if (!slot_table_) throw std::bad_alloc();
   // The working budget starts at a quarter (at least kMinBricks bricks, at most the budget).
@@ -54,15 +70,32 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   const StoreLayout& layout = store_.layout();
   auto b = std::make_shared<CachedBrick>();
   b->band_ = store_.locate_brick(index).first;
-  std::shared_ptr<BrickPool> pool = pool_;
-  void* block = pool->allocate();
-  b->core_block_ = std::shared_ptr<void>(block, [pool](void* p) { pool->release(p); });
-  b->values_ = static_cast<float*>(block);
-  b->bounds_ = reinterpret_cast<uint64_t*>(b->values_ + layout.brick_nodes());
-  b->bytes_ = pool->block_bytes();
-  const BrickView view{b->values_, b->bounds_, nullptr, nullptr, nullptr, nullptr};
-  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, b->values_);
+  const auto nodes = static_cast<size_t>(layout.brick_nodes());
+  std::shared_ptr<Pools> pools = pools_;
+  // The bounds are decoded in place, the values into an array of this thread's, then kept in as
+  // few bytes as hold them.
+  std::shared_ptr<void> bounds(pools->bounds.allocate(), [pools](void* p) { pools->bounds.release(p); });
+  thread_local std::vector<float> values;
+  values.resize(nodes);
+  const BrickView view{values.data(), static_cast<uint64_t*>(bounds.get()), nullptr, nullptr, nullptr, nullptr};
+  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values.data());
   bytes_read_.fetch_add(read, std::memory_order_relaxed);
+  const int width = value_bytes(values);
+  BrickPool& pool = pools->values[static_cast<size_t>(std::countr_zero(static_cast<unsigned>(width)))];
+  std::shared_ptr<void> kept(pool.allocate(), [pools, &pool](void* p) { pool.release(p); });  // pools keeps pool alive
+  auto narrow = [&](auto* to) { std::copy(values.begin(), values.end(), to); };
+  if (width == 1)
+    narrow(static_cast<uint8_t*>(kept.get()));
+  else if (width == 2)
+    narrow(static_cast<uint16_t*>(kept.get()));
+  else
+    narrow(static_cast<float*>(kept.get()));
+  b->bounds_ = static_cast<uint64_t*>(bounds.get());
+  b->values_ = kept.get();
+  b->value_bytes_ = width;
+  b->bytes_ = pools->bounds.block_bytes() + pool.block_bytes();
+  b->core_block_ = std::move(bounds);
+  b->values_block_ = std::move(kept);
   if (!stores_records(layout, b->band_))  // band 0: filled on first read; the corners: none
     std::fill_n(b->bounds_, layout.brick_nodes(), b->band_ == 0 ? kUnsetBounds : 0);
   return b;
@@ -100,9 +133,9 @@ void BrickCache::require(CachedBrick& brick, int64_t index, const RecordFields& 
   }
   if (brick.extra_.size() == before) return;
   if (stored) {
-    const BrickView view{brick.values_, brick.bounds_, surplus, exact, paper, weights};
     // The values were decoded with the core; the sections here do not touch them.
-    const uint64_t read = store_.read_brick(index, which, view, brick.values_);
+    const BrickView view{nullptr, brick.bounds_, surplus, exact, paper, weights};
+    const uint64_t read = store_.read_brick(index, which, view, nullptr);
     bytes_read_.fetch_add(read, std::memory_order_relaxed);
   }
   if (which[static_cast<size_t>(Section::exact)]) brick.exact_.store(exact, std::memory_order_release);

@@ -38,12 +38,40 @@ inline constexpr uint32_t kUnsetInterval = ~uint32_t{0};
 inline constexpr uint64_t kUnsetWeights = ~uint64_t{0};
 inline constexpr uint16_t kUnsetSurplus = 0xffffu;
 
-// One decoded brick. Arrays as engine/hierarchy/hierarchy.h's BrickView; those of fields not yet required
-// are null.
+// A brick's values as the cache holds them: floats, or, when every value of the brick is an
+// integer of 0..255 (0..65535) bit for bit, those integers in one byte (two). A uint8 scan's
+// bricks, or a quantized store's codes, then take 9 (10) bytes a node with their records instead
+// of 12: memory a paged extraction touches fresh, and more bricks within a cache's budget. A value
+// read converts back to the very float it was (-0.0 keeps a brick in floats).
+class BrickValues {
+ public:
+  BrickValues(const void* data, int bytes) : data_(data), bytes_(bytes) {}
+  int bytes() const { return bytes_; }  // per value: 1, 2 or 4
+  float operator[](size_t m) const {
+    if (bytes_ == 1) return static_cast<const uint8_t*>(data_)[m];
+    if (bytes_ == 2) return static_cast<const uint16_t*>(data_)[m];
+    return static_cast<const float*>(data_)[m];
+  }
+  // f(p) with p the values as held: const uint8_t*, const uint16_t* or const float*. For loops
+  // over many values, which then read them without a test each.
+  template <class F>
+  decltype(auto) visit(F&& f) const {
+    if (bytes_ == 1) return f(static_cast<const uint8_t*>(data_));
+    if (bytes_ == 2) return f(static_cast<const uint16_t*>(data_));
+    return f(static_cast<const float*>(data_));
+  }
+
+ private:
+  const void* data_;
+  int bytes_;
+};
+
+// One decoded brick. Arrays as engine/hierarchy/hierarchy.h's BrickView, but its values are a
+// BrickValues; the arrays of fields not yet required are null.
 class CachedBrick {
  public:
   int band() const { return band_; }
-  const float* values() const { return values_; }
+  BrickValues values() const { return {values_, value_bytes_}; }
   uint64_t* bounds() const { return bounds_; }
   uint16_t* surplus() const { return surplus_.load(std::memory_order_acquire); }
   uint32_t* exact() const { return exact_.load(std::memory_order_acquire); }
@@ -58,15 +86,16 @@ class CachedBrick {
  private:
   friend class BrickCache;
   int band_ = 0;
-  float* values_ = nullptr;
+  const void* values_ = nullptr;
+  int value_bytes_ = 4;
   uint64_t* bounds_ = nullptr;
   std::atomic<uint16_t*> surplus_{nullptr};
   std::atomic<uint32_t*> exact_{nullptr}, paper_{nullptr};
   std::atomic<uint64_t*> weights_{nullptr};
   std::mutex mutex_;  // while a section is decoded into it
   std::atomic<uint64_t> bytes_{0};
-  std::shared_ptr<void> core_block_;            // values and bounds, from the pool
-  std::vector<std::unique_ptr<char[]>> extra_;  // the other fields' arrays
+  std::shared_ptr<void> core_block_, values_block_;  // the core's arrays, from the cache's pools
+  std::vector<std::unique_ptr<char[]>> extra_;       // the other fields' arrays
 };
 
 struct BrickCacheStats {
@@ -133,7 +162,15 @@ class BrickCache {
 
   const StoreReader& store_;
   const uint64_t budget_;
-  std::shared_ptr<BrickPool> pool_;  // core blocks, shared with the bricks
+  // The core's blocks, shared with the bricks: the bounds words, and the values in 1, 2 or 4
+  // bytes (BrickValues).
+  struct Pools {
+    explicit Pools(size_t nodes)
+        : bounds(nodes * sizeof(uint64_t)), values{{BrickPool(nodes), BrickPool(nodes * 2), BrickPool(nodes * 4)}} {}
+    BrickPool bounds;
+    std::array<BrickPool, 3> values;
+  };
+  std::shared_ptr<Pools> pools_;
   // A slot per brick asked for, reached through a table of a pointer per brick of the store. A
   // store has hundreds of thousands of bricks (millions at 2048^3) and a coarse extraction asks
   // for a few thousand: a slot for each, made up front, was 40 bytes a brick to touch before the

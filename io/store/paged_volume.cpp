@@ -221,8 +221,7 @@ Hierarchy load_hierarchy(const PagedVolume& volume, const RecordFields& fields) 
   parallel_for(int64_t{0}, layout.brick_count(), [&](int64_t index) {
     PagedVolume::Reader reader = volume.reader();
     PagedVolume::Pager& pager = reader.bricks();
-    const float* values = pager.values(index);
-    std::copy(values, values + nodes, out.values(index));
+    pager.values(index).visit([&](const auto* values) { std::copy(values, values + nodes, out.values(index)); });
     const BrickView to = out.brick(index);
     const int band = pager.band(index);
     const auto [j, b] = volume.cache().store().locate_brick(index);

@@ -40,7 +40,7 @@ class PagedVolume {
   class Pager {
    public:
     explicit Pager(const PagedVolume& volume) : volume_(&volume) {}
-    const float* values(int64_t index) { return brick(index).values(); }
+    BrickValues values(int64_t index) { return brick(index).values(); }
     int band(int64_t index) { return brick(index).band(); }
     uint64_t bounds_word(int64_t index, uint32_t m);
     Bf16 surplus(int64_t index, uint32_t m);
