@@ -906,8 +906,9 @@ TEST_F(PagedExtract, CacheMakesSlotsOnlyForTheBricksAskedFor) {
 
 // A cache keeps a quarter of its budget while an extraction reads each brick once (one pass in
 // traversal order): the rest would be memory filled once and never read again. When the bricks it
-// reads are ones it read before (an extraction asked for again, a budget's search and extraction),
-// it keeps the whole budget from then on, and an extraction asked for again reads nothing.
+// reads are ones it read before (an extraction asked for again), it keeps the whole budget from
+// then on, and an extraction asked for again reads nothing. (A budget's search says so beforehand:
+// the next test.)
 TEST_F(PagedExtract, CacheKeepsAQuarterOfItsBudgetUntilItReadsBricksAgain) {
   const StoreReader store(convert(testing::load_shared(testing::shared_volumes()[1]), "neghip", 3));
   const DecodedSizes sizes = decoded_sizes(store);
@@ -965,45 +966,75 @@ TEST_F(PagedExtract, ABudgetSearchKeepsTheWholeCacheBudgetFromItsStart) {
   EXPECT_EQ(fresh.stats().working_bytes, sizes.total / 4);
 }
 
-// The cache holds a brick's values in the fewest bytes that keep every one of them bit for bit:
-// band 0's bricks along x hold integers of 0..255, integers up to 1000, integers with one -0.0,
-// and halves. Every value reads back as the float it was, and a brick of bytes takes 9 bytes a
-// node with its bounds.
-TEST_F(PagedExtract, ABrickIsHeldInTheFewestBytesThatKeepItsValues) {
-  Volume v;
-  v.dims = {64, 16, 16};
-  v.values.resize(64 * 16 * 16);
-  auto at = [&](int64_t x, int64_t y, int64_t z) -> float& {
-    return v.values[static_cast<size_t>((z * 16 + y) * 64 + x)];
+// The cache holds a store's values in the bytes its header promises (BrickValues): a uint8 scan
+// in one, 8-bit codes in one, 16-bit codes in two, floats in four. Every value of every brick reads
+// back as the very float the store holds, and a brick takes nodes x (8 + width) bytes.
+TEST_F(PagedExtract, BrickValuesAreHeldInTheBytesTheStoresTypePromises) {
+  struct Case {
+    std::string name, raw;
+    int quantize_bits, bytes;
   };
-  for (int64_t z = 0; z < 16; ++z)
-    for (int64_t y = 0; y < 16; ++y)
-      for (int64_t x = 0; x < 64; ++x) {
-        const auto i = static_cast<float>((x * 7 + y * 3 + z * 5) % 200);
-        at(x, y, z) = x < 16 ? i : x < 32 ? 4 * i + 200 : x < 48 ? i : i + 0.5f;
-      }
-  at(40, 3, 5) = -0.0f;
-  const StoreReader store(convert(v, "widths"));
-  const StoreLayout& layout = store.layout();
-  BrickCache cache(store, kHugeBudget);
-  const auto nodes = static_cast<uint64_t>(layout.brick_nodes());
-  const std::array<int, 4> expected_bytes = {1, 2, 4, 4};
-  for (int64_t bx = 0; bx < 4; ++bx) {
-    const int64_t index = layout.brick_index(0, {bx, 0, 0});
-    const uint64_t before = cache.stats().peak_bytes;
-    const std::shared_ptr<CachedBrick> brick = cache.get(index);
-    EXPECT_EQ(brick->values().bytes(), expected_bytes[static_cast<size_t>(bx)]) << "brick " << bx;
-    EXPECT_EQ(cache.stats().peak_bytes - before, nodes * (8 + static_cast<uint64_t>(brick->values().bytes())))
-        << "brick " << bx;
-    int64_t differ = 0;
-    for (int64_t z = 0; z < 16; ++z)
-      for (int64_t y = 0; y < 16; ++y)
-        for (int64_t x = 0; x < 16; ++x) {
-          const float held = brick->values()[brick_morton(x, y, z, layout.brick_bits())];
-          differ += std::bit_cast<uint32_t>(held) != std::bit_cast<uint32_t>(at(bx * 16 + x, y, z));
-        }
-    EXPECT_EQ(differ, 0) << "brick " << bx;
+  const std::string data = ISOTOPE_TEST_DATA;
+  const std::vector<Case> cases = {{"neghip", data + "/neghip_66x66x66_uint8.raw", 0, 1},
+                                   {"hydrogen", data + "/hydrogen_64x64x64_float32.raw", 0, 4},
+                                   {"hydrogen16", data + "/hydrogen_64x64x64_float32.raw", 16, 2},
+                                   {"hydrogen8", data + "/hydrogen_64x64x64_float32.raw", 8, 1}};
+  for (const Case& c : cases) {
+    ConvertOptions o;
+    o.quantize_bits = c.quantize_bits;
+    const std::string path = (dir_ / (c.name + ".isotope")).string();
+    convert_to_store(*open_box_reader({c.raw, std::nullopt, std::nullopt}, dir_.string()), path, o);
+    const StoreReader store(path);
+    const StoreLayout& layout = store.layout();
+    BrickCache cache(store, kHugeBudget);
+    EXPECT_EQ(cache.value_bytes(), c.bytes) << c.name;
+    const auto nodes = static_cast<size_t>(layout.brick_nodes());
+    std::vector<float> values(nodes);
+    std::vector<uint64_t> bounds(nodes);
+    int64_t differ = 0, wrong_size = 0;
+    for (int64_t i = 0; i < layout.brick_count(); ++i) {
+      const uint64_t before = cache.stats().peak_bytes;
+      const std::shared_ptr<CachedBrick> brick = cache.get(i);
+      wrong_size += cache.stats().peak_bytes - before != nodes * (8 + static_cast<uint64_t>(c.bytes));
+      store.read_brick(i, {true, false, false, false}, {values.data(), bounds.data()}, values.data());
+      for (size_t m = 0; m < nodes; ++m)
+        differ += std::bit_cast<uint32_t>(brick->values()[m]) != std::bit_cast<uint32_t>(values[m]);
+    }
+    EXPECT_EQ(differ, 0) << c.name;
+    EXPECT_EQ(wrong_size, 0) << c.name;
   }
+}
+
+// A header that promises integers the bricks do not hold (valid checksums, a lying type or range)
+// is named as a corrupt brick by the read that finds it, never narrowed into other values.
+TEST_F(PagedExtract, ABrickOutsideItsHeadersTypeIsACorruptBrick) {
+  Volume v;
+  v.dims = {17, 17, 17};
+  v.values.resize(17 * 17 * 17);
+  for (size_t i = 0; i < v.values.size(); ++i) v.values[i] = static_cast<float>(i % 97);
+  v.values[17 * 17 * 9 + 17 * 4 + 3] = 2.5f;  // node (3, 4, 9)
+  const std::string path = convert(v, "lying");
+  auto bytes = testing::read_bytes(path);
+  StoreHeader h = decode_header(bytes.data(), kHeaderBytes, path);
+  ASSERT_EQ(h.source_type, "float32");
+  h.source_type = "uint8";
+  const auto header = encode_header(h);
+  std::copy(header.begin(), header.end(), bytes.begin());
+  testing::write_file(path, "", bytes);
+  const StoreReader store(path);
+  BrickCache cache(store, kHugeBudget);
+  ASSERT_EQ(cache.value_bytes(), 1);
+  const int64_t band0 = store.layout().brick_index(0, {0, 0, 0});
+  std::string message = "no error";
+  try {
+    cache.get(band0);
+  } catch (const IoError& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find("(corrupt brick)"), std::string::npos) << message;
+  EXPECT_NE(message.find("band 0"), std::string::npos) << message;
+  // A brick without the fraction reads.
+  EXPECT_NO_THROW(cache.get(store.layout().brick_index(1, {0, 0, 0})));
 }
 
 // Every brick; every thread count, each with both cache budgets across the bricks' runs.

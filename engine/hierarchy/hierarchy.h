@@ -163,11 +163,6 @@ class Hierarchy {
   std::unique_ptr<uint64_t[]> weights_;
 };
 
-// Values and records by coordinates over any set of bricks, as a traversal reader
-// (engine/extract/traversal.h). `Bricks` gives a brick's arrays (view) and reads record words
-// (bounds_word, topology). Lookups as MultiresVolume's: a node's value is read from band j (its
-// coordinates lie on G_j), clamped into the data box beyond band j's grid; a record from the band
-// of the node's scale.
 // f(p) over a brick's values: p is the array itself where they are floats (a hierarchy in
 // memory), or what a paged brick holds them in (io/store/brick_cache.h, BrickValues::visit).
 template <class Values, class F>
@@ -178,6 +173,11 @@ decltype(auto) with_values(const Values& values, F&& f) {
     return values.visit(f);
 }
 
+// Values and records by coordinates over any set of bricks, as a traversal reader
+// (engine/extract/traversal.h). `Bricks` gives a brick's arrays (view) and reads record words
+// (bounds_word, topology). Lookups as MultiresVolume's: a node's value is read from band j (its
+// coordinates lie on G_j), clamped into the data box beyond band j's grid; a record from the band
+// of the node's scale.
 template <class Bricks>
 class CompactLookup {
  public:

@@ -4,6 +4,9 @@
 #include <bit>
 #include <new>
 #include <span>
+#include <string>
+
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -12,9 +15,9 @@ size_t core_bytes(const StoreLayout& layout) {
   return static_cast<size_t>(layout.brick_nodes()) * (sizeof(float) + sizeof(uint64_t));
 }
 
-// The fewest bytes (1, 2 or 4) that hold every value exactly (BrickValues). Bit operations only,
-// so that it vectorizes: every brick read is checked.
-int value_bytes(std::span<const float> values) {
+// The fewest bytes (1, 2 or 4) that hold every value exactly. Bit operations only, so that it
+// vectorizes: every brick read is checked.
+int fewest_bytes(std::span<const float> values) {
   uint32_t not_short = 0, not_byte = 0;
   for (const float v : values) {
     // Clamped first, so that the conversion is defined (a NaN clamps to 0). The integer's float
@@ -24,6 +27,14 @@ int value_bytes(std::span<const float> values) {
     not_byte |= static_cast<uint32_t>(k) & ~0xffu;
   }
   return not_short != 0 ? 4 : not_byte != 0 ? 2 : 1;
+}
+
+// What the header promises of every value: codes of 8 or 16 bits, or a lossless scan of unsigned
+// integers within the range it gives.
+int store_value_bytes(const StoreHeader& h) {
+  if (h.quantize_bits != 0) return h.quantize_bits <= 8 ? 1 : 2;
+  if (h.source_type != "uint8" && h.source_type != "uint16") return 4;
+  return h.value_min >= 0 && h.value_max <= 255 ? 1 : h.value_min >= 0 && h.value_max <= 65535 ? 2 : 4;
 }
 
 template <class T>
@@ -41,7 +52,8 @@ CachedBrick::~CachedBrick() = default;
 BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
     : store_(store),
       budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
-      pools_(std::make_shared<Pools>(static_cast<size_t>(store.layout().brick_nodes()))),
+      value_bytes_(store_value_bytes(store.header())),
+      pools_(std::make_shared<Pools>(static_cast<size_t>(store.layout().brick_nodes()), value_bytes_)),
       slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
   if (!slot_table_) throw std::bad_alloc();
   // The working budget starts at a quarter (at least kMinBricks bricks, at most the budget).
@@ -72,28 +84,33 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   b->band_ = store_.locate_brick(index).first;
   const auto nodes = static_cast<size_t>(layout.brick_nodes());
   std::shared_ptr<Pools> pools = pools_;
-  // The bounds are decoded in place, the values into an array of this thread's, then kept in as
-  // few bytes as hold them.
+  // The bounds are decoded in place, the values into an array of this thread's, then kept in the
+  // store's width once checked to fit it.
   std::shared_ptr<void> bounds(pools->bounds.allocate(), [pools](void* p) { pools->bounds.release(p); });
   thread_local std::vector<float> values;
   values.resize(nodes);
   const BrickView view{values.data(), static_cast<uint64_t*>(bounds.get()), nullptr, nullptr, nullptr, nullptr};
   const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values.data());
   bytes_read_.fetch_add(read, std::memory_order_relaxed);
-  const int width = value_bytes(values);
-  BrickPool& pool = pools->values[static_cast<size_t>(std::countr_zero(static_cast<unsigned>(width)))];
-  std::shared_ptr<void> kept(pool.allocate(), [pools, &pool](void* p) { pool.release(p); });  // pools keeps pool alive
+  if (value_bytes_ < 4 && fewest_bytes(values) > value_bytes_) {
+    const StoreHeader& h = store_.header();
+    throw IoError(store_.describe_brick(index) + ": holds a value that is not " +
+                  (h.quantize_bits != 0 ? "a " + std::to_string(h.quantize_bits) + "-bit code"
+                                        : "an integer of the header's " + h.source_type + " range") +
+                  " (corrupt brick)");
+  }
+  std::shared_ptr<void> kept(pools->values.allocate(), [pools](void* p) { pools->values.release(p); });
   auto narrow = [&](auto* to) { std::copy(values.begin(), values.end(), to); };
-  if (width == 1)
+  if (value_bytes_ == 1)
     narrow(static_cast<uint8_t*>(kept.get()));
-  else if (width == 2)
+  else if (value_bytes_ == 2)
     narrow(static_cast<uint16_t*>(kept.get()));
   else
     narrow(static_cast<float*>(kept.get()));
   b->bounds_ = static_cast<uint64_t*>(bounds.get());
   b->values_ = kept.get();
-  b->value_bytes_ = width;
-  b->bytes_ = pools->bounds.block_bytes() + pool.block_bytes();
+  b->value_bytes_ = value_bytes_;
+  b->bytes_ = pools->bounds.block_bytes() + pools->values.block_bytes();
   b->core_block_ = std::move(bounds);
   b->values_block_ = std::move(kept);
   if (!stores_records(layout, b->band_))  // band 0: filled on first read; the corners: none

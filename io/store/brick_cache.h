@@ -38,11 +38,11 @@ inline constexpr uint32_t kUnsetInterval = ~uint32_t{0};
 inline constexpr uint64_t kUnsetWeights = ~uint64_t{0};
 inline constexpr uint16_t kUnsetSurplus = 0xffffu;
 
-// A brick's values as the cache holds them: floats, or, when every value of the brick is an
-// integer of 0..255 (0..65535) bit for bit, those integers in one byte (two). A uint8 scan's
-// bricks, or a quantized store's codes, then take 9 (10) bytes a node with their records instead
-// of 12: memory a paged extraction touches fresh, and more bricks within a cache's budget. A value
-// read converts back to the very float it was (-0.0 keeps a brick in floats).
+// A brick's values as the cache holds them: in one byte where the store's values are integers of
+// 0..255 (a uint8 scan, 8-bit codes), two up to 65535 (uint16, 16-bit codes), else as floats
+// (BrickCache::value_bytes). A uint8 brick then takes 9 bytes a node with its bounds instead of
+// 12: memory a paged extraction touches fresh, and more bricks within a cache's budget. A value
+// read converts back to the very float it was.
 class BrickValues {
  public:
   BrickValues(const void* data, int bytes) : data_(data), bytes_(bytes) {}
@@ -126,6 +126,11 @@ class BrickCache {
   // extraction at the eps it chose): the whole budget is kept from now on, without a window of
   // misses first (docs/METHOD.md, "working budget"). Thread-safe.
   void keep_whole_budget();
+  // Bytes a value of this store's bricks is held in (BrickValues): 1 or 2 where the header says
+  // every value is an integer of 0..255 or 0..65535 (its source type and range, or its codes), else
+  // 4. One width for all bricks, so that one pool's freed blocks serve every brick. A brick whose
+  // values do not fit is corrupt: get() throws IoError naming it.
+  int value_bytes() const { return value_bytes_; }
   // A hint: brick `index` will be asked for soon. Starts the kernel reading it if it is not
   // resident (and was not asked for before).
   void prefetch(int64_t index);
@@ -162,13 +167,11 @@ class BrickCache {
 
   const StoreReader& store_;
   const uint64_t budget_;
-  // The core's blocks, shared with the bricks: the bounds words, and the values in 1, 2 or 4
-  // bytes (BrickValues).
+  const int value_bytes_;
+  // The core's blocks, shared with the bricks: the bounds words, and the values in value_bytes_.
   struct Pools {
-    explicit Pools(size_t nodes)
-        : bounds(nodes * sizeof(uint64_t)), values{{BrickPool(nodes), BrickPool(nodes * 2), BrickPool(nodes * 4)}} {}
-    BrickPool bounds;
-    std::array<BrickPool, 3> values;
+    Pools(size_t nodes, int value_bytes) : bounds(nodes * sizeof(uint64_t)), values(nodes * value_bytes) {}
+    BrickPool bounds, values;
   };
   std::shared_ptr<Pools> pools_;
   // A slot per brick asked for, reached through a table of a pointer per brick of the store. A
