@@ -271,12 +271,12 @@ void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mod
 enum class PagedBudget { full, eighth, eighth_reached };
 
 // A brick's core decoded (io/store/brick_cache.h): the bounds word of every node and its value
-// in the bytes the store's type promises (BrickCache::value_bytes).
+// in the bytes the store's type promises (held_value_bytes).
 uint64_t store_decoded_bytes(const isotope::StoreReader& store) {
   const isotope::StoreLayout& l = store.layout();
-  const isotope::BrickCache cache(store, 0);
   return static_cast<uint64_t>(l.brick_count()) *
-         static_cast<uint64_t>(l.brick_nodes() * (cache.value_bytes() + static_cast<int64_t>(sizeof(uint64_t))));
+         static_cast<uint64_t>(l.brick_nodes() *
+                               (isotope::held_value_bytes(store.header()) + static_cast<int64_t>(sizeof(uint64_t))));
 }
 
 void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget which, int threads) {

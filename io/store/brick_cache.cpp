@@ -29,14 +29,6 @@ int fewest_bytes(std::span<const float> values) {
   return not_short != 0 ? 4 : not_byte != 0 ? 2 : 1;
 }
 
-// What the header promises of every value: codes of 8 or 16 bits, or a lossless scan of unsigned
-// integers within the range it gives.
-int store_value_bytes(const StoreHeader& h) {
-  if (h.quantize_bits != 0) return h.quantize_bits <= 8 ? 1 : 2;
-  if (h.source_type != "uint8" && h.source_type != "uint16") return 4;
-  return h.value_min >= 0 && h.value_max <= 255 ? 1 : h.value_min >= 0 && h.value_max <= 65535 ? 2 : 4;
-}
-
 template <class T>
 T* new_array(std::vector<std::unique_ptr<char[]>>& owner, int64_t n, T fill) {
   owner.push_back(std::make_unique_for_overwrite<char[]>(static_cast<size_t>(n) * sizeof(T)));
@@ -47,12 +39,20 @@ T* new_array(std::vector<std::unique_ptr<char[]>>& owner, int64_t n, T fill) {
 
 }  // namespace
 
+// What the header promises of every value: codes of 8 or 16 bits, or a lossless scan of unsigned
+// integers within the range it gives.
+int held_value_bytes(const StoreHeader& h) {
+  if (h.quantize_bits != 0) return h.quantize_bits <= 8 ? 1 : 2;
+  if (h.source_type != "uint8" && h.source_type != "uint16") return 4;
+  return h.value_min >= 0 && h.value_max <= 255 ? 1 : h.value_min >= 0 && h.value_max <= 65535 ? 2 : 4;
+}
+
 CachedBrick::~CachedBrick() = default;
 
 BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
     : store_(store),
       budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
-      value_bytes_(store_value_bytes(store.header())),
+      value_bytes_(held_value_bytes(store.header())),
       pools_(std::make_shared<Pools>(static_cast<size_t>(store.layout().brick_nodes()), value_bytes_)),
       slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
   if (!slot_table_) throw std::bad_alloc();
@@ -84,29 +84,31 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   b->band_ = store_.locate_brick(index).first;
   const auto nodes = static_cast<size_t>(layout.brick_nodes());
   std::shared_ptr<Pools> pools = pools_;
-  // The bounds are decoded in place, the values into an array of this thread's, then kept in the
-  // store's width once checked to fit it.
+  // The bounds are decoded in place; so are floats, while narrower values go through an array of
+  // this thread's, checked to fit the store's width, then copied in it.
   std::shared_ptr<void> bounds(pools->bounds.allocate(), [pools](void* p) { pools->bounds.release(p); });
-  thread_local std::vector<float> values;
-  values.resize(nodes);
-  const BrickView view{values.data(), static_cast<uint64_t*>(bounds.get()), nullptr, nullptr, nullptr, nullptr};
-  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values.data());
-  bytes_read_.fetch_add(read, std::memory_order_relaxed);
-  if (value_bytes_ < 4 && fewest_bytes(values) > value_bytes_) {
-    const StoreHeader& h = store_.header();
-    throw IoError(store_.describe_brick(index) + ": holds a value that is not " +
-                  (h.quantize_bits != 0 ? "a " + std::to_string(h.quantize_bits) + "-bit code"
-                                        : "an integer of the header's " + h.source_type + " range") +
-                  " (corrupt brick)");
-  }
   std::shared_ptr<void> kept(pools->values.allocate(), [pools](void* p) { pools->values.release(p); });
-  auto narrow = [&](auto* to) { std::copy(values.begin(), values.end(), to); };
-  if (value_bytes_ == 1)
-    narrow(static_cast<uint8_t*>(kept.get()));
-  else if (value_bytes_ == 2)
-    narrow(static_cast<uint16_t*>(kept.get()));
-  else
-    narrow(static_cast<float*>(kept.get()));
+  thread_local std::vector<float> narrow;
+  float* values = static_cast<float*>(kept.get());
+  if (value_bytes_ < 4) {
+    narrow.resize(nodes);
+    values = narrow.data();
+  }
+  const BrickView view{values, static_cast<uint64_t*>(bounds.get()), nullptr, nullptr, nullptr, nullptr};
+  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values);
+  bytes_read_.fetch_add(read, std::memory_order_relaxed);
+  if (value_bytes_ < 4) {
+    if (fewest_bytes(narrow) > value_bytes_) {
+      const StoreHeader& h = store_.header();
+      throw IoError(store_.describe_brick(index) + ": holds a value that is not " +
+                    (h.quantize_bits != 0 ? "a " + std::to_string(h.quantize_bits) + "-bit code"
+                                          : "an integer of the header's " + h.source_type + " range") +
+                    " (corrupt brick)");
+    }
+    BrickValues::of_width(value_bytes_, [&](auto held) {
+      std::copy(narrow.begin(), narrow.end(), static_cast<decltype(held)*>(kept.get()));
+    });
+  }
   b->bounds_ = static_cast<uint64_t*>(bounds.get());
   b->values_ = kept.get();
   b->value_bytes_ = value_bytes_;

@@ -38,27 +38,35 @@ inline constexpr uint32_t kUnsetInterval = ~uint32_t{0};
 inline constexpr uint64_t kUnsetWeights = ~uint64_t{0};
 inline constexpr uint16_t kUnsetSurplus = 0xffffu;
 
+// Bytes a value of this store's bricks is held in (BrickValues): 1 or 2 where the header says
+// every value is an integer of 0..255 or 0..65535 (its codes, or an unsigned integer type and its
+// range), else 4.
+int held_value_bytes(const StoreHeader& header);
+
 // A brick's values as the cache holds them: in one byte where the store's values are integers of
 // 0..255 (a uint8 scan, 8-bit codes), two up to 65535 (uint16, 16-bit codes), else as floats
-// (BrickCache::value_bytes). A uint8 brick then takes 9 bytes a node with its bounds instead of
+// (held_value_bytes). A uint8 brick then takes 9 bytes a node with its bounds instead of
 // 12: memory a paged extraction touches fresh, and more bricks within a cache's budget. A value
 // read converts back to the very float it was.
 class BrickValues {
  public:
   BrickValues(const void* data, int bytes) : data_(data), bytes_(bytes) {}
   int bytes() const { return bytes_; }  // per value: 1, 2 or 4
-  float operator[](size_t m) const {
-    if (bytes_ == 1) return static_cast<const uint8_t*>(data_)[m];
-    if (bytes_ == 2) return static_cast<const uint16_t*>(data_)[m];
-    return static_cast<const float*>(data_)[m];
-  }
   // f(p) with p the values as held: const uint8_t*, const uint16_t* or const float*. For loops
   // over many values, which then read them without a test each.
   template <class F>
   decltype(auto) visit(F&& f) const {
-    if (bytes_ == 1) return f(static_cast<const uint8_t*>(data_));
-    if (bytes_ == 2) return f(static_cast<const uint16_t*>(data_));
-    return f(static_cast<const float*>(data_));
+    return of_width(bytes_, [&](auto held) { return f(static_cast<const decltype(held)*>(data_)); });
+  }
+  // f(T{}) with T the type values of `bytes` bytes are held in: uint8_t, uint16_t or float.
+  template <class F>
+  static decltype(auto) of_width(int bytes, F&& f) {
+    if (bytes == 1) return f(uint8_t{});
+    if (bytes == 2) return f(uint16_t{});
+    return f(float{});
+  }
+  float operator[](size_t m) const {
+    return visit([m](const auto* p) { return static_cast<float>(p[m]); });
   }
 
  private:
@@ -126,10 +134,8 @@ class BrickCache {
   // extraction at the eps it chose): the whole budget is kept from now on, without a window of
   // misses first (docs/METHOD.md, "working budget"). Thread-safe.
   void keep_whole_budget();
-  // Bytes a value of this store's bricks is held in (BrickValues): 1 or 2 where the header says
-  // every value is an integer of 0..255 or 0..65535 (its source type and range, or its codes), else
-  // 4. One width for all bricks, so that one pool's freed blocks serve every brick. A brick whose
-  // values do not fit is corrupt: get() throws IoError naming it.
+  // held_value_bytes of the store: one width for all bricks, so that one pool's freed blocks serve
+  // every brick. A brick whose values do not fit is corrupt: get() throws IoError naming it.
   int value_bytes() const { return value_bytes_; }
   // A hint: brick `index` will be asked for soon. Starts the kernel reading it if it is not
   // resident (and was not asked for before).
