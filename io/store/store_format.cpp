@@ -12,6 +12,7 @@
 #include <memory>
 #include <new>
 #include <span>
+#include <stdexcept>
 #include <type_traits>
 #include <utility>
 
@@ -236,18 +237,56 @@ std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries) {
 static_assert(sizeof(BrickEntry) == kEntryBytes && std::is_trivially_copyable_v<BrickEntry> &&
               offsetof(BrickEntry, bytes) == sizeof(uint64_t) && std::endian::native == std::endian::little);
 
-std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
-                                         uint64_t area_end, const std::string& file) {
-  if (size != d.bytes || size != static_cast<uint64_t>(count) * kEntryBytes)
-    throw IoError(file + ": directory is truncated");
-  std::vector<BrickEntry> entries(static_cast<size_t>(count));
-  if (size != 0) std::memcpy(entries.data(), bytes, size);
-  check_directory(entries, d, area_end, file);
-  return entries;
+namespace {
+
+// Whether the entries that take room, taken in the Morton order of their bricks (the file order,
+// docs/FORMAT.md), each start where the one before ends: the writer's own order, walked without a
+// sort or any memory beyond a short stack. Depth first over the power-of-two cube around `grid`,
+// children in Morton order (x, then y, then z), cells outside the grid left out.
+bool tiles_in_file_order(std::span<const BrickEntry> entries, const Box3& grid) {
+  int64_t side = 1;
+  while (side < std::max({grid[0], grid[1], grid[2]})) side *= 2;
+  struct Cell {
+    int64_t x, y, z, size;
+  };
+  std::vector<Cell> stack{{0, 0, 0, side}};
+  uint64_t end = 0;
+  bool first = true;
+  auto next = [&](int64_t x, int64_t y, int64_t z) {
+    if (x >= grid[0] || y >= grid[1] || z >= grid[2]) return true;
+    const BrickEntry& e = entries[static_cast<size_t>((z * grid[1] + y) * grid[0] + x)];
+    if (e.total() == 0) return true;
+    if (!first && e.offset != end) return false;
+    first = false;
+    end = e.offset + e.total();
+    return true;
+  };
+  while (!stack.empty()) {
+    const Cell c = stack.back();
+    stack.pop_back();
+    if (c.x >= grid[0] || c.y >= grid[1] || c.z >= grid[2]) continue;
+    if (c.size == 1) {
+      if (!next(c.x, c.y, c.z)) return false;
+      continue;
+    }
+    if (c.size == 2) {  // the eight bricks at once, sparing the stack three quarters of its cells
+      for (int i = 0; i < 8; ++i)
+        if (!next(c.x + (i & 1), c.y + (i >> 1 & 1), c.z + (i >> 2 & 1))) return false;
+      continue;
+    }
+    const int64_t h = c.size / 2;
+    for (int i = 7; i >= 0; --i)
+      stack.push_back({c.x + (i & 1) * h, c.y + (i >> 1 & 1) * h, c.z + (i >> 2 & 1) * h, h});
+  }
+  return true;
 }
 
-void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d, uint64_t area_end,
+}  // namespace
+
+void check_directory(std::span<const BrickEntry> entries, const Box3& grid, const BandDirectory& d, uint64_t area_end,
                      const std::string& file) {
+  if (static_cast<int64_t>(entries.size()) != grid[0] * grid[1] * grid[2])
+    throw std::logic_error("check_directory: the entries are not the grid's bricks");
   if (store_checksum(entries.data(), entries.size_bytes()) != d.checksum)
     throw IoError(file + ": directory checksum mismatch (corrupt directory)");
   for (const BrickEntry& e : entries) {
@@ -262,6 +301,10 @@ void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d
   // share bytes, since an entry that points into another brick (a copy of one passes every
   // checksum) would give a silently wrong brick, and none leaves a gap. verify checks that the
   // bands tile the whole brick area; a band read alone checks its own, in the order of offsets.
+  // The writer's Morton order is that order (docs/FORMAT.md, "File order"), so it is walked first:
+  // at 2048^3 band 0's 2 M entries take a few milliseconds where the sort took a tenth of a second.
+  // Any other order, and every fault, goes to the sort, which names the first fault.
+  if (tiles_in_file_order(entries, grid)) return;
   // That order comes from a bucket sort: the run's bytes cut into as many equal spans as there are
   // entries, each entry in the span of its offset, a span's few entries sorted among themselves:
   // linear, and the order a sort of (offset, entry) pairs gives, so the same first fault is named.

@@ -78,14 +78,12 @@ std::array<uint8_t, kHeaderBytes> encode_header(const StoreHeader& h);
 StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& file);
 
 std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries);
-// One band's directory of `count` entries; every brick must lie in [kHeaderBytes, area_end).
-// Throws IoError naming `file` when the size, checksum or an entry is wrong.
-std::vector<BrickEntry> decode_directory(const uint8_t* bytes, size_t size, const BandDirectory& d, int64_t count,
-                                         uint64_t area_end, const std::string& file);
-// The same checks on a directory read straight into its entries (an entry's 24 bytes are its
-// fields in order, little-endian as the host), which spares a copy of the bytes: a 2048^3
-// volume's band 0 has 2 M entries, 50 MB. The caller has read d.bytes into `entries`.
-void check_directory(std::span<const BrickEntry> entries, const BandDirectory& d, uint64_t area_end,
+// Checks a band's directory read straight into its entries (an entry's 24 bytes are its fields in
+// order, little-endian as the host), which spares a copy of the bytes: a 2048^3 volume's band 0
+// has 2 M entries, 50 MB. `grid`: the band's bricks per axis, the entries x fastest. Throws
+// IoError naming `file` when the checksum or an entry is wrong: an entry outside
+// [kHeaderBytes, area_end), a section with no room, or bricks that do not tile one run of the file.
+void check_directory(std::span<const BrickEntry> entries, const Box3& grid, const BandDirectory& d, uint64_t area_end,
                      const std::string& file);
 
 // Whether band j's bricks have records (bands 1 .. k-1 store them; band 0's are rebuilt from its

@@ -103,7 +103,7 @@ const StoreReader::Directory& StoreReader::band_directory(int band) const {
     auto entries = std::make_shared<Directory>(static_cast<size_t>(layout_.band(band).brick_count()));
     if (where.bytes != entries->size() * kEntryBytes) throw IoError(path_ + ": directory is truncated");
     pread_all(fd_, entries->data(), where.bytes, where.offset, path_);
-    check_directory(*entries, where, area_end_, path_);
+    check_directory(*entries, layout_.band(band).bricks, where, area_end_, path_);
     d.entries = std::move(entries);
   }
   return *d.entries;
