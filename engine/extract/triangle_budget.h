@@ -229,15 +229,28 @@ class CountPasses {
 
   void next(double bound) {
     bound_ = bound;
-    // Chunks of the frontier's lists: each compacts what it keeps in place.
+    // Chunks of the frontier's lists, each of at most kDescents items to descend (the work) and
+    // kChunk items in all; each compacts what it keeps in place. A list holds its items in
+    // depth-first order, so the items a pass descends (the finer detail of one region) can lie
+    // together: chunks of a fixed length left most of a pass to one thread (at 2048^3, 0.7 s of
+    // a 1 M budget's search on one core).
     struct Chunk {
       size_t list, begin, end, kept = 0;
     };
     std::vector<Chunk> chunks;
-    constexpr size_t kChunk = 4096;
-    for (size_t l = 0; l < frontier_.size(); ++l)
-      for (size_t b = 0; b < frontier_[l].size(); b += kChunk)
-        chunks.push_back({l, b, std::min(frontier_[l].size(), b + kChunk)});
+    constexpr size_t kDescents = 64, kChunk = 4096;
+    for (size_t l = 0; l < frontier_.size(); ++l) {
+      const std::vector<FrontierItem>& list = frontier_[l];
+      size_t begin = 0, descents = 0;
+      for (size_t j = 0; j < list.size(); ++j) {
+        descents += list[j].key >= bound_;
+        if (descents == kDescents || j + 1 - begin == kChunk) {
+          chunks.push_back({l, begin, j + 1});
+          begin = j + 1, descents = 0;
+        }
+      }
+      if (begin < list.size()) chunks.push_back({l, begin, list.size()});
+    }
     run_parallel(static_cast<int64_t>(chunks.size()), [&](Walk& walk, Worker& w, int64_t i) {
       Chunk& c = chunks[static_cast<size_t>(i)];
       std::vector<FrontierItem>& list = frontier_[c.list];
