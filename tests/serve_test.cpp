@@ -144,6 +144,22 @@ TEST(Supersession, ALargerNumberOfTheSameClientRaisesTheOldersFlags) {
   EXPECT_EQ(s.clients(), 2u);
 }
 
+// The pieces a server sends one after the other are the encoded bytes, the arrays viewed where
+// they lie in the mesh and normals.
+TEST(MeshWire, ThePiecesAreTheEncodedBytesWithTheArraysLeftInPlace) {
+  const Mesh mesh = extract(MultiresVolume::build(generate_sphere(17)), {});
+  ASSERT_GT(mesh.triangles.size(), 100u);
+  const auto normals = vertex_normals(mesh);
+  const MeshWirePieces pieces = mesh_wire_pieces(mesh, normals, "{\"a\":1}");
+  EXPECT_EQ(pieces.arrays[0].data(), reinterpret_cast<const char*>(mesh.positions.data()));
+  EXPECT_EQ(pieces.arrays[1].data(), reinterpret_cast<const char*>(normals.data()));
+  EXPECT_EQ(pieces.arrays[2].data(), reinterpret_cast<const char*>(mesh.triangles.data()));
+  std::string joined = pieces.head;
+  for (const std::string_view a : pieces.arrays) joined.append(a);
+  EXPECT_EQ(joined.size(), pieces.size());
+  EXPECT_EQ(joined, encode_mesh_wire(mesh, normals, "{\"a\":1}"));
+}
+
 TEST(MeshWire, RoundTripsWithEveryArrayOnA4ByteBoundary) {
   const Mesh mesh = extract(MultiresVolume::build(generate_sphere(17)), {});
   ASSERT_GT(mesh.triangles.size(), 100u);

@@ -13,8 +13,8 @@ static_assert(std::endian::native == std::endian::little, "the wire format is li
 void put_u32(std::string& out, uint32_t v) { out.append(reinterpret_cast<const char*>(&v), 4); }
 
 template <class T>
-void put_array(std::string& out, const T* data, size_t count) {
-  out.append(reinterpret_cast<const char*>(data), count * sizeof(T));
+std::string_view bytes_of(const T* data, size_t count) {
+  return {reinterpret_cast<const char*>(data), count * sizeof(T)};
 }
 
 uint32_t checked_u32(size_t n, const char* what) {
@@ -27,24 +27,33 @@ size_t padded(size_t n) { return (n + 3) & ~size_t{3}; }
 
 }  // namespace
 
-std::string encode_mesh_wire(const Mesh& mesh, const std::vector<std::array<float, 3>>& normals,
-                             std::string_view report_json) {
+MeshWirePieces mesh_wire_pieces(const Mesh& mesh, const std::vector<std::array<float, 3>>& normals,
+                                std::string_view report_json) {
   if (normals.size() != mesh.positions.size()) throw std::invalid_argument("one normal per vertex");
   const uint32_t vertices = checked_u32(mesh.positions.size(), "vertices");
   const uint32_t triangles = checked_u32(mesh.triangles.size(), "triangles");
   const uint32_t json_bytes = checked_u32(report_json.size(), "report bytes");
+  MeshWirePieces out;
+  out.head.reserve(20 + padded(json_bytes));
+  out.head.append(kMeshWireMagic.data(), 4);
+  put_u32(out.head, kMeshWireVersion);
+  put_u32(out.head, json_bytes);
+  put_u32(out.head, vertices);
+  put_u32(out.head, triangles);
+  out.head.append(report_json);
+  out.head.append(padded(json_bytes) - json_bytes, ' ');
+  out.arrays = {bytes_of(mesh.positions.data(), mesh.positions.size()), bytes_of(normals.data(), normals.size()),
+                bytes_of(mesh.triangles.data(), mesh.triangles.size())};
+  return out;
+}
+
+std::string encode_mesh_wire(const Mesh& mesh, const std::vector<std::array<float, 3>>& normals,
+                             std::string_view report_json) {
+  const MeshWirePieces pieces = mesh_wire_pieces(mesh, normals, report_json);
   std::string out;
-  out.reserve(20 + padded(json_bytes) + size_t{24} * vertices + size_t{12} * triangles);
-  out.append(kMeshWireMagic.data(), 4);
-  put_u32(out, kMeshWireVersion);
-  put_u32(out, json_bytes);
-  put_u32(out, vertices);
-  put_u32(out, triangles);
-  out.append(report_json);
-  out.append(padded(json_bytes) - json_bytes, ' ');
-  put_array(out, mesh.positions.data(), mesh.positions.size());
-  put_array(out, normals.data(), normals.size());
-  put_array(out, mesh.triangles.data(), mesh.triangles.size());
+  out.reserve(pieces.size());
+  out.append(pieces.head);
+  for (const std::string_view a : pieces.arrays) out.append(a);
   return out;
 }
 

@@ -242,10 +242,22 @@ size_t ResponseBudget::held() const {
 
 void set_held_content(httplib::Response& res, const char* body, size_t size, const char* content_type,
                       std::shared_ptr<const void> hold) {
-  res.set_content_provider(size, content_type,
-                           [body, hold = std::move(hold)](size_t offset, size_t length, httplib::DataSink& sink) {
-                             return sink.write(body + offset, std::min(length, kPiece));
-                           });
+  set_held_content(res, {std::string_view(body, size)}, content_type, std::move(hold));
+}
+
+void set_held_content(httplib::Response& res, std::vector<std::string_view> parts, const char* content_type,
+                      std::shared_ptr<const void> hold) {
+  size_t size = 0;
+  for (const std::string_view p : parts) size += p.size();
+  res.set_content_provider(
+      size, content_type,
+      [parts = std::move(parts), hold = std::move(hold)](size_t offset, size_t length, httplib::DataSink& sink) {
+        // The part that holds `offset`, and as much of it as the sink takes at once.
+        size_t i = 0;
+        for (; i < parts.size() && offset >= parts[i].size(); ++i) offset -= parts[i].size();
+        if (i == parts.size()) return false;  // past the end: httplib asks no such thing
+        return sink.write(parts[i].data() + offset, std::min({length, kPiece, parts[i].size() - offset}));
+      });
 }
 
 }  // namespace isotope::tools

@@ -22,7 +22,9 @@
 #include <cstddef>
 #include <memory>
 #include <mutex>
+#include <string_view>
 #include <thread>
+#include <vector>
 
 #include "tools/serve/http_limits.h"
 
@@ -86,6 +88,9 @@ class MemoryReturner {
 // BODY as RES's content, sent from where it lies (no copy) in pieces; HOLD (e.g. a ResponseBudget
 // hold, or the owner of BODY) is kept until the response is destroyed.
 void set_held_content(httplib::Response& res, const char* body, size_t size, const char* content_type,
+                      std::shared_ptr<const void> hold);
+// The same for a body that lies in several places: PARTS one after the other.
+void set_held_content(httplib::Response& res, std::vector<std::string_view> parts, const char* content_type,
                       std::shared_ptr<const void> hold);
 
 }  // namespace isotope::tools

@@ -169,7 +169,7 @@ struct ViewerServer::Impl {
       run.input = settings.store;
       run.options = r.options;
       run.threads = static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
-      const Mesh mesh = input.extract(r.options, &run.extract);
+      Mesh mesh = input.extract(r.options, &run.extract);
       run.extract_seconds = seconds_since(start);
       describe(input.info(), run);
       const auto measure_start = std::chrono::steady_clock::now();
@@ -187,16 +187,22 @@ struct ViewerServer::Impl {
       report["seq"] = r.seq ? nlohmann::ordered_json(*r.seq) : nlohmann::ordered_json(nullptr);
       report["server_seconds"] = seconds_since(start);
       // The body is held, against the budget, until its client has taken it (or the pace of
-      // tools/serve/bounded_http.h ends the connection).
+      // tools/serve/bounded_http.h ends the connection): the mesh and normals themselves, sent
+      // from where they lie after the wire format's header.
       struct Held {
         std::shared_ptr<void> hold;  // released last, once the body is freed (the release trims)
-        std::string body;
+        Mesh mesh;
+        std::vector<std::array<float, 3>> normals;
+        MeshWirePieces body;
       };
       auto held = std::make_shared<Held>();
-      held->body = encode_mesh_wire(mesh, normals, report.dump());
+      held->mesh = std::move(mesh);
+      held->normals = std::move(normals);
+      held->body = mesh_wire_pieces(held->mesh, held->normals, report.dump());
       held->hold = responses.hold(held->body.size());
       if (!held->hold) return refuse_for_responses(res);
-      set_held_content(res, held->body.data(), held->body.size(), "application/octet-stream", held);
+      set_held_content(res, {held->body.head, held->body.arrays[0], held->body.arrays[1], held->body.arrays[2]},
+                       "application/octet-stream", held);
       log(req, run);
     } catch (const BadRequest& e) {
       answer_text(res, 400, e.what());
