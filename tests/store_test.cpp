@@ -676,10 +676,13 @@ TEST(StoreDirectory, TheTilingCheckNamesWhatTheSortOfOffsetsNames) {
     bad[1][a].offset += 1;                 // a byte along
     bad[2][a].offset = at;                 // past the end of the run
     bad[3][a] = entries[b];                // a copy of another entry
-    for (const auto& e : bad) {
-      // The first brick of the run moved past its end still tiles it: both must accept it.
-      const std::string want = sorted_fault(e);
-      EXPECT_EQ(checked_fault(e, grid, area_end), want) << "round " << round;
+    for (size_t k = 0; k < bad.size(); ++k) {
+      const std::string want = sorted_fault(bad[k]);
+      // Moved past the end of the run, the run's first brick still tiles it: both accept that.
+      if (k != 2) {
+        EXPECT_NE(want, "") << "round " << round;
+      }
+      EXPECT_EQ(checked_fault(bad[k], grid, area_end), want) << "round " << round;
       faults += !want.empty();
     }
   }

@@ -269,7 +269,7 @@ bool tiles_in_file_order(std::span<const BrickEntry> entries, const Box3& grid) 
       if (!next(c.x, c.y, c.z)) return false;
       continue;
     }
-    if (c.size == 2) {  // the eight bricks at once, sparing the stack three quarters of its cells
+    if (c.size == 2) {  // the eight bricks at once, sparing the stack seven eighths of its pushes
       for (int i = 0; i < 8; ++i)
         if (!next(c.x + (i & 1), c.y + (i >> 1 & 1), c.z + (i >> 2 & 1))) return false;
       continue;

@@ -83,6 +83,7 @@ std::vector<uint8_t> encode_directory(const std::vector<BrickEntry>& entries);
 // has 2 M entries, 50 MB. `grid`: the band's bricks per axis, the entries x fastest. Throws
 // IoError naming `file` when the checksum or an entry is wrong: an entry outside
 // [kHeaderBytes, area_end), a section with no room, or bricks that do not tile one run of the file.
+// Throws std::logic_error when `entries` are not the grid's bricks (a caller's error, not a file's).
 void check_directory(std::span<const BrickEntry> entries, const Box3& grid, const BandDirectory& d, uint64_t area_end,
                      const std::string& file);
 

@@ -199,7 +199,11 @@ struct ViewerServer::Impl {
       held->mesh = std::move(mesh);
       held->normals = std::move(normals);
       held->body = mesh_wire_pieces(held->mesh, held->normals, report.dump());
-      held->hold = responses.hold(held->body.size());
+      // Held: the arrays' whole allocations, room reserved beyond their sizes included.
+      held->hold = responses.hold(held->body.head.size() +
+                                  sizeof(held->mesh.positions[0]) *
+                                      (held->mesh.positions.capacity() + held->normals.capacity()) +
+                                  sizeof(held->mesh.triangles[0]) * held->mesh.triangles.capacity());
       if (!held->hold) return refuse_for_responses(res);
       set_held_content(res, {held->body.head, held->body.arrays[0], held->body.arrays[1], held->body.arrays[2]},
                        "application/octet-stream", held);
