@@ -154,8 +154,8 @@ TEST(MeshWire, ThePiecesAreTheEncodedBytesWithTheArraysLeftInPlace) {
   EXPECT_EQ(pieces.arrays[0].data(), reinterpret_cast<const char*>(mesh.positions.data()));
   EXPECT_EQ(pieces.arrays[1].data(), reinterpret_cast<const char*>(normals.data()));
   EXPECT_EQ(pieces.arrays[2].data(), reinterpret_cast<const char*>(mesh.triangles.data()));
-  std::string joined = pieces.head;
-  for (const std::string_view a : pieces.arrays) joined.append(a);
+  std::string joined;
+  for (const std::string_view p : pieces.parts()) joined.append(p);
   EXPECT_EQ(joined.size(), pieces.size());
   EXPECT_EQ(joined, encode_mesh_wire(mesh, normals, "{\"a\":1}"));
 }

@@ -52,8 +52,7 @@ std::string encode_mesh_wire(const Mesh& mesh, const std::vector<std::array<floa
   const MeshWirePieces pieces = mesh_wire_pieces(mesh, normals, report_json);
   std::string out;
   out.reserve(pieces.size());
-  out.append(pieces.head);
-  for (const std::string_view a : pieces.arrays) out.append(a);
+  for (const std::string_view p : pieces.parts()) out.append(p);
   return out;
 }
 

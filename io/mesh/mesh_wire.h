@@ -23,7 +23,13 @@ inline constexpr uint32_t kMeshWireVersion = 1;
 struct MeshWirePieces {
   std::string head;
   std::array<std::string_view, 3> arrays;
-  size_t size() const { return head.size() + arrays[0].size() + arrays[1].size() + arrays[2].size(); }
+  // The four pieces in the order they are sent.
+  std::array<std::string_view, 4> parts() const { return {head, arrays[0], arrays[1], arrays[2]}; }
+  size_t size() const {
+    size_t n = 0;
+    for (const std::string_view p : parts()) n += p.size();
+    return n;
+  }
 };
 MeshWirePieces mesh_wire_pieces(const Mesh& mesh, const std::vector<std::array<float, 3>>& normals,
                                 std::string_view report_json);

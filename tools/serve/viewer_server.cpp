@@ -205,8 +205,8 @@ struct ViewerServer::Impl {
                                       (held->mesh.positions.capacity() + held->normals.capacity()) +
                                   sizeof(held->mesh.triangles[0]) * held->mesh.triangles.capacity());
       if (!held->hold) return refuse_for_responses(res);
-      set_held_content(res, {held->body.head, held->body.arrays[0], held->body.arrays[1], held->body.arrays[2]},
-                       "application/octet-stream", held);
+      const auto parts = held->body.parts();
+      set_held_content(res, {parts.begin(), parts.end()}, "application/octet-stream", held);
       log(req, run);
     } catch (const BadRequest& e) {
       answer_text(res, 400, e.what());
