@@ -808,9 +808,11 @@ TEST_F(Serve, ACrowdIsAnsweredOrRefusedWithBoundedMemory) {
   EXPECT_GE(ok, 18);  // those that ran and those that waited
   EXPECT_EQ(ok + busy, kClients);
   // 200 client threads' stacks and buffers, and the meshes of the requests that ran: far below 200
-  // meshes (measured 112 MB with the limits, 412 MB with 64 extractions at once). ThreadSanitizer's
-  // shadow memory multiplies every byte, so there only the answers are checked.
-#if !defined(__SANITIZE_THREAD__)
+  // meshes (measured 106-117 MB with the limits, 412 MB with 64 extractions at once). Under the
+  // sanitizers the peak measures their allocators rather than the server: ThreadSanitizer's shadow
+  // memory multiplies every byte, and AddressSanitizer's quarantine keeps what every request freed
+  // (170-175 MB, 73-77 MB with the quarantine off), so there only the answers are checked.
+#if !defined(__SANITIZE_THREAD__) && !defined(__SANITIZE_ADDRESS__)
   EXPECT_LT(grown_mb, 40 * mesh_mb + 64);
 #endif
 }
