@@ -73,6 +73,12 @@ constexpr int64_t kDecodePerThread = 2;
 constexpr double kMeshFactor = 5.0;
 // Slack above all that: allocator arenas and page-granular growth that vary run to run.
 constexpr int64_t kMarginMb = 8;
+// On 2 threads, malloc's second arena keeps what the pieces built there once the weld has freed
+// them, and how much of it the measuring after the weld can reuse varies from run to run: over 9
+// runs of three builds (2026-11-27), eps 0 peaked at 192-202 MB on one thread and 193-226 MB on
+// two, against a 2-thread limit of 225.6 MB without this term. A cache that held 30 MB beyond its
+// budget still fails the 1-thread run.
+constexpr int64_t kSecondArenaMb = 16;
 
 using testing::Child;
 using testing::report;
@@ -194,7 +200,8 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
       const double budget_mb = small.report.at("cache").at("effective_budget_mb").get<double>();
       const double limit_mb =
           mb_of_kb(baseline_kb[threads]) + budget_mb + static_cast<double>(extra_bricks) * brick_mb +
-          kMeshFactor * static_cast<double>(small.mesh_bytes()) / (1 << 20) + static_cast<double>(kMarginMb);
+          kMeshFactor * static_cast<double>(small.mesh_bytes()) / (1 << 20) + static_cast<double>(kMarginMb) +
+          (threads > 1 ? static_cast<double>(kSecondArenaMb) : 0.0);
       const double rss_mb = mb_of_kb(small.child.max_rss_kb);
       report(key + "_rss_mb", rss_mb);
       report(key + "_report_peak_rss_mb", small.report.at("peak_rss_mb").get<double>());
