@@ -44,6 +44,12 @@ inline std::array<Child, 2> bisect(const PackedTet& t, int level, bool positive)
   if (level % 3 == 0) return {{{{t[0], t[2], t[3], v}, positive}, {{t[1], t[3], t[2], v}, positive}}};
   return {{{{t[0], t[2], t[3], v}, positive}, {{t[1], t[2], t[3], v}, !positive}}};
 }
+// The values at the corners of bisect's children, in their corners' order, from those of t
+// (`f`, in t's order) and the value at its refinement vertex.
+inline std::array<std::array<float, 4>, 2> bisect_values(const std::array<float, 4>& f, float at_v, int level) {
+  if (level % 3 == 0) return {{{f[0], f[2], f[3], at_v}, {f[1], f[3], f[2], at_v}}};
+  return {{{f[0], f[2], f[3], at_v}, {f[1], f[2], f[3], at_v}}};
+}
 
 // Triangles marching tetrahedra makes of one tetrahedron (engine/mesh/marching_tetrahedra.cpp).
 inline int triangles_of(const std::array<float, 4>& f, float iso) {
@@ -179,11 +185,13 @@ template <TraversalSource Source>
 struct LevelScratch {
   struct Root {
     Child tet;
+    std::array<float, 4> values;  // at its corners, when the walk carries them (Traversal::kCarryValues)
     int level;
   };
   std::vector<Root> roots;  // of the chunks still to walk, the next one last
   Scratch<Child> frontier, next;
-  Scratch<typename Source::Reader::Handle> handles;  // of frontier
+  Scratch<std::array<float, 4>> frontier_values, next_values;  // at the corners of frontier and next, when carried
+  Scratch<typename Source::Reader::Handle> handles;            // of frontier
 };
 
 // A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
@@ -299,6 +307,12 @@ class Traversal {
   // What the traversal does at t: cull it (no value on each side, or beyond the data box), stop
   // and emit it, or refine it.
   using Handle = typename Source::Reader::Handle;
+  // Whether the reader gives the value of the node whose record a handle locates (value_at): then
+  // a level-by-level walk carries its tetrahedra's corner values down, each child reading only its
+  // new corner, the parent's refinement vertex, beside the record just read, and a stopping
+  // tetrahedron reading none. A source whose values are one array lookup away (MultiresVolume)
+  // reads the four at the stop instead, which costs it less than carrying them (docs/METHOD.md).
+  static constexpr bool kCarryValues = requires(typename Source::Reader & r, const Handle& h) { r.value_at(h); };
   // h: where the record of t's refinement vertex lives (unused at the leaves).
   Step step(const PackedTet& t, int level, const Handle& h) {
     ++tets_visited_;
@@ -345,12 +359,17 @@ class Traversal {
   void visit_by_levels(const PackedTet& t, int level, bool positive) {
     LevelScratch<Source>& s = levels_ ? *levels_ : own_levels_;
     s.roots.clear();
-    s.roots.push_back({Child{t, positive}, level});
+    s.roots.push_back({Child{t, positive}, {}, level});
+    if constexpr (kCarryValues) s.roots.back().values = corner_values(t, level);
     while (!s.roots.empty()) {
       const auto root = s.roots.back();
       s.roots.pop_back();
       s.frontier.reserve(1);
       s.frontier[0] = root.tet;
+      if constexpr (kCarryValues) {
+        s.frontier_values.reserve(1);
+        s.frontier_values[0] = root.values;
+      }
       size_t n = 1;
       int l = root.level;
       // Chunks end where a whole number of them reaches just past the finest level, so that the
@@ -359,6 +378,7 @@ class Traversal {
       for (; n > 0 && l < end; ++l) {
         s.handles.reserve(n);
         s.next.reserve(2 * n);  // written by index: a refined tetrahedron has two children
+        if constexpr (kCarryValues) s.next_values.reserve(2 * n);
         if (l < lattice_.max_level())
           for (size_t i = 0; i < n; ++i) {
             if (clip_ && outside_box(s.frontier[i].tet)) continue;  // see locate() below
@@ -370,18 +390,32 @@ class Traversal {
           const Child& c = s.frontier[i];
           switch (step(c.tet, l, s.handles[i])) {
             case Step::cull: break;
-            case Step::stop: emit(c.tet, l, c.positive); break;
+            case Step::stop:
+              if constexpr (kCarryValues)
+                emit_values(c.tet, s.frontier_values[i], c.positive);
+              else
+                emit(c.tet, l, c.positive);
+              break;
             case Step::refine: {
               const auto children = bisect(c.tet, l, c.positive);
+              if constexpr (kCarryValues) {
+                const auto values = bisect_values(s.frontier_values[i], reader_.value_at(s.handles[i]), l);
+                s.next_values[next] = values[0];
+                s.next_values[next + 1] = values[1];
+              }
               s.next[next++] = children[0];
               s.next[next++] = children[1];
             }
           }
         }
         std::swap(s.frontier, s.next);
+        std::swap(s.frontier_values, s.next_values);
         n = next;
       }
-      for (size_t i = n; i-- > 0;) s.roots.push_back({s.frontier[i], l});  // the first on top
+      for (size_t i = n; i-- > 0;) {  // the first on top
+        s.roots.push_back({s.frontier[i], {}, l});
+        if constexpr (kCarryValues) s.roots.back().values = s.frontier_values[i];
+      }
     }
   }
 
@@ -403,9 +437,11 @@ class Traversal {
 
   void emit(const PackedTet& t, int level, bool positive) {
     if (pieces_) return pieces_->push_back({t, level, positive, true});
-    ++tets_emitted_;
     const int j = band_of(level);
-    const std::array<float, 4> f{value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)};
+    emit_values(t, {value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)}, positive);
+  }
+  void emit_values(const PackedTet& t, const std::array<float, 4>& f, bool positive) {
+    ++tets_emitted_;
     // Most stopping tetrahedra lie in a diamond whose range holds the isovalue but are not cut
     // themselves: settle that before building their corners.
     const int cut = triangles_of(f, rule_.options().iso);
