@@ -185,7 +185,8 @@ template <TraversalSource Source>
 struct LevelScratch {
   struct Root {
     Child tet;
-    std::array<float, 4> values;  // at its corners, when the walk carries them (Traversal::kCarryValues)
+    std::array<float, 4>
+        values;  // at its corners, when the walk carries them (Traversal::kCarryValues); NaN: not read yet
     int level;
   };
   std::vector<Root> roots;  // of the chunks still to walk, the next one last
@@ -307,12 +308,15 @@ class Traversal {
   // What the traversal does at t: cull it (no value on each side, or beyond the data box), stop
   // and emit it, or refine it.
   using Handle = typename Source::Reader::Handle;
-  // Whether the reader gives the value of the node whose record a handle locates (value_at): then
-  // a level-by-level walk carries its tetrahedra's corner values down, each child reading only its
-  // new corner, the parent's refinement vertex, beside the record just read, and a stopping
-  // tetrahedron reading none. A source whose values are one array lookup away (MultiresVolume)
-  // reads the four at the stop instead, which costs it less than carrying them (docs/METHOD.md).
-  static constexpr bool kCarryValues = requires(typename Source::Reader & r, const Handle& h) { r.value_at(h); };
+  // Whether the reader gives the value of the node whose record a handle locates
+  // (value_at_record): then a level-by-level walk carries its tetrahedra's corner values down, each
+  // child reading only its new corner, the parent's refinement vertex, beside the record just read,
+  // and a stopping tetrahedron none. A subtree's own corners start unread (NaN) and are read at a
+  // stop that needs them, so the walk reads no brick it did not read before. A source whose values
+  // are one array lookup away (MultiresVolume) reads the four at the stop instead, which costs it
+  // less than carrying them (docs/METHOD.md, "In parallel").
+  static constexpr bool kCarryValues = requires(typename Source::Reader & r, const Handle& h) { r.value_at_record(h); };
+  static constexpr float kUnread = std::numeric_limits<float>::quiet_NaN();  // no value is NaN
   // h: where the record of t's refinement vertex lives (unused at the leaves).
   Step step(const PackedTet& t, int level, const Handle& h) {
     ++tets_visited_;
@@ -360,7 +364,7 @@ class Traversal {
     LevelScratch<Source>& s = levels_ ? *levels_ : own_levels_;
     s.roots.clear();
     s.roots.push_back({Child{t, positive}, {}, level});
-    if constexpr (kCarryValues) s.roots.back().values = corner_values(t, level);
+    if constexpr (kCarryValues) s.roots.back().values = {kUnread, kUnread, kUnread, kUnread};
     while (!s.roots.empty()) {
       const auto root = s.roots.back();
       s.roots.pop_back();
@@ -392,14 +396,14 @@ class Traversal {
             case Step::cull: break;
             case Step::stop:
               if constexpr (kCarryValues)
-                emit_values(c.tet, s.frontier_values[i], c.positive);
+                emit_carried(c.tet, l, s.frontier_values[i], c.positive);
               else
                 emit(c.tet, l, c.positive);
               break;
             case Step::refine: {
               const auto children = bisect(c.tet, l, c.positive);
               if constexpr (kCarryValues) {
-                const auto values = bisect_values(s.frontier_values[i], reader_.value_at(s.handles[i]), l);
+                const auto values = bisect_values(s.frontier_values[i], reader_.value_at_record(s.handles[i]), l);
                 s.next_values[next] = values[0];
                 s.next_values[next + 1] = values[1];
               }
@@ -439,6 +443,14 @@ class Traversal {
     if (pieces_) return pieces_->push_back({t, level, positive, true});
     const int j = band_of(level);
     emit_values(t, {value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)}, positive);
+  }
+  // A stop with the values carried down: those of the subtree's own corners still unread are read
+  // here, as emit() reads them.
+  void emit_carried(const PackedTet& t, int level, std::array<float, 4> f, bool positive) {
+    for (int c = 0; c < 4; ++c)
+      if (std::isnan(f[static_cast<size_t>(c)])) [[unlikely]]
+        f[static_cast<size_t>(c)] = value(t[static_cast<size_t>(c)], band_of(level));
+    emit_values(t, f, positive);
   }
   void emit_values(const PackedTet& t, const std::array<float, 4>& f, bool positive) {
     ++tets_emitted_;

@@ -215,9 +215,11 @@ class CompactLookup {
   }
   DiamondTopology topology(const Handle& h, const RecordFields& read) { return bricks_.topology(h.index, h.m, read); }
   void prefetch(const Handle& h) { bricks_.prefetch(h.index, h.m); }
-  // The value of the node whose record h locates, read in the node's own band: the value every
-  // finer band holds at that node too (docs/FORMAT.md, "Verification").
-  float value_at(const Handle& h) { return bricks_.values(h.index)[h.m]; }
+  // The value of the node whose record h locates (h from locate() of a vertex within the data
+  // box's records, as every vertex the traversal refines is), read in the node's own band: the data
+  // value at the node clamped into the box, which every band holding the node has there and which
+  // value() gives beyond a band's grid (docs/FORMAT.md, "Verification").
+  float value_at_record(const Handle& h) { return bricks_.values(h.index)[h.m]; }
 
   // The values of band-0 nodes lo .. lo + n (inclusive; inside band 0's grid) into f, x fastest,
   // rows `stride` apart: a block of finest cells (engine/extract/finest_extract.h), from every brick it spans.
