@@ -185,8 +185,8 @@ template <TraversalSource Source>
 struct LevelScratch {
   struct Root {
     Child tet;
-    std::array<float, 4>
-        values;  // at its corners, when the walk carries them (Traversal::kCarryValues); NaN: not read yet
+    // At its corners, when the walk carries them (Traversal::kCarryValues); NaN: not read yet.
+    std::array<float, 4> values;
     int level;
   };
   std::vector<Root> roots;  // of the chunks still to walk, the next one last
@@ -441,8 +441,7 @@ class Traversal {
 
   void emit(const PackedTet& t, int level, bool positive) {
     if (pieces_) return pieces_->push_back({t, level, positive, true});
-    const int j = band_of(level);
-    emit_values(t, {value(t[0], j), value(t[1], j), value(t[2], j), value(t[3], j)}, positive);
+    emit_values(t, corner_values(t, level), positive);
   }
   // A stop with the values carried down: those of the subtree's own corners still unread are read
   // here, as emit() reads them.
