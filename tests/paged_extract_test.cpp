@@ -967,8 +967,10 @@ TEST_F(PagedExtract, ABudgetSearchKeepsTheWholeCacheBudgetFromItsStart) {
 }
 
 // The cache holds a store's values in the bytes its header promises (BrickValues): a uint8 scan
-// in one, 8-bit codes in one, 16-bit codes in two, floats in four. Every value of every brick reads
-// back as the very float the store holds, and a brick takes nodes x (8 + width) bytes.
+// in one, 8-bit codes in one, 16-bit codes in two, floats in four; and the records' range and
+// bound in 32-bit words beside values of one byte, else in 64. Every value and every record word
+// of every brick reads back as the very bits the store holds, and a brick takes nodes x (4 + 1)
+// or nodes x (8 + width) bytes.
 TEST_F(PagedExtract, BrickValuesAreHeldInTheBytesTheStoresTypePromises) {
   struct Case {
     std::string name, raw;
@@ -991,16 +993,23 @@ TEST_F(PagedExtract, BrickValuesAreHeldInTheBytesTheStoresTypePromises) {
     const auto nodes = static_cast<size_t>(layout.brick_nodes());
     std::vector<float> values(nodes);
     std::vector<uint64_t> bounds(nodes);
-    int64_t differ = 0, wrong_size = 0;
+    const uint64_t bounds_bytes = c.bytes == 1 ? 4 : 8;
+    int64_t differ = 0, records_differ = 0, records = 0, wrong_size = 0;
     for (int64_t i = 0; i < layout.brick_count(); ++i) {
       const uint64_t before = cache.stats().peak_bytes;
       const std::shared_ptr<CachedBrick> brick = cache.get(i);
-      wrong_size += cache.stats().peak_bytes - before != nodes * (8 + static_cast<uint64_t>(c.bytes));
+      wrong_size += cache.stats().peak_bytes - before != nodes * (bounds_bytes + static_cast<uint64_t>(c.bytes));
+      EXPECT_EQ(brick->narrow(), c.bytes == 1) << c.name;
       store.read_brick(i, {true, false, false, false}, {values.data(), bounds.data()}, values.data());
       for (size_t m = 0; m < nodes; ++m)
         differ += std::bit_cast<uint32_t>(brick->values()[m]) != std::bit_cast<uint32_t>(values[m]);
+      if (!stores_records(layout, brick->band())) continue;  // band 0's are computed, on first read
+      for (size_t m = 0; m < nodes; ++m, ++records)
+        records_differ += (brick->narrow() ? widen_bounds(brick->narrow_bounds()[m]) : brick->bounds()[m]) != bounds[m];
     }
     EXPECT_EQ(differ, 0) << c.name;
+    EXPECT_EQ(records_differ, 0) << c.name << ", of " << records;
+    EXPECT_GT(records, 0) << c.name;
     EXPECT_EQ(wrong_size, 0) << c.name;
   }
 }

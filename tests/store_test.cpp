@@ -139,11 +139,20 @@ TEST_F(Store, RoundTripIsExactOnOddDimensionsAndAnyBrickSize) {
     }
 }
 
-TEST_F(Store, RoundTripIsExactOnRealVolumes) {
+// Each real volume as floats, and converted from its raw file in its own type: a uint8 store's
+// cache holds its records in narrow words (io/store/brick_cache.h), which must read back as the
+// very records.
+TEST_F(Store, RoundTripIsExactOnRealVolumesAsFloatsAndInTheirOwnType) {
   for (const auto& shared : testing::shared_volumes()) {
     SCOPED_TRACE(shared.name);
     const Volume v = testing::load_shared(shared);
     expect_round_trip(v, convert(v, shared.name));
+    const std::string own = path(shared.name + "-own.isotope");
+    convert_to_store(*open_box_reader({std::string(ISOTOPE_TEST_DATA) + "/" + shared.file, std::nullopt, std::nullopt},
+                                      dir_.string()),
+                     own, {});
+    EXPECT_EQ(BrickCache(StoreReader(own), 1).value_bytes(), shared.file.find("uint8") != std::string::npos ? 1 : 4);
+    expect_round_trip(v, own);
   }
 }
 
@@ -534,6 +543,49 @@ TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
     b.bounds[1] = bounds_word(p);
   });
   EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "value outside its record's range");
+}
+
+// A uint8 store's cache holds each record's range and bound in 32 bits (io/store/brick_cache.h,
+// narrow bounds). A record those bits cannot hold exactly, under valid checksums, is named as a
+// corrupt brick by the read that finds it, never rounded into another record.
+TEST_F(StoreCorruption, ARecordNarrowWordsCannotHoldIsACorruptBrickOfAUint8Store) {
+  const std::string good = path("neghip.isotope");
+  convert_to_store(
+      *open_box_reader({std::string(ISOTOPE_TEST_DATA) + "/neghip_66x66x66_uint8.raw", std::nullopt, std::nullopt},
+                       dir_.string()),
+      good, {});
+  const StoreLayout layout = StoreReader(good).layout();
+  const int64_t index = layout.brick_index(1, {0, 0, 0}), other = layout.brick_index(2, {0, 0, 0});
+  struct Case {
+    const char* name;
+    std::function<void(PackedBounds&)> edit;
+  };
+  const std::vector<Case> cases = {
+      {"a bound between halves", [](PackedBounds& p) { p.bound = 2.25f; }},
+      {"a negative bound", [](PackedBounds& p) { p.bound = -1; }},
+      {"a fraction in the range", [](PackedBounds& p) { p.lo = bf16_down(0.5f), p.hi = std::max(p.hi, bf16_up(1)); }},
+      {"a range beyond 255", [](PackedBounds& p) { p.hi = bf16_up(256); }},
+      {"a range upside down", [](PackedBounds& p) { p.lo = bf16_down(9), p.hi = bf16_down(8); }},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    testing::write_file(bad_, "", read_bytes(good));
+    // Node (1, 0, 0) of band 1 (Morton 1): a record of its own.
+    rewrite_brick(bad_, index, [&](const BrickView& b) {
+      PackedBounds p = bounds_of(b.bounds[1]);
+      c.edit(p);
+      b.bounds[1] = bounds_word(p);
+    });
+    const StoreReader store(bad_);
+    BrickCache cache(store, uint64_t{1} << 30);
+    ASSERT_EQ(cache.value_bytes(), 1);
+    const std::string message = message_of([&] { cache.get(index); });
+    EXPECT_NE(message.find("band 1"), std::string::npos) << message;
+    EXPECT_NE(message.find("holds a record whose range or bound is not of integers of 0..255 (corrupt brick)"),
+              std::string::npos)
+        << message;
+    EXPECT_EQ(message_of([&] { cache.get(other); }), "") << "a brick without the record reads";
+  }
 }
 
 // Header fields edited and the header's checksum redone: the checksum holds, the content cannot

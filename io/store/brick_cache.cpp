@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstring>
 #include <new>
 #include <span>
 #include <string>
 
+#include "engine/hierarchy/compact_record.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -78,25 +80,69 @@ uint64_t BrickCache::brick_bytes() const {
   return static_cast<uint64_t>(store_.layout().brick_nodes()) * (4 + 8 + 2 + 4 + 4 + 8);
 }
 
+bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
+  // Branch-free over 32-bit lanes, so that it vectorizes: every brick a uint8 store's extraction
+  // reads goes through it (the words are copied as halves first: a loop that splits 64-bit loads
+  // does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
+  // do; a negative one, or a NaN, clamps to the top), narrowed, and must come back as its very
+  // bits: that rejects NaN, negatives, -0, fractions, a bound between halves, and what the clamps
+  // moved.
+  constexpr uint32_t k255 = std::bit_cast<uint32_t>(255.0f), k32767 = std::bit_cast<uint32_t>(32767.0f);
+  constexpr size_t kBlock = 512;
+  uint32_t bad = 0;
+  for (size_t first = 0; first < n; first += kBlock) {
+    const size_t count = std::min(kBlock, n - first);
+    uint32_t half[2 * kBlock];  // little-endian: the low half (lo, hi), then the bound's bits
+    std::memcpy(half, words + first, count * sizeof(uint64_t));
+    uint32_t* out = narrow + first;
+    for (size_t i = 0; i < count; ++i) {
+      const uint32_t low = half[2 * i], bound_bits = half[2 * i + 1];
+      const uint32_t lo_bits = low << 16, hi_bits = low & 0xffff0000u;
+      const auto lo = static_cast<int32_t>(std::bit_cast<float>(std::min(lo_bits, k255)));
+      const auto hi = static_cast<int32_t>(std::bit_cast<float>(std::min(hi_bits, k255)));
+      const auto halves = static_cast<int32_t>(2 * std::bit_cast<float>(std::min(bound_bits, k32767)));
+      const uint32_t infinite = 0u - static_cast<uint32_t>(bound_bits == 0x7f800000u);
+      out[i] = static_cast<uint32_t>(lo) | static_cast<uint32_t>(hi) << 8 |
+               (static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u));
+      bad |= (std::bit_cast<uint32_t>(static_cast<float>(lo)) ^ lo_bits) |
+             (std::bit_cast<uint32_t>(static_cast<float>(hi)) ^ hi_bits) | static_cast<uint32_t>(hi - lo) >> 31 |
+             (~infinite & (std::bit_cast<uint32_t>(0.5f * static_cast<float>(halves)) ^ bound_bits));
+    }
+  }
+  return bad == 0;
+}
+
 std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   const StoreLayout& layout = store_.layout();
   auto b = std::make_shared<CachedBrick>();
   b->band_ = store_.locate_brick(index).first;
   const auto nodes = static_cast<size_t>(layout.brick_nodes());
   std::shared_ptr<Pools> pools = pools_;
-  // The bounds are decoded in place; so are floats, while narrower values go through an array of
-  // this thread's, checked to fit the store's width, then copied in it.
+  // Floats and 64-bit bounds are decoded in place; narrower values and bounds go through arrays
+  // of this thread's, checked to fit the store's width, then copied in it.
   std::shared_ptr<void> bounds(pools->bounds.allocate(), [pools](void* p) { pools->bounds.release(p); });
   std::shared_ptr<void> kept(pools->values.allocate(), [pools](void* p) { pools->values.release(p); });
   thread_local std::vector<float> narrow;
+  thread_local std::vector<uint64_t> wide;
   float* values = static_cast<float*>(kept.get());
   if (value_bytes_ < 4) {
     narrow.resize(nodes);
     values = narrow.data();
   }
-  const BrickView view{values, static_cast<uint64_t*>(bounds.get()), nullptr, nullptr, nullptr, nullptr};
+  const bool narrow_bounds = value_bytes_ == 1, records = stores_records(layout, b->band_);
+  uint64_t* words = static_cast<uint64_t*>(bounds.get());
+  if (narrow_bounds) {
+    wide.resize(nodes);
+    words = wide.data();
+  }
+  const BrickView view{values, words, nullptr, nullptr, nullptr, nullptr};
   const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values);
   bytes_read_.fetch_add(read, std::memory_order_relaxed);
+  if (narrow_bounds && records) {
+    if (!isotope::narrow_bounds(wide.data(), nodes, static_cast<uint32_t*>(bounds.get())))
+      throw IoError(store_.describe_brick(index) + ": holds a record whose range or bound is not of integers of " +
+                    "0..255 (corrupt brick)");
+  }
   if (value_bytes_ < 4) {
     if (fewest_bytes(narrow) > value_bytes_) {
       const StoreHeader& h = store_.header();
@@ -109,14 +155,18 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
       std::copy(narrow.begin(), narrow.end(), static_cast<decltype(held)*>(kept.get()));
     });
   }
-  b->bounds_ = static_cast<uint64_t*>(bounds.get());
+  b->bounds_ = bounds.get();
   b->values_ = kept.get();
   b->value_bytes_ = value_bytes_;
   b->bytes_ = pools->bounds.block_bytes() + pools->values.block_bytes();
   b->core_block_ = std::move(bounds);
   b->values_block_ = std::move(kept);
-  if (!stores_records(layout, b->band_))  // band 0: filled on first read; the corners: none
-    std::fill_n(b->bounds_, layout.brick_nodes(), b->band_ == 0 ? kUnsetBounds : 0);
+  if (!records) {  // band 0: filled on first read; the corners: none
+    if (narrow_bounds)
+      std::fill_n(b->narrow_bounds(), nodes, b->band_ == 0 ? kUnsetNarrowBounds : 0);
+    else
+      std::fill_n(b->bounds(), nodes, b->band_ == 0 ? kUnsetBounds : 0);
+  }
   return b;
 }
 
@@ -153,7 +203,7 @@ void BrickCache::require(CachedBrick& brick, int64_t index, const RecordFields& 
   if (brick.extra_.size() == before) return;
   if (stored) {
     // The values were decoded with the core; the sections here do not touch them.
-    const BrickView view{nullptr, brick.bounds_, surplus, exact, paper, weights};
+    const BrickView view{nullptr, nullptr, surplus, exact, paper, weights};  // the core is decoded
     const uint64_t read = store_.read_brick(index, which, view, nullptr);
     bytes_read_.fetch_add(read, std::memory_order_relaxed);
   }

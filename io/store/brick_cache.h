@@ -18,9 +18,11 @@
 // again.
 #include <array>
 #include <atomic>
+#include <bit>
 #include <cstdint>
 #include <cstdlib>
 #include <deque>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -45,9 +47,9 @@ int held_value_bytes(const StoreHeader& header);
 
 // A brick's values as the cache holds them: in one byte where the store's values are integers of
 // 0..255 (a uint8 scan, 8-bit codes), two up to 65535 (uint16, 16-bit codes), else as floats
-// (held_value_bytes). A uint8 brick then takes 9 bytes a node with its bounds instead of
-// 12: memory a paged extraction touches fresh, and more bricks within a cache's budget. A value
-// read converts back to the very float it was.
+// (held_value_bytes), with 1 + 4 bytes a node for a uint8 brick's values and narrow bounds
+// instead of 4 + 8: memory a paged extraction touches fresh, and more bricks within a cache's
+// budget. A value read converts back to the very float it was.
 class BrickValues {
  public:
   BrickValues(const void* data, int bytes) : data_(data), bytes_(bytes) {}
@@ -74,13 +76,39 @@ class BrickValues {
   int bytes_;
 };
 
+// A record's range and bound as the cache holds them where values are held in one byte: in 32
+// bits instead of the 64 of engine/hierarchy/compact_record.h's word. The range of such a store
+// is one of integers of 0..255, each a byte; the bound is a multiple of a half (a node's distance
+// from the midpoint of two integers, added and maximised over the levels: at most 34 x 255), kept
+// as a count of halves in 16 bits, 0xffff for +inf (a diamond that leaves the data box). A uint8
+// brick then takes 5 bytes a node with its values instead of 9: half the memory a coarse
+// extraction touches fresh, and twice the bricks within a cache's budget (docs/METHOD.md, "Out of
+// core"). Exact both ways: a word reads back as the very 64-bit word it came from.
+inline constexpr uint32_t kUnsetNarrowBounds = 0x00ffu;  // lo 255 above hi 0: the range of no record
+// The narrow words of n 64-bit ones; false if some word has none (a range not of integers of
+// 0..255 in order, or a bound not a multiple of a half up to 32767 nor +inf).
+bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow);
+inline uint64_t widen_bounds(uint32_t narrow) {
+  const auto code = [](uint32_t byte) { return uint64_t{std::bit_cast<uint32_t>(static_cast<float>(byte)) >> 16}; };
+  const uint32_t halves = narrow >> 16;
+  const float bound = halves == 0xffffu ? std::numeric_limits<float>::infinity() : 0.5f * static_cast<float>(halves);
+  return code(narrow & 0xffu) | code(narrow >> 8 & 0xffu) << 16 | uint64_t{std::bit_cast<uint32_t>(bound)} << 32;
+}
+
 // One decoded brick. Arrays as engine/hierarchy/hierarchy.h's BrickView, but its values are a
-// BrickValues; the arrays of fields not yet required are null.
+// BrickValues, and its range-and-bound words are narrow (narrow_bounds) where its values are
+// held in one byte; the arrays of fields not yet required are null.
 class CachedBrick {
  public:
   int band() const { return band_; }
   BrickValues values() const { return {values_, value_bytes_}; }
-  uint64_t* bounds() const { return bounds_; }
+  // The range-and-bound words: 32-bit where narrow(), else 64-bit; null for the other width.
+  bool narrow() const { return value_bytes_ == 1; }
+  uint32_t* narrow_bounds() const { return narrow() ? static_cast<uint32_t*>(bounds_) : nullptr; }
+  uint64_t* bounds() const { return narrow() ? nullptr : static_cast<uint64_t*>(bounds_); }
+  const void* bounds_at(uint32_t m) const {
+    return static_cast<const char*>(bounds_) + size_t{m} * (narrow() ? sizeof(uint32_t) : sizeof(uint64_t));
+  }
   uint16_t* surplus() const { return surplus_.load(std::memory_order_acquire); }
   uint32_t* exact() const { return exact_.load(std::memory_order_acquire); }
   uint32_t* paper() const { return paper_.load(std::memory_order_acquire); }
@@ -96,7 +124,7 @@ class CachedBrick {
   int band_ = 0;
   const void* values_ = nullptr;
   int value_bytes_ = 4;
-  uint64_t* bounds_ = nullptr;
+  void* bounds_ = nullptr;
   std::atomic<uint16_t*> surplus_{nullptr};
   std::atomic<uint32_t*> exact_{nullptr}, paper_{nullptr};
   std::atomic<uint64_t*> weights_{nullptr};
@@ -176,7 +204,8 @@ class BrickCache {
   const int value_bytes_;
   // The core's blocks, shared with the bricks: the bounds words, and the values in value_bytes_.
   struct Pools {
-    Pools(size_t nodes, int value_bytes) : bounds(nodes * sizeof(uint64_t)), values(nodes * value_bytes) {}
+    Pools(size_t nodes, int value_bytes)
+        : bounds(nodes * (value_bytes == 1 ? sizeof(uint32_t) : sizeof(uint64_t))), values(nodes * value_bytes) {}
     BrickPool bounds, values;
   };
   std::shared_ptr<Pools> pools_;

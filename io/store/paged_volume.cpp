@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <stdexcept>
 
 #include "engine/core/parallel.h"
 #include "engine/extract/adaptive_extract.h"
@@ -109,7 +110,7 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
     if (home->paper()) store(home->paper() + m, interval_word(t.paper_lo, t.paper_hi));
     if (home->weights()) store(home->weights() + m, weights_word(t.weight));
   }
-  store(home->bounds() + m, isotope::bounds_word(pack_bounds(r.bounds)));  // last: the word others check first
+  store_bounds(*home, m, pack_bounds(r.bounds));  // last: the word others check first
   return r;
 }
 
@@ -152,11 +153,27 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v) {
   range.error_bound = round_up(eta + sat.bound);
   range.error_surplus = std::max(round_up(eta), sat.surplus);
   if (surplus) store(home->surplus() + m, bf16_up(range.error_surplus));
-  store(home->bounds() + m, isotope::bounds_word(pack_bounds(range)));
+  store_bounds(*home, m, pack_bounds(range));
+}
+
+void PagedVolume::Pager::store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p) {
+  const uint64_t word = isotope::bounds_word(p);
+  if (!home.narrow()) return store(home.bounds() + m, word);
+  // Computed from values the cache checked to be integers of 0..255: always narrow.
+  uint32_t narrow = 0;
+  if (!narrow_bounds(&word, 1, &narrow)) throw std::logic_error("a band-0 record of one-byte values is not narrow");
+  store(home.narrow_bounds() + m, narrow);
+}
+
+uint64_t PagedVolume::Pager::load_bounds(int64_t index, uint32_t m) {
+  CachedBrick& b = brick(index);
+  if (!b.narrow()) return load(b.bounds() + m);
+  const uint32_t w = load(b.narrow_bounds() + m);
+  return w == kUnsetNarrowBounds ? kUnsetBounds : widen_bounds(w);
 }
 
 uint64_t PagedVolume::Pager::bounds_word(int64_t index, uint32_t m) {
-  const uint64_t w = load(brick(index).bounds() + m);
+  const uint64_t w = load_bounds(index, m);
   if (w != kUnsetBounds) return w;
   const Coord v = band0_node(index, m);
   const auto& dims = volume_->layout_.dims();
@@ -164,7 +181,7 @@ uint64_t PagedVolume::Pager::bounds_word(int64_t index, uint32_t m) {
     band0_bounds_inside(v);
   else
     band0_record(v, false);
-  return load(brick(index).bounds() + m);
+  return load_bounds(index, m);
 }
 
 Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {
@@ -198,7 +215,7 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
 void PagedVolume::Pager::prefetch(int64_t index, uint32_t m) {
   const Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
   if (p.index == index)
-    __builtin_prefetch(p.brick->bounds() + m);
+    __builtin_prefetch(p.brick->bounds_at(m));
   else
     volume_->cache_.prefetch(index);
 }

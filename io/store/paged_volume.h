@@ -67,6 +67,10 @@ class PagedVolume {
     // the box's outer layer of nodes), without building its diamond: a template of its class.
     void band0_bounds_inside(const Coord& v);
     float value_at(const Coord& c);  // as MultiresVolume::value: any lattice node, clamped into the data box
+    // A record's range-and-bound word as engine/hierarchy/compact_record.h's, whatever width the
+    // brick holds it in (CachedBrick::narrow), kUnsetBounds for one not computed yet; and storing one.
+    uint64_t load_bounds(int64_t index, uint32_t m);
+    void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
     Coord band0_node(int64_t index, uint32_t m) const;
 
     struct Pinned {
