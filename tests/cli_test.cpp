@@ -619,10 +619,17 @@ TEST_F(Cli, TriangleBudgetPicksTheFinestEpsWithinIt) {
   const std::string store = in_work("neghip.isotope");
   ASSERT_EQ(run("convert -q " + quote(kData + "/neghip_66x66x66_uint8.raw") + " " + quote(store)).code, 0);
   const nlohmann::json full = extract_report(quote(store) + " --iso 64");
-  for (int64_t budget : {int64_t{30000}, int64_t{60000}, full["triangles"].get<int64_t>() + 1}) {
+  // One below full resolution: the finest step that fits refines some of the diamonds of error 0
+  // (eps 0 and some tie classes), a cut, not the full-resolution mesh.
+  const int64_t below_full = full["triangles"].get<int64_t>() - 1;
+  for (int64_t budget : {int64_t{30000}, int64_t{60000}, below_full, full["triangles"].get<int64_t>() + 1}) {
     const nlohmann::json r = extract_report(quote(store) + " --iso 64 --max-triangles " + std::to_string(budget));
     const std::string chosen = slurp(work() / "mesh.ply");
     EXPECT_LE(r["triangles"].get<int64_t>(), budget);
+    if (budget == below_full) {
+      EXPECT_EQ(r["chosen_eps"].get<double>(), 0.0);
+      EXPECT_GE(r["chosen_eps_ties"].get<int>(), 0);
+    }
     EXPECT_EQ(r["max_triangles"].get<int64_t>(), budget);
     std::ostringstream eps, next;
     eps.precision(17), next.precision(17);

@@ -112,7 +112,7 @@ TEST(ServeRequest, RefusesWhatIsNotAnExtractionWithAMessage) {
       {query({{"iso", "1"}, {"foo", "2"}}), "unknown parameter 'foo'"},
       {query({{"iso", "1"}, {"max-triangles", "0"}}), "max-triangles must be"},
       {query({{"iso", "1"}, {"max-triangles", "1000"}, {"eps", "2"}}), "max-triangles chooses eps itself"},
-      {query({{"iso", "1"}, {"eps-ties", "3"}}), "eps-ties applies to a finite eps other than 0 only"},
+      {query({{"iso", "1"}, {"eps", "2"}, {"eps-ties", "100000"}}), "eps-ties must be an integer in 0 .. 1024"},
       {query({{"iso", "1"}, {"iso", "2"}}), "iso is given twice"},
       {query({{"iso", std::string(200, '1')}}), "iso is too long"},
       {query({{"iso", "1"}, {"client", "../etc"}}), "client must be 1-64 characters"},

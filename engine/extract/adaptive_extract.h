@@ -263,7 +263,9 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
     choose_exactly();
     keep();
   }
-  if (in_codes.eps == 0 && finest_extract_applies(source.lattice())) {
+  // Full resolution only when every diamond of key 0 is refined: a budget's finest step may be a
+  // cut within them (eps 0 and some tie classes), which is a mesh of fewer triangles.
+  if (in_codes.eps == 0 && in_codes.eps_ties < 0 && finest_extract_applies(source.lattice())) {
     const SplitRule rule = rule_now();
     return finish(extract_finest(source, rule, &total));
   }

@@ -94,7 +94,9 @@ class ArraySource {
 
 }  // namespace
 
-bool needs_hierarchy(const ExtractOptions& options) { return options.eps != 0 || options.max_triangles > 0; }
+bool needs_hierarchy(const ExtractOptions& options) {
+  return options.eps != 0 || options.max_triangles > 0 || options.eps_ties >= 0;
+}
 
 Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
   options.validate();

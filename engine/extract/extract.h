@@ -17,7 +17,8 @@ namespace isotope {
 // Throws as extract(const Volume&, ...) does (isotope/extract.h).
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
-// Whether extract(volume, options) needs a hierarchy (eps > 0, or a triangle budget).
+// Whether extract(volume, options) needs a hierarchy (eps > 0, tie classes at eps 0, or a
+// triangle budget): all but full resolution.
 bool needs_hierarchy(const ExtractOptions& options);
 
 }  // namespace isotope

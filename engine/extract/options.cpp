@@ -166,8 +166,7 @@ void ExtractOptions::validate() const {
     throw OptionError("eps-ties", "must be in 0 .. " + std::to_string(kMaxTieClasses));
   if (eps_ties >= 0 && max_triangles > 0)
     throw OptionError("eps-ties", "is chosen by max-triangles: give eps-ties with eps only");
-  if (eps_ties >= 0 && !(eps > 0 && std::isfinite(eps)))
-    throw OptionError("eps-ties", "applies to a finite eps other than 0 only");
+  if (eps_ties >= 0 && !std::isfinite(eps)) throw OptionError("eps-ties", "applies to a finite eps only");
   if (auto_delta && (topology != TopologyMode::simplify || max_triangles == 0 || delta != 0))
     throw OptionError("delta", "is chosen only with topology simplify, a triangle budget and no delta given");
   if (focus) {
@@ -236,7 +235,7 @@ std::optional<SimplificationWeight> parse_simplification_weight(std::string_view
 
 RecordFields fields_for(const ExtractOptions& o) {
   RecordFields f{false, false, false, false};
-  if (o.eps == 0 && o.max_triangles == 0) return f;
+  if (o.eps == 0 && o.max_triangles == 0 && o.eps_ties < 0) return f;  // full resolution: values only
   f.exact = o.topology == TopologyMode::preserve || o.topology == TopologyMode::simplify;
   f.weights = o.topology == TopologyMode::simplify;
   f.paper = o.topology == TopologyMode::paper;

@@ -92,8 +92,8 @@ struct ExtractOptions {
   bool keep_shares = false;
 
   // Throws OptionError naming the first option out of its range: iso not finite, eps or delta
-  // negative or NaN (infinity is the coarsest), eps_ties outside -1 .. kMaxTieClasses or without a
-  // finite eps > 0 (or with a budget), delta without `simplify`, a focus point not finite or a
+  // negative or NaN (infinity is the coarsest), eps_ties outside -1 .. kMaxTieClasses or with an
+  // infinite eps (or with a budget), delta without `simplify`, a focus point not finite or a
   // radius not > 0, a budget outside [0, kMaxTriangleBudget] or with eps > 0, auto_delta without a budget in
   // simplify mode. Every extraction calls it; a face calls it to refuse before any work.
   void validate() const;

@@ -130,7 +130,7 @@ class Store:
         simplify and no delta, delta too; ``stats["chosen_eps_ties"]`` is the ``eps_ties`` that, with
         ``eps=stats["chosen_eps"]``, gives the same mesh). The same budget asked for again of this
         Store is the choice made the first time, without the search (``stats["budget_remembered"]``).
-        ``eps_ties`` (with an ``eps`` other than 0):
+        ``eps_ties`` (with an ``eps``, 0 included):
         of the diamonds whose error equals eps exactly, refine only those of the N coarsest tie
         classes. ``threads``: 0 for all cores (up to 4096); a limit holds for the whole process while the call
         runs (oneTBB's), so concurrent calls share it.

@@ -410,7 +410,7 @@ def test_options_that_mean_nothing_are_refused_with_the_commands_words(data, iso
     raw = str(data / "bolt_70x123x66_uint8.raw")
     cases = [(dict(max_triangles=0), ["--max-triangles", "0"], "max-triangles"),
              (dict(max_triangles=1000, eps=2), ["--max-triangles", "1000", "--eps", "2"], "max-triangles"),
-             (dict(eps_ties=3), ["--eps-ties", "3"], "eps-ties"),
+             (dict(eps=2, eps_ties=10 ** 5), ["--eps", "2", "--eps-ties", "100000"], "eps-ties"),
              (dict(eps=2, eps_ties=-1), ["--eps", "2", "--eps-ties", "-1"], "eps-ties"),
              (dict(max_triangles=1000, eps_ties=3), ["--max-triangles", "1000", "--eps-ties", "3"], "eps-ties"),
              (dict(threads=-1), ["--threads", "-1"], "threads"),
