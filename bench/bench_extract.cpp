@@ -271,13 +271,13 @@ void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mod
 // read and decode; the store file itself stays in the OS page cache.
 enum class PagedBudget { full, eighth, eighth_reached };
 
-// A brick's core decoded (io/store/brick_cache.h): the bounds word of every node and its value
-// in the bytes the store's type promises (held_value_bytes).
+// A brick's core decoded (io/store/brick_cache.h): every node's value and range-and-bound word in
+// the bytes the store's type promises (held_value_bytes, held_bounds_bytes).
 uint64_t store_decoded_bytes(const isotope::StoreReader& store) {
   const isotope::StoreLayout& l = store.layout();
+  const int value_bytes = isotope::held_value_bytes(store.header());
   return static_cast<uint64_t>(l.brick_count()) *
-         static_cast<uint64_t>(l.brick_nodes() *
-                               (isotope::held_value_bytes(store.header()) + static_cast<int64_t>(sizeof(uint64_t))));
+         static_cast<uint64_t>(l.brick_nodes() * (value_bytes + isotope::held_bounds_bytes(value_bytes)));
 }
 
 void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget which, int threads) {

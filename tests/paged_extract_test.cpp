@@ -24,6 +24,7 @@
 #include "engine/extract/adaptive_extract.h"
 #include "engine/extract/budget_memo.h"
 #include "engine/extract/extract.h"
+#include "engine/hierarchy/compact_record.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
@@ -1014,6 +1015,56 @@ TEST_F(PagedExtract, BrickValuesAreHeldInTheBytesTheStoresTypePromises) {
   }
 }
 
+// narrow_bounds takes every word a store of one-byte values holds, each reading back as its very
+// bits, and refuses every word that no narrow word gives back: at the first and last words, and
+// on each side of a block's end, of an array that is not a whole number of its blocks.
+TEST(NarrowBounds, TakeEveryRecordOfOneByteValuesExactlyAndNothingElse) {
+  constexpr float kInfinity = std::numeric_limits<float>::infinity();
+  std::vector<uint64_t> good;
+  for (int lo = 0; lo < 256; ++lo)
+    for (int hi = lo; hi < 256; ++hi)
+      for (const float bound : {0.0f, 0.5f, 765.0f, 14535.0f, 32767.0f, kInfinity})
+        good.push_back(bounds_word({bf16_down(static_cast<float>(lo)), bf16_up(static_cast<float>(hi)), bound}));
+  for (int halves = 0; halves < 0xffff; ++halves)  // every bound a narrow word holds
+    good.push_back(bounds_word({bf16_down(7), bf16_up(200), 0.5f * static_cast<float>(halves)}));
+  std::vector<uint32_t> narrow(good.size());
+  ASSERT_TRUE(narrow_bounds(good.data(), good.size(), narrow.data()));
+  int64_t differ = 0, unset = 0;
+  for (size_t i = 0; i < good.size(); ++i)
+    differ += widen_bounds(narrow[i]) != good[i], unset += narrow[i] == kUnsetNarrowBounds;
+  EXPECT_EQ(differ, 0);
+  EXPECT_EQ(unset, 0);
+
+  const auto word = [](uint16_t lo, uint16_t hi, float bound) { return bounds_word({lo, hi, bound}); };
+  const uint16_t b3 = bf16_down(3), b9 = bf16_down(9);
+  const std::vector<std::pair<const char*, uint64_t>> bad = {
+      {"bound -0", word(b3, b9, -0.0f)},
+      {"bound NaN", word(b3, b9, std::numeric_limits<float>::quiet_NaN())},
+      {"bound -NaN", word(b3, b9, -std::numeric_limits<float>::quiet_NaN())},
+      {"bound -inf", word(b3, b9, -kInfinity)},
+      {"bound -1", word(b3, b9, -1.0f)},
+      {"bound 0.25", word(b3, b9, 0.25f)},
+      {"bound 32767.5", word(b3, b9, 32767.5f)},
+      {"bound 40000", word(b3, b9, 40000.0f)},
+      {"bound a denormal", word(b3, b9, std::numeric_limits<float>::denorm_min())},
+      {"lo -0", word(0x8000, b9, 1.0f)},
+      {"lo a denormal", word(0x0001, b9, 1.0f)},
+      {"lo 0.5", word(bf16_down(0.5f), b9, 1.0f)},
+      {"lo -1", word(bf16_down(-1.0f), b9, 1.0f)},
+      {"hi 256", word(b3, bf16_up(256.0f), 1.0f)},
+      {"hi NaN", word(b3, 0x7fc0, 1.0f)},
+      {"hi below lo", word(b9, b3, 1.0f)},
+  };
+  const uint64_t fine = word(b3, b9, 1.5f);
+  for (const auto& [name, w] : bad)
+    for (const size_t at : {size_t{0}, size_t{511}, size_t{512}, size_t{999}}) {
+      std::vector<uint64_t> words(1000, fine);
+      words[at] = w;
+      std::vector<uint32_t> out(words.size());
+      EXPECT_FALSE(narrow_bounds(words.data(), words.size(), out.data())) << name << " at " << at;
+    }
+}
+
 // A header that promises integers the bricks do not hold (valid checksums, a lying type or range)
 // is named as a corrupt brick by the read that finds it, never narrowed into other values.
 TEST_F(PagedExtract, ABrickOutsideItsHeadersTypeIsACorruptBrick) {
@@ -1049,6 +1100,23 @@ TEST_F(PagedExtract, ABrickOutsideItsHeadersTypeIsACorruptBrick) {
 // Every brick; every thread count, each with both cache budgets across the bricks' runs.
 TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
   expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});
+}
+
+// The same bytes through a uint8 store, whose cache holds 32-bit record words (io/store/brick_cache.h,
+// narrow bounds), band 0's computed on first read by whichever thread gets there: what
+// scripts/test.sh runs under ThreadSanitizer for that path.
+TEST_F(PagedParallel, SameBytesThroughAUint8Store) {
+  const testing::SharedVolume& neghip = testing::shared_volumes()[1];
+  ASSERT_EQ(neghip.file, "neghip_66x66x66_uint8.raw");
+  const std::string path = (dir_ / "neghip.isotope").string();
+  ConvertOptions o;
+  o.brick_bits = 3;
+  convert_to_store(
+      *open_box_reader({std::string(ISOTOPE_TEST_DATA) + "/" + neghip.file, std::nullopt, std::nullopt}, dir_.string()),
+      path, o);
+  const StoreReader store(path);
+  ASSERT_EQ(BrickCache(store, 1).value_bytes(), 1);
+  expect_same_bytes("neghip uint8", testing::load_shared(neghip), neghip.isovalues[0], store, {2, 8});
 }
 
 // A sample of the bricks on many threads: what scripts/test.sh runs under ThreadSanitizer.

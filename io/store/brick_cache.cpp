@@ -13,8 +13,9 @@
 namespace isotope {
 namespace {
 
-size_t core_bytes(const StoreLayout& layout) {
-  return static_cast<size_t>(layout.brick_nodes()) * (sizeof(float) + sizeof(uint64_t));
+// A brick's core as the cache holds it: its values and its range-and-bound words.
+size_t core_bytes(const StoreLayout& layout, int value_bytes) {
+  return static_cast<size_t>(layout.brick_nodes()) * static_cast<size_t>(value_bytes + held_bounds_bytes(value_bytes));
 }
 
 // The fewest bytes (1, 2 or 4) that hold every value exactly. Bit operations only, so that it
@@ -53,13 +54,16 @@ CachedBrick::~CachedBrick() = default;
 
 BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
     : store_(store),
-      budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout()))),
+      budget_(
+          std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout(), held_value_bytes(store.header())))),
       value_bytes_(held_value_bytes(store.header())),
       pools_(std::make_shared<Pools>(static_cast<size_t>(store.layout().brick_nodes()), value_bytes_)),
       slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
   if (!slot_table_) throw std::bad_alloc();
   // The working budget starts at a quarter (at least kMinBricks bricks, at most the budget).
-  working_ = std::max<uint64_t>(budget_ / 4, std::min<uint64_t>(budget_, kMinBricks * core_bytes(store.layout())));
+  working_ = std::max<uint64_t>(
+      budget_ / 4,
+      std::min<uint64_t>(budget_, kMinBricks * core_bytes(store.layout(), held_value_bytes(store.header()))));
 }
 
 BrickCache::Slot& BrickCache::slot(int64_t index) {
@@ -77,13 +81,16 @@ BrickCache::Slot* BrickCache::find_slot(int64_t index) const {
 }
 
 uint64_t BrickCache::brick_bytes() const {
-  return static_cast<uint64_t>(store_.layout().brick_nodes()) * (4 + 8 + 2 + 4 + 4 + 8);
+  // The core, then surplus, exact and paper intervals, weights.
+  return static_cast<uint64_t>(store_.layout().brick_nodes()) *
+         static_cast<uint64_t>(value_bytes_ + held_bounds_bytes(value_bytes_) + 2 + 4 + 4 + 8);
 }
 
 bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
-  // Branch-free over 32-bit lanes, so that it vectorizes: every brick a uint8 store's extraction
-  // reads goes through it (the words are copied as halves first: a loop that splits 64-bit loads
-  // does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
+  static_assert(std::endian::native == std::endian::little, "a word's halves are copied as little-endian");
+  // Branch-free over 32-bit lanes, so that it vectorizes: every brick of stored records a uint8
+  // store's extraction reads goes through it (the words are copied as halves first: a loop that
+  // splits 64-bit loads does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
   // do; a negative one, or a NaN, clamps to the top), narrowed, and must come back as its very
   // bits: that rejects NaN, negatives, -0, fractions, a bound between halves, and what the clamps
   // moved.
@@ -129,20 +136,19 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
     narrow.resize(nodes);
     values = narrow.data();
   }
-  const bool narrow_bounds = value_bytes_ == 1, records = stores_records(layout, b->band_);
+  const bool narrow_words = held_bounds_bytes(value_bytes_) == 4, records = stores_records(layout, b->band_);
   uint64_t* words = static_cast<uint64_t*>(bounds.get());
-  if (narrow_bounds) {
+  if (narrow_words) {
     wide.resize(nodes);
     words = wide.data();
   }
   const BrickView view{values, words, nullptr, nullptr, nullptr, nullptr};
   const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values);
   bytes_read_.fetch_add(read, std::memory_order_relaxed);
-  if (narrow_bounds && records) {
-    if (!isotope::narrow_bounds(wide.data(), nodes, static_cast<uint32_t*>(bounds.get())))
-      throw IoError(store_.describe_brick(index) + ": holds a record whose range or bound is not of integers of " +
-                    "0..255 (corrupt brick)");
-  }
+  if (narrow_words && records && !narrow_bounds(wide.data(), nodes, static_cast<uint32_t*>(bounds.get())))
+    throw IoError(store_.describe_brick(index) +
+                  ": holds a record whose range is not of integers of 0..255 in order, or whose bound is not a "
+                  "multiple of a half up to 32767 nor +inf (corrupt brick)");
   if (value_bytes_ < 4) {
     if (fewest_bytes(narrow) > value_bytes_) {
       const StoreHeader& h = store_.header();
@@ -162,7 +168,7 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   b->core_block_ = std::move(bounds);
   b->values_block_ = std::move(kept);
   if (!records) {  // band 0: filled on first read; the corners: none
-    if (narrow_bounds)
+    if (narrow_words)
       std::fill_n(b->narrow_bounds(), nodes, b->band_ == 0 ? kUnsetNarrowBounds : 0);
     else
       std::fill_n(b->bounds(), nodes, b->band_ == 0 ? kUnsetBounds : 0);

@@ -77,17 +77,22 @@ class BrickValues {
 };
 
 // A record's range and bound as the cache holds them where values are held in one byte: in 32
-// bits instead of the 64 of engine/hierarchy/compact_record.h's word. The range of such a store
-// is one of integers of 0..255, each a byte; the bound is a multiple of a half (a node's distance
-// from the midpoint of two integers, added and maximised over the levels: at most 34 x 255), kept
-// as a count of halves in 16 bits, 0xffff for +inf (a diamond that leaves the data box). A uint8
-// brick then takes 5 bytes a node with its values instead of 9: half the memory a coarse
-// extraction touches fresh, and twice the bricks within a cache's budget (docs/METHOD.md, "Out of
-// core"). Exact both ways: a word reads back as the very 64-bit word it came from.
+// bits instead of the 64 of engine/hierarchy/compact_record.h's word. A record's lo and hi are
+// then integers of 0..255, a byte each; its bound is a multiple of a half (at each level, the
+// distance of the value at a diamond's centre from the mean of the values at its edge's ends,
+// added over at most 3k <= 57 levels: at most 14,535), kept as a count of halves in 16 bits, or
+// 0xffff for +inf (a diamond that leaves the data box, or one of its descendants does). A uint8
+// brick then takes 5 bytes a node with its values instead of 9: 5/9 of the memory a coarse
+// extraction touches fresh, and 1.8 times the bricks within a cache's budget (docs/METHOD.md,
+// "Out of core"). Exact both ways: a word reads back as the very 64-bit word it came from.
 inline constexpr uint32_t kUnsetNarrowBounds = 0x00ffu;  // lo 255 above hi 0: the range of no record
+// Bytes a record's range-and-bound word is held in: 4 beside values held in one byte, else 8.
+inline int held_bounds_bytes(int value_bytes) { return value_bytes == 1 ? 4 : 8; }
 // The narrow words of n 64-bit ones; false if some word has none (a range not of integers of
-// 0..255 in order, or a bound not a multiple of a half up to 32767 nor +inf).
+// 0..255 in order, or a bound not a multiple of a half up to 32767 nor +inf), and then what was
+// written to `narrow` means nothing.
 bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow);
+// The 64-bit word of a narrow one (not of kUnsetNarrowBounds, which marks no record).
 inline uint64_t widen_bounds(uint32_t narrow) {
   const auto code = [](uint32_t byte) { return uint64_t{std::bit_cast<uint32_t>(static_cast<float>(byte)) >> 16}; };
   const uint32_t halves = narrow >> 16;
@@ -103,7 +108,7 @@ class CachedBrick {
   int band() const { return band_; }
   BrickValues values() const { return {values_, value_bytes_}; }
   // The range-and-bound words: 32-bit where narrow(), else 64-bit; null for the other width.
-  bool narrow() const { return value_bytes_ == 1; }
+  bool narrow() const { return held_bounds_bytes(value_bytes_) == 4; }
   uint32_t* narrow_bounds() const { return narrow() ? static_cast<uint32_t*>(bounds_) : nullptr; }
   uint64_t* bounds() const { return narrow() ? nullptr : static_cast<uint64_t*>(bounds_); }
   const void* bounds_at(uint32_t m) const {
@@ -205,7 +210,7 @@ class BrickCache {
   // The core's blocks, shared with the bricks: the bounds words, and the values in value_bytes_.
   struct Pools {
     Pools(size_t nodes, int value_bytes)
-        : bounds(nodes * (value_bytes == 1 ? sizeof(uint32_t) : sizeof(uint64_t))), values(nodes * value_bytes) {}
+        : bounds(nodes * static_cast<size_t>(held_bounds_bytes(value_bytes))), values(nodes * value_bytes) {}
     BrickPool bounds, values;
   };
   std::shared_ptr<Pools> pools_;
