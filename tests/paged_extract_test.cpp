@@ -1093,8 +1093,19 @@ TEST_F(PagedExtract, ABrickOutsideItsHeadersTypeIsACorruptBrick) {
   }
   EXPECT_NE(message.find("(corrupt brick)"), std::string::npos) << message;
   EXPECT_NE(message.find("band 0"), std::string::npos) << message;
-  // A brick without the fraction reads.
+  // A brick without the fraction reads (its records too are narrow: the data keep band 1's ranges
+  // and bounds integers and halves).
   EXPECT_NO_THROW(cache.get(store.layout().brick_index(1, {0, 0, 0})));
+  // verify refuses what the extraction refuses.
+  std::string verified = "no error";
+  try {
+    verify_store(path);
+  } catch (const IoError& e) {
+    verified = e.what();
+  }
+  EXPECT_NE(verified.find("band 0"), std::string::npos) << verified;
+  EXPECT_NE(verified.find("holds a value that is not an integer of the header's uint8 range"), std::string::npos)
+      << verified;
 }
 
 // Every brick; every thread count, each with both cache budgets across the bricks' runs.

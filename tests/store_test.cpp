@@ -591,6 +591,8 @@ TEST_F(StoreCorruption, ARecordNarrowWordsCannotHoldIsACorruptBrickOfAUint8Store
               std::string::npos)
         << message;
     EXPECT_EQ(message_of([&] { cache.get(other); }), "") << "a brick without the record reads";
+    // verify refuses what the extraction refuses (a negative or NaN bound by its own check first).
+    EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "(band 1, brick 0 0 0): ");
   }
 }
 

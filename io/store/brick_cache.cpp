@@ -2,12 +2,10 @@
 
 #include <algorithm>
 #include <bit>
-#include <cstring>
 #include <new>
 #include <span>
 #include <string>
 
-#include "engine/hierarchy/compact_record.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -16,20 +14,6 @@ namespace {
 // A brick's core as the cache holds it: its values and its range-and-bound words.
 size_t core_bytes(const StoreLayout& layout, int value_bytes) {
   return static_cast<size_t>(layout.brick_nodes()) * static_cast<size_t>(value_bytes + held_bounds_bytes(value_bytes));
-}
-
-// The fewest bytes (1, 2 or 4) that hold every value exactly. Bit operations only, so that it
-// vectorizes: every brick read is checked.
-int fewest_bytes(std::span<const float> values) {
-  uint32_t not_short = 0, not_byte = 0;
-  for (const float v : values) {
-    // Clamped first, so that the conversion is defined (a NaN clamps to 0). The integer's float
-    // must be v's very bits: that rejects -0.0, NaN, fractions and what the clamp moved.
-    const int32_t k = static_cast<int32_t>(std::min(65535.0f, std::max(0.0f, v)));
-    not_short |= std::bit_cast<uint32_t>(static_cast<float>(k)) ^ std::bit_cast<uint32_t>(v);
-    not_byte |= static_cast<uint32_t>(k) & ~0xffu;
-  }
-  return not_short != 0 ? 4 : not_byte != 0 ? 2 : 1;
 }
 
 template <class T>
@@ -41,14 +25,6 @@ T* new_array(std::vector<std::unique_ptr<char[]>>& owner, int64_t n, T fill) {
 }
 
 }  // namespace
-
-// What the header promises of every value: codes of 8 or 16 bits, or a lossless scan of unsigned
-// integers within the range it gives.
-int held_value_bytes(const StoreHeader& h) {
-  if (h.quantize_bits != 0) return h.quantize_bits <= 8 ? 1 : 2;
-  if (h.source_type != "uint8" && h.source_type != "uint16") return 4;
-  return h.value_min >= 0 && h.value_max <= 255 ? 1 : h.value_min >= 0 && h.value_max <= 65535 ? 2 : 4;
-}
 
 CachedBrick::~CachedBrick() = default;
 
@@ -86,39 +62,6 @@ uint64_t BrickCache::brick_bytes() const {
          static_cast<uint64_t>(value_bytes_ + held_bounds_bytes(value_bytes_) + 2 + 4 + 4 + 8);
 }
 
-bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
-  static_assert(std::endian::native == std::endian::little, "a word's halves are copied as little-endian");
-  // Branch-free over 32-bit lanes, so that it vectorizes: every brick of stored records a uint8
-  // store's extraction reads goes through it (the words are copied as halves first: a loop that
-  // splits 64-bit loads does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
-  // do; a negative one, or a NaN, clamps to the top), narrowed, and must come back as its very
-  // bits: that rejects NaN, negatives, -0, fractions, a bound between halves, and what the clamps
-  // moved.
-  constexpr uint32_t k255 = std::bit_cast<uint32_t>(255.0f), k32767 = std::bit_cast<uint32_t>(32767.0f);
-  constexpr size_t kBlock = 512;
-  uint32_t bad = 0;
-  for (size_t first = 0; first < n; first += kBlock) {
-    const size_t count = std::min(kBlock, n - first);
-    uint32_t half[2 * kBlock];  // little-endian: the low half (lo, hi), then the bound's bits
-    std::memcpy(half, words + first, count * sizeof(uint64_t));
-    uint32_t* out = narrow + first;
-    for (size_t i = 0; i < count; ++i) {
-      const uint32_t low = half[2 * i], bound_bits = half[2 * i + 1];
-      const uint32_t lo_bits = low << 16, hi_bits = low & 0xffff0000u;
-      const auto lo = static_cast<int32_t>(std::bit_cast<float>(std::min(lo_bits, k255)));
-      const auto hi = static_cast<int32_t>(std::bit_cast<float>(std::min(hi_bits, k255)));
-      const auto halves = static_cast<int32_t>(2 * std::bit_cast<float>(std::min(bound_bits, k32767)));
-      const uint32_t infinite = 0u - static_cast<uint32_t>(bound_bits == 0x7f800000u);
-      out[i] = static_cast<uint32_t>(lo) | static_cast<uint32_t>(hi) << 8 |
-               (static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u));
-      bad |= (std::bit_cast<uint32_t>(static_cast<float>(lo)) ^ lo_bits) |
-             (std::bit_cast<uint32_t>(static_cast<float>(hi)) ^ hi_bits) | static_cast<uint32_t>(hi - lo) >> 31 |
-             (~infinite & (std::bit_cast<uint32_t>(0.5f * static_cast<float>(halves)) ^ bound_bits));
-    }
-  }
-  return bad == 0;
-}
-
 std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   const StoreLayout& layout = store_.layout();
   auto b = std::make_shared<CachedBrick>();
@@ -146,17 +89,10 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values);
   bytes_read_.fetch_add(read, std::memory_order_relaxed);
   if (narrow_words && records && !narrow_bounds(wide.data(), nodes, static_cast<uint32_t*>(bounds.get())))
-    throw IoError(store_.describe_brick(index) +
-                  ": holds a record whose range is not of integers of 0..255 in order, or whose bound is not a "
-                  "multiple of a half up to 32767 nor +inf (corrupt brick)");
+    throw IoError(store_.describe_brick(index) + ": " + kRecordNotHeld + " (corrupt brick)");
   if (value_bytes_ < 4) {
-    if (fewest_bytes(narrow) > value_bytes_) {
-      const StoreHeader& h = store_.header();
-      throw IoError(store_.describe_brick(index) + ": holds a value that is not " +
-                    (h.quantize_bits != 0 ? "a " + std::to_string(h.quantize_bits) + "-bit code"
-                                          : "an integer of the header's " + h.source_type + " range") +
-                    " (corrupt brick)");
-    }
+    if (fewest_bytes(narrow) > value_bytes_)
+      throw IoError(store_.describe_brick(index) + ": " + value_not_held(store_.header()) + " (corrupt brick)");
     BrickValues::of_width(value_bytes_, [&](auto held) {
       std::copy(narrow.begin(), narrow.end(), static_cast<decltype(held)*>(kept.get()));
     });

@@ -29,6 +29,7 @@
 
 #include "engine/hierarchy/hierarchy.h"
 #include "io/store/brick_pool.h"
+#include "io/store/held_words.h"
 #include "io/store/store_format.h"
 #include "io/store/store_reader.h"
 
@@ -39,11 +40,6 @@ inline constexpr uint64_t kUnsetBounds = ~uint64_t{0};
 inline constexpr uint32_t kUnsetInterval = ~uint32_t{0};
 inline constexpr uint64_t kUnsetWeights = ~uint64_t{0};
 inline constexpr uint16_t kUnsetSurplus = 0xffffu;
-
-// Bytes a value of this store's bricks is held in (BrickValues): 1 or 2 where the header says
-// every value is an integer of 0..255 or 0..65535 (its codes, or an unsigned integer type and its
-// range), else 4.
-int held_value_bytes(const StoreHeader& header);
 
 // A brick's values as the cache holds them: in one byte where the store's values are integers of
 // 0..255 (a uint8 scan, 8-bit codes), two up to 65535 (uint16, 16-bit codes), else as floats
@@ -75,30 +71,6 @@ class BrickValues {
   const void* data_;
   int bytes_;
 };
-
-// A record's range and bound as the cache holds them where values are held in one byte: in 32
-// bits instead of the 64 of engine/hierarchy/compact_record.h's word. A record's lo and hi are
-// then integers of 0..255, a byte each; its bound is a multiple of a half (at each level, the
-// distance of the value at a diamond's centre from the mean of the values at its edge's ends,
-// added over at most 3k <= 57 levels: at most 14,535), kept as a count of halves in 16 bits, or
-// 0xffff for +inf (a diamond that leaves the data box, or one of its descendants does). A uint8
-// brick then takes 5 bytes a node with its values instead of 9: 5/9 of the memory a coarse
-// extraction touches fresh, and 1.8 times the bricks within a cache's budget (docs/METHOD.md,
-// "Out of core"). Exact both ways: a word reads back as the very 64-bit word it came from.
-inline constexpr uint32_t kUnsetNarrowBounds = 0x00ffu;  // lo 255 above hi 0: the range of no record
-// Bytes a record's range-and-bound word is held in: 4 beside values held in one byte, else 8.
-inline int held_bounds_bytes(int value_bytes) { return value_bytes == 1 ? 4 : 8; }
-// The narrow words of n 64-bit ones; false if some word has none (a range not of integers of
-// 0..255 in order, or a bound not a multiple of a half up to 32767 nor +inf), and then what was
-// written to `narrow` means nothing.
-bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow);
-// The 64-bit word of a narrow one (not of kUnsetNarrowBounds, which marks no record).
-inline uint64_t widen_bounds(uint32_t narrow) {
-  const auto code = [](uint32_t byte) { return uint64_t{std::bit_cast<uint32_t>(static_cast<float>(byte)) >> 16}; };
-  const uint32_t halves = narrow >> 16;
-  const float bound = halves == 0xffffu ? std::numeric_limits<float>::infinity() : 0.5f * static_cast<float>(halves);
-  return code(narrow & 0xffu) | code(narrow >> 8 & 0xffu) << 16 | uint64_t{std::bit_cast<uint32_t>(bound)} << 32;
-}
 
 // One decoded brick. Arrays as engine/hierarchy/hierarchy.h's BrickView, but its values are a
 // BrickValues, and its range-and-bound words are narrow (narrow_bounds) where its values are

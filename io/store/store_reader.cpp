@@ -16,6 +16,7 @@
 #include "engine/core/parallel.h"
 #include "io/file/checked_size.h"
 #include "io/file/input_file.h"
+#include "io/store/held_words.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -227,6 +228,21 @@ std::string check_brick(const StoreReader& store, int64_t index, FullBrick& bric
   return {};
 }
 
+// What the extraction's cache checks of every brick it reads (io/store/held_words.h): values
+// within the width the header promises, and beside values of one byte, records narrow words hold.
+std::string check_held_widths(const StoreReader& store, int64_t index, const FullBrick& brick) {
+  const int bytes = held_value_bytes(store.header());
+  if (bytes == 4) return {};
+  if (fewest_bytes(brick.values) > bytes) return value_not_held(store.header());
+  thread_local std::vector<uint32_t> narrow;
+  narrow.resize(brick.bounds.size());
+  const bool records = stores_records(store.layout(), store.locate_brick(index).first);
+  if (held_bounds_bytes(bytes) == 4 && records &&
+      !narrow_bounds(brick.bounds.data(), brick.bounds.size(), narrow.data()))
+    return kRecordNotHeld;
+  return {};
+}
+
 // Bands j >= 1 repeat values of band j-1: node g holds band j-1's value at 2g (clamped to its grid).
 std::string check_values_against_finer_band(const StoreReader& store, int64_t index, const FullBrick& brick) {
   const StoreLayout& layout = store.layout();
@@ -301,6 +317,7 @@ VerifyStats verify_store(const std::string& path, const ProgressCallback& progre
       store.read_brick(i, kAllSections, brick->view(), brick->values.data());
       const auto [j, b] = store.locate_brick(i);
       std::string problem = check_brick(store, i, *brick);
+      if (problem.empty()) problem = check_held_widths(store, i, *brick);
       if (problem.empty() && j > 0) problem = check_values_against_finer_band(store, i, *brick);
       if (!problem.empty()) throw IoError(store.describe_brick(i) + ": " + problem);
       if (j == 0) {  // the data's range, from its nodes in the data box

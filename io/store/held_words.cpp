@@ -1,0 +1,71 @@
+#include "io/store/held_words.h"
+
+#include <algorithm>
+#include <bit>
+#include <cstring>
+#include <limits>
+
+namespace isotope {
+
+// What the header promises of every value: codes of 8 or 16 bits, or a lossless scan of unsigned
+// integers within the range it gives.
+int held_value_bytes(const StoreHeader& h) {
+  if (h.quantize_bits != 0) return h.quantize_bits <= 8 ? 1 : 2;
+  if (h.source_type != "uint8" && h.source_type != "uint16") return 4;
+  return h.value_min >= 0 && h.value_max <= 255 ? 1 : h.value_min >= 0 && h.value_max <= 65535 ? 2 : 4;
+}
+
+std::string value_not_held(const StoreHeader& h) {
+  return "holds a value that is not " + (h.quantize_bits != 0
+                                             ? "a " + std::to_string(h.quantize_bits) + "-bit code"
+                                             : "an integer of the header's " + h.source_type + " range");
+}
+
+// The fewest bytes (1, 2 or 4) that hold every value exactly. Bit operations only, so that it
+// vectorizes: every brick read is checked.
+int fewest_bytes(std::span<const float> values) {
+  uint32_t not_short = 0, not_byte = 0;
+  for (const float v : values) {
+    // Clamped first, so that the conversion is defined (a NaN clamps to 0). The integer's float
+    // must be v's very bits: that rejects -0.0, NaN, fractions and what the clamp moved.
+    const int32_t k = static_cast<int32_t>(std::min(65535.0f, std::max(0.0f, v)));
+    not_short |= std::bit_cast<uint32_t>(static_cast<float>(k)) ^ std::bit_cast<uint32_t>(v);
+    not_byte |= static_cast<uint32_t>(k) & ~0xffu;
+  }
+  return not_short != 0 ? 4 : not_byte != 0 ? 2 : 1;
+}
+
+bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
+  static_assert(std::endian::native == std::endian::little, "a word's halves are copied as little-endian");
+  // Branch-free over 32-bit lanes, so that it vectorizes: every brick of stored records a uint8
+  // store's extraction reads goes through it (the words are copied as halves first: a loop that
+  // splits 64-bit loads does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
+  // do; a negative one, or a NaN, clamps to the top), narrowed, and must come back as its very
+  // bits: that rejects NaN, negatives, -0, fractions, a bound between halves, and what the clamps
+  // moved.
+  constexpr uint32_t k255 = std::bit_cast<uint32_t>(255.0f), k32767 = std::bit_cast<uint32_t>(32767.0f);
+  constexpr size_t kBlock = 512;
+  uint32_t bad = 0;
+  for (size_t first = 0; first < n; first += kBlock) {
+    const size_t count = std::min(kBlock, n - first);
+    uint32_t half[2 * kBlock];  // little-endian: the low half (lo, hi), then the bound's bits
+    std::memcpy(half, words + first, count * sizeof(uint64_t));
+    uint32_t* out = narrow + first;
+    for (size_t i = 0; i < count; ++i) {
+      const uint32_t low = half[2 * i], bound_bits = half[2 * i + 1];
+      const uint32_t lo_bits = low << 16, hi_bits = low & 0xffff0000u;
+      const auto lo = static_cast<int32_t>(std::bit_cast<float>(std::min(lo_bits, k255)));
+      const auto hi = static_cast<int32_t>(std::bit_cast<float>(std::min(hi_bits, k255)));
+      const auto halves = static_cast<int32_t>(2 * std::bit_cast<float>(std::min(bound_bits, k32767)));
+      const uint32_t infinite = 0u - static_cast<uint32_t>(bound_bits == 0x7f800000u);
+      out[i] = static_cast<uint32_t>(lo) | static_cast<uint32_t>(hi) << 8 |
+               (static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u));
+      bad |= (std::bit_cast<uint32_t>(static_cast<float>(lo)) ^ lo_bits) |
+             (std::bit_cast<uint32_t>(static_cast<float>(hi)) ^ hi_bits) | static_cast<uint32_t>(hi - lo) >> 31 |
+             (~infinite & (std::bit_cast<uint32_t>(0.5f * static_cast<float>(halves)) ^ bound_bits));
+    }
+  }
+  return bad == 0;
+}
+
+}  // namespace isotope
