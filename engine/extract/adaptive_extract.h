@@ -120,11 +120,12 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
 // Where a triangle budget samples the volume instead of counting all of it (BudgetSample): on
 // lattices of 513 a side and up (volumes over 257 samples on a side), where the exact search costs
 // more than the extraction it chooses for; smaller volumes keep the exact search, cheap there. The
-// subtrees are those of level 18 (1.6 M tetrahedra, a 64th of the side across), one in 8 kept: at
-// 1024^3 the estimates of T were within 1% of the meshes' counts for budgets of 100 k to 2 M, where
-// level 12 (24,576 subtrees) missed by up to 9% and level 15 by up to 11%.
+// subtrees are those of level 18 (1.6 M tetrahedra, a 64th of the side across), one in 16 kept
+// (docs/METHOD.md, "A budget from a sample": as often within the 90-100% window as one in 8, for
+// 8% less time at 1024^3), where level 12 (24,576 subtrees) missed by up to 9% and level 15 by up
+// to 11%.
 inline BudgetSample budget_sample_for(const Lattice& lattice) {
-  return lattice.k >= 9 ? BudgetSample{18, 3} : BudgetSample{};
+  return lattice.k >= 9 ? BudgetSample{18, 4} : BudgetSample{};
 }
 
 // `sample`: as budget_sample_for(the source's lattice) unless given (tests choose it). `memo`: the
