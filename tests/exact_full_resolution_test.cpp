@@ -151,6 +151,25 @@ TEST(OneShot, EpsAboveZeroOrABudgetGoThroughTheHierarchy) {
   EXPECT_THROW(extract(v, nan_iso), std::invalid_argument);
 }
 
+// eps 0 with tie classes is a cut within the diamonds of error 0 (what a triangle budget may
+// choose): through the hierarchy, as the multiresolution volume gives it, with fewer triangles
+// than full resolution, which every class refined gives again.
+TEST(OneShot, EpsZeroWithTieClassesIsACutNotFullResolution) {
+  const testing::SharedVolume& neghip = testing::shared_volumes()[1];  // flat and linear regions
+  ASSERT_EQ(neghip.name, "neghip");
+  const Volume v = testing::load_shared(neghip);
+  const MultiresVolume mv = MultiresVolume::build(v);
+  const auto full = extract_full_resolution(v, 64.0f).triangles.size();
+  ExtractOptions o;
+  o.iso = 64.0f, o.eps = 0, o.eps_ties = 0;
+  EXPECT_TRUE(needs_hierarchy(o));
+  const Mesh a = extract(v, o), b = extract(mv, o);
+  EXPECT_TRUE(a.positions == b.positions && a.triangles == b.triangles);
+  EXPECT_LT(a.triangles.size(), full);
+  o.eps_ties = kMaxTieClasses;
+  EXPECT_EQ(extract(v, o).triangles.size(), full);
+}
+
 // The blocks are marched in slabs on all threads; the mesh is the same bit for bit.
 TEST(ExactAtEpsZero, AnyThreadCountGivesTheSameMeshBitForBit) {
   const MultiresVolume mv = MultiresVolume::build(generate_algebraic(65));

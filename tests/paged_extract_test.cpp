@@ -614,11 +614,12 @@ TEST_F(PagedExtract, TriangleBudgetFromASampleLandsWithinTenPercentOrFallsBack) 
   int stood = 0, fell_back = 0;
   // The default's level 18 lies below most of a 129^3 volume's cuts; 12 is where the default sits
   // relative to the cut of a budget of about 1 M at 1024^3.
-  for (const BudgetSample sample : {BudgetSample{12, 3}, BudgetSample{6, 3}}) {
+  for (const BudgetSample sample : {BudgetSample{12, 3}, BudgetSample{12, 4}, BudgetSample{6, 3}}) {
     for (const int64_t budget : {int64_t{5000}, int64_t{15000}, int64_t{40000}}) {
       ExtractOptions o;
       o.iso = 64.5f, o.topology = TopologyMode::none, o.max_triangles = budget;
-      const std::string what = describe(o) + " sample level " + std::to_string(sample.level);
+      const std::string what =
+          describe(o) + " sample level " + std::to_string(sample.level) + " one in " + std::to_string(1 << sample.bits);
       ExtractStats s, exact_s, memory_s, one_s;
       const Mesh m = extract_adaptive(paged, o, &s, sample);
       const Mesh exact = extract_adaptive(paged, o, &exact_s, BudgetSample{});
@@ -1113,7 +1114,7 @@ TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
   expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});
 }
 
-// The same bytes through a uint8 store, whose cache holds 32-bit record words (io/store/brick_cache.h,
+// The same bytes through a uint8 store, whose cache holds 32-bit record words (io/store/held_words.h,
 // narrow bounds), band 0's computed on first read by whichever thread gets there: what
 // scripts/test.sh runs under ThreadSanitizer for that path.
 TEST_F(PagedParallel, SameBytesThroughAUint8Store) {

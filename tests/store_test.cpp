@@ -140,7 +140,7 @@ TEST_F(Store, RoundTripIsExactOnOddDimensionsAndAnyBrickSize) {
 }
 
 // Each real volume as floats, and converted from its raw file in its own type: a uint8 store's
-// cache holds its records in narrow words (io/store/brick_cache.h), which must read back as the
+// cache holds its records in narrow words (io/store/held_words.h), which must read back as the
 // very records.
 TEST_F(Store, RoundTripIsExactOnRealVolumesAsFloatsAndInTheirOwnType) {
   for (const auto& shared : testing::shared_volumes()) {
@@ -546,7 +546,7 @@ TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
   EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "value outside its record's range");
 }
 
-// A uint8 store's cache holds each record's range and bound in 32 bits (io/store/brick_cache.h,
+// A uint8 store's cache holds each record's range and bound in 32 bits (io/store/held_words.h,
 // narrow bounds). A record those bits cannot hold exactly, under valid checksums, is named as a
 // corrupt brick by the read that finds it, never rounded into another record.
 TEST_F(StoreCorruption, ARecordNarrowWordsCannotHoldIsACorruptBrickOfAUint8Store) {

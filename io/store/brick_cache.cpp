@@ -1,9 +1,7 @@
 #include "io/store/brick_cache.h"
 
 #include <algorithm>
-#include <bit>
 #include <new>
-#include <span>
 #include <string>
 
 #include "isotope/error.h"

@@ -18,11 +18,9 @@
 // again.
 #include <array>
 #include <atomic>
-#include <bit>
 #include <cstdint>
 #include <cstdlib>
 #include <deque>
-#include <limits>
 #include <memory>
 #include <mutex>
 #include <vector>
