@@ -223,8 +223,7 @@ Mesh extract_adaptive(const Source& source, const ExtractOptions& options, Extra
         const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles, budget_sample);
         // A guess of eps 0 (full resolution, or a cut within the diamonds of error 0), or none, is
         // left to the exact search: it alone can tell whether the whole mesh fits, or that no mesh
-        // does. (A lattice without the sample's
-        // subtrees is counted exactly at once.)
+        // does. (A lattice without the sample's subtrees is counted exactly at once.)
         if (!c.sampled || (c.fits && c.eps != 0)) take_choice(c), chosen = true, sampled = c.sampled;
       }
     }

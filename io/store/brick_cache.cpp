@@ -28,16 +28,14 @@ CachedBrick::~CachedBrick() = default;
 
 BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
     : store_(store),
-      budget_(
-          std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout(), held_value_bytes(store.header())))),
       value_bytes_(held_value_bytes(store.header())),
+      budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout(), value_bytes_))),
       pools_(std::make_shared<Pools>(static_cast<size_t>(store.layout().brick_nodes()), value_bytes_)),
       slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
   if (!slot_table_) throw std::bad_alloc();
   // The working budget starts at a quarter (at least kMinBricks bricks, at most the budget).
-  working_ = std::max<uint64_t>(
-      budget_ / 4,
-      std::min<uint64_t>(budget_, kMinBricks * core_bytes(store.layout(), held_value_bytes(store.header()))));
+  working_ = std::max<uint64_t>(budget_ / 4,
+                                std::min<uint64_t>(budget_, kMinBricks * core_bytes(store.layout(), value_bytes_)));
 }
 
 BrickCache::Slot& BrickCache::slot(int64_t index) {

@@ -175,8 +175,8 @@ class BrickCache {
   void grow(int64_t index, CachedBrick& brick, uint64_t bytes);  // a brick took more memory
 
   const StoreReader& store_;
+  const int value_bytes_;  // before budget_, whose floor it sizes
   const uint64_t budget_;
-  const int value_bytes_;
   // The core's blocks, shared with the bricks: the bounds words, and the values in value_bytes_.
   struct Pools {
     Pools(size_t nodes, int value_bytes)
