@@ -195,10 +195,11 @@ TEST(ExactAtEpsZero, MeshIsWeldedOneVertexPerCutGridEdge) {
   EXPECT_EQ(t.components, 1);
 }
 
-// The definition the slabs must reproduce: one welding builder fed every cell, z slowest.
-Mesh one_walk(const Volume& volume, float iso) {
+// The definition the slabs must reproduce: one welding builder fed every cell, z slowest. welds:
+// a welding table lent to the builder, or null for its own.
+Mesh one_walk(const Volume& volume, float iso, EdgeVertexMap* welds = nullptr) {
   const auto& d = volume.dims;
-  MeshBuilder builder(iso, std::max({d[0], d[1], d[2]}), volume.origin, volume.spacing);
+  MeshBuilder builder(iso, std::max({d[0], d[1], d[2]}), volume.origin, volume.spacing, welds);
   for (int64_t z = 0; z + 1 < d[2]; ++z)
     for (int64_t y = 0; y + 1 < d[1]; ++y)
       for (int64_t x = 0; x + 1 < d[0]; ++x)
@@ -214,6 +215,21 @@ Mesh one_walk(const Volume& volume, float iso) {
           builder.add_tet(t, f, det > 0);
         }
   return builder.take();
+}
+
+// A welding table lent from mesh to mesh (as the traversal lends one from piece to piece) is
+// emptied when lent: one that welded this very mesh before, every edge of it taken, welds it
+// again as a table of the builder's own does.
+TEST(ExactAtEpsZero, ALentWeldingTableIsEmptiedForEachMesh) {
+  const Volume v = generate_sphere(33);
+  const Mesh own = one_walk(v, 0.0f);
+  ASSERT_GT(own.triangles.size(), 0u);
+  EdgeVertexMap lent(16);  // grown by the first mesh, kept at that size for the next
+  for (int mesh = 0; mesh < 3; ++mesh) {
+    const Mesh m = one_walk(v, 0.0f, &lent);
+    EXPECT_TRUE(m.positions == own.positions) << "mesh " << mesh;
+    EXPECT_TRUE(m.triangles == own.triangles) << "mesh " << mesh;
+  }
 }
 
 int64_t slab_count(const Volume& v) {

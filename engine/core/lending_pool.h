@@ -32,6 +32,11 @@ class LendingPool {
     const std::lock_guard<std::mutex> lock(mutex_);
     free_.push_back(std::move(t));
   }
+  // Lets go of the objects given back: their memory, once the tasks are done.
+  void clear() {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    free_.clear();
+  }
 
  private:
   std::mutex mutex_;

@@ -98,6 +98,7 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
   } else {
     run_share();
   }
+  levels.clear();  // the walks' scratch and welding tables, before the weld takes its memory
   if (check) {
     int64_t mine = 0;
     for (const PartMesh& p : parts) mine += static_cast<int64_t>(p.mesh.triangles.size());

@@ -193,6 +193,9 @@ struct LevelScratch {
   Scratch<Child> frontier, next;
   Scratch<std::array<float, 4>> frontier_values, next_values;  // at the corners of frontier and next, when carried
   Scratch<typename Source::Reader::Handle> handles;            // of frontier
+  // The welding table of the traversal's mesh (MeshBuilder): lent with the rest, it keeps the size
+  // of the largest piece's, emptied in O(1), where a table per piece grew from small each time.
+  EdgeVertexMap welds{64};
 };
 
 // A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
@@ -213,7 +216,8 @@ class Traversal {
       : reader_(source.reader()),
         lattice_(source.lattice()),
         rule_(rule),
-        builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing()),
+        builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing(),
+                 levels ? &levels->welds : nullptr),
         levels_(levels) {
     for (int i = 0; i < 3; ++i) {
       box_max_[i] = source.data_dims()[i] - 1;

@@ -64,8 +64,13 @@ bool before(const Coord& p, const Coord& q) {
 }  // namespace
 
 MeshBuilder::MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin,
-                         const std::array<double, 3>& spacing)
-    : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing) {}
+                         const std::array<double, 3>& spacing, EdgeVertexMap* welds)
+    : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing), own_map_(welds ? 0 : 64) {
+  if (welds) {
+    welds->clear();
+    map_ = welds;
+  }
+}
 
 // p + q in brick order (16^3 doubled coordinates, i.e. the 8^3 node bricks): edges met close
 // together in the traversal get close keys, and the welding table keeps them close in memory.
@@ -85,7 +90,7 @@ Coord edge_key_sum(uint64_t key, int64_t side) {
 
 uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coord& q0, float f1) {
   const uint32_t fresh = static_cast<uint32_t>(mesh_.positions.size());
-  const uint32_t found = map_.find_or_insert(key, fresh);
+  const uint32_t found = map_->find_or_insert(key, fresh);
   if (found != EdgeVertexMap::kAbsent) return found;
   // Interpolate from the edge's first node in grid order, so every tetrahedron sharing the
   // edge would compute the same bits.

@@ -47,8 +47,10 @@ class EdgeMemo {
 
 class MeshBuilder {
  public:
-  // side: nodes per axis of the grid whose coordinates are passed in.
-  MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing);
+  // side: nodes per axis of the grid whose coordinates are passed in. welds: a welding table lent
+  // for this builder's life (emptied here), or null for one of its own.
+  MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing,
+              EdgeVertexMap* welds = nullptr);
 
   // Emits the 0, 1 or 2 triangles of one tetrahedron. `positive`: det(c1-c0, c2-c0, c3-c0) > 0.
   // Triangles are wound counter-clockwise seen from the outside (value <= iso); a quadrilateral
@@ -68,7 +70,7 @@ class MeshBuilder {
   void reset() {
     mesh_ = Mesh{};
     keys_.clear();
-    map_.clear();
+    map_->clear();
   }
 
  private:
@@ -78,9 +80,9 @@ class MeshBuilder {
   float iso_;
   int64_t key_bricks_;  // bricks per axis of the doubled lattice
   std::array<double, 3> origin_, spacing_;
-  // Small at first: the traversal makes a builder per piece, hundreds per extraction, most of
-  // them with a few hundred vertices; a table sized for thousands cost more to clear than to fill.
-  EdgeVertexMap map_{64};
+  // Small at first: a builder of its own serves one mesh.
+  EdgeVertexMap own_map_{64};
+  EdgeVertexMap* map_ = &own_map_;
   Mesh mesh_;
   bool keep_keys_ = false;
   std::vector<uint64_t> keys_;
