@@ -222,10 +222,13 @@ void MemoryReturner::busy() {
 
 void MemoryReturner::run() {
   constexpr size_t kKeptBusy = size_t{256} << 20, kKeptIdle = size_t{64} << 20;
+  // Idle: ten seconds without an extraction. A viewer's user pauses between requests for seconds;
+  // within them the next request finds the memory the last one freed (docs/SERVE.md).
+  constexpr auto kIdleAfter = std::chrono::seconds(10);
   std::unique_lock<std::mutex> lock(mutex_);
   while (!wake_.wait_for(lock, std::chrono::milliseconds(250), [this] { return stop_; })) {
     const auto since_busy = Clock::now().time_since_epoch() - std::chrono::nanoseconds(last_busy_ns_.load());
-    const size_t kept = since_busy > std::chrono::seconds(1) ? kKeptIdle : kKeptBusy;
+    const size_t kept = since_busy > kIdleAfter ? kKeptIdle : kKeptBusy;
     if (mallinfo2().fordblks > kept) malloc_trim(0);
   }
 }

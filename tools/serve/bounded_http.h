@@ -62,7 +62,7 @@ class ResponseBudget {
 };
 
 // Gives freed memory back to the system from a thread of its own, every quarter second: once more
-// than 256 MB of it is kept, or 64 MB after a second without an extraction. glibc keeps freed
+// than 256 MB of it is kept, or 64 MB after ten seconds without an extraction. glibc keeps freed
 // memory in its arena (the server's one, up to the trim threshold, which isotope::open_volume
 // raises for the brick cache): a server would otherwise keep a crowd's meshes in its RSS long
 // after their clients left. Not after every
