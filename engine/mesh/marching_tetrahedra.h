@@ -51,6 +51,8 @@ class MeshBuilder {
   // for this builder's life (emptied here), or null for one of its own.
   MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing,
               EdgeVertexMap* welds = nullptr);
+  MeshBuilder(const MeshBuilder&) = delete;  // a copy would weld into the original's table
+  MeshBuilder& operator=(const MeshBuilder&) = delete;
 
   // Emits the 0, 1 or 2 triangles of one tetrahedron. `positive`: det(c1-c0, c2-c0, c3-c0) > 0.
   // Triangles are wound counter-clockwise seen from the outside (value <= iso); a quadrilateral

@@ -1,7 +1,6 @@
 #include "tools/serve/viewer_server.h"
 
 #include <httplib.h>
-#include <malloc.h>
 #include <oneapi/tbb/global_control.h>
 #include <sys/socket.h>
 
@@ -69,14 +68,6 @@ nlohmann::ordered_json store_info_json(const StoreReader& store) {
 
 // Only a store is served (the viewer pages it; a raw volume would be read whole per server).
 Source open_store(const ViewerServer::Settings& s) {
-  // One malloc arena for the whole server, set before a second thread allocates. glibc gives
-  // threads arenas of their own and deletes a thread arena's heap as soon as all of it is free:
-  // a request's mesh, normals and topology arrays, freed once its client had them, went back to
-  // the kernel, and the next request faulted fresh pages in for them again, on whichever of the
-  // workers served it. The main arena keeps them, up to the trim threshold (OpenOptions::
-  // tune_allocator; MemoryReturner trims an idle server). The 1 M-triangle request at 1024^3:
-  // 0.24-0.26 s in the server after the first, against 0.33-0.37 s (docs/SERVE.md, "Speed").
-  mallopt(M_ARENA_MAX, 1);
   require_regular_file(s.store, s.store, "an isotope store");  // a missing file says so (io/file/input_file.h)
   if (!is_store_file(s.store))
     throw IoError(s.store + ": not an isotope store (isotope serve shows stores; run isotope convert first)");
