@@ -15,7 +15,6 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -35,6 +34,7 @@
 #include "io/volume/volume_reader.h"
 #include "io/volume/volume_writer.h"
 #include "isotope/error.h"
+#include "tests/child_process.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
 
@@ -503,11 +503,10 @@ TEST_F(IoTest, Hdf5DatasetsOfFilterPluginsReadThroughTheCommandAsWithGzip) {
       b.add("/volume", H5T_STD_U16LE, H5T_NATIVE_UINT16, {hsize_t(n), hsize_t(n), hsize_t(n)}, v.data(), {8, 8, 8},
             filter);
     }
-    const std::string command =
-        std::string("'") + ISOTOPE_BINARY + "' extract '" + h5 + ":/volume' --iso 100.5 -q -o '" + mesh + "'";
-    EXPECT_EQ(std::system(command.c_str()), 0) << command;
-    std::ifstream in(mesh, std::ios::binary);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string log = path(name + ".log");
+    EXPECT_EQ(testing::run_isotope({"extract", h5 + ":/volume", "--iso", "100.5", "-q", "-o", mesh}, log).code, 0)
+        << name << ": " << testing::slurp(log);
+    return testing::slurp(mesh);
   };
   const std::string gzip = extract("gzip", H5Z_FILTER_DEFLATE);
   ASSERT_GT(gzip.size(), 1000u);

@@ -195,7 +195,7 @@ struct LevelScratch {
   Scratch<typename Source::Reader::Handle> handles;            // of frontier
   // The welding table of the traversal's mesh (MeshBuilder): lent with the rest, it keeps the size
   // of the largest piece's, emptied in O(1), where a table per piece grew from small each time.
-  EdgeVertexMap welds{0};  // grows with the first piece lent it
+  EdgeVertexMap welds{0};
 };
 
 // A piece of the traversal: a subtree to descend, or one tetrahedron to emit.
