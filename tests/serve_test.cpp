@@ -338,10 +338,10 @@ TEST_F(Serve, ExtractAnswersTheMeshExtractGivesWithItsReport) {
 // A triangle budget: the server's search chooses the eps the command's does, and the report says
 // which, with the next finer step's count beyond the budget. The same budget asked for again is
 // that choice remembered (engine/extract/budget_memo.h): the same mesh and report, without the
-// search. A budget below the coarsest mesh is the client's to change: 400, with how many triangles
-// that mesh has.
+// search. A budget below the coarsest mesh a topology mode allows is the client's to change: 400,
+// with how many triangles that mesh has.
 TEST_F(Serve, ATriangleBudgetChoosesTheEpsExtractChooses) {
-  const auto below = get("/api/extract?iso=" + exact(iso_) + "&topology=none&max-triangles=10");
+  const auto below = get("/api/extract?iso=" + exact(iso_) + "&topology=preserve&max-triangles=10");
   ASSERT_TRUE(below);
   EXPECT_EQ(below->status, 400);
   EXPECT_NE(below->body.find("is below the coarsest mesh this topology mode allows"), std::string::npos) << below->body;

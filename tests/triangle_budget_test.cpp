@@ -64,7 +64,7 @@ BudgetChoice walk_the_cut(const Source& source, const traversal::SplitRule& rule
     double key = 0;
     const auto fate = judge(walk, t, level, &key);
     if (fate == Traversal<Source>::Fate::culled) return;
-    const int tris = walk.triangles(t, level);
+    const int tris = walk.triangles(t, level, positive);
     count += tris;
     const int tie = ties ? SplitRule::tie_class((t[0] + t[1]) >> 1, level) : 0;
     if (fate == Traversal<Source>::Fate::split_key && key > -kInf) front.push({key, tie, t, level, positive, tris});

@@ -19,6 +19,7 @@
 #include "engine/extract/finest_extract.h"
 #include "engine/extract/traversal.h"
 #include "engine/extract/triangle_budget.h"
+#include "engine/mesh/box_clip.h"
 #include "engine/mesh/piece_weld.h"
 
 namespace isotope {
@@ -99,9 +100,11 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
     run_share();
   }
   levels.clear();  // the walks' scratch and welding tables, before the weld takes its memory
+  // What reaches past the data box is clipped to it once welded (engine/mesh/box_clip.h).
+  const BoxClip box = BoxClip::of(source.data_dims(), source.lattice().n, source.origin(), source.spacing());
   if (check) {
     int64_t mine = 0;
-    for (const PartMesh& p : parts) mine += static_cast<int64_t>(p.mesh.triangles.size());
+    for (const PartMesh& p : parts) mine += clipped_triangles(p.mesh, box);
     if (!check(mine)) return false;
   }
   if (group && !options.keep_shares) parts = gather_parts(*group, std::move(parts));  // rank 0's parts: all of them
@@ -113,7 +116,10 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
   // Rank 0 (or every rank, keeping its share) welds; the others wait, so that running out of
   // memory in the weld stops them too.
   together([&] {
-    if (!group || options.keep_shares || group->rank() == 0) *mesh = weld(parts, source.lattice().side);
+    if (!group || options.keep_shares || group->rank() == 0) {
+      *mesh = weld(parts, source.lattice().side);
+      clip_to_box(*mesh, box);
+    }
   });
   return true;
 }

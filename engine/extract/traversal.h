@@ -17,6 +17,7 @@
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/record.h"
+#include "engine/mesh/box_clip.h"
 #include "engine/mesh/marching_tetrahedra.h"
 
 namespace isotope {
@@ -218,6 +219,8 @@ class Traversal {
         rule_(rule),
         builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing(),
                  levels ? &levels->welds : nullptr),
+        cutter_(rule.options().iso, lattice_.side, source.origin(), source.spacing()),
+        box_(BoxClip::of(source.data_dims(), lattice_.n, source.origin(), source.spacing())),
         levels_(levels) {
     for (int i = 0; i < 3; ++i) {
       box_max_[i] = source.data_dims()[i] - 1;
@@ -291,7 +294,31 @@ class Traversal {
     *weight = rule_.topology_weight(reader_.topology(h, rule_.fields()));
     return Fate::split_key;
   }
-  int triangles(const PackedTet& t, int level) { return triangles_of(corner_values(t, level), rule_.options().iso); }
+  // The triangles the mesh will have of t if it stops there, from the values at its corners:
+  // marching tetrahedra's, clipped to the data box where t reaches past it (engine/mesh/box_clip.h),
+  // as the extraction clips its mesh.
+  int triangles(const PackedTet& t, const std::array<float, 4>& f, bool positive) const {
+    const int n = triangles_of(f, rule_.options().iso);
+    if (n == 0 || !clip_ || !past_box(t)) return n;
+    const std::array<Coord, 4> c{unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])};
+    const TetCutter::Cut cut = cutter_.cut(c, f, positive);
+    std::array<Point, 4> p;
+    for (int i = 0; i < cut.points; ++i) {
+      const auto [a, b] = cut.edges[static_cast<size_t>(i)];
+      p[static_cast<size_t>(i)] = cutter_.point(c[static_cast<size_t>(a)], f[static_cast<size_t>(a)],
+                                                c[static_cast<size_t>(b)], f[static_cast<size_t>(b)]);
+    }
+    int count = 0;
+    for (int i = 0; i < cut.triangles; ++i) {
+      const auto& tri = cut.triangle[static_cast<size_t>(i)];
+      count += clipped_triangles(box_, p[static_cast<size_t>(tri[0])], p[static_cast<size_t>(tri[1])],
+                                 p[static_cast<size_t>(tri[2])]);
+    }
+    return count;
+  }
+  int triangles(const PackedTet& t, int level, bool positive) {
+    return triangles(t, corner_values(t, level), positive);
+  }
   // The values marching tetrahedra reads at a level-`level` tetrahedron's corners, and at one
   // node of such a tetrahedron (a node's value does not depend on the level it is read at).
   std::array<float, 4> corner_values(const PackedTet& t, int level) {
@@ -427,6 +454,15 @@ class Traversal {
     }
   }
 
+  // Some corner of the tetrahedron lies beyond a face of the data box.
+  bool past_box(const PackedTet& t) const {
+    for (int a = 0; a < 3; ++a) {
+      const int shift = a * kFieldBits;
+      for (Packed p : t)
+        if (static_cast<int64_t>((p >> shift) & kFieldMask) > box_max_[a]) return true;
+    }
+    return false;
+  }
   // The tetrahedron lies in a half-space beyond a face of the data box: it meets the box in a
   // face at most. Leaves are unit-cell Kuhn tetrahedra, wholly inside or caught here.
   bool outside_box(const PackedTet& t) const {
@@ -468,6 +504,8 @@ class Traversal {
   const Lattice& lattice_;
   const SplitRule& rule_;
   MeshBuilder builder_;
+  TetCutter cutter_;
+  BoxClip box_;
   Coord box_max_{};
   bool clip_ = false;  // the data box is smaller than the lattice
   int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;

@@ -103,9 +103,9 @@ BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitR
 }
 
 // Simplify mode with a budget and no delta (engine/extract/options.h, ExtractOptions::auto_delta): at
-// eps = infinity a tetrahedron is split iff its diamond reaches past the data box, or the exact
-// rule fires below it with a weight >= delta; the weight (saturated, so never growing downwards)
-// is the key. The smallest delta whose mesh at eps = infinity has at most max_triangles: the
+// eps = infinity a tetrahedron is split iff the exact rule fires below it with a weight >= delta
+// (or its error key is infinite: at a focus's centre); the weight (saturated, so never growing
+// downwards) is the key. The smallest delta whose mesh at eps = infinity has at most max_triangles: the
 // features of smallest weight dropped first, the rest kept.
 template <TraversalSource Source>
 BudgetChoice choose_delta_for_budget(const Source& source, const traversal::SplitRule& rule, int64_t max_triangles) {
@@ -281,7 +281,8 @@ class CountPasses {
         way_path = path, way_level = level, way_root = root;
         const traversal::Child& at = way[static_cast<size_t>(level)];
         const Corners f = walk.corner_values(at.tet, level);
-        descend(walk, w, at.tet, f, level, at.positive, root, path, item.key, tris_of(f), -1, nullptr);
+        descend(walk, w, at.tet, f, level, at.positive, root, path, item.key, walk.triangles(at.tet, f, at.positive),
+                -1, nullptr);
       }
       c.kept = out - c.begin;
     });
@@ -368,7 +369,7 @@ class CountPasses {
     double key = 0;
     const auto fate = judge_(walk, t, level, &key);
     if (fate == Walk::Fate::culled) return 0;
-    const int64_t tris = tris_of(f);
+    const int64_t tris = walk.triangles(t, f, positive);
     // Outside the sample: t counts on the cuts above it, exactly, and not below.
     if (level == sample_.level && !sample_.exact() && !sample_.keeps(root, path)) return tris;
     // A key of -infinity is never split (choose_delta_for_budget: no critical point below).
@@ -401,7 +402,6 @@ class CountPasses {
     const int64_t weight = !sample_.exact() && level >= sample_.level ? int64_t{1} << sample_.bits : 1;
     w.table.add(key, tie, weight * (children - tris));
   }
-  int64_t tris_of(const Corners& f) const { return traversal::triangles_of(f, rule_.options().iso); }
 
   const Source& source_;
   const traversal::SplitRule& rule_;

@@ -189,7 +189,8 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
   // 0 (every surplus is 0), no critical interval (the exact rule needs v beyond both a and b; the
   // paper's flags v an extremum, but its interval [c, c) is empty), weights 0; and so are its
   // children's, which lie within one node of it and reach one node further. Only inside the data
-  // box's inner part, where no descendant reaches past the box (those are refined always).
+  // box's inner part, where no descendant reaches past the box (those are critical in every
+  // topology mode: engine/hierarchy/record_builder.h).
   const bool trivial = j_ == 0;
   if (trivial) find_constant_blocks();
   Box3 trivial_first{}, trivial_last{};

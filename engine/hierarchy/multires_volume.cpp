@@ -55,8 +55,8 @@ MultiresVolume MultiresVolume::allocate(const std::array<int64_t, 3>& dims, cons
   mv.spacing_ = spacing;
   mv.origin_ = origin;
   // Lattice nodes beyond the data box are never stored: value() answers with the nearest data
-  // node, which keeps ranges tight, and no diamond that reaches past the box is ever stopped at,
-  // so those values never reach the mesh (docs/METHOD.md, "Volumes that are not (2^k+1)^3").
+  // node, which keeps ranges tight; what a tetrahedron reaching past the box makes of them is
+  // clipped to the box (docs/METHOD.md, "Volumes that are not (2^k+1)^3").
   mv.layout_ = BrickLayout(dims);
   mv.values_.resize(static_cast<size_t>(mv.layout_.size));
   int64_t records = 0;

@@ -12,7 +12,7 @@ namespace isotope {
 // What every visit of the traversal reads: saturated range and errors of v's diamond.
 struct DiamondBounds {
   float lo = 0, hi = 0;     // value range of every node below v
-  float error_bound = 0;    // guaranteed L-infinity bound (infinite where the diamond leaves the data box)
+  float error_bound = 0;    // guaranteed L-infinity bound
   float error_surplus = 0;  // the paper's saturated surplus eta_bar
 };
 

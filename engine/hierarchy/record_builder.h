@@ -139,15 +139,21 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
                             const DiamondBounds& range, Saturation sat, CriticalCounts& counts, bool topology = true) {
   Record r;
   r.bounds = range;
+  // A diamond reaching past the data box is judged on the clamped field like any other: inside the
+  // box that field is the data, and the traversal clips what it emits there to the box
+  // (docs/METHOD.md, "Volumes that are not (2^k+1)^3").
+  const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
+  r.bounds.error_bound = round_up(eta + sat.bound);
+  r.bounds.error_surplus = std::max(round_up(eta), sat.surplus);
+  if (!topology) return r;
   if (!inside_box) {
-    // Refine always: its tetrahedra reach past the data box (docs/METHOD.md, "Volumes that are not
-    // (2^k+1)^3"), so they are cut down to unit cells, each wholly inside or outside.
-    r.bounds.error_bound = r.bounds.error_surplus = std::numeric_limits<float>::infinity();
+    // The clipped surface's topology is not what the clamped field's rules see: the topology
+    // modes refine such a diamond whatever the isovalue. It adds no weight of its own, so that
+    // simplify mode with a delta above every feature's weight is mode none here too.
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    sat.exact.hull({-kInf, kInf});
+    sat.paper.hull({-kInf, kInf});
   } else {
-    const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
-    r.bounds.error_bound = round_up(eta + sat.bound);
-    r.bounds.error_surplus = std::max(round_up(eta), sat.surplus);
-    if (!topology) return r;
     const IsoInterval exact = exact_interval(dv);
     const IsoInterval paper = paper_interval(dv);
     counts[0][static_cast<int>(dv.type)] += paper.empty() ? 0 : 1;

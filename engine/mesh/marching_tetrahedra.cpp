@@ -63,35 +63,18 @@ bool before(const Coord& p, const Coord& q) {
 
 }  // namespace
 
-MeshBuilder::MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin,
-                         const std::array<double, 3>& spacing, EdgeVertexMap* welds)
-    : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing), own_map_(welds ? 0 : 64) {
-  if (welds) {
-    welds->clear();
-    map_ = welds;
-  }
-}
+TetCutter::TetCutter(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing)
+    : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing) {}
 
 // p + q in brick order (16^3 doubled coordinates, i.e. the 8^3 node bricks): edges met close
 // together in the traversal get close keys, and the welding table keeps them close in memory.
-uint64_t MeshBuilder::edge_key(const Coord& p, const Coord& q) const {
+uint64_t TetCutter::edge_key(const Coord& p, const Coord& q) const {
   const int64_t x = p[0] + q[0], y = p[1] + q[1], z = p[2] + q[2];
   const int64_t brick = ((z >> 4) * key_bricks_ + (y >> 4)) * key_bricks_ + (x >> 4);
   return static_cast<uint64_t>(brick << 12 | (z & 15) << 8 | (y & 15) << 4 | (x & 15));
 }
 
-Coord edge_key_sum(uint64_t key, int64_t side) {
-  const int64_t bricks = (2 * side - 1 + 15) / 16;
-  const auto brick = static_cast<int64_t>(key >> 12);
-  const int64_t bx = brick % bricks, by = brick / bricks % bricks, bz = brick / (bricks * bricks);
-  return {bx << 4 | static_cast<int64_t>(key & 15), by << 4 | static_cast<int64_t>(key >> 4 & 15),
-          bz << 4 | static_cast<int64_t>(key >> 8 & 15)};
-}
-
-uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coord& q0, float f1) {
-  const uint32_t fresh = static_cast<uint32_t>(mesh_.positions.size());
-  const uint32_t found = map_->find_or_insert(key, fresh);
-  if (found != EdgeVertexMap::kAbsent) return found;
+std::array<float, 3> TetCutter::point(const Coord& p0, float f0, const Coord& q0, float f1) const {
   // Interpolate from the edge's first node in grid order, so every tetrahedron sharing the
   // edge would compute the same bits.
   const bool swap = before(q0, p0);
@@ -103,40 +86,26 @@ uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p0, float f0, const Coor
   for (int a = 0; a < 3; ++a)
     pos[a] = static_cast<float>(origin_[a] +
                                 spacing_[a] * (static_cast<double>(p[a]) + t * static_cast<double>(q[a] - p[a])));
-  mesh_.positions.push_back(pos);
-  if (keep_keys_) keys_.push_back(key);
-  return fresh;
+  return pos;
 }
 
-void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
-                          EdgeMemo* memo) {
+TetCutter::Cut TetCutter::cut(const std::array<Coord, 4>& corners, const std::array<float, 4>& values,
+                              bool positive) const {
   int c = 0;
   for (int i = 0; i < 4; ++i) c |= (values[i] > iso_ ? 1 : 0) << i;
   const Case& k = table()[static_cast<size_t>(c)];
-  if (k.count == 0) return;
-  uint32_t v[4];
-  for (int i = 0; i < k.count; ++i) {
-    const int a = k.edges[i][0], b = k.edges[i][1];
-    if (!memo) {
-      v[i] = vertex(edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
-      continue;
-    }
-    uint64_t& slot = memo->slot(corners[a], corners[b]);
-    if (slot >> 32 == memo->stamp()) {
-      v[i] = static_cast<uint32_t>(slot);
-    } else {
-      v[i] = vertex(edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
-      slot = memo->stamp() << 32 | v[i];
-    }
-  }
-  const bool flip = !positive;
-  auto emit = [&](uint32_t x, uint32_t y, uint32_t z) {
-    if (flip) std::swap(y, z);
-    mesh_.triangles.push_back({x, y, z});
+  Cut out;
+  if (k.count == 0) return out;
+  out.points = k.count;
+  out.edges = k.edges;
+  // Seen from the outside, counter-clockwise: the table's order for a positive tetrahedron.
+  auto add = [&](int x, int y, int z) {
+    if (!positive) std::swap(y, z);
+    out.triangle[static_cast<size_t>(out.triangles++)] = {x, y, z};
   };
   if (k.count == 3) {
-    emit(v[0], v[1], v[2]);
-    return;
+    add(0, 1, 2);
+    return out;
   }
   // Split along the diagonal through the smallest edge key: it depends on the grid edges only,
   // not on the corner order or on which tetrahedron welded a vertex first.
@@ -145,8 +114,60 @@ void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<
   int m = 0;
   for (int i = 1; i < 4; ++i)
     if (keys[i] < keys[m]) m = i;
-  emit(v[m], v[(m + 1) & 3], v[(m + 2) & 3]);
-  emit(v[m], v[(m + 2) & 3], v[(m + 3) & 3]);
+  add(m, (m + 1) & 3, (m + 2) & 3);
+  add(m, (m + 2) & 3, (m + 3) & 3);
+  return out;
+}
+
+MeshBuilder::MeshBuilder(float iso, int64_t side, const std::array<double, 3>& origin,
+                         const std::array<double, 3>& spacing, EdgeVertexMap* welds)
+    : cutter_(iso, side, origin, spacing), own_map_(welds ? 0 : 64) {
+  if (welds) {
+    welds->clear();
+    map_ = welds;
+  }
+}
+
+Coord edge_key_sum(uint64_t key, int64_t side) {
+  const int64_t bricks = (2 * side - 1 + 15) / 16;
+  const auto brick = static_cast<int64_t>(key >> 12);
+  const int64_t bx = brick % bricks, by = brick / bricks % bricks, bz = brick / (bricks * bricks);
+  return {bx << 4 | static_cast<int64_t>(key & 15), by << 4 | static_cast<int64_t>(key >> 4 & 15),
+          bz << 4 | static_cast<int64_t>(key >> 8 & 15)};
+}
+
+uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
+  const uint32_t fresh = static_cast<uint32_t>(mesh_.positions.size());
+  const uint32_t found = map_->find_or_insert(key, fresh);
+  if (found != EdgeVertexMap::kAbsent) return found;
+  mesh_.positions.push_back(cutter_.point(p, fp, q, fq));
+  if (keep_keys_) keys_.push_back(key);
+  return fresh;
+}
+
+void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
+                          EdgeMemo* memo) {
+  const TetCutter::Cut k = cutter_.cut(corners, values, positive);
+  if (k.points == 0) return;
+  uint32_t v[4];
+  for (int i = 0; i < k.points; ++i) {
+    const int a = k.edges[static_cast<size_t>(i)][0], b = k.edges[static_cast<size_t>(i)][1];
+    if (!memo) {
+      v[i] = vertex(cutter_.edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
+      continue;
+    }
+    uint64_t& slot = memo->slot(corners[a], corners[b]);
+    if (slot >> 32 == memo->stamp()) {
+      v[i] = static_cast<uint32_t>(slot);
+    } else {
+      v[i] = vertex(cutter_.edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
+      slot = memo->stamp() << 32 | v[i];
+    }
+  }
+  for (int t = 0; t < k.triangles; ++t) {
+    const auto& tri = k.triangle[static_cast<size_t>(t)];
+    mesh_.triangles.push_back({v[tri[0]], v[tri[1]], v[tri[2]]});
+  }
 }
 
 }  // namespace isotope

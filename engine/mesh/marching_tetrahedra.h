@@ -45,6 +45,33 @@ class EdgeMemo {
   std::vector<uint64_t> slots_;
 };
 
+// What marching tetrahedra makes of one tetrahedron, before any vertex is welded: the cut edges
+// (pairs of corner indices) and the triangles over them, in the order and winding MeshBuilder emits
+// them. Shared by MeshBuilder and by what counts the triangles a mesh will have after clipping to
+// the data box (engine/mesh/box_clip.h), which must see the same triangles.
+class TetCutter {
+ public:
+  // side: nodes per axis of the grid whose coordinates are passed in.
+  TetCutter(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing);
+
+  struct Cut {
+    int points = 0;                                // cut edges: 0, 3 or 4
+    std::array<std::array<int, 2>, 4> edges{};     // each a pair of corner indices
+    int triangles = 0;                             // 0, 1 or 2
+    std::array<std::array<int, 3>, 2> triangle{};  // indices into edges
+  };
+  Cut cut(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive) const;
+  // The welding key of grid edge (p, q) and the position of its vertex (physical coordinates).
+  uint64_t edge_key(const Coord& p, const Coord& q) const;
+  std::array<float, 3> point(const Coord& p, float fp, const Coord& q, float fq) const;
+  float iso() const { return iso_; }
+
+ private:
+  float iso_;
+  int64_t key_bricks_;  // bricks per axis of the doubled lattice
+  std::array<double, 3> origin_, spacing_;
+};
+
 class MeshBuilder {
  public:
   // side: nodes per axis of the grid whose coordinates are passed in. welds: a welding table lent
@@ -76,12 +103,9 @@ class MeshBuilder {
   }
 
  private:
-  uint64_t edge_key(const Coord& p, const Coord& q) const;
   uint32_t vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
 
-  float iso_;
-  int64_t key_bricks_;  // bricks per axis of the doubled lattice
-  std::array<double, 3> origin_, spacing_;
+  TetCutter cutter_;
   // Small at first: a builder of its own serves one mesh.
   EdgeVertexMap own_map_{64};
   EdgeVertexMap* map_ = &own_map_;

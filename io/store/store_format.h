@@ -1,5 +1,5 @@
 #pragma once
-// The .isotope store, version 3 (docs/FORMAT.md): a 1024-byte header with a table of band
+// The .isotope store, version 4 (docs/FORMAT.md): a 1024-byte header with a table of band
 // directories, the bricks, then one directory per band. A brick is up to four sections, each a
 // checksummed zstd frame, so that an extraction reads and decodes only the fields its mode needs:
 // core (values; range and bound of the records), exact intervals, weights, and extra (the paper's
@@ -18,7 +18,7 @@ namespace isotope {
 
 inline constexpr std::array<char, 8> kStoreMagic = {'I', 'S', 'O', 'S', 'T', 'O', 'R', 'E'};
 // 2: three simplification weights per record; 3: compact records in sections, band directories.
-inline constexpr uint32_t kStoreVersion = 3;
+inline constexpr uint32_t kStoreVersion = 4;
 inline constexpr size_t kHeaderBytes = 1024;
 inline constexpr size_t kEntryBytes = 24;
 inline constexpr size_t kBandTableAt = 256;                    // the header's table of band directories

@@ -163,7 +163,7 @@ def main():
     # Named .isotope without the magic number: a damaged store, said so (not read as a raw volume).
     cases['zeros.isotope'] = (bytes(2048), {'extract': 'not an isotope store (wrong magic number)',
                                             'verify': 'wrong magic number'})
-    store_case('version-2', reseal(edit(good, '<I', 8, 2)), 'convert the volume again')
+    store_case('version-3', reseal(edit(good, '<I', 8, 3)), 'convert the volume again')
     store_case('header-checksum', edit(good, '<d', 40, 2.0), 'header checksum mismatch')
     store_case('spacing-nan', reseal(edit(good, '<d', 48, nan)), 'spacing that is not a positive number')
     store_case('spacing-negative', reseal(edit(good, '<d', 40, -1.0)), 'spacing that is not a positive number')
