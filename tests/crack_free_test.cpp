@@ -223,6 +223,26 @@ TEST(CrackFree, ClippingAtTheBoxEndsOnItsFacesWeldsWhatItCutsAndCountsWhatItLeav
       }
       EXPECT_GT(boundary, 0) << what;
       EXPECT_EQ(off_face, 0) << what;
+      // In order, each triangle replaced by what is left of it: one wholly inside is where the
+      // counts of those before it put it (clipping works in place: engine/mesh/box_clip.cpp).
+      auto corners = [](const Mesh& mesh, const std::array<uint32_t, 3>& t) {
+        return std::array<std::array<float, 3>, 3>{mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]};
+      };
+      size_t at = 0, inside = 0, in_place = 0;
+      for (const auto& t : closed.triangles) {
+        const auto c = corners(closed, t);
+        const int k = clipped_triangles(box, c[0], c[1], c[2]);
+        bool whole = true;
+        for (const auto& p : c)
+          for (int a = 0; a < 3; ++a) whole = whole && p[a] <= face[a];
+        if (whole) {
+          ++inside;
+          in_place += at < m.triangles.size() && corners(m, m.triangles[at]) == c;
+        }
+        at += static_cast<size_t>(k);
+      }
+      EXPECT_GT(inside, 0u) << what;
+      EXPECT_EQ(in_place, inside) << what;
       EXPECT_EQ(measure_topology(m).nonmanifold_edges, 0) << what;
     }
   }

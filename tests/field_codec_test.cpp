@@ -104,7 +104,7 @@ Floats uint16_ramp(size_t n) {
   return v;
 }
 
-// Error indicators of integer data: half-integers, +inf where a diamond leaves the data box.
+// Error indicators of integer data: half-integers, and +inf, which the codec must keep.
 Floats half_integers_with_inf(size_t n, uint32_t seed = 1) {
   std::mt19937 rng(seed);
   Floats v(n);

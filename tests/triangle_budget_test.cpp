@@ -201,7 +201,7 @@ using TriangleBudgetParallel = TriangleBudget;  // small enough for ThreadSaniti
 
 TEST_F(TriangleBudget, CountsEveryCutAsTheWalkDownTheCutDoesInMemory) {
   int compared = 0;
-  // A clipped lattice (45 x 50 x 39 in 64^3): the diamonds that reach past the box have infinite keys.
+  // A clipped lattice (45 x 50 x 39 in 64^3): what reaches past the box is clipped, and counted so.
   const Volume noise = testing::crop(generate_noise(50, 17), {45, 50, 39});
   const Hierarchy noise_h = Hierarchy::build(noise);
   for (TopologyMode mode : {TopologyMode::none, TopologyMode::preserve}) {

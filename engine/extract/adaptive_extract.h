@@ -117,7 +117,7 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
   // memory in the weld stops them too.
   together([&] {
     if (!group || options.keep_shares || group->rank() == 0) {
-      *mesh = weld(parts, source.lattice().side);
+      *mesh = weld(parts, source.lattice().side, box.any());
       clip_to_box(*mesh, box);
     }
   });

@@ -302,7 +302,7 @@ class Traversal {
     if (n == 0 || !clip_ || !past_box(t)) return n;
     const std::array<Coord, 4> c{unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])};
     const TetCutter::Cut cut = cutter_.cut(c, f, positive);
-    std::array<Point, 4> p;
+    std::array<BoxClip::Point, 4> p;
     for (int i = 0; i < cut.points; ++i) {
       const auto [a, b] = cut.edges[static_cast<size_t>(i)];
       p[static_cast<size_t>(i)] = cutter_.point(c[static_cast<size_t>(a)], f[static_cast<size_t>(a)],

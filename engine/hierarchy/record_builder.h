@@ -241,7 +241,7 @@ class RecordBuilder {
     Saturation sat;
     for_each_child(d, lattice_, [&](const Coord& u) {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node
-      // below it, and v, which reaches out there too, is refined anyway.
+      // below it, and what the traversal emits there is clipped away (engine/mesh/box_clip.h).
       Record c;
       if (grid_.child(u, c)) sat.add(c, range, topology);
     });

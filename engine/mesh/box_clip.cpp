@@ -8,6 +8,8 @@
 namespace isotope {
 namespace {
 
+using Point = BoxClip::Point;
+
 // Where the edge from `in` (at or before the face) to `out` (past it) meets the face of `axis`:
 // from the inside corner, whichever triangle asks.
 Point crossing(const Point& in, const Point& out, int axis, float face) {
@@ -124,18 +126,32 @@ void clip_to_box(Mesh& mesh, const BoxClip& box) {
           crossing(mesh.positions[in], mesh.positions[out], axis, box.face[static_cast<size_t>(axis)]));
     return it->second;
   };
-  Mesh::Array<std::array<uint32_t, 3>> triangles;
-  triangles.reserve(mesh.triangles.size());
-  for (const auto& t : mesh.triangles) {
-    if (!past[t[0]] && !past[t[1]] && !past[t[2]]) {
-      triangles.push_back(t);
-      continue;
+  // In place, in order: triangle r is read before slot r is written; what a clipped triangle
+  // adds beyond the slots read so far waits in `waiting` (a few, from the few triangles clipped),
+  // so that a mesh of hundreds of megabytes is not copied for them.
+  auto& triangles = mesh.triangles;
+  const size_t n = triangles.size();
+  std::vector<std::array<uint32_t, 3>> waiting;
+  size_t first_waiting = 0, w = 0;
+  auto put = [&](const std::array<uint32_t, 3>& t, size_t read) {
+    if (first_waiting == waiting.size() && w <= read) {
+      triangles[w++] = t;
+      return;
     }
-    clip_triangle(box, t[0], t[1], t[2], pos, cross, [&](uint32_t x, uint32_t y, uint32_t z) {
-      triangles.push_back({x, y, z});
-    });
+    waiting.push_back(t);
+  };
+  for (size_t r = 0; r < n; ++r) {
+    const std::array<uint32_t, 3> t = triangles[r];
+    if (!past[t[0]] && !past[t[1]] && !past[t[2]]) {
+      put(t, r);
+    } else {
+      clip_triangle(box, t[0], t[1], t[2], pos, cross, [&](uint32_t x, uint32_t y, uint32_t z) { put({x, y, z}, r); });
+    }
+    while (first_waiting < waiting.size() && w <= r) triangles[w++] = waiting[first_waiting++];
+    if (first_waiting == waiting.size()) waiting.clear(), first_waiting = 0;
   }
-  mesh.triangles = std::move(triangles);
+  triangles.resize(w);
+  triangles.insert(triangles.end(), waiting.begin() + static_cast<std::ptrdiff_t>(first_waiting), waiting.end());
   // Drop the vertices left without a triangle (those past the box, and any whose every triangle
   // was clipped away), keeping the order of the rest.
   std::vector<uint32_t> index(mesh.positions.size(), 0);

@@ -17,8 +17,9 @@
 namespace isotope {
 
 struct BoxClip {
-  std::array<float, 3> face{};   // the far face along each axis, in physical coordinates
-  std::array<bool, 3> active{};  // whether that face lies inside the lattice (else nothing is past it)
+  using Point = std::array<float, 3>;  // physical coordinates, as a mesh holds them
+  std::array<float, 3> face{};         // the far face along each axis, in physical coordinates
+  std::array<bool, 3> active{};        // whether that face lies inside the lattice (else nothing is past it)
   bool any() const { return active[0] || active[1] || active[2]; }
 
   // The box of `dims` data nodes on a lattice of n + 1 nodes per axis, as a mesh built with this
@@ -27,10 +28,8 @@ struct BoxClip {
                     const std::array<double, 3>& spacing);
 };
 
-using Point = std::array<float, 3>;
-
 // How many triangles the triangle (a, b, c) becomes (0 to 8): what clip_to_box leaves of it.
-int clipped_triangles(const BoxClip& box, const Point& a, const Point& b, const Point& c);
+int clipped_triangles(const BoxClip& box, const BoxClip::Point& a, const BoxClip::Point& b, const BoxClip::Point& c);
 
 // Clips every triangle of `mesh` to the box, in place: the triangles keep their order (each
 // replaced by what is left of it), the vertices theirs, new ones follow, and vertices no triangle

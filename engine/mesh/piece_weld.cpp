@@ -28,7 +28,7 @@ bool on_boundary(const Tet& t, const Coord& s) {
 
 }  // namespace
 
-Mesh weld(std::vector<PartMesh>& parts, int64_t side) {
+Mesh weld(std::vector<PartMesh>& parts, int64_t side, bool room_to_clip) {
   // Which vertices are shared candidates, per part, in parallel.
   std::vector<std::vector<bool>> shared(parts.size());
   parallel_for(int64_t{0}, static_cast<int64_t>(parts.size()), [&](int64_t i) {
@@ -43,8 +43,10 @@ Mesh weld(std::vector<PartMesh>& parts, int64_t side) {
     for (bool b : shared[i]) boundary += b;
   }
   Mesh out;
-  out.positions.reserve(vertices);
-  out.triangles.reserve(triangles);
+  // Reserved pages that are never written cost no memory.
+  const auto room = [room_to_clip](size_t n) { return room_to_clip ? n + n / 32 + 1024 : n; };
+  out.positions.reserve(room(vertices));
+  out.triangles.reserve(room(triangles));
   EdgeVertexMap map(boundary);
   std::vector<uint32_t> remap;
   for (size_t i = 0; i < parts.size(); ++i) {

@@ -33,7 +33,7 @@ inline constexpr const char* kRecordNotHeld =
 // then integers of 0..255, a byte each; its bound is a multiple of a half (at each level, the
 // distance of the value at a diamond's centre from the mean of the values at its edge's ends,
 // added over at most 3k <= 57 levels: at most 14,535), kept as a count of halves in 16 bits, or
-// 0xffff for +inf (a diamond that leaves the data box, or one of its descendants does). A uint8
+// 0xffff for +inf (no record of a store holds it, but the code is kept for one that would). A uint8
 // brick then takes 5 bytes a node with its values instead of 9: 5/9 of the memory a coarse
 // extraction touches fresh, and 1.8 times the bricks within a cache's budget (docs/METHOD.md,
 // "Out of core"). Exact both ways: a word reads back as the very 64-bit word it came from.

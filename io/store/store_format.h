@@ -17,7 +17,8 @@
 namespace isotope {
 
 inline constexpr std::array<char, 8> kStoreMagic = {'I', 'S', 'O', 'S', 'T', 'O', 'R', 'E'};
-// 2: three simplification weights per record; 3: compact records in sections, band directories.
+// 2: three simplification weights per record; 3: compact records in sections, band directories;
+// 4: diamonds reaching past the data box hold the clamped field's errors, not infinity.
 inline constexpr uint32_t kStoreVersion = 4;
 inline constexpr size_t kHeaderBytes = 1024;
 inline constexpr size_t kEntryBytes = 24;
