@@ -219,13 +219,10 @@ class Traversal {
         rule_(rule),
         builder_(rule.options().iso, lattice_.side, source.origin(), source.spacing(),
                  levels ? &levels->welds : nullptr),
-        cutter_(rule.options().iso, lattice_.side, source.origin(), source.spacing()),
         box_(BoxClip::of(source.data_dims(), lattice_.n, source.origin(), source.spacing())),
+        clip_(box_.any()),
         levels_(levels) {
-    for (int i = 0; i < 3; ++i) {
-      box_max_[i] = source.data_dims()[i] - 1;
-      clip_ = clip_ || box_max_[i] < lattice_.n;
-    }
+    for (int i = 0; i < 3; ++i) box_max_[i] = source.data_dims()[i] - 1;
   }
 
   // The traversal cut at `level` into pieces, in depth-first order: the subtrees rooted there and
@@ -300,21 +297,8 @@ class Traversal {
   int triangles(const PackedTet& t, const std::array<float, 4>& f, bool positive) const {
     const int n = triangles_of(f, rule_.options().iso);
     if (n == 0 || !clip_ || !past_box(t)) return n;
-    const std::array<Coord, 4> c{unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])};
-    const TetCutter::Cut cut = cutter_.cut(c, f, positive);
-    std::array<BoxClip::Point, 4> p;
-    for (int i = 0; i < cut.points; ++i) {
-      const auto [a, b] = cut.edges[static_cast<size_t>(i)];
-      p[static_cast<size_t>(i)] = cutter_.point(c[static_cast<size_t>(a)], f[static_cast<size_t>(a)],
-                                                c[static_cast<size_t>(b)], f[static_cast<size_t>(b)]);
-    }
-    int count = 0;
-    for (int i = 0; i < cut.triangles; ++i) {
-      const auto& tri = cut.triangle[static_cast<size_t>(i)];
-      count += clipped_triangles(box_, p[static_cast<size_t>(tri[0])], p[static_cast<size_t>(tri[1])],
-                                 p[static_cast<size_t>(tri[2])]);
-    }
-    return count;
+    return clipped_triangles(box_, builder_.cutter(), {unpack(t[0]), unpack(t[1]), unpack(t[2]), unpack(t[3])}, f,
+                             positive);
   }
   int triangles(const PackedTet& t, int level, bool positive) {
     return triangles(t, corner_values(t, level), positive);
@@ -504,10 +488,9 @@ class Traversal {
   const Lattice& lattice_;
   const SplitRule& rule_;
   MeshBuilder builder_;
-  TetCutter cutter_;
   BoxClip box_;
+  bool clip_;  // box_.any(): the data box is smaller than the lattice
   Coord box_max_{};
-  bool clip_ = false;  // the data box is smaller than the lattice
   int64_t tets_visited_ = 0, tets_emitted_ = 0, tets_simplified_ = 0;
   std::vector<Piece>* pieces_ = nullptr;  // while splitting
   LevelScratch<Source> own_levels_;

@@ -100,6 +100,24 @@ int clipped_triangles(const BoxClip& box, const Point& a, const Point& b, const 
   return count;
 }
 
+int clipped_triangles(const BoxClip& box, const TetCutter& cutter, const std::array<Coord, 4>& corners,
+                      const std::array<float, 4>& values, bool positive) {
+  const TetCutter::Cut cut = cutter.cut(corners, values, positive);
+  std::array<Point, 4> p;
+  for (int i = 0; i < cut.points; ++i) {
+    const auto [a, b] = cut.edges[static_cast<size_t>(i)];
+    p[static_cast<size_t>(i)] = cutter.point(corners[static_cast<size_t>(a)], values[static_cast<size_t>(a)],
+                                             corners[static_cast<size_t>(b)], values[static_cast<size_t>(b)]);
+  }
+  int count = 0;
+  for (int i = 0; i < cut.triangles; ++i) {
+    const auto& t = cut.triangle[static_cast<size_t>(i)];
+    count += clipped_triangles(box, p[static_cast<size_t>(t[0])], p[static_cast<size_t>(t[1])],
+                               p[static_cast<size_t>(t[2])]);
+  }
+  return count;
+}
+
 int64_t clipped_triangles(const Mesh& mesh, const BoxClip& box) {
   if (!box.any()) return static_cast<int64_t>(mesh.triangles.size());
   int64_t count = 0;

@@ -12,6 +12,7 @@
 #include <cstdint>
 
 #include "engine/hierarchy/lattice.h"
+#include "engine/mesh/marching_tetrahedra.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
@@ -30,6 +31,12 @@ struct BoxClip {
 
 // How many triangles the triangle (a, b, c) becomes (0 to 8): what clip_to_box leaves of it.
 int clipped_triangles(const BoxClip& box, const BoxClip::Point& a, const BoxClip::Point& b, const BoxClip::Point& c);
+
+// How many triangles marching tetrahedra's of one tetrahedron (`cutter`, as MeshBuilder::add_tet
+// emits them) become: what clip_to_box leaves of them in the welded mesh, since the vertices there
+// have the same positions.
+int clipped_triangles(const BoxClip& box, const TetCutter& cutter, const std::array<Coord, 4>& corners,
+                      const std::array<float, 4>& values, bool positive);
 
 // Clips every triangle of `mesh` to the box, in place: the triangles keep their order (each
 // replaced by what is left of it), the vertices theirs, new ones follow, and vertices no triangle

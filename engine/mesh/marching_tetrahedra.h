@@ -64,7 +64,6 @@ class TetCutter {
   // The welding key of grid edge (p, q) and the position of its vertex (physical coordinates).
   uint64_t edge_key(const Coord& p, const Coord& q) const;
   std::array<float, 3> point(const Coord& p, float fp, const Coord& q, float fq) const;
-  float iso() const { return iso_; }
 
  private:
   float iso_;
@@ -88,6 +87,10 @@ class MeshBuilder {
   // With a memo, the corners must lie in its current box.
   void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
                EdgeMemo* memo = nullptr);
+
+  // The triangles add_tet emits, unwelded (what a count of the mesh's triangles after clipping
+  // builds again: engine/mesh/box_clip.h).
+  const TetCutter& cutter() const { return cutter_; }
 
   Mesh take() { return std::move(mesh_); }
   // The edge key of every vertex, in vertex order (kept only when asked for, by keep_keys()):
