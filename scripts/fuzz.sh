@@ -27,7 +27,7 @@ done
 
 if [ "$build" = 1 ]; then
   cmake -S . -B build-fuzz -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-    -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DISOTOPE_FUZZ=ON -DISOTOPE_SANITIZE=address,undefined -DISOTOPE_WERROR=ON > /dev/null
+    -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DISOTOPE_FUZZ=ON -DISOTOPE_SANITIZE=address,undefined -DISOTOPE_WERROR=ON > /dev/null
   cmake --build build-fuzz -j "$(nproc)"
 fi
 

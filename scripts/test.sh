@@ -52,9 +52,11 @@ ISOTOPE="$PWD/build-ci/tools/isotope" build-ci/venv/bin/python -m pytest -p no:c
   | tee "$log.pytest"
 
 phase "RelWithDebInfo, address,undefined sanitizers (build-asan)"
-# Assertions stay on here (no NDEBUG): they check the traversal's invariants on every test. -g1:
-# line tables, all the sanitizers' reports need to name file and line, for a shorter build.
-cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1" -DISOTOPE_WERROR=ON \
+# Assertions stay on here (no NDEBUG): they check the traversal's invariants on every test. -O1
+# -g1 (the sanitizers' advice, and line tables: all their reports need to name file and line):
+# measured on 2 cores, the build takes 619 s against 1015 s at -O2 -g, and the tests 295 s
+# against 272 s. The same for the TSan build below: 295 s against 457 s, tests 284 s against 266 s.
+cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=address,undefined -DISOTOPE_BUILD_BENCH=OFF -DISOTOPE_UNITY_TOOLS=ON
 cmake --build build-asan -j "$jobs"
 phase "ASan+UBSan tests"
@@ -82,7 +84,7 @@ run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "sl
 # The parallel paths under ThreadSanitizer (engine/core/parallel.h runs them on std::threads there), and
 # the server: its worker threads, concurrent extractions and supersession.
 phase "RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
-cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1" -DISOTOPE_WERROR=ON \
+cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF
 cmake --build build-tsan --target test_determinism test_distribution test_store test_paged_extract test_triangle_budget test_exact_full_resolution test_serve -j "$jobs"
 phase "TSan tests"
