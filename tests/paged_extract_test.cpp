@@ -16,8 +16,10 @@
 #include <fstream>
 #include <limits>
 #include <random>
+#include <span>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "engine/core/fields.h"
@@ -1064,6 +1066,38 @@ TEST(NarrowBounds, TakeEveryRecordOfOneByteValuesExactlyAndNothingElse) {
       words[at] = w;
       std::vector<uint32_t> out(words.size());
       EXPECT_FALSE(narrow_bounds(words.data(), words.size(), out.data())) << name << " at " << at;
+    }
+}
+
+// fewest_bytes gives 1 for integers of 0..255, 2 for those up to 65535, and 4 as soon as one value
+// is anything else, wherever it stands: at the first and last values, and on each side of 512.
+TEST(FewestBytes, HoldEveryIntegerInItsWidthAndNothingElse) {
+  std::vector<float> all(65536);
+  for (int k = 0; k < 65536; ++k) all[static_cast<size_t>(k)] = static_cast<float>(k);
+  EXPECT_EQ(fewest_bytes(std::span<const float>(all).first(256)), 1);
+  EXPECT_EQ(fewest_bytes(all), 2);
+  for (int k = 256; k < 65536; ++k) ASSERT_EQ(fewest_bytes(std::vector<float>(3, static_cast<float>(k))), 2) << k;
+  constexpr float kInfinity = std::numeric_limits<float>::infinity();
+  const std::vector<std::pair<const char*, float>> wide = {
+      {"-0", -0.0f},
+      {"-1", -1.0f},
+      {"-65535", -65535.0f},
+      {"0.5", 0.5f},
+      {"255.5", 255.5f},
+      {"a denormal", std::numeric_limits<float>::denorm_min()},
+      {"65536", 65536.0f},
+      {"65535.5", 65535.5f},
+      {"1e9", 1e9f},
+      {"+inf", kInfinity},
+      {"-inf", -kInfinity},
+      {"NaN", std::numeric_limits<float>::quiet_NaN()},
+      {"-NaN", -std::numeric_limits<float>::quiet_NaN()},
+  };
+  for (const auto& [name, v] : wide)
+    for (const size_t at : {size_t{0}, size_t{511}, size_t{512}, size_t{999}}) {
+      std::vector<float> values(1000, 7.0f);
+      values[at] = v;
+      EXPECT_EQ(fewest_bytes(values), 4) << name << " at " << at;
     }
 }
 

@@ -20,15 +20,18 @@ std::string value_not_held(const StoreHeader& h) {
                                              : "an integer of the header's " + h.source_type + " range");
 }
 
-// The fewest bytes (1, 2 or 4) that hold every value exactly. Bit operations only, so that it
-// vectorizes: every brick read is checked.
+// The fewest bytes (1, 2 or 4) that hold every value exactly. On the bits, branch-free, so that
+// it vectorizes: every brick read is checked. A non-negative float orders as its bits do; a
+// negative one (-0 too) or a NaN has bits above those of 65535 and clamps to it. The integer's
+// float must then be v's very bits: that rejects negatives, -0, NaN, fractions and what the clamp
+// moved.
 int fewest_bytes(std::span<const float> values) {
+  constexpr uint32_t k65535 = std::bit_cast<uint32_t>(65535.0f);
   uint32_t not_short = 0, not_byte = 0;
   for (const float v : values) {
-    // Clamped first, so that the conversion is defined (a NaN clamps to 0). The integer's float
-    // must be v's very bits: that rejects -0.0, NaN, fractions and what the clamp moved.
-    const int32_t k = static_cast<int32_t>(std::min(65535.0f, std::max(0.0f, v)));
-    not_short |= std::bit_cast<uint32_t>(static_cast<float>(k)) ^ std::bit_cast<uint32_t>(v);
+    const auto bits = std::bit_cast<uint32_t>(v);
+    const auto k = static_cast<int32_t>(std::bit_cast<float>(std::min(bits, k65535)));
+    not_short |= std::bit_cast<uint32_t>(static_cast<float>(k)) ^ bits;
     not_byte |= static_cast<uint32_t>(k) & ~0xffu;
   }
   return not_short != 0 ? 4 : not_byte != 0 ? 2 : 1;
