@@ -189,11 +189,13 @@ struct LevelScratch {
     // At its corners, when the walk carries them (Traversal::kCarryValues); NaN: not read yet.
     std::array<float, 4> values;
     int level;
+    bool near;  // it reaches past the data box (Traversal::past_box); else no tetrahedron below it does
   };
   std::vector<Root> roots;  // of the chunks still to walk, the next one last
   Scratch<Child> frontier, next;
   Scratch<std::array<float, 4>> frontier_values, next_values;  // at the corners of frontier and next, when carried
   Scratch<typename Source::Reader::Handle> handles;            // of frontier
+  Scratch<uint8_t> frontier_near, next_near;                   // Root::near of frontier and next
   // The welding table of the traversal's mesh (MeshBuilder): lent with the rest, it keeps the size
   // of the largest piece's, emptied in O(1), where a table per piece grew from small each time.
   EdgeVertexMap welds{0};
@@ -333,9 +335,10 @@ class Traversal {
   static constexpr bool kCarryValues = requires(typename Source::Reader & r, const Handle& h) { r.value_at_record(h); };
   static constexpr float kUnread = std::numeric_limits<float>::quiet_NaN();  // no value is NaN
   // h: where the record of t's refinement vertex lives (unused at the leaves).
-  Step step(const PackedTet& t, int level, const Handle& h) {
+  // near: t may lie beyond the data box (only a tetrahedron that reaches past it can).
+  Step step(const PackedTet& t, int level, const Handle& h, bool near) {
     ++tets_visited_;
-    if (clip_ && outside_box(t)) return Step::cull;
+    if (near && outside_box(t)) return Step::cull;
     if (level == lattice_.max_level()) return Step::stop;
     const DiamondBounds b = reader_.bounds(h, rule_.fields());
     if (!rule_.in_range(b)) return Step::cull;
@@ -359,7 +362,7 @@ class Traversal {
 
   void visit(const PackedTet& t, int level, bool positive) {
     if (pieces_ && level == split_level_) return pieces_->push_back({t, level, positive, false});
-    switch (step(t, level, locate(t, level))) {
+    switch (step(t, level, locate(t, level), clip_)) {
       case Step::cull: return;
       case Step::stop: return emit(t, level, positive);
       case Step::refine:
@@ -373,18 +376,22 @@ class Traversal {
   // roots of the next chunks, walked depth first, so that a chunk stays within a region a few
   // bricks across however large the subtree (docs/METHOD.md, "In parallel"), and the order depends
   // on the tree alone, not on which tetrahedra were culled. The same tetrahedra stop and are
-  // emitted as in visit(), in another order.
+  // emitted as in visit(), in another order. A tetrahedron within the data box has its children
+  // within it too: the walk tests for the box only below those that reach past it (`near`), a
+  // few along the box's far faces, instead of at every tetrahedron.
   static constexpr int kChunkLevels = 12;
   void visit_by_levels(const PackedTet& t, int level, bool positive) {
     LevelScratch<Source>& s = levels_ ? *levels_ : own_levels_;
     s.roots.clear();
-    s.roots.push_back({Child{t, positive}, {}, level});
+    s.roots.push_back({Child{t, positive}, {}, level, clip_ && past_box(t)});
     if constexpr (kCarryValues) s.roots.back().values = {kUnread, kUnread, kUnread, kUnread};
     while (!s.roots.empty()) {
       const auto root = s.roots.back();
       s.roots.pop_back();
       s.frontier.reserve(1);
       s.frontier[0] = root.tet;
+      s.frontier_near.reserve(1);
+      s.frontier_near[0] = root.near;
       if constexpr (kCarryValues) {
         s.frontier_values.reserve(1);
         s.frontier_values[0] = root.values;
@@ -397,17 +404,19 @@ class Traversal {
       for (; n > 0 && l < end; ++l) {
         s.handles.reserve(n);
         s.next.reserve(2 * n);  // written by index: a refined tetrahedron has two children
+        s.next_near.reserve(2 * n);
         if constexpr (kCarryValues) s.next_values.reserve(2 * n);
         if (l < lattice_.max_level())
           for (size_t i = 0; i < n; ++i) {
-            if (clip_ && outside_box(s.frontier[i].tet)) continue;  // see locate() below
+            if (s.frontier_near[i] && outside_box(s.frontier[i].tet)) continue;  // see locate() below
             s.handles[i] = reader_.locate((s.frontier[i].tet[0] + s.frontier[i].tet[1]) >> 1);
             reader_.prefetch(s.handles[i]);
           }
         size_t next = 0;
         for (size_t i = 0; i < n; ++i) {
           const Child& c = s.frontier[i];
-          switch (step(c.tet, l, s.handles[i])) {
+          const bool near = s.frontier_near[i];
+          switch (step(c.tet, l, s.handles[i], near)) {
             case Step::cull: break;
             case Step::stop:
               if constexpr (kCarryValues)
@@ -422,6 +431,8 @@ class Traversal {
                 s.next_values[next] = values[0];
                 s.next_values[next + 1] = values[1];
               }
+              s.next_near[next] = near && past_box(children[0].tet);
+              s.next_near[next + 1] = near && past_box(children[1].tet);
               s.next[next++] = children[0];
               s.next[next++] = children[1];
             }
@@ -429,10 +440,11 @@ class Traversal {
         }
         std::swap(s.frontier, s.next);
         std::swap(s.frontier_values, s.next_values);
+        std::swap(s.frontier_near, s.next_near);
         n = next;
       }
       for (size_t i = n; i-- > 0;) {  // the first on top
-        s.roots.push_back({s.frontier[i], {}, l});
+        s.roots.push_back({s.frontier[i], {}, l, s.frontier_near[i] != 0});
         if constexpr (kCarryValues) s.roots.back().values = s.frontier_values[i];
       }
     }
