@@ -8,6 +8,10 @@
 #include <optional>
 #include <string>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "isotope/error.h"
 
 namespace isotope {
@@ -239,6 +243,36 @@ void encode_integer(std::span<const float> values, const IntegerPlan& plan, std:
   }
 }
 
+// The offsets of `count` one-byte zigzagged deltas that follow `offset`: their running sum modulo
+// 256. Sixteen at a time where SSE2 is (every x86-64): the smooth fields of a uint8 store (values,
+// ranges) are such deltas, and a sum within a register takes four shifted adds where a loop
+// carries one add per value. Returns the last offset.
+uint32_t running_bytes(const uint8_t* z, size_t count, uint32_t offset, uint8_t* out) {
+  size_t i = 0;
+#if defined(__SSE2__)
+  const __m128i one = _mm_set1_epi8(1), low7 = _mm_set1_epi8(0x7f);
+  __m128i carry = _mm_set1_epi8(static_cast<char>(offset));
+  for (; i + 16 <= count; i += 16) {
+    const __m128i w = _mm_loadu_si128(reinterpret_cast<const __m128i*>(z + i));
+    // unzigzag: (z >> 1) ^ -(z & 1), in bytes
+    __m128i d = _mm_xor_si128(_mm_and_si128(_mm_srli_epi16(w, 1), low7), _mm_cmpeq_epi8(_mm_and_si128(w, one), one));
+    d = _mm_add_epi8(d, _mm_slli_si128(d, 1));
+    d = _mm_add_epi8(d, _mm_slli_si128(d, 2));
+    d = _mm_add_epi8(d, _mm_slli_si128(d, 4));
+    d = _mm_add_epi8(d, _mm_slli_si128(d, 8));
+    d = _mm_add_epi8(d, carry);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i), d);
+    offset = static_cast<uint32_t>(_mm_extract_epi16(d, 7)) >> 8;
+    carry = _mm_set1_epi8(static_cast<char>(offset));
+  }
+#endif
+  for (; i < count; ++i) {
+    offset = (offset + unzigzag<1>(z[i])) & kWidthMask<1>;
+    out[i] = static_cast<uint8_t>(offset);
+  }
+  return offset;
+}
+
 // Two passes a block at a time: the codes (a running sum where deltas are stored, carried from
 // value to value), then their values, a loop with no carry and no branch, so that it vectorizes:
 // every brick read decodes its values and records here (a third of a coarse extraction's decoding
@@ -253,13 +287,19 @@ void decode_codes(const uint8_t* planes, uint32_t min_code, uint32_t inf_code, b
   uint32_t offset = 0;
   for (size_t first = 0; first < n; first += kBlock) {
     const size_t count = std::min(kBlock, n - first);
-    for (size_t i = 0; i < count; ++i) {
-      const uint32_t w = word_at<W>(planes, n, first + i);
-      if constexpr (Delta) {
-        offset = (offset + unzigzag<W>(w)) & kWidthMask<W>;
-        code[i] = min_code + offset;
-      } else {
-        code[i] = min_code + w;
+    if constexpr (W == 1 && Delta) {
+      uint8_t run[kBlock];
+      offset = running_bytes(planes + first, count, offset, run);
+      for (size_t i = 0; i < count; ++i) code[i] = min_code + run[i];
+    } else {
+      for (size_t i = 0; i < count; ++i) {
+        const uint32_t w = word_at<W>(planes, n, first + i);
+        if constexpr (Delta) {
+          offset = (offset + unzigzag<W>(w)) & kWidthMask<W>;
+          code[i] = min_code + offset;
+        } else {
+          code[i] = min_code + w;
+        }
       }
     }
     float* out = values.data() + first;
