@@ -281,6 +281,49 @@ TEST(FieldCodecRoundTrip, ConcatenatedFieldsDecodeOneAfterAnother) {
   EXPECT_EQ(p, all.data() + all.size());
 }
 
+// Any payload bytes decode as the format defines them, value by value: offsets are the bytes'
+// little-endian words across the W planes, or the running sum of their zigzagged deltas modulo
+// 2^(8W); a code is the minimum plus the offset, +inf where the field has +inf and the code is
+// its +inf code, else code x scale. Random bytes reach what smooth fields rarely do (deltas of
+// 0x80 and more, codes equal to the +inf code in a field without +inf), at counts that end
+// within a block of the decoder and within one of its sixteen-byte steps.
+TEST(FieldCodecRoundTrip, AnyIntegerPayloadDecodesAsTheFormatDefinesIt) {
+  std::mt19937 rng(2026);
+  int64_t checked = 0;
+  for (const uint8_t width : {uint8_t{1}, uint8_t{2}, uint8_t{4}})
+    for (const uint8_t flags : {uint8_t{0}, uint8_t{1}, uint8_t{2}, uint8_t{3}})  // has +inf, delta
+      for (const uint8_t multiplier : {uint8_t{1}, uint8_t{2}})
+        for (const size_t n :
+             {size_t{1}, size_t{15}, size_t{17}, size_t{511}, size_t{513}, size_t{1040}, size_t{4096}}) {
+          // Codes within a few of the minimum, so that the +inf code (min + 3) recurs.
+          const uint32_t min_code = static_cast<uint32_t>(rng() % 1000), inf_code = min_code + 3;
+          Bytes bytes{kInteger};
+          for (int b = 0; b < 8; ++b) bytes.push_back(static_cast<uint8_t>(uint64_t{n} >> (8 * b)));
+          bytes.insert(bytes.end(), {multiplier, width, flags});
+          for (const uint32_t v : {min_code, inf_code})
+            for (int b = 0; b < 4; ++b) bytes.push_back(static_cast<uint8_t>(v >> (8 * b)));
+          const size_t payload = bytes.size();
+          for (size_t i = 0; i < n * width; ++i) bytes.push_back(static_cast<uint8_t>(rng() % 5 == 0 ? 3 : rng()));
+          const Floats got = decode(bytes, n);
+          const uint32_t mask = width == 4 ? ~0u : (1u << (8 * width)) - 1;
+          uint32_t offset = 0;
+          for (size_t i = 0; i < n; ++i) {
+            uint32_t w = 0;
+            for (int b = 0; b < width; ++b) w |= uint32_t{bytes[payload + static_cast<size_t>(b) * n + i]} << (8 * b);
+            offset = (flags & 2) ? (offset + (((w >> 1) ^ (0u - (w & 1))) & mask)) & mask : w;
+            const uint32_t code = min_code + offset;
+            const float want = (flags & 1) && code == inf_code
+                                   ? kInf
+                                   : static_cast<float>(static_cast<int32_t>(code)) * (multiplier == 2 ? 0.5f : 1.0f);
+            ASSERT_EQ(std::bit_cast<uint32_t>(got[i]), std::bit_cast<uint32_t>(want))
+                << "width " << int{width} << ", flags " << int{flags} << ", multiplier " << int{multiplier}
+                << ", count " << n << ", value " << i;
+            ++checked;
+          }
+        }
+  EXPECT_GT(checked, 0);
+}
+
 // ---- the byte layout of docs/FORMAT.md ----
 
 TEST(FieldCodecLayout, ConstantIsModeCountAndBits) {

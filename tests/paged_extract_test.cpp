@@ -1070,7 +1070,7 @@ TEST(NarrowBounds, TakeEveryRecordOfOneByteValuesExactlyAndNothingElse) {
 }
 
 // fewest_bytes gives 1 for integers of 0..255, 2 for those up to 65535, and 4 as soon as one value
-// is anything else, wherever it stands: at the first and last values, and on each side of 512.
+// is anything else, wherever it stands: first, last, and within a vectorized loop's steps or its tail.
 TEST(FewestBytes, HoldEveryIntegerInItsWidthAndNothingElse) {
   std::vector<float> all(65536);
   for (int k = 0; k < 65536; ++k) all[static_cast<size_t>(k)] = static_cast<float>(k);

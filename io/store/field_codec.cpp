@@ -274,9 +274,9 @@ uint32_t running_bytes(const uint8_t* z, size_t count, uint32_t offset, uint8_t*
 }
 
 // Two passes a block at a time: the codes (a running sum where deltas are stored, carried from
-// value to value), then their values, a loop with no carry and no branch, so that it vectorizes:
-// every brick read decodes its values and records here (a third of a coarse extraction's decoding
-// was this loop as one pass).
+// value to value), then their values, a loop with no carry and no branch, so that it vectorizes
+// (one loop that carries the sum and branches on +inf does not): every brick read decodes its
+// values and records here.
 template <int W, bool Delta>
 void decode_codes(const uint8_t* planes, uint32_t min_code, uint32_t inf_code, bool has_inf, float scale,
                   std::span<float> values) {
