@@ -189,13 +189,14 @@ struct LevelScratch {
     // At its corners, when the walk carries them (Traversal::kCarryValues); NaN: not read yet.
     std::array<float, 4> values;
     int level;
-    bool near;  // it reaches past the data box (Traversal::past_box); else no tetrahedron below it does
   };
   std::vector<Root> roots;  // of the chunks still to walk, the next one last
   Scratch<Child> frontier, next;
   Scratch<std::array<float, 4>> frontier_values, next_values;  // at the corners of frontier and next, when carried
   Scratch<typename Source::Reader::Handle> handles;            // of frontier
-  Scratch<uint8_t> frontier_near, next_near;                   // Root::near of frontier and next
+  // Of frontier and next: the tetrahedron reaches past the data box (Traversal::past_box). Else no
+  // tetrahedron below it does, and the walk does not ask again.
+  Scratch<uint8_t> frontier_near, next_near;
   // The welding table of the traversal's mesh (MeshBuilder): lent with the rest, it keeps the size
   // of the largest piece's, emptied in O(1), where a table per piece grew from small each time.
   EdgeVertexMap welds{0};
@@ -383,7 +384,7 @@ class Traversal {
   void visit_by_levels(const PackedTet& t, int level, bool positive) {
     LevelScratch<Source>& s = levels_ ? *levels_ : own_levels_;
     s.roots.clear();
-    s.roots.push_back({Child{t, positive}, {}, level, clip_ && past_box(t)});
+    s.roots.push_back({Child{t, positive}, {}, level});
     if constexpr (kCarryValues) s.roots.back().values = {kUnread, kUnread, kUnread, kUnread};
     while (!s.roots.empty()) {
       const auto root = s.roots.back();
@@ -391,7 +392,7 @@ class Traversal {
       s.frontier.reserve(1);
       s.frontier[0] = root.tet;
       s.frontier_near.reserve(1);
-      s.frontier_near[0] = root.near;
+      s.frontier_near[0] = clip_ && past_box(root.tet.tet);
       if constexpr (kCarryValues) {
         s.frontier_values.reserve(1);
         s.frontier_values[0] = root.values;
@@ -444,7 +445,7 @@ class Traversal {
         n = next;
       }
       for (size_t i = n; i-- > 0;) {  // the first on top
-        s.roots.push_back({s.frontier[i], {}, l, s.frontier_near[i] != 0});
+        s.roots.push_back({s.frontier[i], {}, l});
         if constexpr (kCarryValues) s.roots.back().values = s.frontier_values[i];
       }
     }
