@@ -249,6 +249,53 @@ TEST(CrackFree, ClippingAtTheBoxEndsOnItsFacesWeldsWhatItCutsAndCountsWhatItLeav
   EXPECT_EQ(clipped, 9);
 }
 
+// The clip runs over blocks of triangles in parallel: blocks that grow (a triangle cut into two
+// with nothing dropped beside it), shrink or stay, sliding up or down to their places, leave the
+// mesh that one block leaves, whatever the block size. One block is the single pass in order.
+TEST(CrackFree, ClippingInBlocksLeavesTheMeshOfOneBlock) {
+  const MultiresVolume mv = MultiresVolume::build(generate_sphere(33));
+  ExtractOptions o;
+  o.eps = 0.02;
+  const Mesh closed = extract(mv, o);
+  BoxClip box;
+  box.face = {0.2f, 0.35f, -0.1f};
+  box.active = {true, true, true};
+  Mesh one = closed;
+  clip_to_box(one, box, closed.triangles.size());
+  ASSERT_LT(one.triangles.size(), closed.triangles.size());
+  ASSERT_GT(one.positions.size(), 0u);
+  for (size_t block : {size_t{1}, size_t{2}, size_t{3}, size_t{7}, size_t{64}, size_t{1000}, size_t{1} << 16}) {
+    Mesh m = closed;
+    clip_to_box(m, box, block);
+    EXPECT_TRUE(m.positions == one.positions) << "block " << block;
+    EXPECT_TRUE(m.triangles == one.triangles) << "block " << block;
+  }
+  // And where blocks grow: every triangle's first corner lies past the x face, its others inside,
+  // so each becomes two.
+  Mesh fan;
+  fan.positions = {{0, 0, 0}};
+  for (int i = 0; i < 50; ++i) {
+    const auto k = static_cast<uint32_t>(fan.positions.size());
+    const float y = static_cast<float>(i);
+    fan.positions.push_back({2, y, 0});
+    fan.positions.push_back({0, y + 1, 0});
+    fan.triangles.push_back({k, k + 1, 0});
+    if (i % 3 == 0) fan.triangles.push_back({k, k, k});  // wholly past: dropped
+  }
+  BoxClip x;
+  x.face = {1, 100, 100};
+  x.active = {true, false, false};
+  Mesh fan_one = fan;
+  clip_to_box(fan_one, x, fan.triangles.size());
+  ASSERT_GT(fan_one.triangles.size(), fan.triangles.size());
+  for (size_t block : {size_t{1}, size_t{2}, size_t{3}, size_t{4}, size_t{5}, size_t{16}}) {
+    Mesh m = fan;
+    clip_to_box(m, x, block);
+    EXPECT_TRUE(m.positions == fan_one.positions) << "block " << block;
+    EXPECT_TRUE(m.triangles == fan_one.triangles) << "block " << block;
+  }
+}
+
 // A volume of 2^k nodes a side sits on a lattice one node larger, so every diamond at its far faces
 // reaches past the data box. Such a diamond stops by its error on the field clamped into the box
 // (docs/METHOD.md, "Volumes that are not (2^k+1)^3"): where that field is the data's own

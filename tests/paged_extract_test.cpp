@@ -1163,7 +1163,13 @@ TEST_F(PagedParallel, SameBytesThroughAUint8Store) {
       path, o);
   const StoreReader store(path);
   ASSERT_EQ(BrickCache(store, 1).value_bytes(), 1);
-  expect_same_bytes("neghip uint8", testing::load_shared(neghip), neghip.isovalues[0], store, {2, 8});
+  // Under ThreadSanitizer one parallel count holds the races to find (36 s a count there).
+#if defined(__SANITIZE_THREAD__)
+  const std::vector<size_t> threads = {8};
+#else
+  const std::vector<size_t> threads = {2, 8};
+#endif
+  expect_same_bytes("neghip uint8", testing::load_shared(neghip), neghip.isovalues[0], store, threads);
 }
 
 // A sample of the bricks on many threads: what scripts/test.sh runs under ThreadSanitizer.

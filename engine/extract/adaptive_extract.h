@@ -103,8 +103,12 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
   // What reaches past the data box is clipped to it once welded (engine/mesh/box_clip.h).
   const BoxClip box = BoxClip::of(source.data_dims(), source.lattice().n, source.origin(), source.spacing());
   if (check) {
+    std::vector<int64_t> counts(parts.size());
+    parallel_for(int64_t{0}, static_cast<int64_t>(parts.size()), [&](int64_t i) {
+      counts[static_cast<size_t>(i)] = clipped_triangles(parts[static_cast<size_t>(i)].mesh, box);
+    });
     int64_t mine = 0;
-    for (const PartMesh& p : parts) mine += clipped_triangles(p.mesh, box);
+    for (int64_t c : counts) mine += c;
     if (!check(mine)) return false;
   }
   if (group && !options.keep_shares) parts = gather_parts(*group, std::move(parts));  // rank 0's parts: all of them

@@ -1,9 +1,12 @@
 #include "engine/mesh/box_clip.h"
 
 #include <algorithm>
+#include <atomic>
 #include <unordered_map>
 #include <utility>
 #include <vector>
+
+#include "engine/core/parallel.h"
 
 namespace isotope {
 namespace {
@@ -126,13 +129,39 @@ int64_t clipped_triangles(const Mesh& mesh, const BoxClip& box) {
   return count;
 }
 
-void clip_to_box(Mesh& mesh, const BoxClip& box) {
+void clip_to_box(Mesh& mesh, const BoxClip& box) { clip_to_box(mesh, box, size_t{1} << 16); }
+
+void clip_to_box(Mesh& mesh, const BoxClip& box, size_t block) {
   if (!box.any()) return;
+  auto& triangles = mesh.triangles;
+  const size_t n = triangles.size();
+  // Blocks of triangles or vertices, for the passes that run in parallel.
+  const size_t per_block = std::max<size_t>(block, 1);
+  const auto blocks_of = [per_block](size_t count) { return (count + per_block - 1) / per_block; };
+  const auto block_end = [per_block](size_t b, size_t count) { return std::min(count, (b + 1) * per_block); };
   const size_t vertices = mesh.positions.size();
-  std::vector<bool> past(vertices);
-  bool any = false;
-  for (size_t v = 0; v < vertices; ++v) any |= past[v] = reaches_past(box, mesh.positions[v]);
-  if (!any) return;
+  std::vector<uint8_t> past(vertices);
+  std::atomic<bool> any{false};
+  parallel_for(int64_t{0}, static_cast<int64_t>(blocks_of(vertices)), [&](int64_t i) {
+    const auto b = static_cast<size_t>(i);
+    bool mine = false;
+    for (size_t v = b * per_block; v < block_end(b, vertices); ++v)
+      mine |= (past[v] = reaches_past(box, mesh.positions[v])) != 0;
+    if (mine) any.store(true, std::memory_order_relaxed);
+  });
+  if (!any.load()) return;
+  // The triangles that reach past the box, a few along its far faces: found per block in parallel,
+  // then clipped in order, so that the crossings are made in the order one pass over the triangles
+  // meets them.
+  const size_t blocks = blocks_of(n);
+  std::vector<std::vector<size_t>> reaching(blocks);
+  parallel_for(int64_t{0}, static_cast<int64_t>(blocks), [&](int64_t i) {
+    const auto b = static_cast<size_t>(i);
+    for (size_t r = b * per_block; r < block_end(b, n); ++r) {
+      const auto& t = triangles[r];
+      if (past[t[0]] | past[t[1]] | past[t[2]]) reaching[b].push_back(r);
+    }
+  });
   // The crossings made so far, by the edge's inside and outside vertex and the face's axis.
   std::array<std::unordered_map<uint64_t, uint32_t>, 3> made;
   auto pos = [&](uint32_t v) -> Point { return mesh.positions[v]; };
@@ -144,46 +173,108 @@ void clip_to_box(Mesh& mesh, const BoxClip& box) {
           crossing(mesh.positions[in], mesh.positions[out], axis, box.face[static_cast<size_t>(axis)]));
     return it->second;
   };
-  // In place, in order: triangle r is read before slot r is written; what a clipped triangle
-  // adds beyond the slots read so far waits in `waiting` (a few, from the few triangles clipped),
-  // so that a mesh of hundreds of megabytes is not copied for them.
-  auto& triangles = mesh.triangles;
-  const size_t n = triangles.size();
-  std::vector<std::array<uint32_t, 3>> waiting;
-  size_t first_waiting = 0, w = 0;
-  auto put = [&](const std::array<uint32_t, 3>& t, size_t read) {
-    if (first_waiting == waiting.size() && w <= read) {
-      triangles[w++] = t;
+  std::vector<size_t> rows;                   // the clipped triangles, in order
+  std::vector<size_t> first_row(blocks + 1);  // each block's first in `rows`
+  std::vector<std::array<uint32_t, 3>> left;  // what they became, in order
+  std::vector<size_t> first_left{0};          // each clipped triangle's first in `left`
+  std::vector<size_t> kept(blocks);           // triangles each block ends with
+  for (size_t b = 0; b < blocks; ++b) {
+    first_row[b] = rows.size();
+    const size_t left_before = left.size();
+    for (size_t r : reaching[b]) {
+      const auto t = triangles[r];
+      clip_triangle(box, t[0], t[1], t[2], pos, cross, [&](uint32_t x, uint32_t y, uint32_t z) {
+        left.push_back({x, y, z});
+      });
+      rows.push_back(r);
+      first_left.push_back(left.size());
+    }
+    kept[b] = block_end(b, n) - b * per_block - reaching[b].size() + (left.size() - left_before);
+    reaching[b] = {};
+  }
+  first_row[blocks] = rows.size();
+  // What each block becomes: those with a clipped triangle are rebuilt from a copy of themselves,
+  // in place when they do not grow (what lies past the box is mostly dropped), else beside.
+  std::vector<std::vector<std::array<uint32_t, 3>>> grown(blocks);
+  parallel_for(int64_t{0}, static_cast<int64_t>(blocks), [&](int64_t i) {
+    const auto b = static_cast<size_t>(i);
+    if (first_row[b] == first_row[b + 1]) return;
+    const auto begin = triangles.begin() + static_cast<std::ptrdiff_t>(b * per_block);
+    const auto end = triangles.begin() + static_cast<std::ptrdiff_t>(block_end(b, n));
+    thread_local std::vector<std::array<uint32_t, 3>> copy;
+    copy.assign(begin, end);
+    std::array<uint32_t, 3>* out = triangles.data() + b * per_block;
+    if (kept[b] > copy.size()) {
+      grown[b].resize(kept[b]);
+      out = grown[b].data();
+    }
+    size_t row = first_row[b];
+    for (size_t k = 0; k < copy.size(); ++k) {
+      if (row < first_row[b + 1] && rows[row] == b * per_block + k) {
+        out = std::copy(left.begin() + static_cast<std::ptrdiff_t>(first_left[row]),
+                        left.begin() + static_cast<std::ptrdiff_t>(first_left[row + 1]), out);
+        ++row;
+      } else {
+        *out++ = copy[k];
+      }
+    }
+  });
+  // The blocks slid to their places, serially: those moving up first, from the last, then the
+  // others from the first, so that no block is overwritten before it moved (the places keep the
+  // blocks' order).
+  std::vector<size_t> to(blocks + 1, 0);
+  for (size_t b = 0; b < blocks; ++b) to[b + 1] = to[b] + kept[b];
+  if (to[blocks] > n) triangles.resize(to[blocks]);
+  auto move = [&](size_t b) {
+    const auto dest = triangles.begin() + static_cast<std::ptrdiff_t>(to[b]);
+    const auto count = static_cast<std::ptrdiff_t>(kept[b]);
+    if (!grown[b].empty()) {
+      std::copy(grown[b].begin(), grown[b].end(), dest);
+      grown[b] = {};
       return;
     }
-    waiting.push_back(t);
+    const auto from = triangles.begin() + static_cast<std::ptrdiff_t>(b * per_block);
+    if (to[b] > b * per_block)
+      std::copy_backward(from, from + count, dest + count);
+    else if (to[b] < b * per_block)
+      std::copy(from, from + count, dest);
   };
-  for (size_t r = 0; r < n; ++r) {
-    const std::array<uint32_t, 3> t = triangles[r];
-    if (!past[t[0]] && !past[t[1]] && !past[t[2]]) {
-      put(t, r);
-    } else {
-      clip_triangle(box, t[0], t[1], t[2], pos, cross, [&](uint32_t x, uint32_t y, uint32_t z) { put({x, y, z}, r); });
-    }
-    while (first_waiting < waiting.size() && w <= r) triangles[w++] = waiting[first_waiting++];
-    if (first_waiting == waiting.size()) waiting.clear(), first_waiting = 0;
-  }
-  triangles.resize(w);
-  triangles.insert(triangles.end(), waiting.begin() + static_cast<std::ptrdiff_t>(first_waiting), waiting.end());
+  for (size_t b = blocks; b-- > 0;)
+    if (to[b] > b * per_block) move(b);
+  for (size_t b = 0; b < blocks; ++b)
+    if (to[b] <= b * per_block) move(b);
+  triangles.resize(to[blocks]);
   // Drop the vertices left without a triangle (those past the box, and any whose every triangle
   // was clipped away), keeping the order of the rest.
-  std::vector<uint32_t> index(mesh.positions.size(), 0);
-  for (const auto& t : mesh.triangles)
-    for (uint32_t v : t) index[v] = 1;
-  uint32_t kept = 0;
-  for (size_t v = 0; v < index.size(); ++v) {
-    if (!index[v]) continue;
-    mesh.positions[kept] = mesh.positions[v];
-    index[v] = kept++;
-  }
-  mesh.positions.resize(kept);
-  for (auto& t : mesh.triangles)
-    for (uint32_t& v : t) v = index[v];
+  const size_t all = mesh.positions.size();
+  std::vector<uint8_t> used(all, 0);
+  parallel_for(int64_t{0}, static_cast<int64_t>(blocks_of(triangles.size())), [&](int64_t i) {
+    const auto b = static_cast<size_t>(i);
+    for (size_t r = b * per_block; r < block_end(b, triangles.size()); ++r)
+      for (uint32_t v : triangles[r]) std::atomic_ref<uint8_t>(used[v]).store(1, std::memory_order_relaxed);
+  });
+  std::vector<uint32_t> first_kept(blocks_of(all) + 1, 0);
+  parallel_for(int64_t{0}, static_cast<int64_t>(blocks_of(all)), [&](int64_t i) {
+    const auto b = static_cast<size_t>(i);
+    first_kept[b + 1] =
+        static_cast<uint32_t>(std::count(used.begin() + static_cast<std::ptrdiff_t>(b * per_block),
+                                         used.begin() + static_cast<std::ptrdiff_t>(block_end(b, all)), 1));
+  });
+  for (size_t b = 0; b < blocks_of(all); ++b) first_kept[b + 1] += first_kept[b];
+  std::vector<uint32_t> index(all);
+  parallel_for(int64_t{0}, static_cast<int64_t>(blocks_of(all)), [&](int64_t i) {
+    const auto b = static_cast<size_t>(i);
+    uint32_t k = first_kept[b];
+    for (size_t v = b * per_block; v < block_end(b, all); ++v) index[v] = used[v] ? k++ : 0;
+  });
+  for (size_t v = 0; v < all; ++v)
+    if (used[v]) mesh.positions[index[v]] = mesh.positions[v];
+  mesh.positions.resize(first_kept.back());
+  parallel_for(int64_t{0}, static_cast<int64_t>(blocks_of(triangles.size())), [&](int64_t i) {
+    const auto b = static_cast<size_t>(i);
+    for (size_t r = b * per_block; r < block_end(b, triangles.size()); ++r)
+      for (uint32_t& v : triangles[r]) v = index[v];
+  });
 }
 
 }  // namespace isotope

@@ -9,6 +9,7 @@
 // from the inside corner, so both triangles along that edge compute the same bits, and in a mesh
 // it is welded by that edge: the clipped mesh is as crack-free as the mesh was.
 #include <array>
+#include <cstddef>
 #include <cstdint>
 
 #include "engine/hierarchy/lattice.h"
@@ -42,6 +43,9 @@ int clipped_triangles(const BoxClip& box, const TetCutter& cutter, const std::ar
 // replaced by what is left of it), the vertices theirs, new ones follow, and vertices no triangle
 // uses any more are dropped. Nothing changes where no triangle reaches past the box.
 void clip_to_box(Mesh& mesh, const BoxClip& box);
+// The same, its passes run in parallel over blocks of `block` triangles (and vertices): the mesh it
+// leaves does not depend on the block size.
+void clip_to_box(Mesh& mesh, const BoxClip& box, size_t block);
 
 // The triangles `mesh` will have after clip_to_box, without clipping it.
 int64_t clipped_triangles(const Mesh& mesh, const BoxClip& box);

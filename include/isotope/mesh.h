@@ -10,8 +10,10 @@
 namespace isotope {
 
 struct Mesh {
+  // Meshes run to hundreds of megabytes: on huge pages, and resize() leaves the new elements
+  // unwritten (detail::UninitializedHugePageAllocator), for the writer to fill.
   template <class T>
-  using Array = std::vector<T, detail::HugePageAllocator<T>>;  // meshes run to hundreds of megabytes
+  using Array = std::vector<T, detail::UninitializedHugePageAllocator<T>>;
   Array<std::array<float, 3>> positions;
   Array<std::array<uint32_t, 3>> triangles;  // counter-clockwise seen from the outside (value <= iso)
 };

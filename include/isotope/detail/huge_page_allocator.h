@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <cstdlib>
 #include <new>
+#include <type_traits>
+#include <utility>
 
 namespace isotope::detail {
 
@@ -49,6 +51,30 @@ struct HugePageAllocator {
   template <class U>
   bool operator==(const HugePageAllocator<U>&) const noexcept {
     return true;
+  }
+};
+
+// As HugePageAllocator, but an element made without a value is left unwritten, as `new T` leaves
+// it (for the trivial types the mesh holds): resize() then costs neither a pass over the memory nor
+// its first touch, so an array written whole right after, by several threads, has each page
+// touched by the thread that writes it.
+template <class T>
+struct UninitializedHugePageAllocator : HugePageAllocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitializedHugePageAllocator<U>;
+  };
+  UninitializedHugePageAllocator() = default;
+  template <class U>
+  UninitializedHugePageAllocator(const UninitializedHugePageAllocator<U>&) noexcept {}  // NOLINT: as above
+
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
   }
 };
 
