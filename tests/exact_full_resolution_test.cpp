@@ -219,9 +219,9 @@ Mesh one_walk(const Volume& volume, float iso, EdgeVertexMap* welds = nullptr) {
 
 // A welding table lent from mesh to mesh (as the traversal lends one from piece to piece) is
 // emptied when lent: one that welded this very mesh before, every edge of it taken, welds it
-// again as a table of the builder's own does. The first mesh, part of the next one, leaves stale
-// slots of the same edges (other vertex numbers) in a table the next one outgrows: its growth must
-// drop them.
+// again as a table of the builder's own does, a small mesh after a large one too. The first
+// mesh, part of the next one, leaves stale slots of the same edges (other vertex numbers) in a
+// table the next one outgrows: its growth must drop them.
 TEST(ExactAtEpsZero, ALentWeldingTableIsEmptiedForEachMesh) {
   const Volume v = generate_sphere(33), part = testing::crop(v, {13, 33, 33});
   const Mesh own_part = one_walk(part, 0.0f), own = one_walk(v, 0.0f);
@@ -230,10 +230,13 @@ TEST(ExactAtEpsZero, ALentWeldingTableIsEmptiedForEachMesh) {
   EdgeVertexMap lent(16);
   const Mesh first = one_walk(part, 0.0f, &lent);
   EXPECT_TRUE(first.positions == own_part.positions && first.triangles == own_part.triangles);
-  for (int mesh = 0; mesh < 3; ++mesh) {  // grown by the first of them, kept at that size
-    const Mesh m = one_walk(v, 0.0f, &lent);
-    EXPECT_TRUE(m.positions == own.positions) << "mesh " << mesh;
-    EXPECT_TRUE(m.triangles == own.triangles) << "mesh " << mesh;
+  // Grown by the first whole mesh; each later one starts on the table's first slots again and
+  // grows over the memory the first one left, stale slots and all.
+  for (int mesh = 0; mesh < 4; ++mesh) {
+    const bool whole = mesh % 2 == 0;
+    const Mesh m = one_walk(whole ? v : part, 0.0f, &lent);
+    EXPECT_TRUE(m.positions == (whole ? own : own_part).positions) << "mesh " << mesh;
+    EXPECT_TRUE(m.triangles == (whole ? own : own_part).triangles) << "mesh " << mesh;
   }
 }
 

@@ -197,8 +197,8 @@ struct LevelScratch {
   // Of frontier and next: the tetrahedron reaches past the data box (Traversal::past_box). Else no
   // tetrahedron below it does, and the walk does not ask again.
   Scratch<uint8_t> frontier_near, next_near;
-  // The welding table of the traversal's mesh (MeshBuilder): lent with the rest, it keeps the size
-  // of the largest piece's, emptied in O(1), where a table per piece grew from small each time.
+  // The welding table of the traversal's mesh (MeshBuilder): lent with the rest, it keeps the memory
+  // of the largest piece's, emptied in O(1), where a table per piece was allocated anew each time.
   EdgeVertexMap welds{0};
 };
 

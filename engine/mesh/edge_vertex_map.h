@@ -21,20 +21,20 @@ class EdgeVertexMap {
 
   explicit EdgeVertexMap(size_t expected = 1024) { rehash(capacity_for(expected)); }
 
-  // Empty again, keeping the table and its size, in O(1): a slot is taken only while it carries
-  // the table's current stamp, so a new stamp frees them all. A table lent from one mesh to the
-  // next this way is memory already touched, and no clearing pass.
+  // Empty again, in O(1), keeping the table's memory: a slot is taken only while it carries the
+  // table's current stamp, so a new stamp frees them all. The next mesh starts on the table's first
+  // kStartSlots slots and grows over the rest as it needs: a table lent from one mesh to the next
+  // this way is memory already touched, and a small mesh after a large one keeps to a few cache-warm
+  // pages instead of scattering its keys over the large one's table.
   void clear() {
-    if (++stamp_ == 0) {  // the stamps wrapped: no slot may look taken
-      for (Slot& s : slots_) s.stamp = 0;
-      stamp_ = 1;
-    }
+    next_stamp();
     size_ = 0;
+    mask_ = std::min(slots_.size(), kStartSlots) - 1;
   }
 
   // Returns the index stored for key, or stores `fresh` and returns kAbsent.
   uint32_t find_or_insert(uint64_t key, uint32_t fresh) {
-    if (2 * (size_ + 1) > slots_.size()) rehash(slots_.size() * 2);
+    if (2 * (size_ + 1) > mask_ + 1) rehash(2 * (mask_ + 1));
     for (size_t i = slot(key);; i = (i + 1) & mask_) {
       Slot& s = slots_[i];
       if (s.stamp != stamp_) {
@@ -52,25 +52,39 @@ class EdgeVertexMap {
     uint32_t value;
     uint32_t stamp;  // taken while it equals the table's stamp_
   };
+  static constexpr size_t kStartSlots = 4096;  // 64 KB
   static size_t capacity_for(size_t n) {
     size_t c = 16;
     while (c < 2 * n) c *= 2;
     return c;
   }
   size_t slot(uint64_t key) const { return static_cast<size_t>((key * 0x9E3779B97F4A7C15ull) >> 20) & mask_; }
+  void next_stamp() {
+    if (++stamp_ == 0) {  // the stamps wrapped: no slot may look taken
+      for (Slot& s : slots_) s.stamp = 0;
+      stamp_ = 1;
+    }
+  }
+  // Over the first `capacity` slots, allocated if need be; what was taken is inserted again.
   void rehash(size_t capacity) {
-    Slots old(capacity, Slot{0, 0, 0});
-    old.swap(slots_);
-    const uint32_t taken = stamp_;
-    stamp_ = 1;
+    moving_.clear();
+    for (size_t i = 0; i <= mask_ && i < slots_.size(); ++i)
+      if (slots_[i].stamp == stamp_) moving_.push_back(slots_[i]);
+    if (capacity > slots_.size()) {
+      Slots grown(capacity, Slot{0, 0, 0});
+      grown.swap(slots_);
+      stamp_ = 1;
+    } else {
+      next_stamp();
+    }
     mask_ = capacity - 1;
     size_ = 0;
-    for (const Slot& s : old)
-      if (s.stamp == taken) find_or_insert(s.key, s.value);
+    for (const Slot& s : moving_) find_or_insert(s.key, s.value);
   }
 
   using Slots = std::vector<Slot, detail::HugePageAllocator<Slot>>;
   Slots slots_;
+  std::vector<Slot> moving_;  // what a rehash inserts again
   uint32_t stamp_ = 1;
   size_t mask_ = 0, size_ = 0;
 };
