@@ -251,7 +251,8 @@ TEST(CrackFree, ClippingAtTheBoxEndsOnItsFacesWeldsWhatItCutsAndCountsWhatItLeav
 
 // The clip runs over blocks of triangles in parallel: blocks that grow (a triangle cut into two
 // with nothing dropped beside it), shrink or stay, sliding up or down to their places, leave the
-// mesh that one block leaves, whatever the block size. One block is the single pass in order.
+// mesh that one block leaves, whatever the block size: one block is rebuilt whole, in order, with
+// nothing to slide.
 TEST(CrackFree, ClippingInBlocksLeavesTheMeshOfOneBlock) {
   const MultiresVolume mv = MultiresVolume::build(generate_sphere(33));
   ExtractOptions o;
@@ -270,8 +271,9 @@ TEST(CrackFree, ClippingInBlocksLeavesTheMeshOfOneBlock) {
     EXPECT_TRUE(m.positions == one.positions) << "block " << block;
     EXPECT_TRUE(m.triangles == one.triangles) << "block " << block;
   }
-  // And where blocks grow: every triangle's first corner lies past the x face, its others inside,
-  // so each becomes two.
+  // And where blocks grow: a triangle whose first corner lies past the x face, its others inside,
+  // becomes two; between them some lie wholly past (dropped) or wholly inside (kept as they are,
+  // so that blocks untouched slide up over themselves).
   Mesh fan;
   fan.positions = {{0, 0, 0}};
   for (int i = 0; i < 50; ++i) {
@@ -281,6 +283,8 @@ TEST(CrackFree, ClippingInBlocksLeavesTheMeshOfOneBlock) {
     fan.positions.push_back({0, y + 1, 0});
     fan.triangles.push_back({k, k + 1, 0});
     if (i % 3 == 0) fan.triangles.push_back({k, k, k});  // wholly past: dropped
+    if (i % 4 == 1)
+      for (int j = 0; j < 6; ++j) fan.triangles.push_back({0, k + 1, k + 1});  // wholly inside: kept
   }
   BoxClip x;
   x.face = {1, 100, 100};

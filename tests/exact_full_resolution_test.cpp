@@ -227,11 +227,13 @@ TEST(ExactAtEpsZero, ALentWeldingTableIsEmptiedForEachMesh) {
   const Mesh own_part = one_walk(part, 0.0f), own = one_walk(v, 0.0f);
   ASSERT_GT(own_part.positions.size(), own.positions.size() / 8);
   ASSERT_LT(own_part.positions.size(), own.positions.size() / 2);  // so the table grows for the next
+  // and the whole mesh, started on the table's first slots again, outgrows them (half of 4096).
+  ASSERT_GT(own.positions.size(), 2048u);
   EdgeVertexMap lent(16);
   const Mesh first = one_walk(part, 0.0f, &lent);
   EXPECT_TRUE(first.positions == own_part.positions && first.triangles == own_part.triangles);
-  // Grown by the first whole mesh; each later one starts on the table's first slots again and
-  // grows over the memory the first one left, stale slots and all.
+  // Grown by the first whole mesh; each later one starts on the table's first slots again, and a
+  // whole mesh grows over the memory the first one left, stale slots and all.
   for (int mesh = 0; mesh < 4; ++mesh) {
     const bool whole = mesh % 2 == 0;
     const Mesh m = one_walk(whole ? v : part, 0.0f, &lent);

@@ -12,7 +12,7 @@ namespace {
 
 Mesh mesh_of(size_t vertices, std::vector<std::array<uint32_t, 3>> triangles) {
   Mesh m;
-  m.positions.resize(vertices);
+  m.positions.resize(vertices, {0, 0, 0});  // resize() alone leaves them unwritten
   for (const auto& t : triangles) m.triangles.push_back(t);
   return m;
 }

@@ -193,21 +193,23 @@ void clip_to_box(Mesh& mesh, const BoxClip& box, size_t block) {
     reaching[b] = {};
   }
   first_row[blocks] = rows.size();
+  // Where each block goes, and the memory for those that grow, taken before any block changes, so
+  // that running out of it leaves the mesh as it was.
+  std::vector<size_t> to(blocks + 1, 0);
+  for (size_t b = 0; b < blocks; ++b) to[b + 1] = to[b] + kept[b];
+  std::vector<std::vector<std::array<uint32_t, 3>>> grown(blocks);
+  for (size_t b = 0; b < blocks; ++b)
+    if (kept[b] > block_end(b, n) - b * per_block) grown[b].resize(kept[b]);
+  if (to[blocks] > n) triangles.resize(to[blocks]);
   // What each block becomes: those with a clipped triangle are rebuilt from a copy of themselves,
   // in place when they do not grow (what lies past the box is mostly dropped), else beside.
-  std::vector<std::vector<std::array<uint32_t, 3>>> grown(blocks);
   parallel_for(int64_t{0}, static_cast<int64_t>(blocks), [&](int64_t i) {
     const auto b = static_cast<size_t>(i);
     if (first_row[b] == first_row[b + 1]) return;
     const auto begin = triangles.begin() + static_cast<std::ptrdiff_t>(b * per_block);
     const auto end = triangles.begin() + static_cast<std::ptrdiff_t>(block_end(b, n));
-    thread_local std::vector<std::array<uint32_t, 3>> copy;
-    copy.assign(begin, end);
-    std::array<uint32_t, 3>* out = triangles.data() + b * per_block;
-    if (kept[b] > copy.size()) {
-      grown[b].resize(kept[b]);
-      out = grown[b].data();
-    }
+    const std::vector<std::array<uint32_t, 3>> copy(begin, end);
+    std::array<uint32_t, 3>* out = grown[b].empty() ? triangles.data() + b * per_block : grown[b].data();
     size_t row = first_row[b];
     for (size_t k = 0; k < copy.size(); ++k) {
       if (row < first_row[b + 1] && rows[row] == b * per_block + k) {
@@ -222,9 +224,6 @@ void clip_to_box(Mesh& mesh, const BoxClip& box, size_t block) {
   // The blocks slid to their places, serially: those moving up first, from the last, then the
   // others from the first, so that no block is overwritten before it moved (the places keep the
   // blocks' order).
-  std::vector<size_t> to(blocks + 1, 0);
-  for (size_t b = 0; b < blocks; ++b) to[b + 1] = to[b] + kept[b];
-  if (to[blocks] > n) triangles.resize(to[blocks]);
   auto move = [&](size_t b) {
     const auto dest = triangles.begin() + static_cast<std::ptrdiff_t>(to[b]);
     const auto count = static_cast<std::ptrdiff_t>(kept[b]);
