@@ -173,26 +173,22 @@ void clip_to_box(Mesh& mesh, const BoxClip& box, size_t block) {
           crossing(mesh.positions[in], mesh.positions[out], axis, box.face[static_cast<size_t>(axis)]));
     return it->second;
   };
-  std::vector<size_t> rows;                   // the clipped triangles, in order
-  std::vector<size_t> first_row(blocks + 1);  // each block's first in `rows`
+  std::vector<size_t> first_row(blocks + 1);  // each block's first clipped triangle, counted over all
   std::vector<std::array<uint32_t, 3>> left;  // what they became, in order
   std::vector<size_t> first_left{0};          // each clipped triangle's first in `left`
   std::vector<size_t> kept(blocks);           // triangles each block ends with
   for (size_t b = 0; b < blocks; ++b) {
-    first_row[b] = rows.size();
+    first_row[b + 1] = first_row[b] + reaching[b].size();
     const size_t left_before = left.size();
     for (size_t r : reaching[b]) {
       const auto t = triangles[r];
       clip_triangle(box, t[0], t[1], t[2], pos, cross, [&](uint32_t x, uint32_t y, uint32_t z) {
         left.push_back({x, y, z});
       });
-      rows.push_back(r);
       first_left.push_back(left.size());
     }
     kept[b] = block_end(b, n) - b * per_block - reaching[b].size() + (left.size() - left_before);
-    reaching[b] = {};
   }
-  first_row[blocks] = rows.size();
   // Where each block goes, and the memory for those that grow, taken before any block changes, so
   // that running out of it leaves the mesh as it was.
   std::vector<size_t> to(blocks + 1, 0);
@@ -205,17 +201,18 @@ void clip_to_box(Mesh& mesh, const BoxClip& box, size_t block) {
   // in place when they do not grow (what lies past the box is mostly dropped), else beside.
   parallel_for(int64_t{0}, static_cast<int64_t>(blocks), [&](int64_t i) {
     const auto b = static_cast<size_t>(i);
-    if (first_row[b] == first_row[b + 1]) return;
+    const std::vector<size_t>& rows = reaching[b];
+    if (rows.empty()) return;
     const auto begin = triangles.begin() + static_cast<std::ptrdiff_t>(b * per_block);
     const auto end = triangles.begin() + static_cast<std::ptrdiff_t>(block_end(b, n));
     const std::vector<std::array<uint32_t, 3>> copy(begin, end);
     std::array<uint32_t, 3>* out = grown[b].empty() ? triangles.data() + b * per_block : grown[b].data();
-    size_t row = first_row[b];
+    size_t j = 0;  // of rows
     for (size_t k = 0; k < copy.size(); ++k) {
-      if (row < first_row[b + 1] && rows[row] == b * per_block + k) {
-        out = std::copy(left.begin() + static_cast<std::ptrdiff_t>(first_left[row]),
-                        left.begin() + static_cast<std::ptrdiff_t>(first_left[row + 1]), out);
-        ++row;
+      if (j < rows.size() && rows[j] == b * per_block + k) {
+        const size_t c = first_row[b] + j++;
+        out = std::copy(left.begin() + static_cast<std::ptrdiff_t>(first_left[c]),
+                        left.begin() + static_cast<std::ptrdiff_t>(first_left[c + 1]), out);
       } else {
         *out++ = copy[k];
       }
