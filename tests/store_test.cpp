@@ -57,12 +57,12 @@ std::string dims_name(const Volume& v) {
 
 const RecordFields kAll{true, true, true, true};
 
-// The store read whole, as an extraction reads it.
-Hierarchy load(const std::string& store) {
+// The store read whole, as an extraction reads it, with these fields.
+Hierarchy load(const std::string& store, const RecordFields& fields = kAll) {
   const StoreReader reader(store);
   BrickCache cache(reader, uint64_t{1} << 34);
   const PagedVolume volume(cache);
-  return load_hierarchy(volume, kAll);
+  return load_hierarchy(volume, fields);
 }
 
 bool same_words(const Hierarchy& a, const Hierarchy& b, int64_t index, int64_t n) {
@@ -155,6 +155,42 @@ TEST_F(Store, RoundTripIsExactOnRealVolumesAsFloatsAndInTheirOwnType) {
     EXPECT_EQ(BrickCache(StoreReader(own), 1).value_bytes(), 1);
     expect_round_trip(v, own);
   }
+}
+
+// Band 0's records of a uint8 store read for their range and bound alone (an extraction with
+// --error bound, the default): computed in the narrow words' integers (io/store/paged_volume.h),
+// they must be the very words of the build in memory, at every node of every brick.
+TEST_F(Store, BandZeroRangesAndBoundsOfAUint8StoreAreTheBuildsWithNoOtherField) {
+  int volumes = 0;
+  for (const auto& shared : testing::shared_volumes()) {
+    if (shared.file.find("uint8") == std::string::npos) continue;
+    SCOPED_TRACE(shared.name);
+    ++volumes;
+    const std::string own = path(shared.name + "-own.isotope");
+    convert_to_store(*open_box_reader({std::string(ISOTOPE_TEST_DATA) + "/" + shared.file, std::nullopt, std::nullopt},
+                                      dir_.string()),
+                     own, {});
+    ASSERT_EQ(BrickCache(StoreReader(own), 1).value_bytes(), 1);
+    const Hierarchy loaded = load(own, RecordFields{});
+    const Hierarchy built =
+        Hierarchy::build(testing::load_shared(shared), RecordFields{}, StoreLayout::kDefaultBrickBits);
+    ASSERT_EQ(loaded.layout().brick_count(), built.layout().brick_count());
+    const int64_t nodes = built.layout().brick_nodes();
+    const Band& band0 = built.layout().band(0);
+    int64_t mismatches = 0, bounded = 0;  // band-0 records with an error bound above 0
+    for (int64_t i = 0; i < built.layout().brick_count(); ++i) {
+      const BrickView x = loaded.brick(i), y = built.brick(i);
+      for (int64_t m = 0; m < nodes; ++m) {
+        if (x.bounds[m] != y.bounds[m] && ++mismatches < 5)
+          ADD_FAILURE() << "brick " << i << ", node " << m << ": " << std::hex << x.bounds[m] << " against "
+                        << y.bounds[m];
+        bounded += i < band0.first_brick + band0.brick_count() && bounds_of(y.bounds[m]).bound > 0;
+      }
+    }
+    EXPECT_EQ(mismatches, 0);
+    EXPECT_GT(bounded, 1000);
+  }
+  EXPECT_GE(volumes, 3);
 }
 
 // The size target: a store of uint8/uint16 data is at most 1.5x its raw input.

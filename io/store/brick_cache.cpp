@@ -61,7 +61,9 @@ uint64_t BrickCache::brick_bytes() const {
 std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   const StoreLayout& layout = store_.layout();
   auto b = std::make_shared<CachedBrick>();
-  b->band_ = store_.locate_brick(index).first;
+  const auto [band, brick] = store_.locate_brick(index);
+  b->band_ = band;
+  for (int a = 0; a < 3; ++a) b->origin_[static_cast<size_t>(a)] = brick[static_cast<size_t>(a)] * layout.brick_width();
   const auto nodes = static_cast<size_t>(layout.brick_nodes());
   std::shared_ptr<Pools> pools = pools_;
   // Floats and 64-bit bounds are decoded in place; narrower values and bounds go through arrays

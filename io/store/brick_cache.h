@@ -48,6 +48,7 @@ class BrickValues {
  public:
   BrickValues(const void* data, int bytes) : data_(data), bytes_(bytes) {}
   int bytes() const { return bytes_; }  // per value: 1, 2 or 4
+  const void* data() const { return data_; }
   // f(p) with p the values as held: const uint8_t*, const uint16_t* or const float*. For loops
   // over many values, which then read them without a test each.
   template <class F>
@@ -76,6 +77,8 @@ class BrickValues {
 class CachedBrick {
  public:
   int band() const { return band_; }
+  // Its first node, in its band's grid units: a node's coordinates are this plus its Morton code's.
+  const Box3& origin() const { return origin_; }
   BrickValues values() const { return {values_, value_bytes_}; }
   // The range-and-bound words: 32-bit where narrow(), else 64-bit; null for the other width.
   bool narrow() const { return held_bounds_bytes(value_bytes_) == 4; }
@@ -97,6 +100,7 @@ class CachedBrick {
  private:
   friend class BrickCache;
   int band_ = 0;
+  Box3 origin_{};
   const void* values_ = nullptr;
   int value_bytes_ = 4;
   void* bounds_ = nullptr;

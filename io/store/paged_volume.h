@@ -65,13 +65,33 @@ class PagedVolume {
     Record band0_record(const Coord& v, bool topology);
     // The same for the range and errors of a vertex whose polyhedron lies in the data box (all but
     // the box's outer layer of nodes), without building its diamond: a template of its class.
-    void band0_bounds_inside(const Coord& v);
+    // (index, m): where v's record lives.
+    void band0_bounds_inside(const Coord& v, int64_t index, uint32_t m);
+    // The nodes within one node of such a vertex, by their offset from it: whether they lie in its
+    // brick, and where there. (Within the data box: the vertex lies inside it by one node.)
+    struct Near {
+      int64_t lx, ly, lz, mask;  // the vertex within its brick; the brick's width - 1
+      const uint32_t* spread;    // spread_bits_3, by table
+      [[gnu::always_inline]] bool in_brick(const std::array<int8_t, 3>& o) const {
+        return static_cast<uint64_t>(lx + o[0]) <= static_cast<uint64_t>(mask) &&
+               static_cast<uint64_t>(ly + o[1]) <= static_cast<uint64_t>(mask) &&
+               static_cast<uint64_t>(lz + o[2]) <= static_cast<uint64_t>(mask);
+      }
+      [[gnu::always_inline]] uint32_t index(const std::array<int8_t, 3>& o) const {
+        return spread[lx + o[0]] | spread[ly + o[1]] << 1 | spread[lz + o[2]] << 2;
+      }
+    };
+    // band0_bounds_inside where the brick's words are narrow and it holds no surplus: in integers.
+    template <class Template>
+    void band0_narrow_inside(const Coord& v, const Template& t, int64_t index, CachedBrick& home, uint32_t m,
+                             const Near& near);
     float value_at(const Coord& c);  // as MultiresVolume::value: any lattice node, clamped into the data box
     // A record's range-and-bound word as engine/hierarchy/compact_record.h's, whatever width the
     // brick holds it in (CachedBrick::narrow), kUnsetBounds for one not computed yet; and storing one.
-    uint64_t load_bounds(int64_t index, uint32_t m);
+    uint64_t load_bounds(int64_t index, uint32_t m) { return word_of(brick(index), m); }
+    static uint64_t word_of(const CachedBrick& brick, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
-    Coord band0_node(int64_t index, uint32_t m) const;
+    static Coord band0_node(const CachedBrick& brick, uint32_t m);  // band 0: the node of m in the brick
 
     struct Pinned {
       int64_t index = -1;
