@@ -66,28 +66,22 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   for (int a = 0; a < 3; ++a) b->origin_[static_cast<size_t>(a)] = brick[static_cast<size_t>(a)] * layout.brick_width();
   const auto nodes = static_cast<size_t>(layout.brick_nodes());
   std::shared_ptr<Pools> pools = pools_;
-  // Floats and 64-bit bounds are decoded in place; narrower values and bounds go through arrays
-  // of this thread's, checked to fit the store's width, then copied in it.
+  // Floats and bounds are decoded in place (narrow bounds checked as they are narrowed); narrower
+  // values go through an array of this thread's, checked to fit the store's width, then copied in it.
   std::shared_ptr<void> bounds(pools->bounds.allocate(), [pools](void* p) { pools->bounds.release(p); });
   std::shared_ptr<void> kept(pools->values.allocate(), [pools](void* p) { pools->values.release(p); });
   thread_local std::vector<float> narrow;
-  thread_local std::vector<uint64_t> wide;
   float* values = static_cast<float*>(kept.get());
   if (value_bytes_ < 4) {
     narrow.resize(nodes);
     values = narrow.data();
   }
   const bool narrow_words = held_bounds_bytes(value_bytes_) == 4, records = stores_records(layout, b->band_);
-  uint64_t* words = static_cast<uint64_t*>(bounds.get());
-  if (narrow_words) {
-    wide.resize(nodes);
-    words = wide.data();
-  }
-  const BrickView view{values, words, nullptr, nullptr, nullptr, nullptr};
-  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values);
+  const BrickView view{values, narrow_words ? nullptr : static_cast<uint64_t*>(bounds.get()), nullptr, nullptr, nullptr,
+                       nullptr};
+  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values,
+                                          narrow_words ? static_cast<uint32_t*>(bounds.get()) : nullptr);
   bytes_read_.fetch_add(read, std::memory_order_relaxed);
-  if (narrow_words && records && !narrow_bounds(wide.data(), nodes, static_cast<uint32_t*>(bounds.get())))
-    throw IoError(store_.describe_brick(index) + ": " + kRecordNotHeld + " (corrupt brick)");
   if (value_bytes_ < 4) {
     if (fewest_bytes(narrow) > value_bytes_)
       throw IoError(store_.describe_brick(index) + ": " + value_not_held(store_.header()) + " (corrupt brick)");

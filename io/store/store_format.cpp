@@ -18,6 +18,7 @@
 
 #include "io/file/checked_size.h"
 #include "io/store/field_codec.h"
+#include "io/store/held_words.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -400,8 +401,41 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
   return out;
 }
 
+namespace {
+
+// One core field of a one-byte store's records (lo, hi or bound: float bits, one per record) into
+// the records' narrow words (io/store/held_words.h), as narrow_bounds() narrows the 64-bit words
+// decode_section would otherwise scatter them into: the same words and the same refusals, without
+// the wide words in between. Branch-free over the records, so that it vectorizes. Returns nonzero
+// where a value has no narrow form (a range that is not an integer of 0..255, a bound not a
+// multiple of a half up to 32767 nor +inf); throws IoError where a bfloat16 field holds another
+// value, as decode_section's scatter does.
+template <Field F>
+uint32_t narrow_field(const uint32_t* bits, size_t count, uint32_t* words) {
+  constexpr uint32_t k255 = std::bit_cast<uint32_t>(255.0f), k32767 = std::bit_cast<uint32_t>(32767.0f);
+  uint32_t bad = 0, low = 0;
+  for (size_t i = 0; i < count; ++i) {
+    const uint32_t b = bits[i];
+    if constexpr (F == Field::bound) {
+      const auto halves = static_cast<int32_t>(2 * std::bit_cast<float>(std::min(b, k32767)));
+      const uint32_t infinite = 0u - static_cast<uint32_t>(b == 0x7f800000u);
+      words[i] |= static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u);
+      bad |= ~infinite & (std::bit_cast<uint32_t>(0.5f * static_cast<float>(halves)) ^ b);
+    } else {
+      const auto code = static_cast<int32_t>(std::bit_cast<float>(std::min(b, k255)));
+      words[i] |= static_cast<uint32_t>(code) << (F == Field::hi ? 8 : 0);
+      bad |= std::bit_cast<uint32_t>(static_cast<float>(code)) ^ b;
+      low |= b;
+    }
+  }
+  if ((low & 0xffffu) != 0) throw IoError("a field of bfloat16 codes holds another value");
+  return bad;
+}
+
+}  // namespace
+
 void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
-                    const BrickView& out, float* values, const std::string& where) {
+                    const BrickView& out, float* values, const std::string& where, uint32_t* narrow) {
   const bool records = stores_records(layout, band);
   const auto fields = fields_of(s, records);
   if (fields.empty()) {
@@ -427,15 +461,19 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
   if (ZSTD_isError(n)) throw IoError(where + ": cannot decompress (" + ZSTD_getErrorName(n) + ")");
   if (n != raw.size()) throw IoError(where + ": decompressed size differs from the frame's");
   // The words the section's fields fill part by part start at zero.
+  if (s != Section::core || !records) narrow = nullptr;
+  thread_local std::vector<uint32_t> records_narrow;  // narrow: the records' words, in record order
+  if (narrow) records_narrow.assign(record_count, 0);
   switch (s) {
     case Section::core:
-      if (records) std::fill_n(out.bounds, nodes, 0);
+      if (records && !narrow) std::fill_n(out.bounds, nodes, 0);
       break;
     case Section::exact: std::fill_n(out.exact, nodes, 0); break;
     case Section::weights: std::fill_n(out.weights, nodes, 0); break;
     case Section::extra: std::fill_n(out.paper, nodes, 0), std::fill_n(out.surplus, nodes, 0); break;
   }
   thread_local std::vector<float> field;
+  uint32_t not_held = 0;  // narrow: some record has no narrow word
   try {
     const uint8_t* p = raw.data();
     const uint8_t* end = raw.data() + raw.size();
@@ -459,6 +497,13 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
           }
         if (bf16 && (low & 0xffffu) != 0) throw IoError("a field of bfloat16 codes holds another value");
       };
+      if (narrow) {
+        uint32_t* words = records_narrow.data();
+        not_held |= f == Field::lo   ? narrow_field<Field::lo>(bits, record_count, words)
+                    : f == Field::hi ? narrow_field<Field::hi>(bits, record_count, words)
+                                     : narrow_field<Field::bound>(bits, record_count, words);
+        continue;
+      }
       switch (f) {
         case Field::lo: scatter(out.bounds, 0, true); break;
         case Field::hi: scatter(out.bounds, 16, true); break;
@@ -477,6 +522,16 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
     if (p != end) throw IoError("trailing bytes after the last field");
   } catch (const IoError& e) {
     throw IoError(where + ": " + e.what());
+  }
+  if (narrow) {
+    const uint32_t* words = records_narrow.data();
+    for (uint32_t i = 0; i < record_count; ++i)
+      not_held |= ((words[i] >> 8 & 0xffu) - (words[i] & 0xffu)) >> 31;  // hi < lo
+    if (not_held != 0) throw IoError(where + ": " + kRecordNotHeld + " (corrupt brick)");
+    for (uint32_t base = 0, i = 0; base < nodes; base += 8, i += 7) {  // over the record slots; the others 0
+      narrow[base] = 0;
+      std::copy_n(words + i, 7, narrow + base + 1);
+    }
   }
 }
 

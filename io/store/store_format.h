@@ -111,7 +111,10 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
 // Checks a section's checksum, inflates it and decodes its fields into the brick's arrays (those
 // the section holds must be present). Throws IoError starting with `where` ("FILE: brick 12 (band
 // 0, brick 1 0 0)") naming what is wrong.
+// `narrow`: where the brick's range-and-bound words are held in 32 bits (io/store/held_words.h),
+// the core section's records go straight into these (out.bounds is then not written), and a record
+// they cannot hold throws IoError "WHERE: " + kRecordNotHeld + " (corrupt brick)".
 void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
-                    const BrickView& out, float* values, const std::string& where);
+                    const BrickView& out, float* values, const std::string& where, uint32_t* narrow = nullptr);
 
 }  // namespace isotope

@@ -142,7 +142,7 @@ void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& whi
 }
 
 uint64_t StoreReader::read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out,
-                                 float* values) const {
+                                 float* values, uint32_t* narrow) const {
   const BrickEntry& e = entry(index);
   const int band = locate_brick(index).first;
   uint64_t read = 0;
@@ -157,7 +157,7 @@ uint64_t StoreReader::read_brick(int64_t index, const std::array<bool, kSections
     for (int k = s; k < end; ++k) {
       const uint32_t size = e.bytes[static_cast<size_t>(k)];
       decode_section(layout_, band, static_cast<Section>(k), bytes.data() + at, size, out, values,
-                     describe_brick(index));
+                     describe_brick(index), narrow);
       at += size;
     }
   });
