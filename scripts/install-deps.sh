@@ -19,9 +19,6 @@ packages=(
 # Node.js bundles the viewer (esbuild) and drives the browser test; a machine that has node and
 # npm already (e.g. from NodeSource) keeps them.
 if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+=(nodejs npm); fi
-# ninja-build: the generator CI's three builds use (scripts/test.sh): it schedules every
-# target's objects together, where Make waits for a target's dependencies before it starts its
-# objects and leaves a core idle behind the last large file of each.
 # python3-skimage: the peer that isotope bench (and its test) times beside ours. clang-14 and its
 # runtime libraries (libFuzzer, the sanitizers): the fuzz targets of fuzz/ (scripts/fuzz.sh).
 # clang-format: the style check (scripts/format.sh --check). python3-pytest, python3-vtk9 (VTK's
@@ -31,7 +28,7 @@ if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+
 # tests/mpi checks. hdf5-filter-plugin: HDF5 datasets compressed by filter plugins (lz4, bzip2),
 # which the command reads with its static HDF5 beside the plugins' shared one (tests/io_test.cpp).
 if [ "${1:-}" = "--tests" ]; then
-  packages+=(ninja-build chromium python3-skimage clang-14 libclang-rt-14-dev clang-format python3-pytest python3-vtk9 python3-tifffile
+  packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format python3-pytest python3-vtk9 python3-tifffile
     libopenmpi-dev openmpi-bin hdf5-filter-plugin)
 fi
 

@@ -29,7 +29,9 @@
 #include "engine/hierarchy/compact_record.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "io/store/brick_cache.h"
+#include "io/store/held_words.h"
 #include "io/store/paged_volume.h"
+#include "io/store/store_format.h"
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
@@ -1066,6 +1068,95 @@ TEST(NarrowBounds, TakeEveryRecordOfOneByteValuesExactlyAndNothingElse) {
       words[at] = w;
       std::vector<uint32_t> out(words.size());
       EXPECT_FALSE(narrow_bounds(words.data(), words.size(), out.data())) << name << " at " << at;
+    }
+}
+
+// A one-byte store's core section decodes its records straight into narrow words
+// (decode_section's `narrow`): the words narrow_bounds gives of the 64-bit ones, and a refusal
+// where it refuses one, with the corrupt brick's message, wherever the record stands.
+TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
+  const StoreLayout layout({33, 33, 33}, StoreLayout::kDefaultBrickBits);
+  constexpr int kBand = 1;
+  ASSERT_TRUE(stores_records(layout, kBand));
+  const auto nodes = static_cast<size_t>(layout.brick_nodes());
+  const size_t records = nodes - nodes / 8;
+  using Triple = std::array<float, 3>;  // lo, hi, bound
+  const auto section = [&](const std::vector<Triple>& r) {
+    BrickFields f;
+    f.values.assign(nodes, 7.0f);
+    for (auto& field : f.records) field.assign(records, 0.0f);
+    for (size_t i = 0; i < records; ++i)
+      for (size_t k = 0; k < 3; ++k) f.records[k][i] = r[i % r.size()][k];
+    return encode_brick(layout, kBand, f, 3)[static_cast<size_t>(Section::core)];
+  };
+  // The words both ways; "" when they are taken, else the refusal's message.
+  std::vector<float> values(nodes);
+  std::vector<uint64_t> wide(nodes);
+  std::vector<uint32_t> by_narrow_bounds(nodes), straight(nodes);
+  const auto wide_way = [&](const std::vector<uint8_t>& bytes) -> std::string {
+    try {
+      decode_section(layout, kBand, Section::core, bytes.data(), bytes.size(), {values.data(), wide.data()},
+                     values.data(), "brick");
+    } catch (const IoError& e) {
+      return e.what();
+    }
+    return narrow_bounds(wide.data(), nodes, by_narrow_bounds.data())
+               ? ""
+               : std::string("brick: ") + kRecordNotHeld + " (corrupt brick)";
+  };
+  const auto straight_way = [&](const std::vector<uint8_t>& bytes) -> std::string {
+    try {
+      decode_section(layout, kBand, Section::core, bytes.data(), bytes.size(), {values.data(), nullptr}, values.data(),
+                     "brick", straight.data());
+    } catch (const IoError& e) {
+      return e.what();
+    }
+    return "";
+  };
+
+  constexpr float kInfinity = std::numeric_limits<float>::infinity();
+  std::vector<Triple> good;
+  for (int lo = 0; lo < 256; lo += 3)
+    for (int hi = lo; hi < 256; hi += 5)
+      for (const float bound : {0.0f, 0.5f, 765.0f, 14535.0f, 32767.0f, kInfinity})
+        good.push_back({static_cast<float>(lo), static_cast<float>(hi), bound});
+  for (size_t first = 0; first < good.size(); first += records) {
+    const std::vector<Triple> part(good.begin() + static_cast<std::ptrdiff_t>(first),
+                                   good.begin() + static_cast<std::ptrdiff_t>(std::min(good.size(), first + records)));
+    const std::vector<uint8_t> bytes = section(part);
+    ASSERT_EQ(wide_way(bytes), "");
+    ASSERT_EQ(straight_way(bytes), "");
+    EXPECT_EQ(straight, by_narrow_bounds) << "records from " << first;
+  }
+
+  const float nan = std::numeric_limits<float>::quiet_NaN(), denormal = std::numeric_limits<float>::denorm_min();
+  const std::vector<std::pair<const char*, Triple>> bad = {
+      {"bound -0", {3, 9, -0.0f}},
+      {"bound NaN", {3, 9, nan}},
+      {"bound -NaN", {3, 9, -nan}},
+      {"bound -inf", {3, 9, -kInfinity}},
+      {"bound -1", {3, 9, -1}},
+      {"bound 0.25", {3, 9, 0.25f}},
+      {"bound 32767.5", {3, 9, 32767.5f}},
+      {"bound 40000", {3, 9, 40000}},
+      {"bound a denormal", {3, 9, denormal}},
+      {"lo -0", {-0.0f, 9, 1}},
+      {"lo a bfloat16 denormal", {std::bit_cast<float>(0x00010000u), 9, 1}},
+      {"lo 0.5", {0.5f, 9, 1}},
+      {"lo -1", {-1, 9, 1}},
+      {"hi 256", {3, 256, 1}},
+      {"hi NaN", {3, nan, 1}},
+      {"hi below lo", {9, 3, 1}},
+      {"lo not a bfloat16", {3.0001f, 9, 1}},
+  };
+  for (const auto& [name, triple] : bad)
+    for (const size_t at : {size_t{0}, size_t{6}, size_t{7}, records - 1}) {
+      std::vector<Triple> r(records, Triple{3, 9, 1.5f});
+      r[at] = triple;
+      const std::vector<uint8_t> bytes = section(r);
+      const std::string refusal = wide_way(bytes);
+      EXPECT_NE(refusal, "") << name << " at " << at;
+      EXPECT_EQ(straight_way(bytes), refusal) << name << " at " << at;
     }
 }
 

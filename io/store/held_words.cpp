@@ -39,9 +39,9 @@ int fewest_bytes(std::span<const float> values) {
 
 bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
   static_assert(std::endian::native == std::endian::little, "a word's halves are copied as little-endian");
-  // Branch-free over 32-bit lanes, so that it vectorizes: every brick of stored records a uint8
-  // store's extraction reads goes through it (the words are copied as halves first: a loop that
-  // splits 64-bit loads does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
+  // Branch-free over 32-bit lanes, so that it vectorizes: verify runs every brick of stored records
+  // of a uint8 store through it (the words are copied as halves first: a loop that splits 64-bit
+  // loads does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
   // do; a negative one, or a NaN, clamps to the top), narrowed, and must come back as its very
   // bits: that rejects NaN, negatives, -0, fractions, a bound between halves, and what the clamps
   // moved.

@@ -4,6 +4,8 @@
 // record's range and bound in 32 bits, one of integers up to 65535 a value in two bytes. What the
 // cache (io/store/brick_cache.h) holds them in, and what verify (io/store/store_reader.h) checks
 // every brick against, so that a brick the extraction refuses as corrupt is refused by verify too.
+// (The cache decodes a one-byte store's records straight into narrow words, decode_section's
+// `narrow`, which takes and refuses what narrow_bounds does: a test holds the two together.)
 #include <bit>
 #include <cstddef>
 #include <cstdint>

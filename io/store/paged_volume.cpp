@@ -197,8 +197,9 @@ void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Template& t, 
       const int64_t ci = volume_->indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
       w = load(brick(ci).narrow_bounds() + cm);
       if (w == kUnsetNarrowBounds) {
+        const std::shared_ptr<CachedBrick> child = hold(ci);  // as in bounds_word
         bounds_word(ci, cm);
-        w = load(brick(ci).narrow_bounds() + cm);
+        w = load(child->narrow_bounds() + cm);
       }
     }
     lo = std::min(lo, w & 0xffu), hi = std::max(hi, w >> 8 & 0xffu), halves = std::max(halves, w >> 16);
@@ -232,13 +233,17 @@ uint64_t PagedVolume::Pager::bounds_word(int64_t index, uint32_t m) {
   CachedBrick& b = brick(index);
   const uint64_t w = word_of(b, m);
   if (w != kUnsetBounds) return w;
-  const Coord v = band0_node(b, m);
+  // Held until the record is read back: computing it reads other bricks, which may take this one's
+  // pin, and the cache may then evict it, and a brick decoded again has band 0's records unset
+  // (the record just computed would read as none). Held, a lookup gets this very brick back.
+  const std::shared_ptr<CachedBrick> home = hold(index);
+  const Coord v = band0_node(*home, m);
   const auto& dims = volume_->layout_.dims();
   if (v[0] >= 1 && v[1] >= 1 && v[2] >= 1 && v[0] + 1 < dims[0] && v[1] + 1 < dims[1] && v[2] + 1 < dims[2])
     band0_bounds_inside(v, index, m);
   else
     band0_record(v, false);
-  return load_bounds(index, m);
+  return word_of(*home, m);
 }
 
 Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {
@@ -246,8 +251,9 @@ Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {
   if (!b.surplus()) volume_->cache_.require(b, index, {false, false, false, true});
   const Bf16 s = load(b.surplus() + m);
   if (s != kUnsetSurplus || b.band() != 0) return s;
-  band0_record(band0_node(b, m), false);
-  return load(brick(index).surplus() + m);
+  const std::shared_ptr<CachedBrick> home = hold(index);  // as in bounds_word
+  band0_record(band0_node(*home, m), false);
+  return load(home->surplus() + m);
 }
 
 DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const RecordFields& read) {
@@ -262,8 +268,9 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
   std::array<uint64_t, 3> w = words();
   if (b->band() == 0 && ((read.exact && w[0] == kUnsetInterval) || (read.paper && w[1] == kUnsetInterval) ||
                          (read.weights && w[2] == kUnsetWeights))) {
-    band0_record(band0_node(*b, m), true);
-    b = &brick(index);
+    const std::shared_ptr<CachedBrick> home = hold(index);  // as in bounds_word
+    band0_record(band0_node(*home, m), true);
+    b = home.get();
     w = words();
   }
   return topology_of(static_cast<uint32_t>(w[0]), static_cast<uint32_t>(w[1]), w[2]);

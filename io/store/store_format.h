@@ -113,7 +113,8 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
 // 0, brick 1 0 0)") naming what is wrong.
 // `narrow`: where the brick's range-and-bound words are held in 32 bits (io/store/held_words.h),
 // the core section's records go straight into these (out.bounds is then not written), and a record
-// they cannot hold throws IoError "WHERE: " + kRecordNotHeld + " (corrupt brick)".
+// they cannot hold throws IoError "WHERE: " + kRecordNotHeld + " (corrupt brick)". Of a band that
+// stores no records (band 0, the top), nothing is written there: the caller fills it.
 void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
                     const BrickView& out, float* values, const std::string& where, uint32_t* narrow = nullptr);
 
