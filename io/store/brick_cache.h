@@ -154,6 +154,9 @@ class BrickCache {
   BrickCacheStats stats() const;
 
  private:
+  // Tests make a cache that keeps no brick but those its readers hold, evicting all others on every
+  // miss: what a reader must hold to stay correct is then tested, not left to a cache's timing.
+  friend struct BrickCacheTesting;
   // brick and evicted are guarded by slot_locks_[index % kStripes]: held for a pointer copy only.
   // (std::atomic<std::shared_ptr> would do without them, but GCC 12's is not race-free by the
   // memory model: its load releases its internal lock with a relaxed store; ThreadSanitizer

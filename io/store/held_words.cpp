@@ -41,11 +41,7 @@ bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
   static_assert(std::endian::native == std::endian::little, "a word's halves are copied as little-endian");
   // Branch-free over 32-bit lanes, so that it vectorizes: verify runs every brick of stored records
   // of a uint8 store through it (the words are copied as halves first: a loop that splits 64-bit
-  // loads does not vectorize). Each field is clamped on its bits (a non-negative float orders as its bits
-  // do; a negative one, or a NaN, clamps to the top), narrowed, and must come back as its very
-  // bits: that rejects NaN, negatives, -0, fractions, a bound between halves, and what the clamps
-  // moved.
-  constexpr uint32_t k255 = std::bit_cast<uint32_t>(255.0f), k32767 = std::bit_cast<uint32_t>(32767.0f);
+  // loads does not vectorize).
   constexpr size_t kBlock = 512;
   uint32_t bad = 0;
   for (size_t first = 0; first < n; first += kBlock) {
@@ -54,17 +50,10 @@ bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
     std::memcpy(half, words + first, count * sizeof(uint64_t));
     uint32_t* out = narrow + first;
     for (size_t i = 0; i < count; ++i) {
-      const uint32_t low = half[2 * i], bound_bits = half[2 * i + 1];
-      const uint32_t lo_bits = low << 16, hi_bits = low & 0xffff0000u;
-      const auto lo = static_cast<int32_t>(std::bit_cast<float>(std::min(lo_bits, k255)));
-      const auto hi = static_cast<int32_t>(std::bit_cast<float>(std::min(hi_bits, k255)));
-      const auto halves = static_cast<int32_t>(2 * std::bit_cast<float>(std::min(bound_bits, k32767)));
-      const uint32_t infinite = 0u - static_cast<uint32_t>(bound_bits == 0x7f800000u);
-      out[i] = static_cast<uint32_t>(lo) | static_cast<uint32_t>(hi) << 8 |
-               (static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u));
-      bad |= (std::bit_cast<uint32_t>(static_cast<float>(lo)) ^ lo_bits) |
-             (std::bit_cast<uint32_t>(static_cast<float>(hi)) ^ hi_bits) | static_cast<uint32_t>(hi - lo) >> 31 |
-             (~infinite & (std::bit_cast<uint32_t>(0.5f * static_cast<float>(halves)) ^ bound_bits));
+      const uint32_t low = half[2 * i];
+      const uint32_t lo = narrow_code(low << 16, bad), hi = narrow_code(low & 0xffff0000u, bad);
+      out[i] = lo | hi << 8 | narrow_bound(half[2 * i + 1], bad);
+      bad |= (hi - lo) >> 31;  // hi below lo
     }
   }
   return bad == 0;

@@ -6,6 +6,7 @@
 // every brick against, so that a brick the extraction refuses as corrupt is refused by verify too.
 // (The cache decodes a one-byte store's records straight into narrow words, decode_section's
 // `narrow`, which takes and refuses what narrow_bounds does: a test holds the two together.)
+#include <algorithm>
 #include <bit>
 #include <cstddef>
 #include <cstdint>
@@ -42,6 +43,26 @@ inline constexpr const char* kRecordNotHeld =
 inline constexpr uint32_t kUnsetNarrowBounds = 0x00ffu;  // lo 255 above hi 0: the range of no record
 // Bytes a record's range-and-bound word is held in: 4 beside values held in one byte, else 8.
 inline int held_bounds_bytes(int value_bytes) { return value_bytes == 1 ? 4 : 8; }
+// A narrow word's fields from a record's float bits, branch-free so that loops over records
+// vectorize; `bad` gains nonzero bits where a field has no narrow form. Each is clamped on its bits
+// (a non-negative float orders as its bits do; a negative one, or a NaN, clamps to the top),
+// narrowed, and must come back as its very bits: that rejects NaN, negatives, -0, fractions, a
+// bound between halves, and what the clamps moved.
+// A range's end: its byte, an integer of 0..255.
+inline uint32_t narrow_code(uint32_t bits, uint32_t& bad) {
+  constexpr uint32_t k255 = std::bit_cast<uint32_t>(255.0f);
+  const auto code = static_cast<int32_t>(std::bit_cast<float>(std::min(bits, k255)));
+  bad |= std::bit_cast<uint32_t>(static_cast<float>(code)) ^ bits;
+  return static_cast<uint32_t>(code);
+}
+// A bound: its count of halves, up to 32767, or 0xffff for +inf, in the word's top 16 bits.
+inline uint32_t narrow_bound(uint32_t bits, uint32_t& bad) {
+  constexpr uint32_t k32767 = std::bit_cast<uint32_t>(32767.0f);
+  const auto halves = static_cast<int32_t>(2 * std::bit_cast<float>(std::min(bits, k32767)));
+  const uint32_t infinite = 0u - static_cast<uint32_t>(bits == 0x7f800000u);
+  bad |= ~infinite & (std::bit_cast<uint32_t>(0.5f * static_cast<float>(halves)) ^ bits);
+  return static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u);
+}
 // The narrow words of n 64-bit ones; false if some word has none (a range not of integers of
 // 0..255 in order, or a bound not a multiple of a half up to 32767 nor +inf), and then what was
 // written to `narrow` means nothing.

@@ -123,15 +123,13 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint
   const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
   const int64_t mask = pv.layout_.brick_width() - 1;
   const Near near{v[0] & mask, v[1] & mask, v[2] & mask, mask, pv.spread_.data()};
-  auto in_brick = [&](const std::array<int8_t, 3>& o) { return near.in_brick(o); };
-  auto local_index = [&](const std::array<int8_t, 3>& o) { return near.index(o); };
   if (home->narrow() && home->surplus() == nullptr) return band0_narrow_inside(v, t, index, *home, m, near);
   float f[11];
   home->values().visit([&](const auto* values) {
     for (int i = 0; i < t.values; ++i) {
       const auto& o = t.value[static_cast<size_t>(i)];
-      f[i] =
-          in_brick(o) ? static_cast<float>(values[local_index(o)]) : value_at({v[0] + o[0], v[1] + o[1], v[2] + o[2]});
+      f[i] = near.in_brick(o) ? static_cast<float>(values[near.index(o)])
+                              : value_at({v[0] + o[0], v[1] + o[1], v[2] + o[2]});
     }
   });
   // As read_polyhedron and finish_record (engine/hierarchy/record_builder.h) with every vertex in the box.
@@ -144,8 +142,8 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint
     int64_t ci = index;
     uint32_t cm = 0;
     uint64_t word = kUnsetBounds;
-    if (in_brick(o)) {
-      cm = local_index(o);
+    if (near.in_brick(o)) {
+      cm = near.index(o);
       word = word_of(*home, cm);
     } else {
       ci = pv.indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
@@ -188,19 +186,11 @@ void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Template& t, 
     if (near.in_brick(o)) {
       const uint32_t cm = near.index(o);
       w = load(words + cm);
-      if (w == kUnsetNarrowBounds) {
-        bounds_word(index, cm);
-        w = load(words + cm);
-      }
+      if (w == kUnsetNarrowBounds) w = narrow_word(index, cm);
     } else {
       uint32_t cm = 0;
       const int64_t ci = volume_->indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
-      w = load(brick(ci).narrow_bounds() + cm);
-      if (w == kUnsetNarrowBounds) {
-        const std::shared_ptr<CachedBrick> child = hold(ci);  // as in bounds_word
-        bounds_word(ci, cm);
-        w = load(child->narrow_bounds() + cm);
-      }
+      w = narrow_word(ci, cm);
     }
     lo = std::min(lo, w & 0xffu), hi = std::max(hi, w >> 8 & 0xffu), halves = std::max(halves, w >> 16);
   }
@@ -244,6 +234,14 @@ uint64_t PagedVolume::Pager::bounds_word(int64_t index, uint32_t m) {
   else
     band0_record(v, false);
   return word_of(*home, m);
+}
+
+uint32_t PagedVolume::Pager::narrow_word(int64_t index, uint32_t m) {
+  const uint32_t w = load(brick(index).narrow_bounds() + m);
+  if (w != kUnsetNarrowBounds) return w;
+  const std::shared_ptr<CachedBrick> home = hold(index);  // as in bounds_word
+  bounds_word(index, m);
+  return load(home->narrow_bounds() + m);
 }
 
 Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {

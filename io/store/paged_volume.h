@@ -90,6 +90,8 @@ class PagedVolume {
     // brick holds it in (CachedBrick::narrow), kUnsetBounds for one not computed yet; and storing one.
     uint64_t load_bounds(int64_t index, uint32_t m) { return word_of(brick(index), m); }
     static uint64_t word_of(const CachedBrick& brick, uint32_t m);
+    // bounds_word's narrow word, for a brick whose words are narrow (CachedBrick::narrow).
+    uint32_t narrow_word(int64_t index, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
     static Coord band0_node(const CachedBrick& brick, uint32_t m);  // band 0: the node of m in the brick
 

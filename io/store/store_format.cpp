@@ -412,19 +412,13 @@ namespace {
 // value, as decode_section's scatter does.
 template <Field F>
 uint32_t narrow_field(const uint32_t* bits, size_t count, uint32_t* words) {
-  constexpr uint32_t k255 = std::bit_cast<uint32_t>(255.0f), k32767 = std::bit_cast<uint32_t>(32767.0f);
   uint32_t bad = 0, low = 0;
   for (size_t i = 0; i < count; ++i) {
     const uint32_t b = bits[i];
     if constexpr (F == Field::bound) {
-      const auto halves = static_cast<int32_t>(2 * std::bit_cast<float>(std::min(b, k32767)));
-      const uint32_t infinite = 0u - static_cast<uint32_t>(b == 0x7f800000u);
-      words[i] |= static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u);
-      bad |= ~infinite & (std::bit_cast<uint32_t>(0.5f * static_cast<float>(halves)) ^ b);
+      words[i] |= narrow_bound(b, bad);
     } else {
-      const auto code = static_cast<int32_t>(std::bit_cast<float>(std::min(b, k255)));
-      words[i] |= static_cast<uint32_t>(code) << (F == Field::hi ? 8 : 0);
-      bad |= std::bit_cast<uint32_t>(static_cast<float>(code)) ^ b;
+      words[i] |= narrow_code(b, bad) << (F == Field::hi ? 8 : 0);
       low |= b;
     }
   }
