@@ -444,6 +444,74 @@ std::vector<Floats> valid_fields() {
           wide, random_floats(400), Floats(400, 0.1f * 3)};
 }
 
+// Whether v is a byte's value: an integer of 0..255, and its very bits (not -0).
+bool is_byte(float v) {
+  return v >= 0.0f && v <= 255.0f &&
+         std::bit_cast<uint32_t>(static_cast<float>(static_cast<int>(v))) == std::bit_cast<uint32_t>(v);
+}
+
+// decode_field into bytes (a one-byte store's values) agrees with it into floats on [p, end) for
+// `count` values: the same refusal of malformed bytes, else the same end and the floats' bytes
+// where every float is a byte's value, else null.
+::testing::AssertionResult bytes_agree_with_floats(const uint8_t* p, const uint8_t* end, size_t count) {
+  Floats floats(count);
+  std::vector<uint8_t> bytes(count, 0xEE);
+  const uint8_t *float_end = nullptr, *byte_end = nullptr;
+  const auto refusal = [](const std::function<void()>& f) -> std::string {  // "" when taken
+    try {
+      f();
+    } catch (const IoError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  const std::string refused = refusal([&] { float_end = decode_field(p, end, floats); });
+  const std::string byte_refused = refusal([&] { byte_end = decode_field(p, end, std::span<uint8_t>(bytes)); });
+  if (refused != byte_refused)
+    return ::testing::AssertionFailure() << "floats: \"" << refused << "\", bytes: \"" << byte_refused << "\"";
+  if (!refused.empty()) return ::testing::AssertionSuccess();
+  const bool all_bytes = std::all_of(floats.begin(), floats.end(), is_byte);
+  if (!all_bytes)
+    return byte_end == nullptr ? ::testing::AssertionSuccess()
+                               : ::testing::AssertionFailure() << "a value that is not a byte's was taken";
+  if (byte_end != float_end) return ::testing::AssertionFailure() << "the byte decode ends elsewhere";
+  for (size_t i = 0; i < count; ++i)
+    if (bytes[i] != static_cast<uint8_t>(floats[i]))
+      return ::testing::AssertionFailure() << "value " << i << ": " << int{bytes[i]} << " for " << floats[i];
+  return ::testing::AssertionSuccess();
+}
+
+// A one-byte store's values decode straight into bytes (no floats in between): the floats' bytes
+// for every kind of field, and null as soon as one value is not a byte's, wherever it stands and
+// whatever mode, width and multiplier the field took for it.
+TEST(FieldCodecBytes, DecodeAsTheFloatsAndRefuseWhatIsNotAByte) {
+  std::vector<Floats> fields = valid_fields();
+  fields.push_back(small_ints(kBrick));
+  fields.push_back(smooth_uint8(kBrick));
+  Floats all(256);
+  for (size_t i = 0; i < all.size(); ++i) all[i] = static_cast<float>((i * 97) % 256);
+  fields.push_back(all);
+  fields.push_back(Floats(700, 255.0f));  // constant
+  fields.push_back(Floats(700, 0.0f));
+  int taken = 0, refused = 0;
+  for (const float odd : {-0.0f, -1.0f, 0.5f, 255.5f, 256.0f, 300.0f, 70000.0f, kInf, -kInf,
+                          std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::denorm_min()})
+    for (const size_t at : {size_t{0}, size_t{1}, size_t{511}, size_t{512}, size_t{699}}) {
+      Floats f = smooth_uint8(700);
+      f[at] = odd;
+      fields.push_back(f);
+      fields.push_back(Floats(700, odd));
+    }
+  for (const Floats& f : fields) {
+    const Bytes bytes = encode(f);
+    ASSERT_TRUE(bytes_agree_with_floats(bytes.data(), bytes.data() + bytes.size(), f.size()))
+        << f.size() << " values, mode " << int{mode_of(bytes)};
+    (std::all_of(f.begin(), f.end(), is_byte) ? taken : refused)++;
+  }
+  EXPECT_GE(taken, 8);
+  EXPECT_GE(refused, 100);
+}
+
 TEST(FieldCodecHostile, EveryTruncationThrows) {
   for (const Floats& field : valid_fields()) {
     const Bytes bytes = encode(field);
@@ -453,6 +521,7 @@ TEST(FieldCodecHostile, EveryTruncationThrows) {
       Floats out(field.size());
       const std::string message = io_error_of([&] { decode_field(block.get(), block.get() + len, out); });
       ASSERT_NE(message.find("truncated"), std::string::npos) << len << " of " << bytes.size() << " bytes: " << message;
+      ASSERT_TRUE(bytes_agree_with_floats(block.get(), block.get() + len, field.size()));
     }
   }
 }
@@ -530,6 +599,7 @@ TEST(FieldCodecHostile, RandomCorruptionThrowsIoErrorOrDecodes) {
     std::copy(bytes.begin(), bytes.end(), block.get());
     // Mostly the true count (the caller knows it); sometimes a wrong one.
     Floats out(rng() % 8 ? fields[which].size() : rng() % 500);
+    ASSERT_TRUE(bytes_agree_with_floats(block.get(), block.get() + bytes.size(), out.size()));
     try {
       const uint8_t* end = decode_field(block.get(), block.get() + bytes.size(), out);
       ASSERT_GE(end, block.get());

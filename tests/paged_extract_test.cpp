@@ -19,6 +19,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -1071,9 +1072,10 @@ TEST(NarrowBounds, TakeEveryRecordOfOneByteValuesExactlyAndNothingElse) {
     }
 }
 
-// A one-byte store's core section decodes its records straight into narrow words
-// (decode_section's `narrow`): the words narrow_bounds gives of the 64-bit ones, and a refusal
-// where it refuses one, with the corrupt brick's message, wherever the record stands.
+// A one-byte store's core section decodes its records straight into narrow words and its values
+// into bytes (decode_section's `narrow`): the words narrow_bounds gives of the 64-bit ones and the
+// values' bytes, and a refusal where it refuses one, with the corrupt brick's message, wherever the
+// record stands; a value that is not a byte's is refused with the message the cache gives it.
 TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
   const StoreLayout layout({33, 33, 33}, StoreLayout::kDefaultBrickBits);
   constexpr int kBand = 1;
@@ -1081,9 +1083,10 @@ TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
   const auto nodes = static_cast<size_t>(layout.brick_nodes());
   const size_t records = nodes - nodes / 8;
   using Triple = std::array<float, 3>;  // lo, hi, bound
-  const auto section = [&](const std::vector<Triple>& r) {
+  const auto section = [&](const std::vector<Triple>& r, float value = 7.0f) {
     BrickFields f;
     f.values.assign(nodes, 7.0f);
+    f.values[nodes / 2] = value;
     for (auto& field : f.records) field.assign(records, 0.0f);
     for (size_t i = 0; i < records; ++i)
       for (size_t k = 0; k < 3; ++k) f.records[k][i] = r[i % r.size()][k];
@@ -1093,6 +1096,8 @@ TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
   std::vector<float> values(nodes);
   std::vector<uint64_t> wide(nodes);
   std::vector<uint32_t> by_narrow_bounds(nodes), straight(nodes);
+  std::vector<uint8_t> value_bytes(nodes);
+  constexpr std::string_view kNotAByte = "holds a value that is not a byte's";
   const auto wide_way = [&](const std::vector<uint8_t>& bytes) -> std::string {
     try {
       decode_section(layout, kBand, Section::core, bytes.data(), bytes.size(), {values.data(), wide.data()},
@@ -1106,8 +1111,8 @@ TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
   };
   const auto straight_way = [&](const std::vector<uint8_t>& bytes) -> std::string {
     try {
-      decode_section(layout, kBand, Section::core, bytes.data(), bytes.size(), {values.data(), nullptr}, values.data(),
-                     "brick", straight.data());
+      const NarrowBrick one_byte{value_bytes.data(), straight.data(), kNotAByte};
+      decode_section(layout, kBand, Section::core, bytes.data(), bytes.size(), {}, nullptr, "brick", &one_byte);
     } catch (const IoError& e) {
       return e.what();
     }
@@ -1127,6 +1132,12 @@ TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
     ASSERT_EQ(wide_way(bytes), "");
     ASSERT_EQ(straight_way(bytes), "");
     EXPECT_EQ(straight, by_narrow_bounds) << "records from " << first;
+    EXPECT_TRUE(std::equal(values.begin(), values.end(), value_bytes.begin())) << "records from " << first;
+  }
+  for (const float value : {7.5f, 256.0f, -1.0f, -0.0f}) {
+    const std::vector<uint8_t> bytes = section({Triple{3, 9, 1.5f}}, value);
+    ASSERT_EQ(wide_way(bytes), "");
+    EXPECT_EQ(straight_way(bytes), "brick: " + std::string(kNotAByte) + " (corrupt brick)") << value;
   }
 
   const float nan = std::numeric_limits<float>::quiet_NaN(), denormal = std::numeric_limits<float>::denorm_min();

@@ -29,6 +29,7 @@ CachedBrick::~CachedBrick() = default;
 BrickCache::BrickCache(const StoreReader& store, uint64_t budget_bytes)
     : store_(store),
       value_bytes_(held_value_bytes(store.header())),
+      value_refusal_(value_not_held(store.header())),
       budget_(std::max<uint64_t>(budget_bytes, kMinBricks * core_bytes(store.layout(), value_bytes_))),
       pools_(std::make_shared<Pools>(static_cast<size_t>(store.layout().brick_nodes()), value_bytes_)),
       slot_table_(static_cast<Slot**>(std::calloc(static_cast<size_t>(store.layout().brick_count()), sizeof(Slot*)))) {
@@ -66,28 +67,32 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   for (int a = 0; a < 3; ++a) b->origin_[static_cast<size_t>(a)] = brick[static_cast<size_t>(a)] * layout.brick_width();
   const auto nodes = static_cast<size_t>(layout.brick_nodes());
   std::shared_ptr<Pools> pools = pools_;
-  // Floats and bounds are decoded in place (narrow bounds checked as they are narrowed); narrower
-  // values go through an array of this thread's, checked to fit the store's width, then copied in it.
+  // Decoded in place where values are floats or bytes (a one-byte store's words checked as they are
+  // narrowed, its values as they are made bytes); two-byte values go through an array of this
+  // thread's, checked to fit, then copied in.
   std::shared_ptr<void> bounds(pools->bounds.allocate(), [pools](void* p) { pools->bounds.release(p); });
   std::shared_ptr<void> kept(pools->values.allocate(), [pools](void* p) { pools->values.release(p); });
-  thread_local std::vector<float> narrow;
+  thread_local std::vector<float> wide;
   float* values = static_cast<float*>(kept.get());
-  if (value_bytes_ < 4) {
-    narrow.resize(nodes);
-    values = narrow.data();
+  if (value_bytes_ == 2) {
+    wide.resize(nodes);
+    values = wide.data();
   }
-  const bool narrow_words = held_bounds_bytes(value_bytes_) == 4, records = stores_records(layout, b->band_);
-  const BrickView view{values, narrow_words ? nullptr : static_cast<uint64_t*>(bounds.get()), nullptr, nullptr, nullptr,
+  const bool narrow = value_bytes_ == 1, records = stores_records(layout, b->band_);
+  const NarrowBrick one_byte{static_cast<uint8_t*>(kept.get()), static_cast<uint32_t*>(bounds.get()), value_refusal_};
+  const BrickView view{narrow ? nullptr : values,
+                       narrow ? nullptr : static_cast<uint64_t*>(bounds.get()),
+                       nullptr,
+                       nullptr,
+                       nullptr,
                        nullptr};
-  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, values,
-                                          narrow_words ? static_cast<uint32_t*>(bounds.get()) : nullptr);
+  const uint64_t read = store_.read_brick(index, {true, false, false, false}, view, narrow ? nullptr : values,
+                                          narrow ? &one_byte : nullptr);
   bytes_read_.fetch_add(read, std::memory_order_relaxed);
-  if (value_bytes_ < 4) {
-    if (fewest_bytes(narrow) > value_bytes_)
-      throw IoError(store_.describe_brick(index) + ": " + value_not_held(store_.header()) + " (corrupt brick)");
-    BrickValues::of_width(value_bytes_, [&](auto held) {
-      std::copy(narrow.begin(), narrow.end(), static_cast<decltype(held)*>(kept.get()));
-    });
+  if (value_bytes_ == 2) {
+    if (fewest_bytes(wide) > value_bytes_)
+      throw IoError(store_.describe_brick(index) + ": " + value_refusal_ + " (corrupt brick)");
+    std::copy(wide.begin(), wide.end(), static_cast<uint16_t*>(kept.get()));
   }
   b->bounds_ = bounds.get();
   b->values_ = kept.get();
@@ -96,7 +101,7 @@ std::shared_ptr<CachedBrick> BrickCache::decode(int64_t index) {
   b->core_block_ = std::move(bounds);
   b->values_block_ = std::move(kept);
   if (!records) {  // band 0: filled on first read; the corners: none
-    if (narrow_words)
+    if (narrow)
       std::fill_n(b->narrow_bounds(), nodes, b->band_ == 0 ? kUnsetNarrowBounds : 0);
     else
       std::fill_n(b->bounds(), nodes, b->band_ == 0 ? kUnsetBounds : 0);

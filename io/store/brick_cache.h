@@ -23,6 +23,7 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <vector>
 
 #include "engine/hierarchy/hierarchy.h"
@@ -182,7 +183,8 @@ class BrickCache {
   void grow(int64_t index, CachedBrick& brick, uint64_t bytes);  // a brick took more memory
 
   const StoreReader& store_;
-  const int value_bytes_;  // before budget_, whose floor it sizes
+  const int value_bytes_;            // before budget_, whose floor it sizes
+  const std::string value_refusal_;  // a brick's value the store's width does not hold (value_not_held)
   const uint64_t budget_;
   // The core's blocks, shared with the bricks: the bounds words, and the values in value_bytes_.
   struct Pools {

@@ -12,6 +12,7 @@
 #include <emmintrin.h>
 #endif
 
+#include "io/store/held_words.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -274,15 +275,13 @@ uint32_t running_bytes(const uint8_t* z, size_t count, uint32_t offset, uint8_t*
 }
 
 // Two passes a block at a time: the codes (a running sum where deltas are stored, carried from
-// value to value), then their values, a loop with no carry and no branch, so that it vectorizes
-// (one loop that carries the sum and branches on +inf does not): every brick read decodes its
-// values and records here.
-template <int W, bool Delta>
-void decode_codes(const uint8_t* planes, uint32_t min_code, uint32_t inf_code, bool has_inf, float scale,
-                  std::span<float> values) {
+// value to value), then what the sink makes of them, a loop with no carry and no branch, so that it
+// vectorizes (one loop that carries the sum and branches on +inf does not): every brick read
+// decodes its values and records here. sink(first, code, count): the codes of values first ..
+// first + count.
+template <int W, bool Delta, class Sink>
+void decode_codes(const uint8_t* planes, size_t n, uint32_t min_code, Sink& sink) {
   constexpr size_t kBlock = 512;
-  const size_t n = values.size();
-  const uint32_t inf_mask = has_inf ? ~0u : 0u;  // a code of inf_code is +inf only in a field that has it
   uint32_t code[kBlock];
   uint32_t offset = 0;
   for (size_t first = 0; first < n; first += kBlock) {
@@ -302,44 +301,84 @@ void decode_codes(const uint8_t* planes, uint32_t min_code, uint32_t inf_code, b
         }
       }
     }
-    float* out = values.data() + first;
-    for (size_t i = 0; i < count; ++i) {
-      const uint32_t inf = (0u - static_cast<uint32_t>(code[i] == inf_code)) & inf_mask;
-      const auto bits = std::bit_cast<uint32_t>(static_cast<float>(static_cast<int32_t>(code[i])) * scale);
-      out[i] = std::bit_cast<float>((bits & ~inf) | (kInfBits & inf));
-    }
+    sink(first, code, count);
   }
 }
 
-template <bool Delta>
-void decode_codes(int width, const uint8_t* planes, uint32_t min_code, uint32_t inf_code, bool has_inf, float scale,
-                  std::span<float> values) {
-  switch (width) {
-    case 1: decode_codes<1, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
-    case 2: decode_codes<2, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
-    default: decode_codes<4, Delta>(planes, min_code, inf_code, has_inf, scale, values); break;
+// An integer field's header, after its count.
+struct IntegerField {
+  uint32_t multiplier = 1, width = 1, min_code = 0, inf_code = 0;
+  bool has_inf = false, delta = false;
+  const uint8_t* planes = nullptr;
+
+  IntegerField(Reader& r, size_t n) {
+    multiplier = r.u8("integer multiplier");
+    if (multiplier != 1 && multiplier != 2)
+      throw IoError("field codec: integer multiplier " + std::to_string(multiplier) + ", expected 1 or 2");
+    width = r.u8("integer width");
+    if (width != 1 && width != 2 && width != 4)
+      throw IoError("field codec: integer width " + std::to_string(width) + ", expected 1, 2 or 4");
+    const uint8_t flags = r.u8("integer flags");
+    if (flags & ~(kIntegerHasInf | kIntegerDelta))
+      throw IoError("field codec: unknown integer flags " + std::to_string(flags));
+    has_inf = flags & kIntegerHasInf;
+    delta = flags & kIntegerDelta;
+    min_code = r.u32("integer minimum code");
+    inf_code = r.u32("integer +inf code");
+    planes = r.take(n * width, "integer payload");
   }
-}
+  uint32_t inf_mask() const { return has_inf ? ~0u : 0u; }  // a code of inf_code is +inf only in a field that has it
+
+  template <class Sink>
+  void decode(size_t n, Sink& sink) const {
+    auto run = [&]<bool Delta>() {
+      switch (width) {
+        case 1: decode_codes<1, Delta>(planes, n, min_code, sink); break;
+        case 2: decode_codes<2, Delta>(planes, n, min_code, sink); break;
+        default: decode_codes<4, Delta>(planes, n, min_code, sink); break;
+      }
+    };
+    delta ? run.template operator()<true>() : run.template operator()<false>();
+  }
+};
 
 const uint8_t* decode_integer(Reader r, std::span<float> values) {
-  const uint8_t multiplier = r.u8("integer multiplier");
-  if (multiplier != 1 && multiplier != 2)
-    throw IoError("field codec: integer multiplier " + std::to_string(multiplier) + ", expected 1 or 2");
-  const uint8_t width = r.u8("integer width");
-  if (width != 1 && width != 2 && width != 4)
-    throw IoError("field codec: integer width " + std::to_string(width) + ", expected 1, 2 or 4");
-  const uint8_t flags = r.u8("integer flags");
-  if (flags & ~(kIntegerHasInf | kIntegerDelta))
-    throw IoError("field codec: unknown integer flags " + std::to_string(flags));
-  const uint32_t min_code = r.u32("integer minimum code");
-  const uint32_t inf_code = r.u32("integer +inf code");
-  const uint8_t* planes = r.take(values.size() * width, "integer payload");
-  const float scale = multiplier == 2 ? 0.5f : 1.0f;
-  const bool has_inf = flags & kIntegerHasInf;
-  if (flags & kIntegerDelta)
-    decode_codes<true>(width, planes, min_code, inf_code, has_inf, scale, values);
-  else
-    decode_codes<false>(width, planes, min_code, inf_code, has_inf, scale, values);
+  const IntegerField field(r, values.size());
+  const uint32_t inf_mask = field.inf_mask(), inf_code = field.inf_code;
+  const float scale = field.multiplier == 2 ? 0.5f : 1.0f;
+  float* const values_out = values.data();
+  auto sink = [&](size_t first, const uint32_t* code, size_t count) {
+    // Locals: the loop's stores cannot then alias what it reads, and it vectorizes.
+    float* const out = values_out + first;
+    const uint32_t mask = inf_mask, inf_at = inf_code;
+    const float times = scale;
+    for (size_t i = 0; i < count; ++i) {
+      const uint32_t inf = (0u - static_cast<uint32_t>(code[i] == inf_at)) & mask;
+      const auto bits = std::bit_cast<uint32_t>(static_cast<float>(static_cast<int32_t>(code[i])) * times);
+      out[i] = std::bit_cast<float>((bits & ~inf) | (kInfBits & inf));
+    }
+  };
+  field.decode(values.size(), sink);
+  return r.p;
+}
+
+// The same values as bytes: code / multiplier, which must be an integer of 0..255 and not +inf.
+const uint8_t* decode_integer(Reader r, std::span<uint8_t> bytes, uint32_t& bad) {
+  const IntegerField field(r, bytes.size());
+  const uint32_t inf_mask = field.inf_mask(), inf_code = field.inf_code, shift = field.multiplier == 2 ? 1 : 0;
+  uint8_t* const bytes_out = bytes.data();
+  auto sink = [&](size_t first, const uint32_t* code, size_t count) {
+    uint8_t* const out = bytes_out + first;  // locals, as the floats' sink
+    const uint32_t mask = inf_mask, inf_at = inf_code, by = shift;
+    uint32_t wrong = 0;
+    for (size_t i = 0; i < count; ++i) {
+      const uint32_t c = code[i];
+      wrong |= (c >> by & ~0xffu) | (c & by) | ((0u - static_cast<uint32_t>(c == inf_at)) & mask);
+      out[i] = static_cast<uint8_t>(c >> by);
+    }
+    bad |= wrong;
+  };
+  field.decode(bytes.size(), sink);
   return r.p;
 }
 
@@ -388,6 +427,18 @@ const uint8_t* decode_float(Reader r, std::span<float> values) {
   return r.p;
 }
 
+// A field's mode and count, checked against the count the caller expects.
+uint8_t read_mode(Reader& r, size_t expected) {
+  const uint8_t mode = r.u8("field mode");
+  if (mode != kModeConstant && mode != kModeInteger && mode != kModeFloat)
+    throw IoError("field codec: unknown field mode " + std::to_string(mode));
+  const uint64_t count = r.u64("field count");
+  if (count != expected)
+    throw IoError("field codec: field holds " + std::to_string(count) + " values, expected " +
+                  std::to_string(expected));
+  return mode;
+}
+
 }  // namespace
 
 void encode_field(std::span<const float> values, std::vector<uint8_t>& out) {
@@ -409,13 +460,7 @@ void encode_field(std::span<const float> values, std::vector<uint8_t>& out) {
 const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<float> values) {
   if (p == nullptr || end < p) throw IoError("field codec: no bytes to decode");
   Reader r{p, end};
-  const uint8_t mode = r.u8("field mode");
-  if (mode != kModeConstant && mode != kModeInteger && mode != kModeFloat)
-    throw IoError("field codec: unknown field mode " + std::to_string(mode));
-  const uint64_t count = r.u64("field count");
-  if (count != values.size())
-    throw IoError("field codec: field holds " + std::to_string(count) + " values, expected " +
-                  std::to_string(values.size()));
+  const uint8_t mode = read_mode(r, values.size());
   switch (mode) {
     case kModeConstant: {
       const float v = std::bit_cast<float>(r.u32("constant value"));
@@ -425,6 +470,29 @@ const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<floa
     case kModeInteger: return decode_integer(r, values);
     default: return decode_float(r, values);
   }
+}
+
+const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<uint8_t> bytes) {
+  if (p == nullptr || end < p) throw IoError("field codec: no bytes to decode");
+  Reader r{p, end};
+  const uint8_t mode = read_mode(r, bytes.size());
+  uint32_t bad = 0;
+  switch (mode) {
+    case kModeConstant: {
+      const uint8_t b = static_cast<uint8_t>(narrow_code(r.u32("constant value"), bad));
+      std::fill(bytes.begin(), bytes.end(), b);
+      break;
+    }
+    case kModeInteger: r.p = decode_integer(r, bytes, bad); break;
+    default: {  // not what a one-byte store writes, but what its values may be
+      thread_local std::vector<float> values;
+      values.resize(bytes.size());
+      r.p = decode_float(r, values);
+      for (size_t i = 0; i < bytes.size(); ++i)
+        bytes[i] = static_cast<uint8_t>(narrow_code(std::bit_cast<uint32_t>(values[i]), bad));
+    }
+  }
+  return bad == 0 ? r.p : nullptr;
 }
 
 }  // namespace isotope

@@ -429,7 +429,7 @@ uint32_t narrow_field(const uint32_t* bits, size_t count, uint32_t* words) {
 }  // namespace
 
 void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
-                    const BrickView& out, float* values, const std::string& where, uint32_t* narrow) {
+                    const BrickView& out, float* values, const std::string& where, const NarrowBrick* narrow) {
   const bool records = stores_records(layout, band);
   const auto fields = fields_of(s, records);
   if (fields.empty()) {
@@ -455,12 +455,12 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
   if (ZSTD_isError(n)) throw IoError(where + ": cannot decompress (" + ZSTD_getErrorName(n) + ")");
   if (n != raw.size()) throw IoError(where + ": decompressed size differs from the frame's");
   // The words the section's fields fill part by part start at zero.
-  if (s != Section::core || !records) narrow = nullptr;
+  uint32_t* const narrow_words = narrow && s == Section::core && records ? narrow->words : nullptr;
   thread_local std::vector<uint32_t> records_narrow;  // narrow: the records' words, in record order
-  if (narrow) records_narrow.assign(record_count, 0);
+  if (narrow_words) records_narrow.assign(record_count, 0);
   switch (s) {
     case Section::core:
-      if (records && !narrow) std::fill_n(out.bounds, nodes, 0);
+      if (records && !narrow_words) std::fill_n(out.bounds, nodes, 0);
       break;
     case Section::exact: std::fill_n(out.exact, nodes, 0); break;
     case Section::weights: std::fill_n(out.weights, nodes, 0); break;
@@ -473,7 +473,12 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
     const uint8_t* end = raw.data() + raw.size();
     for (const Field f : fields) {
       if (f == Field::values) {
-        p = decode_field(p, end, std::span<float>(values, nodes));
+        if (!narrow) {
+          p = decode_field(p, end, std::span<float>(values, nodes));
+          continue;
+        }
+        p = decode_field(p, end, std::span<uint8_t>(narrow->values, nodes));
+        if (!p) throw IoError(std::string(narrow->value_not_held) + " (corrupt brick)");
         continue;
       }
       field.resize(record_count);
@@ -491,7 +496,7 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
           }
         if (bf16 && (low & 0xffffu) != 0) throw IoError("a field of bfloat16 codes holds another value");
       };
-      if (narrow) {
+      if (narrow_words) {
         uint32_t* words = records_narrow.data();
         not_held |= f == Field::lo   ? narrow_field<Field::lo>(bits, record_count, words)
                     : f == Field::hi ? narrow_field<Field::hi>(bits, record_count, words)
@@ -517,14 +522,14 @@ void decode_section(const StoreLayout& layout, int band, Section s, const uint8_
   } catch (const IoError& e) {
     throw IoError(where + ": " + e.what());
   }
-  if (narrow) {
+  if (narrow_words) {
     const uint32_t* words = records_narrow.data();
     for (uint32_t i = 0; i < record_count; ++i)
       not_held |= ((words[i] >> 8 & 0xffu) - (words[i] & 0xffu)) >> 31;  // hi < lo
     if (not_held != 0) throw IoError(where + ": " + kRecordNotHeld + " (corrupt brick)");
     for (uint32_t base = 0, i = 0; base < nodes; base += 8, i += 7) {  // over the record slots; the others 0
-      narrow[base] = 0;
-      std::copy_n(words + i, 7, narrow + base + 1);
+      narrow_words[base] = 0;
+      std::copy_n(words + i, 7, narrow_words + base + 1);
     }
   }
 }

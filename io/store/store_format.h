@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "engine/hierarchy/hierarchy.h"
@@ -111,11 +112,17 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
 // Checks a section's checksum, inflates it and decodes its fields into the brick's arrays (those
 // the section holds must be present). Throws IoError starting with `where` ("FILE: brick 12 (band
 // 0, brick 1 0 0)") naming what is wrong.
-// `narrow`: where the brick's range-and-bound words are held in 32 bits (io/store/held_words.h),
-// the core section's records go straight into these (out.bounds is then not written), and a record
-// they cannot hold throws IoError "WHERE: " + kRecordNotHeld + " (corrupt brick)". Of a band that
-// stores no records (band 0, the top), nothing is written there: the caller fills it.
+// `narrow`: a one-byte store's brick (io/store/held_words.h), whose values go straight into bytes
+// and whose core records into 32-bit words instead (`values` and out.bounds are then not written).
+// A value that is not a byte throws IoError "WHERE: " + value_not_held + " (corrupt brick)", a
+// record the words cannot hold "WHERE: " + kRecordNotHeld + " (corrupt brick)". Of a band that
+// stores no records (band 0, the top), no word is written: the caller fills them.
+struct NarrowBrick {
+  uint8_t* values = nullptr;
+  uint32_t* words = nullptr;
+  std::string_view value_not_held;  // what the header promised a value to be, refused
+};
 void decode_section(const StoreLayout& layout, int band, Section s, const uint8_t* bytes, size_t size,
-                    const BrickView& out, float* values, const std::string& where, uint32_t* narrow = nullptr);
+                    const BrickView& out, float* values, const std::string& where, const NarrowBrick* narrow = nullptr);
 
 }  // namespace isotope

@@ -142,7 +142,7 @@ void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& whi
 }
 
 uint64_t StoreReader::read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out,
-                                 float* values, uint32_t* narrow) const {
+                                 float* values, const NarrowBrick* narrow) const {
   const BrickEntry& e = entry(index);
   const int band = locate_brick(index).first;
   uint64_t read = 0;

@@ -39,9 +39,10 @@ class StoreReader {
   // Reads the brick's sections that `which` names with as few preads as they take, checks and
   // decodes them into `out` (whose arrays for those sections must be present; values into
   // `values`). Returns the bytes read. Throws IoError naming the brick.
-  // `narrow`: the core's range-and-bound words into 32 bits instead (decode_section).
+  // `narrow`: a one-byte store's values into bytes and core words into 32 bits instead
+  // (decode_section).
   uint64_t read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out, float* values,
-                      uint32_t* narrow = nullptr) const;
+                      const NarrowBrick* narrow = nullptr) const;
   // Asks the kernel to start reading those sections in the background: a hint that costs no
   // thread and pays when the file is not in the page cache.
   void prefetch(int64_t index, const std::array<bool, kSections>& which) const;
