@@ -213,16 +213,7 @@ void PagedVolume::Pager::store_bounds(CachedBrick& home, uint32_t m, const Packe
   store(home.narrow_bounds() + m, narrow);
 }
 
-uint64_t PagedVolume::Pager::word_of(const CachedBrick& b, uint32_t m) {
-  if (!b.narrow()) return load(b.bounds() + m);
-  const uint32_t w = load(b.narrow_bounds() + m);
-  return w == kUnsetNarrowBounds ? kUnsetBounds : widen_bounds(w);
-}
-
-uint64_t PagedVolume::Pager::bounds_word(int64_t index, uint32_t m) {
-  CachedBrick& b = brick(index);
-  const uint64_t w = word_of(b, m);
-  if (w != kUnsetBounds) return w;
+uint64_t PagedVolume::Pager::computed_bounds_word(int64_t index, uint32_t m) {
   // Held until the record is read back: computing it reads other bricks, which may take this one's
   // pin, and the cache may then evict it, and a brick decoded again has band 0's records unset
   // (the record just computed would read as none). Held, a lookup gets this very brick back.
@@ -272,14 +263,6 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
     w = words();
   }
   return topology_of(static_cast<uint32_t>(w[0]), static_cast<uint32_t>(w[1]), w[2]);
-}
-
-void PagedVolume::Pager::prefetch(int64_t index, uint32_t m) {
-  const Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
-  if (p.index == index)
-    __builtin_prefetch(p.brick->bounds_at(m));
-  else
-    volume_->cache_.prefetch(index);
 }
 
 Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats, BudgetMemo* memo) {

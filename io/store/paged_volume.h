@@ -8,6 +8,7 @@
 // children (engine/hierarchy/compact_record.h: the same bits as the in-memory build's), and kept in the
 // cached brick for the next reader.
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <memory>
 
@@ -42,10 +43,21 @@ class PagedVolume {
     explicit Pager(const PagedVolume& volume) : volume_(&volume) {}
     BrickValues values(int64_t index) { return brick(index).values(); }
     int band(int64_t index) { return brick(index).band(); }
-    uint64_t bounds_word(int64_t index, uint32_t m);
+    // Inline, as the lookups below: a traversal reads millions of records, nearly all of them
+    // present and in a brick it holds.
+    uint64_t bounds_word(int64_t index, uint32_t m) {
+      const uint64_t w = word_of(brick(index), m);
+      return w != kUnsetBounds ? w : computed_bounds_word(index, m);
+    }
     Bf16 surplus(int64_t index, uint32_t m);
     DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read);
-    void prefetch(int64_t index, uint32_t m);
+    void prefetch(int64_t index, uint32_t m) {
+      const Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
+      if (p.index == index)
+        __builtin_prefetch(p.brick->bounds_at(m));
+      else
+        volume_->cache_.prefetch(index);
+    }
 
    private:
     CachedBrick& brick(int64_t index) {
@@ -89,7 +101,13 @@ class PagedVolume {
     // A record's range-and-bound word as engine/hierarchy/compact_record.h's, whatever width the
     // brick holds it in (CachedBrick::narrow), kUnsetBounds for one not computed yet; and storing one.
     uint64_t load_bounds(int64_t index, uint32_t m) { return word_of(brick(index), m); }
-    static uint64_t word_of(const CachedBrick& brick, uint32_t m);
+    static uint64_t word_of(const CachedBrick& b, uint32_t m) {
+      if (!b.narrow()) return std::atomic_ref<uint64_t>(b.bounds()[m]).load(std::memory_order_relaxed);
+      const uint32_t w = std::atomic_ref<uint32_t>(b.narrow_bounds()[m]).load(std::memory_order_relaxed);
+      return w == kUnsetNarrowBounds ? kUnsetBounds : widen_bounds(w);
+    }
+    // bounds_word of a band-0 record not computed yet: computes it.
+    uint64_t computed_bounds_word(int64_t index, uint32_t m);
     // bounds_word's narrow word, for a brick whose words are narrow (CachedBrick::narrow).
     uint32_t narrow_word(int64_t index, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
