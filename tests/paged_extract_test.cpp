@@ -1171,6 +1171,29 @@ TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
     }
 }
 
+// A narrow word's range and bound, as the traversal reads them straight from it, are the floats of
+// the 64-bit word it stands for, bit for bit: every range with some bounds, every bound with some
+// ranges, +inf's code included.
+TEST(NarrowBounds, RangeAndBoundReadAsTheirWideWordsAre) {
+  int64_t compared = 0, differ = 0;
+  auto check = [&](uint32_t lo, uint32_t hi, uint32_t halves) {
+    const uint32_t w = lo | hi << 8 | halves << 16;
+    const DiamondBounds straight = narrow_range_bound(w), wide = range_bound(widen_bounds(w));
+    ++compared;
+    if (std::memcmp(&straight, &wide, sizeof straight) != 0 && ++differ < 5)
+      ADD_FAILURE() << "lo " << lo << " hi " << hi << " halves " << halves << ": " << straight.lo << " " << straight.hi
+                    << " " << straight.error_bound << " against " << wide.lo << " " << wide.hi << " "
+                    << wide.error_bound;
+  };
+  for (uint32_t lo = 0; lo < 256; ++lo)
+    for (uint32_t hi = lo; hi < 256; ++hi)
+      for (const uint32_t halves : {0u, 1u, 2u, 3u, 255u, 1001u, 29070u, 65534u, 0xffffu}) check(lo, hi, halves);
+  for (uint32_t halves = 0; halves <= 0xffffu; ++halves)
+    for (const auto& [lo, hi] : {std::pair{0u, 0u}, std::pair{7u, 200u}, std::pair{255u, 255u}}) check(lo, hi, halves);
+  EXPECT_EQ(differ, 0) << "of " << compared;
+  EXPECT_TRUE(std::isinf(narrow_range_bound(0xffff0000u).error_bound));
+}
+
 // fewest_bytes gives 1 for integers of 0..255, 2 for those up to 65535, and 4 as soon as one value
 // is anything else, wherever it stands: first, last, and within a vectorized loop's steps or its tail.
 TEST(FewestBytes, HoldEveryIntegerInItsWidthAndNothingElse) {

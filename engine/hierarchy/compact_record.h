@@ -58,6 +58,11 @@ inline uint64_t bounds_word(const PackedBounds& p) {
 inline PackedBounds bounds_of(uint64_t w) {
   return {static_cast<Bf16>(w), static_cast<Bf16>(w >> 16), std::bit_cast<float>(static_cast<uint32_t>(w >> 32))};
 }
+// A word's range and bound as a traversal reads them (error_surplus 0: another field).
+inline DiamondBounds range_bound(uint64_t w) {
+  const PackedBounds p = bounds_of(w);
+  return {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound, 0.0f};
+}
 
 // What a tetrahedron that the error would let stop reads in topology modes, and the paper's
 // surplus (only --error surplus reads it).

@@ -174,7 +174,8 @@ decltype(auto) with_values(const Values& values, F&& f) {
 }
 
 // Values and records by coordinates over any set of bricks, as a traversal reader
-// (engine/extract/traversal.h). `Bricks` gives a brick's arrays (view) and reads record words
+// (engine/extract/traversal.h). `Bricks` gives a brick's arrays (view) and reads records: a
+// record's range and bound (range_bound: its word's, as floats, error_surplus 0), its words
 // (bounds_word, topology). Lookups as MultiresVolume's: a node's value is read from band j (its
 // coordinates lie on G_j), clamped into the data box beyond band j's grid; a record from the band
 // of the node's scale.
@@ -209,9 +210,9 @@ class CompactLookup {
     return h;
   }
   DiamondBounds bounds(const Handle& h, const RecordFields& read) {
-    const PackedBounds p = bounds_of(bricks_.bounds_word(h.index, h.m));
-    return {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
-            read.surplus ? bf16_to_float(bricks_.surplus(h.index, h.m)) : 0.0f};
+    DiamondBounds b = bricks_.range_bound(h.index, h.m);
+    if (read.surplus) b.error_surplus = bf16_to_float(bricks_.surplus(h.index, h.m));
+    return b;
   }
   DiamondTopology topology(const Handle& h, const RecordFields& read) { return bricks_.topology(h.index, h.m, read); }
   void prefetch(const Handle& h) { bricks_.prefetch(h.index, h.m); }
@@ -260,6 +261,7 @@ struct MemoryBricks {
   int64_t brick_nodes;
   const float* values(int64_t index) const { return h->values_data() + index * brick_nodes; }
   uint64_t bounds_word(int64_t index, uint32_t m) const { return h->bounds_data()[index * brick_nodes + m]; }
+  DiamondBounds range_bound(int64_t index, uint32_t m) const { return isotope::range_bound(bounds_word(index, m)); }
   Bf16 surplus(int64_t index, uint32_t m) const { return h->surplus_data()[index * brick_nodes + m]; }
   DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read) const {
     const int64_t at = index * brick_nodes + m;

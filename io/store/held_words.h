@@ -14,6 +14,7 @@
 #include <span>
 #include <string>
 
+#include "engine/hierarchy/record.h"
 #include "io/store/store_format.h"
 
 namespace isotope {
@@ -67,6 +68,13 @@ inline uint32_t narrow_bound(uint32_t bits, uint32_t& bad) {
 // 0..255 in order, or a bound not a multiple of a half up to 32767 nor +inf), and then what was
 // written to `narrow` means nothing.
 bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow);
+// range_bound (engine/hierarchy/compact_record.h) of a narrow word's 64-bit word, without it: the
+// same floats (a byte's float is its bfloat16's, a count of halves' half is exact).
+inline DiamondBounds narrow_range_bound(uint32_t narrow) {
+  const uint32_t halves = narrow >> 16;
+  return {static_cast<float>(narrow & 0xffu), static_cast<float>(narrow >> 8 & 0xffu),
+          halves == 0xffffu ? std::numeric_limits<float>::infinity() : 0.5f * static_cast<float>(halves), 0.0f};
+}
 // The 64-bit word of a narrow one (not of kUnsetNarrowBounds, which marks no record).
 inline uint64_t widen_bounds(uint32_t narrow) {
   const auto code = [](uint32_t byte) { return uint64_t{std::bit_cast<uint32_t>(static_cast<float>(byte)) >> 16}; };

@@ -49,6 +49,12 @@ class PagedVolume {
       const uint64_t w = word_of(brick(index), m);
       return w != kUnsetBounds ? w : computed_bounds_word(index, m);
     }
+    DiamondBounds range_bound(int64_t index, uint32_t m) {
+      const CachedBrick& b = brick(index);
+      if (!b.narrow()) return isotope::range_bound(bounds_word(index, m));
+      const uint32_t w = std::atomic_ref<uint32_t>(b.narrow_bounds()[m]).load(std::memory_order_relaxed);
+      return narrow_range_bound(w != kUnsetNarrowBounds ? w : narrow_word(index, m));
+    }
     Bf16 surplus(int64_t index, uint32_t m);
     DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read);
     void prefetch(int64_t index, uint32_t m) {
