@@ -214,7 +214,8 @@ TEST_F(Store, BandZeroRangesAndBoundsOfAUint8StoreAreTheBuildsWithNoOtherField) 
 // read the record back. Here the cache keeps no brick a reader does not hold, and the bricks of
 // band 0 that are neighbours in y (32 bricks across) share a reader's pin, so each of those reads
 // evicts the brick being computed into unless it is held. Every record must still be the build's,
-// for the narrow words of one-byte values and for every field.
+// for the narrow words of one-byte values and for every field, and every mesh the one a cache that
+// evicts nothing gives.
 TEST_F(Store, BandZeroRecordsAreTheBuildsWhenTheCacheKeepsOnlyWhatReadersHold) {
   Volume v;
   v.dims = {255, 12, 10};
@@ -246,6 +247,24 @@ TEST_F(Store, BandZeroRecordsAreTheBuildsWhenTheCacheKeepsOnlyWhatReadersHold) {
       if (!same_words(loaded, kept, i, nodes) && ++mismatches < 5) ADD_FAILURE() << "brick " << i << " differs";
     EXPECT_EQ(mismatches, 0);
   }
+  // And as an extraction reads them (range_bound, and in topology modes every field), each record
+  // computed as the walk first reaches it.
+  int compared = 0;
+  for (const double eps : {0.0, 0.02, 0.1})
+    for (const auto mode : {TopologyMode::none, TopologyMode::preserve}) {
+      SCOPED_TRACE("eps " + std::to_string(eps) + (mode == TopologyMode::none ? " none" : " preserve"));
+      ExtractOptions options;
+      options.iso = 0.1f, options.eps = eps, options.topology = mode;
+      BrickCache evicting(reader, 1), keeping(reader, uint64_t{1} << 30);
+      BrickCacheTesting::keep_only_what_readers_hold(evicting);
+      const Mesh a = extract(PagedVolume(evicting), options), b = extract(PagedVolume(keeping), options);
+      EXPECT_GT(evicting.stats().bricks_read, keeping.stats().bricks_read);
+      ASSERT_GT(b.triangles.size(), 100u);
+      ASSERT_EQ(a.positions, b.positions);
+      ASSERT_EQ(a.triangles, b.triangles);
+      ++compared;
+    }
+  EXPECT_EQ(compared, 6);
 }
 
 // The size target: a store of uint8/uint16 data is at most 1.5x its raw input.

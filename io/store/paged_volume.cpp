@@ -230,7 +230,7 @@ uint64_t PagedVolume::Pager::computed_bounds_word(int64_t index, uint32_t m) {
 uint32_t PagedVolume::Pager::narrow_word(int64_t index, uint32_t m) {
   const uint32_t w = load(brick(index).narrow_bounds() + m);
   if (w != kUnsetNarrowBounds) return w;
-  const std::shared_ptr<CachedBrick> home = hold(index);  // as in bounds_word
+  const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
   bounds_word(index, m);
   return load(home->narrow_bounds() + m);
 }
@@ -240,7 +240,7 @@ Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {
   if (!b.surplus()) volume_->cache_.require(b, index, {false, false, false, true});
   const Bf16 s = load(b.surplus() + m);
   if (s != kUnsetSurplus || b.band() != 0) return s;
-  const std::shared_ptr<CachedBrick> home = hold(index);  // as in bounds_word
+  const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
   band0_record(band0_node(*home, m), false);
   return load(home->surplus() + m);
 }
@@ -257,7 +257,7 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
   std::array<uint64_t, 3> w = words();
   if (b->band() == 0 && ((read.exact && w[0] == kUnsetInterval) || (read.paper && w[1] == kUnsetInterval) ||
                          (read.weights && w[2] == kUnsetWeights))) {
-    const std::shared_ptr<CachedBrick> home = hold(index);  // as in bounds_word
+    const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
     band0_record(band0_node(*home, m), true);
     b = home.get();
     w = words();
