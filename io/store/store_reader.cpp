@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sys/stat.h>
+#include <sys/uio.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -131,13 +132,28 @@ std::string StoreReader::describe_brick(int64_t index) const {
          std::to_string(b[0]) + " " + std::to_string(b[1]) + " " + std::to_string(b[2]) + ")";
 }
 
+void StoreReader::advise_window(uint64_t begin, uint64_t stop) const {
+  const uint64_t from = begin & ~(kReadWindow - 1);
+  const uint64_t to = std::min(area_end_, (stop + kReadWindow - 1) & ~(kReadWindow - 1));
+  if (to > from) ::posix_fadvise(fd_, static_cast<off_t>(from), static_cast<off_t>(to - from), POSIX_FADV_WILLNEED);
+}
+
+void StoreReader::read_range(uint8_t* data, uint64_t begin, uint64_t stop, int64_t index) const {
+  const size_t bytes = stop - begin;
+  iovec v{data, bytes};
+  // RWF_NOWAIT reads only what the page cache holds: a warm store pays one call, as with pread.
+  // Any shortfall (or a kernel or file system without it) goes the slow way, whole.
+  if (::preadv2(fd_, &v, 1, static_cast<off_t>(begin), RWF_NOWAIT) == static_cast<ssize_t>(bytes)) return;
+  advise_window(begin, stop);
+  pread_all(fd_, data, bytes, begin, describe_brick(index));
+}
+
 void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& which) const {
   const BrickEntry& e = entry(index);
   for_each_run(which, [&](int s, int end) {
     const uint64_t begin = e.section_offset(static_cast<Section>(s));
     const uint64_t stop = e.section_offset(static_cast<Section>(end));
-    if (stop > begin)
-      ::posix_fadvise(fd_, static_cast<off_t>(begin), static_cast<off_t>(stop - begin), POSIX_FADV_WILLNEED);
+    if (stop > begin) advise_window(begin, stop);
   });
 }
 
@@ -151,7 +167,7 @@ uint64_t StoreReader::read_brick(int64_t index, const std::array<bool, kSections
     const uint64_t begin = e.section_offset(static_cast<Section>(s));
     const uint64_t stop = e.section_offset(static_cast<Section>(end));
     bytes.resize(stop - begin);
-    if (!bytes.empty()) pread_all(fd_, bytes.data(), bytes.size(), begin, describe_brick(index));
+    if (!bytes.empty()) read_range(bytes.data(), begin, stop, index);
     read += bytes.size();
     uint64_t at = 0;
     for (int k = s; k < end; ++k) {

@@ -43,9 +43,14 @@ class StoreReader {
   // (decode_section).
   uint64_t read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out, float* values,
                       const NarrowBrick* narrow = nullptr) const;
-  // Asks the kernel to start reading those sections in the background: a hint that costs no
-  // thread and pays when the file is not in the page cache.
+  // Asks the kernel to start reading those sections in the background, with their read window:
+  // a hint that costs no thread and pays when the file is not in the page cache.
   void prefetch(int64_t index, const std::array<bool, kSections>& which) const;
+  // What the kernel reads of the file when a brick is not in the page cache: the aligned window
+  // of this many bytes that holds it. Bricks lie in traversal order (docs/FORMAT.md, "File
+  // order"), so the window mostly holds the next bricks a subtree reads: one read where there
+  // were several (docs/METHOD.md, "Out of core").
+  static constexpr uint64_t kReadWindow = uint64_t{64} << 10;
   // "FILE: brick 12 (band 0, brick 1 0 0)"
   std::string describe_brick(int64_t index) const;
   // Band and brick coordinates of a directory index.
@@ -56,6 +61,11 @@ class StoreReader {
   // every 4 KB otherwise (docs/METHOD.md, "Out of core").
   using Directory = std::vector<BrickEntry, detail::HugePageAllocator<BrickEntry>>;
   const Directory& band_directory(int band) const;
+  // Asks the kernel for the read windows that hold [begin, stop), within the bricks' area.
+  void advise_window(uint64_t begin, uint64_t stop) const;
+  // [begin, stop) of the file into data, from the page cache when it holds it all, else with
+  // its window; brick `index` names the file in an error.
+  void read_range(uint8_t* data, uint64_t begin, uint64_t stop, int64_t index) const;
 
   std::string path_;
   int fd_ = -1;
