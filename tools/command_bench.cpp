@@ -34,7 +34,8 @@ Command add_bench_command(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--scale", a->scale,
                 "Instead of the suite: a generated N^3 uint8 volume (--scale-size, default 2048: 8.6 GB) written to\n"
-                "--work-dir, converted with --memory-mb 1024 and extracted coarse with --cache-mb 256");
+                "--work-dir, converted with --memory-mb 1024 and extracted coarse with --cache-mb 256, beside eps 0\n"
+                "from the raw file");
   cmd->add_option("--scale-size", a->scale_size, "With --scale: nodes per axis")
       ->check(CLI::Range(int64_t{65}, int64_t{8193}))
       ->capture_default_str();

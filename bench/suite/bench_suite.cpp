@@ -137,6 +137,9 @@ struct Row {
   uint64_t peak_rss = 0, bytes_read = 0;
   double speedup = 0;  // baseline's median at the same thread count over ours
   double share = 0;    // triangles over the full-resolution mesh's
+  // store-cold: the same process with the store in the page cache (its extraction's median), and
+  // the row's floor: that plus the bytes it reads at the disk's sequential rate.
+  double warm_seconds = 0, floor_seconds = 0;
   std::string note;
 };
 
@@ -223,6 +226,32 @@ struct DatasetResult {
   int64_t voxels() const { return dims[0] * dims[1] * dims[2]; }
 };
 
+// The disk's sequential read rate in bytes/s, for the cold rows' floors: a file of 256 MB written
+// to `dir`, dropped from the page cache, read back in reads of 1 MB.
+double sequential_read_rate(const fs::path& dir) {
+  const fs::path file = dir / "disk-rate.bin";
+  constexpr size_t kBlock = size_t{1} << 20, kBlocks = 256;
+  std::vector<uint8_t> block(kBlock);
+  for (size_t i = 0; i < kBlock; ++i) block[i] = static_cast<uint8_t>(i * 2654435761u >> 24);
+  {
+    AtomicFile out(file.string());
+    for (size_t i = 0; i < kBlocks; ++i) out.write(block.data(), block.size());
+    out.commit();
+  }
+  if (!evict_from_page_cache(file.string())) throw IoError(file.string() + ": cannot drop it from the page cache");
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw IoError(file.string() + ": cannot open it again");
+  const auto start = std::chrono::steady_clock::now();
+  uint64_t total = 0;
+  for (ssize_t n; (n = ::pread(fd, block.data(), block.size(), static_cast<off_t>(total))) > 0;)
+    total += static_cast<uint64_t>(n);
+  const double seconds = seconds_since(start);
+  ::close(fd);
+  fs::remove(file);
+  if (total != kBlock * kBlocks) throw IoError(file.string() + ": read back short");
+  return static_cast<double>(total) / seconds;
+}
+
 class Suite {
  public:
   Suite(const SuiteOptions& a, fs::path work, bool progress) : a_(a), work_(std::move(work)), progress_(progress) {
@@ -233,6 +262,7 @@ class Suite {
 
   int threads() const { return threads_; }
   const Policy& policy() const { return policy_; }
+  double disk_rate() const { return disk_rate_; }  // bytes/s; 0 until a cold row measured it
   std::vector<Row>& rows() { return rows_; }
   std::vector<DatasetResult>& datasets() { return datasets_; }
   json& table1() { return table1_; }
@@ -472,12 +502,21 @@ class Suite {
     extract_processes(r, args, work_ / "cold.ply", false, [&] { evict_from_page_cache(store); });
     // Once more with a report, untimed: the bytes read (the same in every cold run).
     evict_from_page_cache(store);
-    args.insert(args.end(), {"-o", (work_ / "cold.ply").string(), "-q", "--report", (work_ / "cold.json").string()});
-    child(args, work_);
+    std::vector<std::string> reported = args;
+    reported.insert(reported.end(),
+                    {"-o", (work_ / "cold.ply").string(), "-q", "--report", (work_ / "cold.json").string()});
+    child(reported, work_);
     std::ifstream in(work_ / "cold.json");
     r.bytes_read = nlohmann::json::parse(in).at("bytes_read").get<uint64_t>();
     fs::remove(work_ / "cold.ply");
     fs::remove(work_ / "cold.json");
+    // The floor: the same runs with what they read left in the page cache by the run above, plus
+    // reading those bytes at the disk's sequential rate.
+    if (disk_rate_ == 0) disk_rate_ = sequential_read_rate(work_);
+    Row warm = r;
+    extract_processes(warm, args, work_ / "cold.ply", false);
+    r.warm_seconds = warm.seconds;
+    r.floor_seconds = warm.seconds + static_cast<double>(r.bytes_read) / disk_rate_;
     return r;
   }
 
@@ -637,6 +676,7 @@ class Suite {
   bool progress_;
   int threads_ = 1;
   Policy policy_, cold_policy_;
+  double disk_rate_ = 0;
   std::map<int, double> baseline_seconds_;
   std::vector<Row> rows_;
   std::vector<DatasetResult> datasets_;
@@ -774,6 +814,15 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
           add("coarse reads at most 15% of the store", name, buf, share <= 0.15);
         }
       }
+    }
+    // Cold within 1.5x of its floor, every cold row.
+    for (const Row& c : rows) {
+      if (c.dataset != name || c.input != "store-cold" || c.floor_seconds <= 0) continue;
+      const double x = c.seconds / c.floor_seconds;
+      std::snprintf(buf, sizeof buf, "%s its floor (%s, eps %g, %d thr: %s ms; warm %s ms + %s MB read)",
+                    ratio(x).c_str(), c.mode.c_str(), c.eps, c.threads, ms(c.seconds).c_str(),
+                    ms(c.warm_seconds).c_str(), mb(c.bytes_read).c_str());
+      add("cold store within 1.5x of its floor", name, buf, x <= 1.5);
     }
     // Warm within 1.25x of memory, every row that has both.
     for (const Row& w : rows) {
@@ -983,6 +1032,7 @@ json rows_json(const std::vector<Row>& rows) {
               {"peak_rss_bytes", r.peak_rss},
               {"bytes_read", r.bytes_read}});
     if (r.process_seconds > 0) j["process_seconds"] = r.process_seconds;
+    if (r.floor_seconds > 0) j.update({{"warm_seconds", r.warm_seconds}, {"floor_seconds", r.floor_seconds}});
     out.push_back(j);
   }
   return out;
@@ -1016,7 +1066,8 @@ json datasets_json(const std::vector<DatasetResult>& ds) {
 
 // A generated N^3 uint8 volume (the paper's algebraic function over [-2, 1.5] onto 0..255, written
 // slab by slab: it is larger than memory as float), converted with --memory-mb 1024 and extracted
-// coarse with --cache-mb 256 from the cold store, each a process measured whole.
+// coarse with --cache-mb 256 from the cold store, beside the surface at eps 0 from the cold raw
+// file, each a process measured whole.
 int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
   const int64_t n = a.scale_size;
   const std::string raw =
@@ -1050,14 +1101,39 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
   if (progress) std::fprintf(stderr, "isotope: bench --scale: converting\n");
   evict_from_page_cache(raw);
   const ChildRun conv = child({"convert", raw, store, "--memory-mb", "1024", "-q"}, work);
+  // The full-resolution alternative: the surface at eps 0 in one process from the cold raw file,
+  // with no store (how a user compares a coarse surface with what it stands for). That process
+  // holds the volume as float32: where that takes more than half the machine's memory it is not
+  // run, and the table says so.
+  const double full_bytes = 4.0 * static_cast<double>(n * n * n);
+  const double memory_bytes =
+      static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGESIZE));
+  std::optional<ChildRun> full;
+  Summary full_summary;
+  if (full_bytes <= memory_bytes / 2) {
+    if (progress) std::fprintf(stderr, "isotope: bench --scale: extracting at eps 0 from the raw file\n");
+    evict_from_page_cache(raw);
+    full = child(
+        {"extract", raw, "--iso", iso, "--eps", "0", "--topology", "none", "-o", (work / "scale-full.ply").string()},
+        work);
+    full_summary = parse_summary(full->output);
+    fs::remove(work / "scale-full.ply");
+  }
   fs::remove(raw);
   const uint64_t store_bytes = fs::file_size(store);
   if (progress) std::fprintf(stderr, "isotope: bench --scale: extracting\n");
+  // Timed as a user runs it, with the summary line and no report (whose per-component measures
+  // would be timed with it: Summary); then once more with a report, untimed, for what it read.
+  const std::vector<std::string> extract = {"extract",         store,     "--iso",      iso,
+                                            "--max-triangles", "1000000", "--topology", "none",
+                                            "--cache-mb",      "256",     "-o",         (work / "scale.ply").string()};
   evict_from_page_cache(store);
-  const ChildRun ext =
-      child({"extract", store, "--iso", iso, "--max-triangles", "1000000", "--topology", "none", "--cache-mb", "256",
-             "-q", "-o", (work / "scale.ply").string(), "--report", (work / "scale.json").string()},
-            work);
+  const ChildRun ext = child(extract, work);
+  const Summary summary = parse_summary(ext.output);
+  std::vector<std::string> reported = extract;
+  reported.insert(reported.end(), {"-q", "--report", (work / "scale.json").string()});
+  evict_from_page_cache(store);
+  child(reported, work);
   std::ifstream in(work / "scale.json");
   const auto report = nlohmann::json::parse(in);
   std::printf("isotope bench --scale: %s, %u hardware threads\n", cpu_model().c_str(),
@@ -1071,10 +1147,26 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
   std::printf(
       "extract      --cache-mb 256, coarse (at most 1M triangles, mode none, eps %g), cold store: %.2f s process,\n"
       "             %.2f s extraction, %lld triangles, peak RSS %.0f MB, %.1f MB read (%.2f%% of the store)\n",
-      report.at("chosen_eps").get<double>(), ext.seconds, report.at("extract_seconds").get<double>(),
-      static_cast<long long>(report.at("triangles").get<int64_t>()), static_cast<double>(ext.max_rss_kb) / 1024,
+      report.at("chosen_eps").get<double>(), ext.seconds, summary.extract_seconds,
+      static_cast<long long>(summary.triangles), static_cast<double>(ext.max_rss_kb) / 1024,
       report.at("bytes_read").get<double>() / 1e6,
       100 * report.at("bytes_read").get<double>() / static_cast<double>(store_bytes));
+  if (full)
+    std::printf(
+        "one-shot     eps 0 from the cold raw file, mode none: %.2f s process, %.2f s extraction, %lld triangles,\n"
+        "             peak RSS %.0f MB\n",
+        full->seconds, full_summary.extract_seconds, static_cast<long long>(full_summary.triangles),
+        static_cast<double>(full->max_rss_kb) / 1024);
+  else
+    std::printf(
+        "one-shot     eps 0 from the raw file: not run (the volume as float32, %.1f GB, is over half of this\n"
+        "             machine's %.1f GB)\n",
+        full_bytes / 1e9, memory_bytes / 1e9);
+  const json one_shot_full = full ? json{{"process_seconds", full->seconds},
+                                         {"extract_seconds", full_summary.extract_seconds},
+                                         {"triangles", full_summary.triangles},
+                                         {"peak_rss_mb", static_cast<double>(full->max_rss_kb) / 1024}}
+                                  : json{{"not_run", "the volume as float32 is over half of the machine's memory"}};
   if (!a.json.empty())
     write_json_file(json{{"scale_size", n},
                          {"write_seconds", write_seconds},
@@ -1083,8 +1175,10 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
                            {"peak_rss_mb", static_cast<double>(conv.max_rss_kb) / 1024},
                            {"memory_mb", 1024},
                            {"store_bytes", store_bytes}}},
+                         {"one_shot_full", one_shot_full},
                          {"extract",
                           {{"process_seconds", ext.seconds},
+                           {"extract_seconds", summary.extract_seconds},
                            {"peak_rss_mb", static_cast<double>(ext.max_rss_kb) / 1024},
                            {"cache_mb", 256},
                            {"report", report}}}},
@@ -1159,6 +1253,9 @@ int run_suite(const SuiteOptions& a) {
 
   std::printf("isotope bench%s: %s, %u hardware threads, %d used; %.1f s\n", a.quick ? " --quick" : "",
               cpu_model().c_str(), std::thread::hardware_concurrency(), suite.threads(), total);
+  if (suite.disk_rate() > 0)
+    std::printf("disk: %.0f MB/s sequential (256 MB read in 1 MB reads, dropped from the page cache first)\n",
+                suite.disk_rate() / 1e6);
   print_datasets(suite.datasets());
   print_rows(suite.rows());
   print_peers(suite.peers(), suite.rows(), suite.threads());
@@ -1173,8 +1270,10 @@ int run_suite(const SuiteOptions& a) {
     json j;
     j["isotope_version"] = ISOTOPE_VERSION_STRING;
     j["suite"] = a.quick ? "quick" : "full";
-    j["machine"] = {
-        {"cpu", cpu_model()}, {"hardware_threads", std::thread::hardware_concurrency()}, {"threads", suite.threads()}};
+    j["machine"] = {{"cpu", cpu_model()},
+                    {"hardware_threads", std::thread::hardware_concurrency()},
+                    {"threads", suite.threads()},
+                    {"disk_read_bytes_per_second", suite.disk_rate()}};
     j["policy"] = {{"min_runs", suite.policy().min_runs},
                    {"max_runs", suite.policy().max_runs},
                    {"min_seconds", suite.policy().min_seconds},
