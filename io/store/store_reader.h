@@ -3,6 +3,7 @@
 // its bricks is asked for (a coarse extraction never loads band 0's, nine tenths of them), bricks
 // on demand by pread, section by section (thread-safe), and a full verification.
 #include <array>
+#include <bit>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -51,6 +52,7 @@ class StoreReader {
   // order"), so the window mostly holds the next bricks a subtree reads: one read where there
   // were several (docs/METHOD.md, "Out of core").
   static constexpr uint64_t kReadWindow = uint64_t{64} << 10;
+  static_assert(std::has_single_bit(kReadWindow), "windows are aligned by masking");
   // "FILE: brick 12 (band 0, brick 1 0 0)"
   std::string describe_brick(int64_t index) const;
   // Band and brick coordinates of a directory index.
@@ -61,7 +63,7 @@ class StoreReader {
   // every 4 KB otherwise (docs/METHOD.md, "Out of core").
   using Directory = std::vector<BrickEntry, detail::HugePageAllocator<BrickEntry>>;
   const Directory& band_directory(int band) const;
-  // Asks the kernel for the read windows that hold [begin, stop), within the bricks' area.
+  // Asks the kernel for the read windows that hold [begin, stop), none past the bricks' area.
   void advise_window(uint64_t begin, uint64_t stop) const;
   // [begin, stop) of the file into data, from the page cache when it holds it all, else with
   // its window; brick `index` names the file in an error.
