@@ -1,5 +1,6 @@
 // Any input opened for extraction (isotope/source.h): the one place that assembles the chain
-// store -> brick cache -> paged volume, or holds a volume and builds its hierarchy on demand. Every
+// store -> brick cache -> paged volume, or streams a volume file at eps 0 and otherwise reads it
+// whole and builds its hierarchy on demand. Every
 // face (the isotope command's extract, sweep and serve, the C++ API, the bench) opens its input
 // here (docs/DESIGN.md, "Seams").
 #include "isotope/source.h"
@@ -13,11 +14,13 @@
 #include "engine/core/volume_check.h"
 #include "engine/extract/budget_memo.h"
 #include "engine/extract/extract.h"
+#include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
+#include "io/volume/box_reader.h"
 #include "io/volume/volume_reader.h"
 
 namespace isotope {
@@ -47,9 +50,12 @@ struct Source::Impl {
   std::unique_ptr<BrickCache> cache;
   std::unique_ptr<PagedVolume> paged;
   int64_t cache_mb = 0;
+  // Or a volume file, read a window of layers at a time by each extraction at eps 0, and read
+  // whole, once, for the first that needs more (or when prepare() plans several).
+  std::unique_ptr<BoxReader> file;
   // Or a volume, with its hierarchy built on first use, with the fields asked for; built again with
   // more when a later extraction reads more.
-  std::unique_ptr<Volume> volume;
+  mutable std::unique_ptr<Volume> volume;
   ProgressCallback progress;
   mutable std::mutex build_mutex;
   // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
@@ -59,16 +65,41 @@ struct Source::Impl {
   // the hierarchy is built again, which reads the array again (a borrowed one may have changed).
   mutable BudgetMemo budgets;
   mutable double preprocess_seconds = 0;
-  double read_seconds = 0;
+  mutable double read_seconds = 0;
+
+  // The volume, read whole from its file the first time. Under build_mutex.
+  const Volume& whole_locked() const {
+    if (volume) return *volume;
+    const auto start = std::chrono::steady_clock::now();
+    const VolumeInfo& i = file->info();
+    auto v = std::make_unique<Volume>();
+    v->dims = i.dims;
+    v->spacing = i.spacing;
+    v->origin = i.origin;
+    v->values.resize(static_cast<size_t>(v->node_count()));
+    file->read_box({0, 0, 0}, i.dims, v->values.data());
+    volume = std::move(v);
+    read_seconds += seconds_since(start);
+    return *volume;
+  }
+  bool read_whole() const {
+    const std::lock_guard<std::mutex> lock(build_mutex);
+    return volume != nullptr;
+  }
+  const Volume& whole() const {
+    const std::lock_guard<std::mutex> lock(build_mutex);
+    return whole_locked();
+  }
 
   std::shared_ptr<const Hierarchy> hierarchy(const RecordFields& fields) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (memory && memory->fields().covers(fields)) return memory;
+    const Volume& values = whole_locked();
     const RecordFields all = memory ? memory->fields() | fields : fields;
     memory.reset();  // freed now unless an extraction still holds it
     budgets.clear();
     const auto start = std::chrono::steady_clock::now();
-    memory = std::make_shared<const Hierarchy>(Hierarchy::build(*volume, all, Hierarchy::kMemoryBrickBits, progress));
+    memory = std::make_shared<const Hierarchy>(Hierarchy::build(values, all, Hierarchy::kMemoryBrickBits, progress));
     preprocess_seconds += seconds_since(start);
     return memory;
   }
@@ -93,8 +124,11 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
     impl->cache = std::make_unique<BrickCache>(*impl->store, static_cast<uint64_t>(options.cache_mb) << 20);
     impl->paged = std::make_unique<PagedVolume>(*impl->cache);
     impl->cache_mb = options.cache_mb;
+  } else if (locate_volume(spec).format == VolumeLocation::Format::nrrd) {
+    // gzip-encoded NRRD is read at random only through an inflated copy: read it whole, once.
+    impl->volume = std::make_unique<Volume>(read_volume(spec));
   } else {
-    impl->volume = std::make_unique<Volume>(read_volume({spec.path, spec.dims, spec.type}));
+    impl->file = open_box_reader(spec, "");  // checks what needs no value: size, layout, dataset
   }
   impl->read_seconds = seconds_since(start);
   return Source(std::move(impl));
@@ -111,20 +145,31 @@ Source open_volume(Volume volume, const OpenOptions& options) {
 
 Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
   if (impl_->paged) return isotope::extract(*impl_->paged, options, stats, &impl_->budgets);
-  if (!needs_hierarchy(options)) return isotope::extract(*impl_->volume, options, stats);
+  if (impl_->file && !impl_->read_whole() && streamed_extract_applies(impl_->file->info().dims, options)) {
+    const BoxReader& file = *impl_->file;
+    const VolumeInfo& i = file.info();
+    const LayerSource layers{i.dims, i.spacing, i.origin, [&](int64_t z, int64_t count, float* out) {
+                               file.read_box({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
+                             }};
+    return extract_streamed(layers, options, stats);
+  }
+  if (!needs_hierarchy(options)) return isotope::extract(impl_->whole(), options, stats);
   const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(options));
   return isotope::extract(*hierarchy, options, stats, &impl_->budgets);
 }
 
 void Source::prepare(const std::vector<ExtractOptions>& planned) const {
-  if (!impl_->volume) return;
+  if (impl_->paged) return;
   RecordFields fields{false, false, false, false};
   bool needed = false;
   for (const ExtractOptions& o : planned) {
     fields = fields | fields_for(o);
     needed = needed || needs_hierarchy(o);
   }
-  if (needed) impl_->hierarchy(fields);
+  if (needed)
+    impl_->hierarchy(fields);
+  else if (planned.size() > 1)
+    impl_->whole();  // read once, not streamed again for each
 }
 
 const StoreReader* Source::store() const { return impl_->store.get(); }
@@ -132,14 +177,20 @@ const StoreReader* Source::store() const { return impl_->store.get(); }
 SourceInfo Source::info() const {
   const Impl& s = *impl_;
   SourceInfo info;
-  info.read_seconds = s.read_seconds;
-  if (s.volume) {
-    info.dims = s.volume->dims;
-    info.spacing = s.volume->spacing;
-    info.origin = s.volume->origin;
-    info.lattice_k = Lattice::enclosing(info.dims).k;
-    info.input_bytes = s.volume->size() * sizeof(float);
+  if (!s.paged) {
     const std::lock_guard<std::mutex> lock(s.build_mutex);
+    info.read_seconds = s.read_seconds;
+    if (s.volume) {
+      info.dims = s.volume->dims;
+      info.spacing = s.volume->spacing;
+      info.origin = s.volume->origin;
+    } else {
+      info.dims = s.file->info().dims;
+      info.spacing = s.file->info().spacing;
+      info.origin = s.file->info().origin;
+    }
+    info.lattice_k = Lattice::enclosing(info.dims).k;
+    info.input_bytes = static_cast<uint64_t>(info.dims[0] * info.dims[1] * info.dims[2]) * sizeof(float);
     info.preprocess_seconds = s.preprocess_seconds;
     info.hierarchy_built = s.memory != nullptr;
     if (s.memory)
@@ -152,6 +203,7 @@ SourceInfo Source::info() const {
   // A store was preprocessed by convert; its header keeps the critical-point counts.
   const StoreHeader& h = s.store->header();
   info.store = true;
+  info.read_seconds = s.read_seconds;
   info.hierarchy_built = true;
   info.dims = h.dims;
   info.spacing = h.spacing;

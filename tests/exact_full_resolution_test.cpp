@@ -1,21 +1,32 @@
 // Invariant 2 of docs/DESIGN.md: at eps = 0 the adaptive extraction is exactly marching tetrahedra
 // over every finest tetrahedron (same triangles), whatever the mode, indicator or dimensions.
-// And the baseline itself, built in slabs on several threads, is the one-walk mesh bit for bit.
+// And the baseline itself, built in slabs on several threads, is the one-walk mesh bit for bit, as
+// is eps 0 streamed from a file a window of layers at a time.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
+#include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/mesh/marching_tetrahedra.h"
+#include "io/volume/volume_reader.h"
+#include "isotope/error.h"
+#include "isotope/source.h"
+#include "tests/io_error_of.h"
+#include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -313,6 +324,201 @@ TEST(FullResolutionSlabs, SurfaceInTheSharedPlaneGivesTheOneWalkMesh) {
     return z == z0 ? ((x * 7 + y * 3) % 5 == 0 ? 1.0 : 0.0) : std::abs(z - z0) == 1 ? -1.0 : 0.5;
   });
   expect_same_mesh_on_any_threads(ties, 0.0f, "ties in the plane");
+}
+
+// eps = 0 from a volume streamed a window of z-layers at a time (engine/extract/streamed_extract.h):
+// the array's mesh bit for bit, each layer read once in order (the top layer of a window again as
+// the first of the next), whatever the threads.
+struct RecordedLayers {
+  const Volume& volume;
+  std::vector<std::array<int64_t, 2>> reads;  // (first layer, layers) per call
+  LayerSource source() {
+    return {volume.dims, volume.spacing, volume.origin, [this](int64_t z, int64_t count, float* out) {
+              reads.push_back({z, count});
+              std::copy(volume.data() + volume.index(0, 0, z), volume.data() + volume.index(0, 0, z + count), out);
+            }};
+  }
+};
+
+void expect_streamed_is_the_arrays_mesh(const Volume& volume, float iso, const std::string& what,
+                                        int64_t min_windows = 1) {
+  ExtractOptions o;
+  o.iso = iso;
+  const Mesh reference = extract(volume, o);
+  ASSERT_GT(reference.triangles.size(), 0u) << what;
+  for (int threads : {1, 2}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    RecordedLayers layers{volume, {}};
+    ExtractStats stats;
+    const Mesh m = extract_streamed(layers.source(), o, &stats);
+    EXPECT_TRUE(m.positions == reference.positions && m.triangles == reference.triangles)
+        << what << " iso " << iso << ", " << threads << " threads";
+    EXPECT_GT(stats.tets_emitted, 0) << what;
+    ASSERT_GE(static_cast<int64_t>(layers.reads.size()), min_windows) << what;
+    int64_t next = 0;
+    for (const auto& [z, count] : layers.reads) {
+      EXPECT_EQ(z, next) << what << ": layers read out of order or twice";
+      EXPECT_GE(count, 2) << what;
+      next = z + count - 1;
+    }
+    EXPECT_EQ(next, volume.dims[2] - 1) << what << ": not every layer read";
+  }
+}
+
+TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
+  for (const auto& s : testing::shared_volumes()) {
+    const Volume v = testing::load_shared(s);
+    for (float iso : s.isovalues) expect_streamed_is_the_arrays_mesh(v, iso, s.name);
+  }
+  const std::string embryo = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
+  const Volume e = read_raw(embryo, *parse_raw_name(embryo));
+  expect_streamed_is_the_arrays_mesh(e, 64.5f, "embryo", 4);  // 16 MB windows of a 256 MB array
+  // Planes of 1.8 MB: a window is one layer of blocks, and the last is 7 cell layers thick.
+  const Volume wide = testing::make_volume({700, 650, 40}, [](int64_t x, int64_t y, int64_t z) {
+    return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
+           0.1 * static_cast<double>(z % 13);
+  });
+  expect_streamed_is_the_arrays_mesh(wide, 0.5f, "wide 700x650x40", 5);
+  EXPECT_EQ(streamed_window_bytes(wide.dims), 700 * 650 * 9 * 4);
+  expect_streamed_is_the_arrays_mesh(generate_noise(9, 3), 0.0f, "noise 9");  // one window of 4-cell blocks
+}
+
+TEST(Streamed, AFailedReadStopsTheExtractionWithItsError) {
+  const std::string embryo = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
+  const Volume e = read_raw(embryo, *parse_raw_name(embryo));
+  ExtractOptions o;
+  o.iso = 64.5f;
+  for (int64_t bad : {int64_t{0}, int64_t{100}, int64_t{255}})
+    for (int threads : {1, 2}) {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+      RecordedLayers layers{e, {}};
+      LayerSource source = layers.source();
+      const auto read = source.read_layers;
+      source.read_layers = [&](int64_t z, int64_t count, float* out) {
+        if (z <= bad && bad < z + count) throw IoError("layer " + std::to_string(bad) + " unreadable");
+        read(z, count, out);
+      };
+      try {
+        extract_streamed(source, o);
+        ADD_FAILURE() << "a failed read at layer " << bad << " went unnoticed";
+      } catch (const IoError& error) {
+        EXPECT_EQ(std::string(error.what()), "layer " + std::to_string(bad) + " unreadable");
+      }
+    }
+}
+
+TEST(Streamed, CancelledWhileItReadsItStops) {
+  const std::string embryo = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
+  const Volume e = read_raw(embryo, *parse_raw_name(embryo));
+  for (int threads : {1, 2}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    std::atomic<bool> cancel{false};
+    ExtractOptions o;
+    o.iso = 64.5f;
+    o.cancel = &cancel;
+    RecordedLayers layers{e, {}};
+    LayerSource source = layers.source();
+    const auto read = source.read_layers;
+    source.read_layers = [&](int64_t z, int64_t count, float* out) {
+      if (z > 0) cancel = true;
+      read(z, count, out);
+    };
+    EXPECT_THROW(extract_streamed(source, o), ExtractionCancelled) << threads << " threads";
+  }
+}
+
+TEST(Streamed, OnlyFullResolutionInOneProcessIsStreamed) {
+  const Volume v = generate_sphere(33);
+  RecordedLayers layers{v, {}};
+  ExtractOptions o;
+  EXPECT_TRUE(streamed_extract_applies(v.dims, o));
+  EXPECT_FALSE(streamed_extract_applies({2, 2, 2}, o)) << "no block fits";
+  o.eps = 0.5;
+  EXPECT_FALSE(streamed_extract_applies(v.dims, o));
+  EXPECT_THROW(extract_streamed(layers.source(), o), std::invalid_argument);
+  o.eps = 0;
+  o.max_triangles = 100;
+  EXPECT_FALSE(streamed_extract_applies(v.dims, o));
+  o.max_triangles = 0;
+  o.eps_ties = 0;
+  EXPECT_FALSE(streamed_extract_applies(v.dims, o));
+  EXPECT_TRUE(layers.reads.empty());
+}
+
+// A Source opened on a volume file (isotope/source.h) streams it at eps 0, every time, and reads
+// it whole once for the first extraction that needs its hierarchy. A file cut short after the open
+// shows which: a streamed extraction fails, one from the volume held in memory does not.
+class SourceOfAFile : public testing::TempDirTest {
+ protected:
+  std::string copy_of(const std::string& name) {
+    const std::string to = path(name);
+    std::filesystem::copy_file(std::string(ISOTOPE_TEST_DATA) + "/" + name, to);
+    return to;
+  }
+};
+
+VolumeSpec spec_of(const std::string& file) { return {file, std::nullopt, std::nullopt}; }
+
+bool same_mesh(const Mesh& a, const Mesh& b) { return a.positions == b.positions && a.triangles == b.triangles; }
+
+TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeUntilTheVolumeIsReadWhole) {
+  const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
+  const Volume v = read_volume(spec_of(raw));
+  ExtractOptions fine, coarse;
+  fine.iso = coarse.iso = 64.5f;
+  coarse.eps = 1;
+  const Mesh fine_mesh = extract(v, fine), coarse_mesh = extract(v, coarse);
+  {
+    const Source source = open_volume(spec_of(raw));
+    EXPECT_FALSE(source.info().hierarchy_built);
+    EXPECT_EQ(source.info().dims, v.dims);
+    EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh));
+    EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "streamed again";
+    std::filesystem::resize_file(raw, 70 * 123 * 60);  // layers 60.. gone
+    EXPECT_CONTAINS(testing::io_error_of([&] { source.extract(fine); }), raw);
+    EXPECT_CONTAINS(testing::io_error_of([&] { source.extract(coarse); }), raw);
+  }
+  std::filesystem::remove(raw);
+  copy_of("bolt_70x123x66_uint8.raw");
+  const Source source = open_volume(spec_of(raw));
+  EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh));  // reads the volume whole, and keeps it
+  EXPECT_TRUE(source.info().hierarchy_built);
+  std::filesystem::resize_file(raw, 0);
+  EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "from the volume in memory";
+  EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh));
+}
+
+TEST_F(SourceOfAFile, AnHdf5DatasetIsStreamedToTheSameMesh) {
+  for (const std::string name : {"embryo.h5", "neghip.h5"}) {
+    const std::string file = copy_of(name);
+    const Volume v = read_volume(spec_of(file));
+    ExtractOptions o;
+    o.iso = name == "embryo.h5" ? 64.5f : 128.5f;
+    const Source source = open_volume(spec_of(file));
+    EXPECT_TRUE(same_mesh(source.extract(o), extract(v, o))) << name;
+  }
+}
+
+// A value that is not finite is refused by the extraction that reads it, in the words and at the
+// coordinates the whole read gives.
+TEST_F(SourceOfAFile, AValueThatIsNotFiniteIsRefusedWhereItIs) {
+  std::vector<float> values(9 * 8 * 7, 1.0f);
+  for (size_t i = 0; i < values.size(); i += 3) values[i] = -1.0f;
+  values[(5 * 8 + 4) * 9 + 3] = std::numeric_limits<float>::quiet_NaN();  // (3, 4, 5)
+  const std::string raw = path("nan_9x8x7_float32.raw");
+  std::ofstream(raw, std::ios::binary)
+      .write(reinterpret_cast<const char*>(values.data()), static_cast<std::streamsize>(values.size() * 4));
+  const std::string whole = testing::io_error_of([&] { read_volume(spec_of(raw)); });
+  EXPECT_CONTAINS(whole, "(3,4,5)");
+  const Source source = open_volume(spec_of(raw));
+  for (double eps : {0.0, 1.0}) {
+    ExtractOptions o;
+    o.eps = eps;
+    const std::string streamed = testing::io_error_of([&] { source.extract(o); });
+    EXPECT_CONTAINS(streamed, raw);
+    EXPECT_CONTAINS(streamed, "(x,y,z) = (3,4,5)");
+    EXPECT_CONTAINS(streamed, "not finite");
+  }
 }
 
 }  // namespace

@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/extract/streamed_extract.h"
 #include "tests/child_process.h"
 #include "tests/temp_dir_test.h"
 
@@ -223,6 +224,46 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
       fs::remove(small.mesh);
     }
     fs::remove(huge.mesh);
+  }
+}
+
+// eps 0 from a volume file streams it (engine/extract/streamed_extract.h): the process holds at
+// most threads + 1 windows of layers and the mesh, never the volume as float. A 385^3 uint8 sphere
+// field: 57 MB of file, 228 MB as float, 15 MB windows; the whole read peaked at 262 MB, the
+// stream at 83 MB on two threads (2026-11-29).
+TEST_F(ExtractMemory, EpsZeroFromAVolumeFileHoldsWindowsAndTheMeshNotTheVolume) {
+  const std::string side = std::to_string(kSize);
+  const std::string raw = path("sphere_" + side + "x" + side + "x" + side + "_uint8.raw");
+  expect_ok({"generate", "sphere", "--size", side, "--type", "uint8", "-q", "-o", raw});
+  const std::string tiny = path("tiny_9x9x9_uint8.raw");
+  expect_ok({"generate", "sphere", "--size", "9", "--type", "uint8", "-q", "-o", tiny});
+  ASSERT_FALSE(HasFailure());
+  const double window_mb = static_cast<double>(streamed_window_bytes({kSize, kSize, kSize})) / (1 << 20);
+  const double volume_mb = static_cast<double>(kSize * kSize * kSize) * sizeof(float) / (1 << 20);
+  report("stream_window_mb", window_mb);
+  std::string mesh;
+  for (const int threads : {1, 2}) {
+    const std::string t = std::to_string(threads);
+    const Child baseline = expect_ok({"extract", tiny, "--iso", "100.5", "--threads", t, "-q", "-o", path("t.ply")});
+    const std::string report_path = path("stream" + t + ".json");
+    const std::string out = path("stream" + t + ".ply");
+    const Child c =
+        expect_ok({"extract", raw, "--iso", "200.5", "--threads", t, "-q", "-o", out, "--report", report_path});
+    const json r = json::parse(slurp(report_path), nullptr, /*allow_exceptions=*/false);
+    ASSERT_FALSE(r.is_discarded()) << "no report";
+    const double mesh_mb =
+        static_cast<double>(12 * r.at("vertices").get<int64_t>() + 12 * r.at("triangles").get<int64_t>()) / (1 << 20);
+    ASSERT_GT(mesh_mb, 1.0);
+    const double limit_mb = mb_of_kb(baseline.max_rss_kb) + (threads + 1) * window_mb + kMeshFactor * mesh_mb +
+                            static_cast<double>(kMarginMb);
+    report("stream_threads" + t + "_rss_mb", mb_of_kb(c.max_rss_kb));
+    report("stream_threads" + t + "_limit_mb", limit_mb);
+    EXPECT_LE(mb_of_kb(c.max_rss_kb), limit_mb) << threads << " threads";
+    EXPECT_LT(limit_mb, mb_of_kb(baseline.max_rss_kb) + volume_mb) << "the limit must be below the volume held whole";
+    if (mesh.empty())
+      mesh = out;
+    else
+      EXPECT_TRUE(same_bytes(out, mesh)) << "1 thread and 2 threads";
   }
 }
 

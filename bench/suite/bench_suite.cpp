@@ -1102,23 +1102,15 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
   evict_from_page_cache(raw);
   const ChildRun conv = child({"convert", raw, store, "--memory-mb", "1024", "-q"}, work);
   // The full-resolution alternative: the surface at eps 0 in one process from the cold raw file,
-  // with no store (how a user compares a coarse surface with what it stands for). That process
-  // holds the volume as float32: where that takes more than half the machine's memory it is not
-  // run, and the table says so.
-  const double full_bytes = 4.0 * static_cast<double>(n * n * n);
-  const double memory_bytes =
-      static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGESIZE));
-  std::optional<ChildRun> full;
-  Summary full_summary;
-  if (full_bytes <= memory_bytes / 2) {
-    if (progress) std::fprintf(stderr, "isotope: bench --scale: extracting at eps 0 from the raw file\n");
-    evict_from_page_cache(raw);
-    full = child(
-        {"extract", raw, "--iso", iso, "--eps", "0", "--topology", "none", "-o", (work / "scale-full.ply").string()},
-        work);
-    full_summary = parse_summary(full->output);
-    fs::remove(work / "scale-full.ply");
-  }
+  // with no store (how a user compares a coarse surface with what it stands for), the file
+  // streamed a window of layers at a time (isotope/source.h).
+  if (progress) std::fprintf(stderr, "isotope: bench --scale: extracting at eps 0 from the raw file\n");
+  evict_from_page_cache(raw);
+  const ChildRun full = child(
+      {"extract", raw, "--iso", iso, "--eps", "0", "--topology", "none", "-o", (work / "scale-full.ply").string()},
+      work);
+  const Summary full_summary = parse_summary(full.output);
+  fs::remove(work / "scale-full.ply");
   fs::remove(raw);
   const uint64_t store_bytes = fs::file_size(store);
   if (progress) std::fprintf(stderr, "isotope: bench --scale: extracting\n");
@@ -1151,22 +1143,15 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
       static_cast<long long>(summary.triangles), static_cast<double>(ext.max_rss_kb) / 1024,
       report.at("bytes_read").get<double>() / 1e6,
       100 * report.at("bytes_read").get<double>() / static_cast<double>(store_bytes));
-  if (full)
-    std::printf(
-        "one-shot     eps 0 from the cold raw file, mode none: %.2f s process, %.2f s extraction, %lld triangles,\n"
-        "             peak RSS %.0f MB\n",
-        full->seconds, full_summary.extract_seconds, static_cast<long long>(full_summary.triangles),
-        static_cast<double>(full->max_rss_kb) / 1024);
-  else
-    std::printf(
-        "one-shot     eps 0 from the raw file: not run (the volume as float32, %.1f GB, is over half of this\n"
-        "             machine's %.1f GB)\n",
-        full_bytes / 1e9, memory_bytes / 1e9);
-  const json one_shot_full = full ? json{{"process_seconds", full->seconds},
-                                         {"extract_seconds", full_summary.extract_seconds},
-                                         {"triangles", full_summary.triangles},
-                                         {"peak_rss_mb", static_cast<double>(full->max_rss_kb) / 1024}}
-                                  : json{{"not_run", "the volume as float32 is over half of the machine's memory"}};
+  std::printf(
+      "one-shot     eps 0 from the cold raw file, mode none: %.2f s process, %.2f s extraction, %lld triangles,\n"
+      "             peak RSS %.0f MB\n",
+      full.seconds, full_summary.extract_seconds, static_cast<long long>(full_summary.triangles),
+      static_cast<double>(full.max_rss_kb) / 1024);
+  const json one_shot_full = json{{"process_seconds", full.seconds},
+                                  {"extract_seconds", full_summary.extract_seconds},
+                                  {"triangles", full_summary.triangles},
+                                  {"peak_rss_mb", static_cast<double>(full.max_rss_kb) / 1024}};
   if (!a.json.empty())
     write_json_file(json{{"scale_size", n},
                          {"write_seconds", write_seconds},

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "engine/extract/adaptive_extract.h"
+#include "engine/extract/array_source.h"
 #include "engine/hierarchy/hierarchy.h"
 
 namespace isotope {
@@ -53,43 +54,6 @@ class InMemory {
 
  private:
   const MultiresVolume& mv_;
-};
-
-// A plain array as a source of values only: what eps = 0 reads (engine/extract/finest_extract.h).
-class ArraySource {
- public:
-  explicit ArraySource(const Volume& v) : v_(v), lattice_(Lattice::enclosing(v.dims)) {}
-  const Lattice& lattice() const { return lattice_; }
-  const std::array<int64_t, 3>& data_dims() const { return v_.dims; }
-  const std::array<double, 3>& origin() const { return v_.origin; }
-  const std::array<double, 3>& spacing() const { return v_.spacing; }
-
-  class Reader {
-   public:
-    explicit Reader(const Volume& v) : v_(v), values_(v.data()) {}
-    float value(const Coord& c, int /*band*/) const {
-      return values_[v_.index(std::min(c[0], v_.dims[0] - 1), std::min(c[1], v_.dims[1] - 1),
-                              std::min(c[2], v_.dims[2] - 1))];
-    }
-    // Blocks lie in the data box (extract_finest cuts them there): whole rows of the array.
-    bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
-      for (int64_t z = 0; z <= n[2]; ++z)
-        for (int64_t y = 0; y <= n[1]; ++y) {
-          const float* row = values_ + v_.index(lo[0], lo[1] + y, lo[2] + z);
-          std::copy(row, row + n[0] + 1, f + (z * stride + y) * stride);
-        }
-      return true;
-    }
-
-   private:
-    const Volume& v_;
-    const float* values_;  // v_.data(), once: Volume::at chooses between owned and borrowed values
-  };
-  Reader reader() const { return Reader(v_); }
-
- private:
-  const Volume& v_;
-  Lattice lattice_;
 };
 
 }  // namespace

@@ -39,6 +39,14 @@ inline bool cut_by(const float* f, int64_t stride, const std::array<int64_t, 3>&
   return below && above;
 }
 
+// The tetrahedra the finest extraction looked at and emitted, from its counts: the six of each
+// block's cube, and of each cell.
+inline void count_finest(int64_t blocks, int64_t cells, ExtractStats* stats) {
+  if (!stats) return;
+  stats->tets_visited = 6 * (blocks + cells);
+  stats->tets_emitted = 6 * cells;
+}
+
 // The cost of each slab of `plan`, for sharing them among processes: from the records of the
 // cube diamonds of scale 2 (the blocks' own, cubes of 8 cells a side, in band 2: 1/64 of the
 // data), the cells of the cubes the isovalue may cut. Coarser cubes (scale 3 or 4, 1/512 or
@@ -103,8 +111,7 @@ Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rul
   if (stats) {
     int64_t all_blocks = 0, all_cells = 0;
     for (size_t i = 0; i < loads.size(); ++i) all_blocks += seen_all[i].work, all_cells += loads[i].work;
-    stats->tets_visited = 6 * (all_blocks + all_cells);
-    stats->tets_emitted = 6 * all_cells;
+    count_finest(all_blocks, all_cells, stats);
     stats->ranks = loads;
   }
   return mesh;
@@ -112,61 +119,73 @@ Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rul
 
 // Blocks are cubes of 8 cells a side (4 or 2 on lattices of side 5 or 3), whose centres are the
 // cube diamonds of scale 2 (1 or 0): their records hold the range of every node of the closed
-// cube, and more. The mesh is the same bit for bit on any number of threads, paged or not.
-template <ValueSource Source>
-Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, ExtractStats* stats) {
-  const Lattice& lattice = source.lattice();
-  const std::array<int64_t, 3>& dims = source.data_dims();
-  const int64_t side = int64_t{2} << std::min(2, lattice.k - 1);  // cells per block edge
-  const int64_t stride = side + 1;
+// cube, and more. Slabs are one layer of blocks.
+inline SlabPlan finest_plan(const Lattice& lattice, const std::array<int64_t, 3>& dims, float iso,
+                            const std::array<double, 3>& origin, const std::array<double, 3>& spacing) {
   SlabPlan plan;
   plan.cell_layers = dims[2] - 1;
-  plan.slab_layers = side;
+  plan.slab_layers = int64_t{2} << std::min(2, lattice.k - 1);  // cells per block edge
   plan.side = lattice.side;  // the traversal's edge keys, hence its quadrilateral splits
-  plan.iso = rule.options().iso;
-  plan.origin = source.origin();
-  plan.spacing = source.spacing();
+  plan.iso = iso;
+  plan.origin = origin;
+  plan.spacing = spacing;
+  return plan;
+}
+
+// The blocks of cell layers [z0, z1) (one slab of PLAN) that the isovalue cuts, marched, their
+// values read through READER (global coordinates). Counts the blocks looked at and the cells marched.
+template <class Reader>
+void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const SlabPlan& plan,
+                         const std::array<int64_t, 3>& dims, int64_t z0, int64_t z1, MeshBuilder& builder,
+                         std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells) {
+  const int64_t side = plan.slab_layers;
+  const int64_t stride = side + 1;
+  std::vector<float> f(static_cast<size_t>(stride * stride * stride));
+  EdgeMemo memo(side);
+  int64_t seen = 0, marched = 0;
+  for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
+    for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
+      ++seen;
+      const Coord centre{x0 + side / 2, y0 + side / 2, z0 + side / 2};
+      if constexpr (RecordReader<Reader>)
+        if (!rule.in_range(
+                reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
+          continue;
+      const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
+      const Coord lo{x0, y0, z0};
+      bool read = false;
+      if constexpr (BlockReader<Reader>)
+        read = reader.block_values(lo, n, f.data(), stride);  // a source that holds blocks together
+      if (!read)
+        for (int64_t z = 0; z <= n[2]; ++z)
+          for (int64_t y = 0; y <= n[1]; ++y)
+            for (int64_t x = 0; x <= n[0]; ++x)
+              f[static_cast<size_t>((z * stride + y) * stride + x)] = reader.value({x0 + x, y0 + y, z0 + z}, 0);
+      // The record's range is saturated over the diamonds below, which reach into the
+      // neighbouring blocks: the block's own range culls most of what it lets through.
+      if (!cut_by(f.data(), stride, n, plan.iso)) continue;
+      march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, memo, builder);
+      marched += n[0] * n[1] * n[2];
+    }
+  blocks += seen;
+  cells += marched;
+}
+
+// The mesh is the same bit for bit on any number of threads, paged or not.
+template <ValueSource Source>
+Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, ExtractStats* stats) {
+  const std::array<int64_t, 3>& dims = source.data_dims();
+  const SlabPlan plan = finest_plan(source.lattice(), dims, rule.options().iso, source.origin(), source.spacing());
   std::atomic<int64_t> blocks{0}, cells{0};
   const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
     throw_if_cancelled(rule.options());
     auto reader = source.reader();
-    std::vector<float> f(static_cast<size_t>(stride * stride * stride));
-    EdgeMemo memo(side);
-    int64_t seen = 0, marched = 0;
-    for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
-      for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
-        ++seen;
-        const Coord centre{x0 + side / 2, y0 + side / 2, z0 + side / 2};
-        if constexpr (RecordReader<decltype(reader)>)
-          if (!rule.in_range(
-                  reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
-            continue;
-        const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
-        const Coord lo{x0, y0, z0};
-        bool read = false;
-        if constexpr (BlockReader<decltype(reader)>)
-          read = reader.block_values(lo, n, f.data(), stride);  // a source that holds blocks together
-        if (!read)
-          for (int64_t z = 0; z <= n[2]; ++z)
-            for (int64_t y = 0; y <= n[1]; ++y)
-              for (int64_t x = 0; x <= n[0]; ++x)
-                f[static_cast<size_t>((z * stride + y) * stride + x)] = reader.value({x0 + x, y0 + y, z0 + z}, 0);
-        // The record's range is saturated over the diamonds below, which reach into the
-        // neighbouring blocks: the block's own range culls most of what it lets through.
-        if (!cut_by(f.data(), stride, n, plan.iso)) continue;
-        march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, memo, builder);
-        marched += n[0] * n[1] * n[2];
-      }
-    blocks += seen;
-    cells += marched;
+    march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
   };
   const Distribution* group = rule.options().distribution;
   if (group) return extract_finest_shared(source, rule, plan, march, *group, blocks, cells, stats);
   Mesh mesh = march_in_slabs(plan, march);
-  if (stats) {
-    stats->tets_visited = 6 * (blocks + cells);  // the six tetrahedra of each block's cube, and of each cell
-    stats->tets_emitted = 6 * cells;
-  }
+  count_finest(blocks, cells, stats);
   return mesh;
 }
 

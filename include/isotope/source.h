@@ -1,10 +1,12 @@
 #pragma once
 // An input opened for extraction, whatever it is: a store made by convert is paged through a brick
 // cache, so that only the bricks a traversal reaches are read (memory: the cache's budget plus the
-// mesh, whatever the store's size); any other volume (raw, NRRD, HDF5, or an array handed over) is
-// held in memory, and its hierarchy is built the first time an extraction needs one (eps > 0 or a
-// triangle budget; at eps 0 the array is marched as it is). Either way extract() can run many
-// times, from several threads at once, and gives the same mesh, byte for byte, for the same volume.
+// mesh, whatever the store's size). A volume file (raw, HDF5, TIFF) is read by each extraction at
+// eps 0 a window of z-layers at a time, marched while the next is read (memory: a few windows plus
+// the mesh, so a file larger than memory works); the first extraction that needs its hierarchy
+// (eps > 0 or a triangle budget) reads it whole, keeps it, and builds the hierarchy. NRRD and an
+// array handed over are held in memory from the start. Either way extract() can run many times,
+// from several threads at once, and gives the same mesh, byte for byte, for the same volume.
 //
 //   isotope::Source scan = isotope::open_volume({"scan_512x512x300_uint16.raw"});
 //   isotope::ExtractOptions o;
@@ -54,13 +56,13 @@ struct SourceInfo {
   std::array<double, 3> spacing{1, 1, 1};
   std::array<double, 3> origin{0, 0, 0};
   int lattice_k = 0;              // the hierarchy's lattice has 2^k cells per axis
-  double read_seconds = 0;        // opening (a volume: reading it whole)
+  double read_seconds = 0;        // opening, and reading a volume whole (not its streamed reads)
   double preprocess_seconds = 0;  // a volume: building its hierarchy, so far
   bool hierarchy_built = false;   // a store: always (by convert)
   // Critical points per diamond type (cube, octahedron, diamond): the paper's rule at f(v), and
   // the exact rule for some isovalue. A store's header keeps them; a volume has them once built.
   std::array<int64_t, 3> critical_paper{0, 0, 0}, critical_exact{0, 0, 0};
-  uint64_t input_bytes = 0;  // a volume: its values in memory (as float)
+  uint64_t input_bytes = 0;  // a volume: its values as float (what an extraction reads)
   // A store: its size, the cache's budget as asked and in effect, a decoded brick's bytes, and
   // what the cache has read (compressed bytes, bricks), served from memory, and held at most.
   uint64_t store_bytes = 0;
@@ -78,7 +80,8 @@ class Source {
   ~Source();
 
   // The mesh of the isosurface these options choose. Throws as isotope::extract() does
-  // (isotope/extract.h), and IoError when a store's brick cannot be read or is corrupt. A triangle
+  // (isotope/extract.h), and IoError when a store's brick or a volume file cannot be read, is
+  // corrupt, or holds a value that is not finite. A triangle
   // budget asked for again is the choice this Source made the first time, without the search
   // (ExtractStats::budget_remembered).
   Mesh extract(const ExtractOptions& options, ExtractStats* stats = nullptr) const;
@@ -99,9 +102,11 @@ class Source {
   std::unique_ptr<Impl> impl_;
 };
 
-// Opens what SPEC names: reads a volume whole, or a store's header (its bricks on demand). Throws
-// IoError naming the file and what is wrong (missing, unreadable, not a volume, a corrupt store,
-// a version 2 store), and OptionError for dims or type given with a store, or cache_mb out of range.
+// Opens what SPEC names: a store's header (its bricks on demand), a volume file's layout (its
+// values when an extraction reads them), or a NRRD volume whole. Throws IoError naming the file
+// and what is wrong (missing, unreadable, of a size or layout that does not match, not a volume, a
+// corrupt store, a version 2 store), and OptionError for dims or type given with a store, or
+// cache_mb out of range. A value that is not finite is refused by the extraction that reads it.
 Source open_volume(const VolumeSpec& spec, const OpenOptions& options = {});
 // An array already in memory (a simulation's field, a numpy array's copy). Throws
 // std::invalid_argument for dimensions below 2, values that do not fill them, or values that are

@@ -159,7 +159,7 @@ class RawBoxReader final : public BoxReader {
       const int64_t z = lo[2] + done / (size[0] * size[1]);
       read_run((z * d[1] + y) * d[0] + lo[0], run, out + done, stage);
     }
-    check_finite(out, lo, size, data_.name);
+    if (!info_.is_integer) check_finite(out, lo, size, data_.name);  // an integer is finite as float
   }
 
  private:
@@ -237,7 +237,7 @@ class Hdf5BoxReader final : public BoxReader {
     check_box(lo, size, info_, where_);
     if (size[0] * size[1] * size[2] == 0) return;
     read_hyperslab(lo, size, out);
-    check_finite(out, lo, size, where_);
+    if (!info_.is_integer) check_finite(out, lo, size, where_);  // an integer is finite as float
   }
 
  private:

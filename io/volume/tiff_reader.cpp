@@ -399,7 +399,7 @@ class TiffBoxReader final : public BoxReader {
         file.refuse_guessed_data("slice");
       }
     }
-    check_finite(out, lo, size, stack_.where);
+    if (!info_.is_integer) check_finite(out, lo, size, stack_.where);  // an integer is finite as float
   }
 
  private:

@@ -1,0 +1,58 @@
+#pragma once
+// A plain array as a source of values only: what eps = 0 reads (engine/extract/finest_extract.h).
+// The array may hold only some z-layers of the volume (a window of a volume streamed from a file).
+#include <algorithm>
+#include <array>
+#include <cstdint>
+
+#include "engine/hierarchy/lattice.h"
+#include "isotope/volume.h"
+
+namespace isotope {
+
+// Reads node values by their global coordinates from an array of whole z-layers: layer z of the
+// volume is layer z - z_first of the array. Coordinates beyond the volume are clamped to its
+// last node (the lattice may reach beyond the data).
+class ArrayReader {
+ public:
+  ArrayReader(const float* values, const std::array<int64_t, 3>& dims, int64_t z_first)
+      : values_(values), dims_(dims), z_first_(z_first) {}
+  float value(const Coord& c, int /*band*/) const {
+    return values_[index(std::min(c[0], dims_[0] - 1), std::min(c[1], dims_[1] - 1), std::min(c[2], dims_[2] - 1))];
+  }
+  // Blocks lie in the data box (extract_finest cuts them there): whole rows of the array.
+  bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
+    for (int64_t z = 0; z <= n[2]; ++z)
+      for (int64_t y = 0; y <= n[1]; ++y) {
+        const float* row = values_ + index(lo[0], lo[1] + y, lo[2] + z);
+        std::copy(row, row + n[0] + 1, f + (z * stride + y) * stride);
+      }
+    return true;
+  }
+
+ private:
+  size_t index(int64_t x, int64_t y, int64_t z) const {
+    return static_cast<size_t>(((z - z_first_) * dims_[1] + y) * dims_[0] + x);
+  }
+  const float* values_;
+  std::array<int64_t, 3> dims_;
+  int64_t z_first_;
+};
+
+// A whole volume in memory.
+class ArraySource {
+ public:
+  explicit ArraySource(const Volume& v) : v_(v), lattice_(Lattice::enclosing(v.dims)) {}
+  const Lattice& lattice() const { return lattice_; }
+  const std::array<int64_t, 3>& data_dims() const { return v_.dims; }
+  const std::array<double, 3>& origin() const { return v_.origin; }
+  const std::array<double, 3>& spacing() const { return v_.spacing; }
+  // v_.data() once per reader: Volume::at chooses between owned and borrowed values per call.
+  ArrayReader reader() const { return ArrayReader(v_.data(), v_.dims, 0); }
+
+ private:
+  const Volume& v_;
+  Lattice lattice_;
+};
+
+}  // namespace isotope

@@ -1,0 +1,177 @@
+#include "engine/extract/streamed_extract.h"
+
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <exception>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "engine/core/volume_check.h"
+#include "engine/extract/array_source.h"
+#include "engine/extract/extract.h"
+#include "engine/extract/finest_extract.h"
+
+namespace isotope {
+namespace {
+
+// What a window aims to hold: four windows or more on a 256^3 volume, so that reading one
+// overlaps marching the others from the start, and each read is a long sequential request.
+constexpr int64_t kWindowBytes = int64_t{16} << 20;
+// What the windows held at once may take, unless two windows are larger.
+constexpr int64_t kRingBytes = int64_t{1} << 30;
+
+int64_t thread_count() {
+  return static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
+// Cell layers per window: whole slabs (layers of blocks), as many as kWindowBytes holds, at least one.
+int64_t window_layers(const std::array<int64_t, 3>& dims, int64_t slab_layers) {
+  const int64_t slab_bytes = dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) * slab_layers;
+  return slab_layers * std::max<int64_t>(1, kWindowBytes / slab_bytes);
+}
+
+// Windows of cell layers, filled in order by a reader thread into a ring of buffers. Window w holds
+// the nodes of cell layers [w * layers, (w + 1) * layers), its top node layer included (the next
+// window reads it again). A buffer is filled again once every slab of its window was marched.
+// Progress: slabs are handed out in increasing order (parallel_for_in_order), so the lowest slab
+// not yet marched is in a window already filled, or the next to fill, whose buffer is free.
+class LayerRing {
+ public:
+  LayerRing(const LayerSource& source, int64_t cell_layers, int64_t layers, int64_t slab_layers, int64_t held)
+      : source_(source), cell_layers_(cell_layers), layers_(layers), slab_layers_(slab_layers) {
+    const int64_t windows = (cell_layers + layers - 1) / layers;
+    marched_.assign(static_cast<size_t>(windows), 0);
+    const auto plane = static_cast<size_t>(source.dims[0] * source.dims[1]);
+    buffers_.resize(static_cast<size_t>(std::min(held, windows)));
+    for (std::vector<float>& b : buffers_) b.resize(plane * static_cast<size_t>(layers + 1));
+    reader_ = std::thread([this] { fill(); });
+  }
+  ~LayerRing() {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      if (!error_) error_ = std::make_exception_ptr(std::logic_error("the streamed extraction was abandoned"));
+    }
+    changed_.notify_all();
+    reader_.join();
+  }
+  LayerRing(const LayerRing&) = delete;
+  LayerRing& operator=(const LayerRing&) = delete;
+
+  int64_t first_layer(int64_t w) const { return w * layers_; }
+
+  // Window w's values, once filled. Rethrows what stopped the extraction (a read, or a march).
+  const float* acquire(int64_t w) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    changed_.wait(lock, [&] { return filled_ > w || error_; });
+    if (filled_ <= w) std::rethrow_exception(error_);
+    return buffers_[static_cast<size_t>(w) % buffers_.size()].data();
+  }
+  // One slab of window w is marched.
+  void release(int64_t w) {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      ++marched_[static_cast<size_t>(w)];
+    }
+    changed_.notify_all();
+  }
+  // A march failed: the reader stops, and every wait rethrows the failure.
+  void fail(std::exception_ptr e) {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      if (!error_) error_ = std::move(e);
+    }
+    changed_.notify_all();
+  }
+
+ private:
+  int64_t cells_in(int64_t w) const { return std::min(layers_, cell_layers_ - w * layers_); }
+  int64_t slabs_in(int64_t w) const { return (cells_in(w) + slab_layers_ - 1) / slab_layers_; }
+
+  void fill() {
+    const auto held = static_cast<int64_t>(buffers_.size());
+    for (int64_t w = 0; w < static_cast<int64_t>(marched_.size()); ++w) {
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        changed_.wait(lock, [&] { return error_ || w < held || marched_[static_cast<size_t>(w - held)] == slabs_in(w - held); });
+        if (error_) return;
+      }
+      try {
+        source_.read_layers(first_layer(w), cells_in(w) + 1, buffers_[static_cast<size_t>(w % held)].data());
+      } catch (...) {
+        fail(std::current_exception());
+        return;
+      }
+      {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        filled_ = w + 1;
+      }
+      changed_.notify_all();
+    }
+  }
+
+  const LayerSource& source_;
+  const int64_t cell_layers_, layers_, slab_layers_;
+  std::vector<std::vector<float>> buffers_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  int64_t filled_ = 0;             // windows [0, filled_) are in their buffers
+  std::vector<int64_t> marched_;   // per window: its slabs marched
+  std::exception_ptr error_;       // what stopped the extraction
+  std::thread reader_;             // last: started once the rest is ready
+};
+
+}  // namespace
+
+bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractOptions& options) {
+  return !needs_hierarchy(options) && options.distribution == nullptr &&
+         finest_extract_applies(Lattice::enclosing(dims));
+}
+
+int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims) {
+  const SlabPlan plan = finest_plan(Lattice::enclosing(dims), dims, 0, {0, 0, 0}, {1, 1, 1});
+  return dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) * (window_layers(dims, plan.slab_layers) + 1);
+}
+
+Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, ExtractStats* stats) {
+  options.validate();
+  validate_layout(source.dims, source.spacing, source.origin);
+  if (!streamed_extract_applies(source.dims, options))
+    throw std::invalid_argument("a streamed extraction is at full resolution, in one process");
+  const auto start = std::chrono::steady_clock::now();
+  const std::array<int64_t, 3>& dims = source.dims;
+  const Lattice lattice = Lattice::enclosing(dims);
+  const traversal::SplitRule rule(options, lattice, source.origin, source.spacing);
+  const SlabPlan plan = finest_plan(lattice, dims, options.iso, source.origin, source.spacing);
+  const int64_t layers = window_layers(dims, plan.slab_layers);
+  const int64_t window_bytes = streamed_window_bytes(dims);
+  const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes));
+  LayerRing ring(source, plan.cell_layers, layers, plan.slab_layers, held);
+  std::atomic<int64_t> blocks{0}, cells{0};
+  Mesh mesh = march_in_slabs(plan, [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
+    const int64_t w = z0 / layers;
+    const float* values = ring.acquire(w);
+    try {
+      throw_if_cancelled(options);
+      ArrayReader reader(values, dims, ring.first_layer(w));
+      march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+    } catch (...) {
+      ring.fail(std::current_exception());
+      throw;
+    }
+    ring.release(w);
+  });
+  if (stats) {
+    *stats = ExtractStats{};
+    count_finest(blocks, cells, stats);
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  return mesh;
+}
+
+}  // namespace isotope

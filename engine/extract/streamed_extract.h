@@ -1,0 +1,39 @@
+#pragma once
+// eps = 0 from a volume held nowhere whole: its values are read a window of z-layers at a time
+// while the windows before it are marched, so that memory holds a few windows and the mesh, and a
+// cold file's reads overlap the march (docs/METHOD.md, "eps = 0 from a file"). The mesh is the one
+// extract(const Volume&, ...) makes from the whole array, bit for bit, on any number of threads.
+#include <array>
+#include <cstdint>
+#include <functional>
+
+#include "isotope/extract.h"
+#include "isotope/mesh.h"
+
+namespace isotope {
+
+// A volume whose values are read on demand, whole z-layers at a time.
+struct LayerSource {
+  std::array<int64_t, 3> dims{0, 0, 0};
+  std::array<double, 3> spacing{1, 1, 1};
+  std::array<double, 3> origin{0, 0, 0};
+  // Fills `out` with the nodes of layers [z, z + count) as float, x fastest, then y, then z. Called
+  // from one thread, in increasing z. Throws what the read throws (a short read, a value that is
+  // not finite): the extraction throws it.
+  std::function<void(int64_t z, int64_t count, float* out)> read_layers;
+};
+
+// Whether extract_streamed makes what these options ask for: full resolution with no tie classes
+// and no budget (nothing that needs the hierarchy), in one process, on a lattice with blocks.
+bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractOptions& options);
+
+// The bytes of one window's values: one layer of blocks at least, more when the layers are small.
+// At most max(2, threads + 1) windows are held, and never more than 1 GB of them unless two
+// windows are larger.
+int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims);
+
+// Throws as extract(const Volume&, ...) does, std::invalid_argument when the options need more
+// than full resolution (streamed_extract_applies), and what read_layers throws.
+Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, ExtractStats* stats = nullptr);
+
+}  // namespace isotope
