@@ -1,5 +1,6 @@
 // `isotope extract` from a store keeps its decoded bricks within --cache-mb whatever the store's
-// size: a store over 4 times the budget (and whose decoded bricks are ~100 times it) extracts with
+// size, at eps 0, at a coarse eps and within a triangle budget (its search included): a store over
+// 4 times the budget (and whose decoded bricks are ~100 times it) extracts with
 // a peak resident set under the budget plus what the output mesh needs plus a constant measured
 // here (a tiny store's extraction), and the mesh does not depend on the budget.
 // Each isotope run is a child process, so that its peak RSS is its own (wait4's rusage): not the
@@ -45,6 +46,8 @@ constexpr int64_t kSize = 385;
 // triangles, while the traversal still reaches a few hundred bricks: the run where the mesh is
 // negligible and the cache's own memory shows.
 constexpr double kCoarseEps = 256;
+// A triangle budget: the eps it chooses reaches more bricks than kCoarseEps.
+constexpr int64_t kBudget = 100000;
 
 // What a paged extraction may hold beyond the budget, in decoded bricks (io/store/brick_cache.h: "the
 // memory in use stays within the budget plus those few bricks per thread"):
@@ -113,16 +116,29 @@ class ExtractMemory : public testing::TempDirTest {
     return c;
   }
 
-  Extraction extract(const std::string& store, const std::string& iso, double eps, int threads, int64_t cache_mb) {
+  // At EPS, or within a budget of MAX_TRIANGLES when it is above 0.
+  Extraction extract(const std::string& store, const std::string& iso, double eps, int threads, int64_t cache_mb,
+                     int64_t max_triangles = 0) {
     char eps_text[32];
     std::snprintf(eps_text, sizeof eps_text, "%g", eps);
-    const std::string name = fs::path(store).stem().string() + "_eps" + eps_text + "_t" + std::to_string(threads) +
-                             "_c" + std::to_string(cache_mb);
+    const std::string name = fs::path(store).stem().string() + "_eps" + eps_text + "_b" +
+                             std::to_string(max_triangles) + "_t" + std::to_string(threads) + "_c" +
+                             std::to_string(cache_mb);
     Extraction e;
     e.mesh = path(name + ".ply");
     const std::string report_path = path(name + ".json");
-    e.child = expect_ok({"extract", store, "--iso", iso, "--eps", eps_text, "--threads", std::to_string(threads),
-                         "--cache-mb", std::to_string(cache_mb), "-o", e.mesh, "--report", report_path, "-q"});
+    std::vector<std::string> args = {"extract",    store,
+                                     "--iso",      iso,
+                                     "--threads",  std::to_string(threads),
+                                     "--cache-mb", std::to_string(cache_mb),
+                                     "-o",         e.mesh,
+                                     "--report",   report_path,
+                                     "-q"};
+    if (max_triangles > 0)
+      args.insert(args.end(), {"--max-triangles", std::to_string(max_triangles)});
+    else
+      args.insert(args.end(), {"--eps", eps_text});
+    e.child = expect_ok(args);
     e.report = json::parse(slurp(report_path), nullptr, /*allow_exceptions=*/false);
     if (e.report.is_discarded() || !e.report.contains("triangles")) {
       ADD_FAILURE() << name << ": no report";
@@ -173,11 +189,19 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
     report("baseline_rss_mb_threads" + std::to_string(threads), mb_of_kb(t.child.max_rss_kb));
   }
 
-  for (const double eps : {0.0, kCoarseEps}) {
-    const std::string tag = eps == 0 ? "eps0" : "coarse";
+  // A triangle budget holds what the extraction at the eps it chooses holds: its search counts
+  // (docs/METHOD.md, "A budget from a sample") take no more than the cache and the mesh.
+  struct Case {
+    const char* tag;
+    double eps;
+    int64_t max_triangles;
+  };
+  for (const Case& run : {Case{"eps0", 0.0, 0}, Case{"coarse", kCoarseEps, 0}, Case{"budget", 0.0, kBudget}}) {
+    const std::string tag = run.tag;
+    const double eps = run.eps;
     // Every brick the traversal reaches, decoded once and never evicted: the reference mesh and
     // the decoded size the budget is measured against.
-    const Extraction huge = extract(big, iso, eps, 2, kHugeBudgetMb);
+    const Extraction huge = extract(big, iso, eps, 2, kHugeBudgetMb, run.max_triangles);
     const double decoded_mb = huge.report.at("cache").at("peak_decoded_mb").get<double>();
     ASSERT_GT(huge.bricks_read(), 0);
     // A brick decoded whole; eps 0 decodes band 0 as halo values only, about an eighth of that.
@@ -189,13 +213,18 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
     report(tag + "_huge_cache_bricks_read", static_cast<double>(huge.bricks_read()));
     report(tag + "_huge_cache_seconds", huge.child.seconds);
     report(tag + "_triangles", static_cast<double>(huge.triangles()));
+    if (run.max_triangles > 0) {
+      EXPECT_LE(huge.triangles(), run.max_triangles);
+      EXPECT_GT(huge.report.at("chosen_eps").get<double>(), 0.0) << "a budget below full resolution";
+      report(tag + "_chosen_eps", huge.report.at("chosen_eps").get<double>());
+    }
     report(tag + "_mesh_mb", static_cast<double>(huge.mesh_bytes()) / (1 << 20));
     // Far more decoded data than the budget, so holding it all would show.
     EXPECT_GE(decoded_mb, 10.0 * kBudgetMb);
 
     for (const int threads : {1, 2}) {
       const std::string key = tag + "_threads" + std::to_string(threads);
-      const Extraction small = extract(big, iso, eps, threads, kBudgetMb);
+      const Extraction small = extract(big, iso, eps, threads, kBudgetMb, run.max_triangles);
       // Peak RSS <= the tiny store's (the constant) + the budget + the bricks held beyond it
       // (pinned by the readers, being decoded, decode scratch) + kMeshFactor x the mesh + margin.
       const int64_t extra_bricks = kPinnedPerReader * (threads + 1) + kDecodePerThread * threads;
@@ -204,7 +233,7 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
       const double limit_mb =
           mb_of_kb(baseline_kb[threads]) + budget_mb + static_cast<double>(extra_bricks) * brick_mb +
           kMeshFactor * static_cast<double>(small.mesh_bytes()) / (1 << 20) + static_cast<double>(kMarginMb) +
-          (eps == 0 && threads > 1 ? static_cast<double>(kSecondArenaMb) : 0.0);
+          (eps == 0 && run.max_triangles == 0 && threads > 1 ? static_cast<double>(kSecondArenaMb) : 0.0);
       const double rss_mb = mb_of_kb(small.child.max_rss_kb);
       report(key + "_rss_mb", rss_mb);
       report(key + "_report_peak_rss_mb", small.report.at("peak_rss_mb").get<double>());

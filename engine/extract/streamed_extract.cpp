@@ -98,7 +98,8 @@ class LayerRing {
     for (int64_t w = 0; w < static_cast<int64_t>(marched_.size()); ++w) {
       {
         std::unique_lock<std::mutex> lock(mutex_);
-        changed_.wait(lock, [&] { return error_ || w < held || marched_[static_cast<size_t>(w - held)] == slabs_in(w - held); });
+        changed_.wait(
+            lock, [&] { return error_ || w < held || marched_[static_cast<size_t>(w - held)] == slabs_in(w - held); });
         if (error_) return;
       }
       try {
@@ -120,10 +121,10 @@ class LayerRing {
   std::vector<std::vector<float>> buffers_;
   std::mutex mutex_;
   std::condition_variable changed_;
-  int64_t filled_ = 0;             // windows [0, filled_) are in their buffers
-  std::vector<int64_t> marched_;   // per window: its slabs marched
-  std::exception_ptr error_;       // what stopped the extraction
-  std::thread reader_;             // last: started once the rest is ready
+  int64_t filled_ = 0;            // windows [0, filled_) are in their buffers
+  std::vector<int64_t> marched_;  // per window: its slabs marched
+  std::exception_ptr error_;      // what stopped the extraction
+  std::thread reader_;            // last: started once the rest is ready
 };
 
 }  // namespace
