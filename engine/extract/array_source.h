@@ -20,6 +20,21 @@ class ArrayReader {
   float value(const Coord& c, int /*band*/) const {
     return values_[index(std::min(c[0], dims_[0] - 1), std::min(c[1], dims_[1] - 1), std::min(c[2], dims_[2] - 1))];
   }
+  // Whether min <= iso < max over the block's nodes (cut_by), read where they are: most blocks
+  // are not cut, and are then never copied. Stops at the first row that shows both sides.
+  bool block_cut(const Coord& lo, const std::array<int64_t, 3>& n, float iso) const {
+    bool below = false, above = false;
+    for (int64_t z = 0; z <= n[2]; ++z)
+      for (int64_t y = 0; y <= n[1]; ++y) {
+        const float* row = values_ + index(lo[0], lo[1] + y, lo[2] + z);
+        for (int64_t x = 0; x <= n[0]; ++x) {
+          below |= row[x] <= iso;
+          above |= row[x] > iso;
+        }
+        if (below && above) return true;
+      }
+    return false;
+  }
   // Blocks lie in the data box (extract_finest cuts them there): whole rows of the array.
   bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) const {
     for (int64_t z = 0; z <= n[2]; ++z)

@@ -153,6 +153,9 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
           continue;
       const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
       const Coord lo{x0, y0, z0};
+      constexpr bool kCutsInPlace = requires { reader.block_cut(lo, n, plan.iso); };
+      if constexpr (kCutsInPlace)
+        if (!reader.block_cut(lo, n, plan.iso)) continue;
       bool read = false;
       if constexpr (BlockReader<Reader>)
         read = reader.block_values(lo, n, f.data(), stride);  // a source that holds blocks together
@@ -163,7 +166,7 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
               f[static_cast<size_t>((z * stride + y) * stride + x)] = reader.value({x0 + x, y0 + y, z0 + z}, 0);
       // The record's range is saturated over the diamonds below, which reach into the
       // neighbouring blocks: the block's own range culls most of what it lets through.
-      if (!cut_by(f.data(), stride, n, plan.iso)) continue;
+      if (!kCutsInPlace && !cut_by(f.data(), stride, n, plan.iso)) continue;
       march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, memo, builder);
       marched += n[0] * n[1] * n[2];
     }
