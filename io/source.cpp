@@ -7,6 +7,7 @@
 
 #include <malloc.h>
 
+#include <atomic>
 #include <chrono>
 #include <mutex>
 #include <utility>
@@ -21,7 +22,9 @@
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
 #include "io/volume/box_reader.h"
+#include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -50,12 +53,17 @@ struct Source::Impl {
   std::unique_ptr<BrickCache> cache;
   std::unique_ptr<PagedVolume> paged;
   int64_t cache_mb = 0;
-  // Or a volume file, read a window of layers at a time by each extraction at eps 0, and read
-  // whole, once, for the first that needs more (or when prepare() plans several).
+  // Or a volume file (named `path`): read a window of layers at a time by each extraction that
+  // streams (eps 0), and read whole, once, by the first that does not.
   std::unique_ptr<BoxReader> file;
-  // Or a volume, with its hierarchy built on first use, with the fields asked for; built again with
-  // more when a later extraction reads more.
+  std::string path;
+  // Or a volume held whole (an array, NRRD, or the file once read): set once, never replaced, and
+  // published in `held` so that an extraction finds it without a lock.
   mutable std::unique_ptr<Volume> volume;
+  mutable std::atomic<const Volume*> held{nullptr};
+  // The whole read. Taken inside build_mutex (a hierarchy reads the volume), never around it: an
+  // extraction from the volume waits for its read, not for another extraction's hierarchy.
+  mutable std::mutex read_mutex;
   ProgressCallback progress;
   mutable std::mutex build_mutex;
   // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
@@ -64,11 +72,22 @@ struct Source::Impl {
   // The triangle budgets settled so far: the same data whether paged or in memory. Forgotten when
   // the hierarchy is built again, which reads the array again (a borrowed one may have changed).
   mutable BudgetMemo budgets;
-  mutable double preprocess_seconds = 0;
-  mutable double read_seconds = 0;
+  mutable double preprocess_seconds = 0;  // under build_mutex
+  mutable double read_seconds = 0;        // under read_mutex
 
-  // The volume, read whole from its file the first time. Under build_mutex.
-  const Volume& whole_locked() const {
+  void hold(std::unique_ptr<Volume> v) const {
+    volume = std::move(v);
+    held.store(volume.get(), std::memory_order_release);
+  }
+  const Volume* in_memory() const { return held.load(std::memory_order_acquire); }
+  // Whether an extraction with these options streams the file rather than read it whole.
+  bool streams(const ExtractOptions& options) const {
+    return file && !in_memory() && streamed_extract_applies(file->info().dims, options);
+  }
+  // The volume, read whole from its file the first time.
+  const Volume& whole() const {
+    if (const Volume* v = in_memory()) return *v;
+    const std::lock_guard<std::mutex> lock(read_mutex);
     if (volume) return *volume;
     const auto start = std::chrono::steady_clock::now();
     const VolumeInfo& i = file->info();
@@ -76,25 +95,22 @@ struct Source::Impl {
     v->dims = i.dims;
     v->spacing = i.spacing;
     v->origin = i.origin;
-    v->values.resize(static_cast<size_t>(v->node_count()));
+    try {
+      size_volume_values(v->values, static_cast<size_t>(v->node_count()));
+    } catch (const std::bad_alloc&) {
+      throw IoError(path + ": " + std::to_string(i.dims[0]) + "x" + std::to_string(i.dims[1]) + "x" +
+                    std::to_string(i.dims[2]) + " volume does not fit in memory");
+    }
     file->read_box({0, 0, 0}, i.dims, v->values.data());
-    volume = std::move(v);
+    hold(std::move(v));
     read_seconds += seconds_since(start);
     return *volume;
-  }
-  bool read_whole() const {
-    const std::lock_guard<std::mutex> lock(build_mutex);
-    return volume != nullptr;
-  }
-  const Volume& whole() const {
-    const std::lock_guard<std::mutex> lock(build_mutex);
-    return whole_locked();
   }
 
   std::shared_ptr<const Hierarchy> hierarchy(const RecordFields& fields) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (memory && memory->fields().covers(fields)) return memory;
-    const Volume& values = whole_locked();
+    const Volume& values = whole();
     const RecordFields all = memory ? memory->fields() | fields : fields;
     memory.reset();  // freed now unless an extraction still holds it
     budgets.clear();
@@ -126,9 +142,10 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
     impl->cache_mb = options.cache_mb;
   } else if (locate_volume(spec).format == VolumeLocation::Format::nrrd) {
     // gzip-encoded NRRD is read at random only through an inflated copy: read it whole, once.
-    impl->volume = std::make_unique<Volume>(read_volume(spec));
+    impl->hold(std::make_unique<Volume>(read_volume(spec)));
   } else {
     impl->file = open_box_reader(spec, "");  // checks what needs no value: size, layout, dataset
+    impl->path = spec.path;
   }
   impl->read_seconds = seconds_since(start);
   return Source(std::move(impl));
@@ -139,13 +156,13 @@ Source open_volume(Volume volume, const OpenOptions& options) {
   validate_volume(volume);  // what extract() would refuse, refused at open
   auto impl = std::make_unique<Source::Impl>();
   impl->progress = options.preprocess_progress;
-  impl->volume = std::make_unique<Volume>(std::move(volume));
+  impl->hold(std::make_unique<Volume>(std::move(volume)));
   return Source(std::move(impl));
 }
 
 Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
   if (impl_->paged) return isotope::extract(*impl_->paged, options, stats, &impl_->budgets);
-  if (impl_->file && !impl_->read_whole() && streamed_extract_applies(impl_->file->info().dims, options)) {
+  if (impl_->streams(options)) {
     const BoxReader& file = *impl_->file;
     const VolumeInfo& i = file.info();
     const LayerSource layers{i.dims, i.spacing, i.origin, [&](int64_t z, int64_t count, float* out) {
@@ -161,15 +178,16 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
 void Source::prepare(const std::vector<ExtractOptions>& planned) const {
   if (impl_->paged) return;
   RecordFields fields{false, false, false, false};
-  bool needed = false;
+  bool needed = false, whole = false;
   for (const ExtractOptions& o : planned) {
     fields = fields | fields_for(o);
     needed = needed || needs_hierarchy(o);
+    whole = whole || !impl_->streams(o);
   }
   if (needed)
     impl_->hierarchy(fields);
-  else if (planned.size() > 1)
-    impl_->whole();  // read once, not streamed again for each
+  else if (whole)
+    impl_->whole();
 }
 
 const StoreReader* Source::store() const { return impl_->store.get(); }
@@ -179,11 +197,15 @@ SourceInfo Source::info() const {
   SourceInfo info;
   if (!s.paged) {
     const std::lock_guard<std::mutex> lock(s.build_mutex);
-    info.read_seconds = s.read_seconds;
-    if (s.volume) {
-      info.dims = s.volume->dims;
-      info.spacing = s.volume->spacing;
-      info.origin = s.volume->origin;
+    {
+      const std::lock_guard<std::mutex> read_lock(s.read_mutex);
+      info.read_seconds = s.read_seconds;
+    }
+    if (const Volume* v = s.in_memory()) {
+      info.values_in_memory = true;
+      info.dims = v->dims;
+      info.spacing = v->spacing;
+      info.origin = v->origin;
     } else {
       info.dims = s.file->info().dims;
       info.spacing = s.file->info().spacing;

@@ -8,16 +8,20 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
+#include "engine/extract/slab_march.h"
 #include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/multires_volume.h"
@@ -372,7 +376,7 @@ TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
   }
   const std::string embryo = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
   const Volume e = read_raw(embryo, *parse_raw_name(embryo));
-  expect_streamed_is_the_arrays_mesh(e, 64.5f, "embryo", 4);  // 16 MB windows of a 256 MB array
+  expect_streamed_is_the_arrays_mesh(e, 64.5f, "embryo", 4);  // 16 MB windows of a 64 MB array
   // Planes of 1.8 MB: a window is one layer of blocks, and the last is 7 cell layers thick.
   const Volume wide = testing::make_volume({700, 650, 40}, [](int64_t x, int64_t y, int64_t z) {
     return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
@@ -380,7 +384,9 @@ TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
   });
   expect_streamed_is_the_arrays_mesh(wide, 0.5f, "wide 700x650x40", 5);
   EXPECT_EQ(streamed_window_bytes(wide.dims), 700 * 650 * 9 * 4);
-  expect_streamed_is_the_arrays_mesh(generate_noise(9, 3), 0.0f, "noise 9");  // one window of 4-cell blocks
+  expect_streamed_is_the_arrays_mesh(generate_noise(9, 3), 0.0f, "noise 9");  // one window, one slab
+  expect_streamed_is_the_arrays_mesh(generate_noise(5, 3), 0.0f, "noise 5");  // blocks of 4 cells
+  EXPECT_EQ(streamed_window_bytes({9, 9, 9}), 9 * 9 * 9 * 4) << "a window holds no more than the volume";
 }
 
 TEST(Streamed, AFailedReadStopsTheExtractionWithItsError) {
@@ -474,6 +480,7 @@ TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeUntilTheVolumeIsReadWhole) {
     EXPECT_EQ(source.info().dims, v.dims);
     EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh));
     EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "streamed again";
+    EXPECT_FALSE(source.info().values_in_memory);
     std::filesystem::resize_file(raw, 70 * 123 * 60);  // layers 60.. gone
     EXPECT_CONTAINS(testing::io_error_of([&] { source.extract(fine); }), raw);
     EXPECT_CONTAINS(testing::io_error_of([&] { source.extract(coarse); }), raw);
@@ -483,6 +490,7 @@ TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeUntilTheVolumeIsReadWhole) {
   const Source source = open_volume(spec_of(raw));
   EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh));  // reads the volume whole, and keeps it
   EXPECT_TRUE(source.info().hierarchy_built);
+  EXPECT_TRUE(source.info().values_in_memory);
   std::filesystem::resize_file(raw, 0);
   EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "from the volume in memory";
   EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh));
@@ -496,6 +504,7 @@ TEST_F(SourceOfAFile, AnHdf5DatasetIsStreamedToTheSameMesh) {
     o.iso = name == "embryo.h5" ? 64.5f : 128.5f;
     const Source source = open_volume(spec_of(file));
     EXPECT_TRUE(same_mesh(source.extract(o), extract(v, o))) << name;
+    EXPECT_FALSE(source.info().values_in_memory) << name;
   }
 }
 
@@ -518,6 +527,39 @@ TEST_F(SourceOfAFile, AValueThatIsNotFiniteIsRefusedWhereItIs) {
     EXPECT_CONTAINS(streamed, raw);
     EXPECT_CONTAINS(streamed, "(x,y,z) = (3,4,5)");
     EXPECT_CONTAINS(streamed, "not finite");
+  }
+}
+
+// A slab that throws stops the slabs after it from starting, and the failure hook runs (a march
+// whose slabs wait on one another, as a streamed one's, needs it to release the others).
+TEST(FullResolutionSlabs, AFailedSlabStopsTheRestAndCallsTheFailureHook) {
+  SlabPlan plan;
+  plan.cell_layers = 1000;
+  plan.side = 1001;
+  for (int threads : {1, 2}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    std::atomic<int> marched{0}, hooked{0};
+    try {
+      march_in_slabs(
+          plan,
+          [&](int64_t z0, int64_t, MeshBuilder&) {
+            if (z0 == 0) {  // once the other threads are well into their slabs
+              std::this_thread::sleep_for(std::chrono::milliseconds(50));
+              throw std::runtime_error("slab 0 failed");
+            }
+            ++marched;
+            std::this_thread::sleep_for(std::chrono::milliseconds(2));
+          },
+          [&] {
+            ++hooked;
+            EXPECT_TRUE(std::current_exception() != nullptr);
+          });
+      ADD_FAILURE() << "the failure went unnoticed";
+    } catch (const std::runtime_error& e) {
+      EXPECT_EQ(std::string(e.what()), "slab 0 failed");
+    }
+    EXPECT_EQ(hooked, 1) << threads << " threads";
+    EXPECT_LT(marched, 200) << threads << " threads: slabs went on after the failure";
   }
 }
 

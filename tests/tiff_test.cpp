@@ -165,6 +165,19 @@ TEST_F(TiffStack, FolderOfTiledDeflateFloatSlicesInNaturalOrderEqualsTheRawVolum
   expect_same_boxes(*reader, want);
 }
 
+// A stack opened for extraction is streamed at eps 0 (isotope/source.h): the mesh of its values.
+TEST_F(TiffStack, AStackIsStreamedAtEpsZeroToTheMeshOfItsValues) {
+  write_tiff(path("neghip.tif"), 66, 66, slices_of(kNeghip), {.compression = COMPRESSION_LZW});
+  ExtractOptions o;
+  o.iso = 128.5f;
+  const Mesh want = extract(raw(kNeghip), o);
+  ASSERT_GT(want.triangles.size(), 0u);
+  const Source stack = open_volume(spec(path("neghip.tif")));
+  const Mesh got = stack.extract(o);
+  EXPECT_TRUE(got.positions == want.positions && got.triangles == want.triangles);
+  EXPECT_FALSE(stack.info().values_in_memory);
+}
+
 TEST_F(TiffStack, EveryElementTypeIsReadAsItsValues) {
   const uint32_t w = 5, h = 4;
   const auto pages_of = [&](auto sample) {

@@ -206,13 +206,14 @@ int run_extract(const ExtractArgs& a) {
       if (process_group()) opened->prepare({run.options});
     });
     const Source& input = *opened;
+    const double read_before = input.info().read_seconds;
     const auto start = std::chrono::steady_clock::now();
     mesh = input.extract(run.options, &run.extract);
     const double elapsed = seconds_since(start);
     describe(input.info(), run);  // before --compare-full: the cache's reads are the extraction's own
-    // A volume's hierarchy is built on demand inside the extraction: that part is preprocessing
-    // (under mpirun it was built before, above).
-    run.extract_seconds = process_group() ? elapsed : elapsed - run.preprocess_seconds;
+    // A volume file is read whole, and its hierarchy built, on demand inside the extraction: that
+    // part is reading and preprocessing (under mpirun both were done before, above).
+    run.extract_seconds = elapsed - (run.read_seconds - read_before) - (process_group() ? 0.0 : run.preprocess_seconds);
     if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
     if (a.compare_full) {
       const auto compare_start = std::chrono::steady_clock::now();

@@ -50,14 +50,22 @@ void parallel_for(int64_t begin, int64_t end, const Body& body) {
 // Calls body(i) for every i in [begin, end), possibly concurrently, handing the indices out one
 // at a time in increasing order: the bodies running at any moment have neighbouring indices.
 // For work items in a spatial order (the traversal's pieces) that share data with their
-// neighbours, e.g. bricks in a cache of bounded size.
+// neighbours, e.g. bricks in a cache of bounded size. Once a body throws, no index is handed out
+// again (bodies running go on to their end), and the first exception is rethrown.
 template <class Body>
 void parallel_for_in_order(int64_t begin, int64_t end, const Body& body) {
   const auto threads =
       static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
   std::atomic<int64_t> next{begin};
   parallel_for(int64_t{0}, std::min(threads, std::max<int64_t>(end - begin, 1)), [&](int64_t) {
-    for (int64_t i = next++; i < end; i = next++) body(i);
+    for (int64_t i = next++; i < end; i = next++) {
+      try {
+        body(i);
+      } catch (...) {
+        next = end;
+        throw;
+      }
+    }
   });
 }
 

@@ -11,8 +11,10 @@
 namespace isotope {
 
 // Reads node values by their global coordinates from an array of whole z-layers: layer z of the
-// volume is layer z - z_first of the array. Coordinates beyond the volume are clamped to its
-// last node (the lattice may reach beyond the data).
+// volume is layer z - z_first of the array. value() clamps coordinates beyond the volume to its
+// last node (the lattice may reach beyond the data), which an array of some layers holds only if
+// it is the last; extract_finest reads blocks, which lie inside the data box, through
+// block_values, and never calls value() on an array that holds only some layers.
 class ArrayReader {
  public:
   ArrayReader(const float* values, const std::array<int64_t, 3>& dims, int64_t z_first)

@@ -146,7 +146,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
   return merger.take();
 }
 
-Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march) {
+Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure) {
   const int64_t count = slab_count(plan);
   if (count <= 0) return Mesh{};
   // Each slab is merged as soon as it and all before it are done, by the thread that finished the
@@ -159,20 +159,31 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march) {
   bool merging = false;  // a thread is merging, and takes any slab that becomes next meanwhile
   BuilderPool builders;  // a welding table per thread while the slabs are marched and merged
   parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
-    const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
-    Slab slab = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
-    std::unique_lock<std::mutex> lock(mutex);
-    done[static_cast<size_t>(s)] = std::move(slab);
-    if (merging) return;
-    merging = true;
-    while (next < count && done[static_cast<size_t>(next)]) {
-      Slab ready = std::move(*done[static_cast<size_t>(next)]);
-      done[static_cast<size_t>(next++)].reset();
-      lock.unlock();
-      merger.append(ready);
-      lock.lock();
+    try {
+      const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
+      Slab slab = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
+      std::unique_lock<std::mutex> lock(mutex);
+      done[static_cast<size_t>(s)] = std::move(slab);
+      if (merging) return;
+      merging = true;
+      while (next < count && done[static_cast<size_t>(next)]) {
+        Slab ready = std::move(*done[static_cast<size_t>(next)]);
+        done[static_cast<size_t>(next++)].reset();
+        lock.unlock();
+        try {
+          merger.append(ready);
+        } catch (...) {
+          lock.lock();
+          merging = false;  // the next slab's thread may try: the first failure is the one thrown
+          throw;
+        }
+        lock.lock();
+      }
+      merging = false;
+    } catch (...) {
+      if (on_failure) on_failure();
+      throw;
     }
-    merging = false;
   });
   return merger.take();
 }

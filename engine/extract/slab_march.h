@@ -27,8 +27,10 @@ using MarchSlab = std::function<void(int64_t z_begin, int64_t z_end, MeshBuilder
 
 // Runs march on every slab, in parallel, and joins the meshes in slab order: vertices are numbered
 // in order of first appearance in one walk over the slabs in order, so the mesh is the same bit
-// for bit whatever the number of threads.
-Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march);
+// for bit whatever the number of threads. A slab that throws (its march, its builder, its merge)
+// stops the others from starting; on_failure, if given, is called inside the handler first (it may
+// use std::current_exception), for march functions that wait on one another.
+Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure = {});
 
 inline int64_t slab_count(const SlabPlan& plan) {
   return std::max<int64_t>(0, (plan.cell_layers + plan.slab_layers - 1) / plan.slab_layers);

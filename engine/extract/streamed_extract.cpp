@@ -7,6 +7,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <exception>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <thread>
@@ -21,8 +22,11 @@ namespace isotope {
 namespace {
 
 // What a window aims to hold: four windows or more on a 256^3 volume, so that reading one
-// overlaps marching the others from the start, and each read is a long sequential request.
+// overlaps marching the others from the start, and each read is of whole layers, in file order.
 constexpr int64_t kWindowBytes = int64_t{16} << 20;
+// How often a worker waiting for a window looks at the cancel flag: a cold read of a window may
+// take a while.
+constexpr auto kCancelPoll = std::chrono::milliseconds(20);
 // What the windows held at once may take, unless two windows are larger.
 constexpr int64_t kRingBytes = int64_t{1} << 30;
 
@@ -30,11 +34,16 @@ int64_t thread_count() {
   return static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
-// Cell layers per window: whole slabs (layers of blocks), as many as kWindowBytes holds, at least one.
+// Cell layers per window: whole slabs (layers of blocks), as many as kWindowBytes holds, at least
+// one, no more than the volume has.
 int64_t window_layers(const std::array<int64_t, 3>& dims, int64_t slab_layers) {
   const int64_t slab_bytes = dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) * slab_layers;
-  return slab_layers * std::max<int64_t>(1, kWindowBytes / slab_bytes);
+  const int64_t volume_slabs = (dims[2] - 1 + slab_layers - 1) / slab_layers;
+  return slab_layers * std::clamp<int64_t>(kWindowBytes / slab_bytes, 1, volume_slabs);
 }
+
+// Node layers a window's buffer holds: its cell layers and the top node layer.
+int64_t window_nodes(const std::array<int64_t, 3>& dims, int64_t layers) { return std::min(layers, dims[2] - 1) + 1; }
 
 // Windows of cell layers, filled in order by a reader thread into a ring of buffers. Window w holds
 // the nodes of cell layers [w * layers, (w + 1) * layers), its top node layer included (the next
@@ -43,13 +52,14 @@ int64_t window_layers(const std::array<int64_t, 3>& dims, int64_t slab_layers) {
 // not yet marched is in a window already filled, or the next to fill, whose buffer is free.
 class LayerRing {
  public:
-  LayerRing(const LayerSource& source, int64_t cell_layers, int64_t layers, int64_t slab_layers, int64_t held)
-      : source_(source), cell_layers_(cell_layers), layers_(layers), slab_layers_(slab_layers) {
+  LayerRing(const LayerSource& source, const ExtractOptions& options, int64_t cell_layers, int64_t layers,
+            int64_t slab_layers, int64_t held)
+      : source_(source), options_(options), cell_layers_(cell_layers), layers_(layers), slab_layers_(slab_layers) {
     const int64_t windows = (cell_layers + layers - 1) / layers;
     marched_.assign(static_cast<size_t>(windows), 0);
-    const auto plane = static_cast<size_t>(source.dims[0] * source.dims[1]);
-    buffers_.resize(static_cast<size_t>(std::min(held, windows)));
-    for (std::vector<float>& b : buffers_) b.resize(plane * static_cast<size_t>(layers + 1));
+    const auto values = static_cast<size_t>(source.dims[0] * source.dims[1] * window_nodes(source.dims, layers));
+    // Written whole by each read before any of it is used: not zero-filled first.
+    for (int64_t b = 0; b < std::min(held, windows); ++b) buffers_.emplace_back(new float[values]);
     reader_ = std::thread([this] { fill(); });
   }
   ~LayerRing() {
@@ -65,12 +75,17 @@ class LayerRing {
 
   int64_t first_layer(int64_t w) const { return w * layers_; }
 
-  // Window w's values, once filled. Rethrows what stopped the extraction (a read, or a march).
+  // Window w's values, once filled. Rethrows what stopped the extraction (a read, a march, a
+  // cancellation).
   const float* acquire(int64_t w) {
     std::unique_lock<std::mutex> lock(mutex_);
-    changed_.wait(lock, [&] { return filled_ > w || error_; });
-    if (filled_ <= w) std::rethrow_exception(error_);
-    return buffers_[static_cast<size_t>(w) % buffers_.size()].data();
+    while (!changed_.wait_for(lock, kCancelPoll, [&] { return filled_ > w || error_; }))
+      if (cancelled()) error_ = std::make_exception_ptr(ExtractionCancelled{});
+    if (filled_ <= w) {
+      changed_.notify_all();  // the reader too, when the cancellation was seen here
+      std::rethrow_exception(error_);
+    }
+    return buffers_[static_cast<size_t>(w) % buffers_.size()].get();
   }
   // One slab of window w is marched.
   void release(int64_t w) {
@@ -80,7 +95,7 @@ class LayerRing {
     }
     changed_.notify_all();
   }
-  // A march failed: the reader stops, and every wait rethrows the failure.
+  // A slab failed: the reader stops, and every wait rethrows the failure.
   void fail(std::exception_ptr e) {
     {
       const std::lock_guard<std::mutex> lock(mutex_);
@@ -90,6 +105,7 @@ class LayerRing {
   }
 
  private:
+  bool cancelled() const { return options_.cancel && options_.cancel->load(std::memory_order_relaxed); }
   int64_t cells_in(int64_t w) const { return std::min(layers_, cell_layers_ - w * layers_); }
   int64_t slabs_in(int64_t w) const { return (cells_in(w) + slab_layers_ - 1) / slab_layers_; }
 
@@ -103,7 +119,8 @@ class LayerRing {
         if (error_) return;
       }
       try {
-        source_.read_layers(first_layer(w), cells_in(w) + 1, buffers_[static_cast<size_t>(w % held)].data());
+        throw_if_cancelled(options_);
+        source_.read_layers(first_layer(w), cells_in(w) + 1, buffers_[static_cast<size_t>(w % held)].get());
       } catch (...) {
         fail(std::current_exception());
         return;
@@ -117,8 +134,9 @@ class LayerRing {
   }
 
   const LayerSource& source_;
+  const ExtractOptions& options_;
   const int64_t cell_layers_, layers_, slab_layers_;
-  std::vector<std::vector<float>> buffers_;
+  std::vector<std::unique_ptr<float[]>> buffers_;
   std::mutex mutex_;
   std::condition_variable changed_;
   int64_t filled_ = 0;            // windows [0, filled_) are in their buffers
@@ -136,7 +154,8 @@ bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractO
 
 int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims) {
   const SlabPlan plan = finest_plan(Lattice::enclosing(dims), dims, 0, {0, 0, 0}, {1, 1, 1});
-  return dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) * (window_layers(dims, plan.slab_layers) + 1);
+  return dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) *
+         window_nodes(dims, window_layers(dims, plan.slab_layers));
 }
 
 Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, ExtractStats* stats) {
@@ -152,21 +171,22 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   const int64_t layers = window_layers(dims, plan.slab_layers);
   const int64_t window_bytes = streamed_window_bytes(dims);
   const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes));
-  LayerRing ring(source, plan.cell_layers, layers, plan.slab_layers, held);
+  LayerRing ring(source, options, plan.cell_layers, layers, plan.slab_layers, held);
   std::atomic<int64_t> blocks{0}, cells{0};
-  Mesh mesh = march_in_slabs(plan, [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
-    const int64_t w = z0 / layers;
-    const float* values = ring.acquire(w);
-    try {
-      throw_if_cancelled(options);
-      ArrayReader reader(values, dims, ring.first_layer(w));
-      march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
-    } catch (...) {
-      ring.fail(std::current_exception());
-      throw;
-    }
-    ring.release(w);
-  });
+  // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
+  // worker and not the reader wait for a window that slab will never release.
+  const auto on_failure = [&] { ring.fail(std::current_exception()); };
+  Mesh mesh = march_in_slabs(
+      plan,
+      [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
+        const int64_t w = z0 / layers;
+        const float* values = ring.acquire(w);
+        throw_if_cancelled(options);
+        ArrayReader reader(values, dims, ring.first_layer(w));
+        march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+        ring.release(w);
+      },
+      on_failure);
   if (stats) {
     *stats = ExtractStats{};
     count_finest(blocks, cells, stats);

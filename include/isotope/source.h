@@ -59,6 +59,9 @@ struct SourceInfo {
   double read_seconds = 0;        // opening, and reading a volume whole (not its streamed reads)
   double preprocess_seconds = 0;  // a volume: building its hierarchy, so far
   bool hierarchy_built = false;   // a store: always (by convert)
+  // A volume: its values held whole in memory (an array, NRRD, or a file once an extraction that
+  // does not stream has read it); a file at eps 0 is streamed instead.
+  bool values_in_memory = false;
   // Critical points per diamond type (cube, octahedron, diamond): the paper's rule at f(v), and
   // the exact rule for some isovalue. A store's header keeps them; a volume has them once built.
   std::array<int64_t, 3> critical_paper{0, 0, 0}, critical_exact{0, 0, 0};

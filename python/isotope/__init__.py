@@ -101,8 +101,11 @@ class Store:
     ``input`` is a store made by :func:`convert` (read out of core: only the bricks an extraction
     reaches, through a cache of ``cache_mb``), a volume file (raw ``NAME_XxYxZ_TYPE.raw`` or any
     raw with ``dims=(x, y, z)`` and ``type``, ``FILE.h5:/dataset``, NRRD, a TIFF stack) or a numpy
-    array ``a[z, y, x]``. A volume is held in memory; its hierarchy is built on the first
-    extraction that needs one (eps > 0), reporting to ``progress(fraction)``.
+    array ``a[z, y, x]``. A raw, HDF5 or TIFF file is streamed at eps 0, a window of layers at a
+    time, so a file larger than memory extracts at full resolution; the first extraction that
+    needs more (eps > 0, a triangle budget) reads it whole and keeps it. An array or NRRD is held in
+    memory. The hierarchy is built on the first extraction that needs one, reporting to
+    ``progress(fraction)``.
     """
 
     def __init__(self, input, *, dims=None, type=None, spacing=None, origin=None, cache_mb=512, progress=None):

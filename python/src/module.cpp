@@ -277,6 +277,7 @@ py::dict info_dict(const SourceInfo& i) {
   d["read_seconds"] = i.read_seconds;
   d["preprocess_seconds"] = i.preprocess_seconds;
   d["hierarchy_built"] = i.hierarchy_built;
+  d["values_in_memory"] = i.values_in_memory;
   d["critical_paper"] = i.critical_paper;
   d["critical_exact"] = i.critical_exact;
   d["input_bytes"] = i.input_bytes;

@@ -66,7 +66,7 @@ Source open_input(const std::string& path, const std::string& dims, const std::s
   try {
     Source source = open_volume(spec, options);
     const SourceInfo info = source.info();
-    if (progress && !info.store)
+    if (progress && info.values_in_memory)  // read at open (a volume file is read when extracted)
       std::fprintf(stderr, "isotope: read %lldx%lldx%lld volume in %.3f s\n", static_cast<long long>(info.dims[0]),
                    static_cast<long long>(info.dims[1]), static_cast<long long>(info.dims[2]), info.read_seconds);
     return source;
