@@ -752,7 +752,8 @@ void print_rows(const std::vector<Row>& rows) {
       "\nExtraction (median wall time; 'vs base': the baseline's time on as many threads over this row's.\n"
       "memory: the hierarchy in memory; store-warm: one brick cache kept across runs; store-cold: a new process\n"
       "with the store dropped from the page cache, the extraction it reports; one-shot: a process extracting\n"
-      "from the raw file (ms: hierarchy and extraction); process ms: the whole process, mesh written;\n"
+      "from the raw file (ms: hierarchy and extraction; at eps 0 the file streamed in it); process ms: the\n"
+      "whole process, mesh written; "
       "read MB: compressed bytes read from the store, per run)\n");
   std::printf("%-13s %-15s %-15s %9s %3s %10s %7s %9s %9s %9s %8s %8s %8s\n", "dataset", "input", "mode", "eps", "thr",
               "triangles", "% full", "ms", "proc ms", "tri/s", "vs base", "peak MB", "read MB");
