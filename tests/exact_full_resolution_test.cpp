@@ -508,6 +508,36 @@ TEST_F(SourceOfAFile, AnHdf5DatasetIsStreamedToTheSameMesh) {
   }
 }
 
+// Extractions from one Source on several threads at once (isotope/source.h): some stream the file
+// while others read it whole and build the hierarchy; each gets its own mesh, and the volume is
+// read whole once. Run under ThreadSanitizer in CI.
+TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {
+  const std::string raw = copy_of("neghip_66x66x66_uint8.raw");
+  const Volume v = read_volume(spec_of(raw));
+  ExtractOptions fine, coarse;
+  fine.iso = coarse.iso = 128.5f;
+  coarse.eps = 4;
+  const Mesh fine_mesh = extract(v, fine), coarse_mesh = extract(v, coarse);
+  for (int round = 0; round < 3; ++round) {
+    const Source source = open_volume(spec_of(raw));
+    std::atomic<int> right{0};
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+      threads.emplace_back([&, t] {
+        const bool is_coarse = t % 2 == 1;
+        try {
+          if (same_mesh(source.extract(is_coarse ? coarse : fine), is_coarse ? coarse_mesh : fine_mesh)) ++right;
+        } catch (const std::exception& e) {
+          ADD_FAILURE() << e.what();
+        }
+      });
+    for (std::thread& t : threads) t.join();
+    EXPECT_EQ(right, 4) << "round " << round;
+    EXPECT_TRUE(source.info().values_in_memory);
+    EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "from the volume read whole";
+  }
+}
+
 // A value that is not finite is refused by the extraction that reads it, in the words and at the
 // coordinates the whole read gives.
 TEST_F(SourceOfAFile, AValueThatIsNotFiniteIsRefusedWhereItIs) {
