@@ -330,7 +330,7 @@ TEST(FullResolutionSlabs, SurfaceInTheSharedPlaneGivesTheOneWalkMesh) {
   expect_same_mesh_on_any_threads(ties, 0.0f, "ties in the plane");
 }
 
-// eps = 0 from a volume streamed a window of z-layers at a time (engine/extract/streamed_extract.h):
+// eps = 0 from a volume streamed a window of z-layers at a time (docs/METHOD.md, "eps = 0 from a file"):
 // the array's mesh bit for bit, each layer read once in order (the top layer of a window again as
 // the first of the next), whatever the threads.
 struct RecordedLayers {
@@ -451,7 +451,7 @@ TEST(Streamed, OnlyFullResolutionInOneProcessIsStreamed) {
   EXPECT_TRUE(layers.reads.empty());
 }
 
-// A Source opened on a volume file (isotope/source.h) streams it at eps 0, every time, and reads
+// A Source opened on a volume file streams it at eps 0, every time, and reads
 // it whole once for the first extraction that needs its hierarchy. A file cut short after the open
 // shows which: a streamed extraction fails, one from the volume held in memory does not.
 class SourceOfAFile : public testing::TempDirTest {
@@ -508,7 +508,7 @@ TEST_F(SourceOfAFile, AnHdf5DatasetIsStreamedToTheSameMesh) {
   }
 }
 
-// Extractions from one Source on several threads at once (isotope/source.h): some stream the file
+// Extractions from one Source on several threads at once (as Source promises): some stream the file
 // while others read it whole and build the hierarchy; each gets its own mesh, and the volume is
 // read whole once. Run under ThreadSanitizer in CI.
 TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {

@@ -165,7 +165,7 @@ TEST_F(TiffStack, FolderOfTiledDeflateFloatSlicesInNaturalOrderEqualsTheRawVolum
   expect_same_boxes(*reader, want);
 }
 
-// A stack opened for extraction is streamed at eps 0 (isotope/source.h): the mesh of its values.
+// A stack opened for extraction (a Source) is streamed at eps 0: the mesh of its values.
 TEST_F(TiffStack, AStackIsStreamedAtEpsZeroToTheMeshOfItsValues) {
   write_tiff(path("neghip.tif"), 66, 66, slices_of(kNeghip), {.compression = COMPRESSION_LZW});
   ExtractOptions o;

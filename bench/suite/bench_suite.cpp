@@ -1104,7 +1104,7 @@ int run_scale(const SuiteOptions& a, const fs::path& work, bool progress) {
   const ChildRun conv = child({"convert", raw, store, "--memory-mb", "1024", "-q"}, work);
   // The full-resolution alternative: the surface at eps 0 in one process from the cold raw file,
   // with no store (how a user compares a coarse surface with what it stands for), the file
-  // streamed a window of layers at a time (isotope/source.h).
+  // streamed a window of layers at a time (docs/METHOD.md, "eps = 0 from a file").
   if (progress) std::fprintf(stderr, "isotope: bench --scale: extracting at eps 0 from the raw file\n");
   evict_from_page_cache(raw);
   const ChildRun full = child(

@@ -1,5 +1,5 @@
 #pragma once
-// A plain array as a source of values only: what eps = 0 reads (engine/extract/finest_extract.h).
+// A plain array as a source of values only: what eps = 0 reads (the finest extraction).
 // The array may hold only some z-layers of the volume (a window of a volume streamed from a file).
 #include <algorithm>
 #include <array>
