@@ -461,6 +461,19 @@ class SourceOfAFile : public testing::TempDirTest {
     std::filesystem::copy_file(std::string(ISOTOPE_TEST_DATA) + "/" + name, to);
     return to;
   }
+  // An extraction at eps 0 and a coarse one, with their meshes from the volume in memory.
+  struct FineAndCoarse {
+    ExtractOptions fine, coarse;
+    Mesh fine_mesh, coarse_mesh;
+  };
+  static FineAndCoarse fine_and_coarse(const Volume& v, float iso, double coarse_eps) {
+    FineAndCoarse r;
+    r.fine.iso = r.coarse.iso = iso;
+    r.coarse.eps = coarse_eps;
+    r.fine_mesh = extract(v, r.fine);
+    r.coarse_mesh = extract(v, r.coarse);
+    return r;
+  }
 };
 
 VolumeSpec spec_of(const std::string& file) { return {file, std::nullopt, std::nullopt}; }
@@ -469,15 +482,11 @@ bool same_mesh(const Mesh& a, const Mesh& b) { return a.positions == b.positions
 
 TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeUntilTheVolumeIsReadWhole) {
   const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
-  const Volume v = read_volume(spec_of(raw));
-  ExtractOptions fine, coarse;
-  fine.iso = coarse.iso = 64.5f;
-  coarse.eps = 1;
-  const Mesh fine_mesh = extract(v, fine), coarse_mesh = extract(v, coarse);
+  const auto [fine, coarse, fine_mesh, coarse_mesh] = fine_and_coarse(read_volume(spec_of(raw)), 64.5f, 1);
   {
     const Source source = open_volume(spec_of(raw));
     EXPECT_FALSE(source.info().hierarchy_built);
-    EXPECT_EQ(source.info().dims, v.dims);
+    EXPECT_EQ(source.info().dims, (std::array<int64_t, 3>{70, 123, 66}));
     EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh));
     EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "streamed again";
     EXPECT_FALSE(source.info().values_in_memory);
@@ -513,11 +522,7 @@ TEST_F(SourceOfAFile, AnHdf5DatasetIsStreamedToTheSameMesh) {
 // read whole once. Run under ThreadSanitizer in CI.
 TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {
   const std::string raw = copy_of("neghip_66x66x66_uint8.raw");
-  const Volume v = read_volume(spec_of(raw));
-  ExtractOptions fine, coarse;
-  fine.iso = coarse.iso = 128.5f;
-  coarse.eps = 4;
-  const Mesh fine_mesh = extract(v, fine), coarse_mesh = extract(v, coarse);
+  const auto [fine, coarse, fine_mesh, coarse_mesh] = fine_and_coarse(read_volume(spec_of(raw)), 128.5f, 4);
   for (int round = 0; round < 3; ++round) {
     const Source source = open_volume(spec_of(raw));
     std::atomic<int> right{0};

@@ -17,11 +17,16 @@
 
 namespace isotope {
 
+// The threads the engine's loops may run on: tbb::global_control's max_allowed_parallelism, which
+// a face sets from its --threads.
+inline int64_t thread_count() {
+  return static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+}
+
 // Calls body(i) for every i in [begin, end), in any order, possibly concurrently.
 template <class Body>
 void parallel_for(int64_t begin, int64_t end, const Body& body) {
-  const auto threads =
-      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const int64_t threads = thread_count();
   if (threads <= 1 || end - begin <= 1) {
     for (int64_t i = begin; i < end; ++i) body(i);
     return;
@@ -54,8 +59,7 @@ void parallel_for(int64_t begin, int64_t end, const Body& body) {
 // again (bodies running go on to their end), and the first exception is rethrown.
 template <class Body>
 void parallel_for_in_order(int64_t begin, int64_t end, const Body& body) {
-  const auto threads =
-      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const int64_t threads = thread_count();
   std::atomic<int64_t> next{begin};
   parallel_for(int64_t{0}, std::min(threads, std::max<int64_t>(end - begin, 1)), [&](int64_t) {
     for (int64_t i = next++; i < end; i = next++) {

@@ -1,7 +1,5 @@
 #include "engine/extract/streamed_extract.h"
 
-#include <tbb/global_control.h>
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -13,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "engine/core/parallel.h"
 #include "engine/core/volume_check.h"
 #include "engine/extract/array_source.h"
 #include "engine/extract/extract.h"
@@ -29,10 +28,6 @@ constexpr int64_t kWindowBytes = int64_t{16} << 20;
 constexpr auto kCancelPoll = std::chrono::milliseconds(20);
 // What the windows held at once may take, unless two windows are larger.
 constexpr int64_t kRingBytes = int64_t{1} << 30;
-
-int64_t thread_count() {
-  return static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
-}
 
 // Cell layers per window: whole slabs (layers of blocks), as many as kWindowBytes holds, at least
 // one, no more than the volume has.

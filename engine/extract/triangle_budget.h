@@ -193,9 +193,7 @@ class CountPasses {
   using Walk = traversal::Traversal<Source>;
   CountPasses(const Source& source, const traversal::SplitRule& rule, bool ties, const Key& judge, BudgetSample sample)
       : source_(source), rule_(rule), ties_(ties), judge_(judge), sample_(sample) {
-    const auto threads =
-        static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
-    workers_.resize(static_cast<size_t>(std::max<int64_t>(threads, 1)));
+    workers_.resize(static_cast<size_t>(std::max<int64_t>(thread_count(), 1)));
   }
 
   const std::unordered_map<TieKey, int64_t, TieKeyHash>& d() const { return table_.d; }

@@ -25,8 +25,7 @@ int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uin
   // Larger tiles compute fewer halo records twice and read their input in fewer, longer calls:
   // the largest c (tiles up to 64^3 nodes) that keeps every thread busy within three quarters of
   // the budget, and gives every thread a few tiles of band 0.
-  const auto threads =
-      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const int64_t threads = thread_count();
   const auto budget = static_cast<int64_t>(memory_bytes / 4 * 3);
   int64_t c = std::max<int64_t>(1, int64_t{64} >> layout.brick_bits());
   while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes) < threads ||

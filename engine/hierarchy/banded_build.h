@@ -151,8 +151,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
                              const BandedBuildOptions& options) {
   using namespace banded_build_internal;
   using Payload = decltype(sink.process(0, Box3{}, std::declval<const BandTile&>()));
-  const auto threads =
-      static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  const int64_t threads = thread_count();
   const auto budget = static_cast<int64_t>(options.memory_bytes / 4 * 3);
   const int64_t c =
       options.tile_bricks > 0 ? options.tile_bricks : tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
