@@ -7,7 +7,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <condition_variable>
 #include <exception>
 #include <filesystem>
@@ -23,12 +25,14 @@
 #include "engine/core/fields.h"
 #include "engine/extract/adaptive_extract.h"
 #include "engine/extract/budget_memo.h"
+#include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "isotope/convert.h"
 #include "isotope/error.h"
 #include "isotope/extract.h"
 #include "isotope/source.h"
 #include "tests/temp_dir_test.h"
+#include "tests/test_support.h"
 
 namespace isotope {
 namespace {
@@ -243,6 +247,59 @@ TEST(DistributedExtract, ASampledBudgetStandsOrFallsBackOnEveryRankAlike) {
   }
   EXPECT_GT(stood, 0);
   EXPECT_GT(fell_back, 0);
+}
+
+// eps 0 streamed from a file (docs/METHOD.md, "eps = 0 from a file"): each rank reads the layers of its
+// own share of the slabs only, in order, a window at a time, and rank 0 has the single process's
+// mesh. Layers of 1 MB: a window is one layer of blocks, so each of the 2 ranks' 2 slabs is a
+// window of its own. A failed read on one rank stops every rank with its message.
+TEST(DistributedExtract, EpsZeroStreamedReadsEachRanksShareOnly) {
+  // A ball of radius 12 about (260, 260, 16): in every slab, and few blocks to march.
+  const Volume volume = testing::make_volume({520, 520, 33}, [](int64_t x, int64_t y, int64_t z) {
+    return 12 - std::hypot(static_cast<double>(x - 260), static_cast<double>(y - 260), static_cast<double>(z - 16));
+  });
+  ASSERT_EQ(streamed_window_bytes(volume.dims), 520 * 520 * 9 * 4);
+  const ExtractOptions o = options_for(0);
+  const Mesh single = extract(volume, o);
+  ASSERT_GT(single.triangles.size(), 1000u);
+  std::array<std::vector<std::array<int64_t, 2>>, 2> reads;  // per rank: (first layer, layers) per call
+  const auto source_for = [&](int rank, int64_t unreadable) {
+    return LayerSource{
+        volume.dims, volume.spacing, volume.origin, [&, rank, unreadable](int64_t z, int64_t n, float* out) {
+          if (z <= unreadable && unreadable < z + n) throw IoError("layer 30 unreadable");
+          reads[static_cast<size_t>(rank)].push_back({z, n});
+          std::copy(volume.data() + volume.index(0, 0, z), volume.data() + volume.index(0, 0, z + n), out);
+        }};
+  };
+  const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(2, [&](const Distribution& g) {
+    ExtractOptions mine = o;
+    mine.distribution = &g;
+    ExtractStats stats;
+    Mesh mesh = extract_streamed(source_for(g.rank(), -1), mine, &stats);
+    return std::pair{std::move(mesh), stats};
+  });
+  for (int r = 0; r < 2; ++r) {
+    ASSERT_FALSE(out[static_cast<size_t>(r)].error) << "rank " << r;
+    const auto& [mesh, stats] = *out[static_cast<size_t>(r)].value;
+    ASSERT_EQ(stats.ranks.size(), 2u);
+    EXPECT_EQ(stats.ranks[static_cast<size_t>(r)].items, 2) << "rank " << r;
+    if (r == 0)
+      expect_same(mesh, single);
+    else
+      EXPECT_TRUE(mesh.triangles.empty() && mesh.positions.empty());
+  }
+  // Rank 0's slabs hold cell layers 0..15, rank 1's 16..31: each reads its own node layers, a
+  // window of 9 at a time, the top one again as the next window's first.
+  using Reads = std::vector<std::array<int64_t, 2>>;
+  EXPECT_EQ(reads[0], (Reads{{0, 9}, {8, 9}}));
+  EXPECT_EQ(reads[1], (Reads{{16, 9}, {24, 9}}));
+  const auto failed = on_ranks<int>(2, [&](const Distribution& g) {
+    ExtractOptions mine = o;
+    mine.distribution = &g;
+    extract_streamed(source_for(g.rank(), 30), mine);
+    return 0;
+  });
+  expect_every_rank_threw(failed, "rank 1 of 2: layer 30 unreadable");
 }
 
 // A fresh folder per test (tests/temp_dir_test.h): what a failed convert must leave empty.

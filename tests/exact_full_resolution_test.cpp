@@ -433,7 +433,7 @@ TEST(Streamed, CancelledWhileItReadsItStops) {
   }
 }
 
-TEST(Streamed, OnlyFullResolutionInOneProcessIsStreamed) {
+TEST(Streamed, OnlyFullResolutionIsStreamed) {
   const Volume v = generate_sphere(33);
   RecordedLayers layers{v, {}};
   ExtractOptions o;

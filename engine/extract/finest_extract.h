@@ -11,6 +11,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "engine/extract/block_march.h"
@@ -87,22 +88,23 @@ std::vector<double> slab_costs(const Source& source, const traversal::SplitRule&
   return costs;
 }
 
-// extract_finest's slabs shared among processes (include/isotope/distribution.h): rank 0 gets the
-// mesh, every rank the counts of all and each rank's load.
-template <ValueSource Source>
-Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,
-                           const MarchSlab& march, const Distribution& group, std::atomic<int64_t>& blocks,
-                           std::atomic<int64_t>& cells, ExtractStats* stats) {
-  const std::vector<double> costs = slab_costs(source, rule, plan, group);
-  const std::vector<size_t> shares = share_by_cost(costs, group.ranks());
+// Each process marches its share of `plan`'s slabs, [shares[rank], shares[rank + 1]) of
+// share_by_cost over `costs`: rank 0 gets the mesh (or, with keep_shares, each rank its own share's),
+// every rank the counts of all and each rank's load. `bytes_read`: what this process read, asked
+// after its march. `on_failure`: as march_in_slabs's.
+inline Mesh march_finest_share(const SlabPlan& plan, const MarchSlab& march, const Distribution& group,
+                               const std::vector<double>& costs, const std::vector<size_t>& shares, bool keep_shares,
+                               std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells,
+                               const std::function<uint64_t()>& bytes_read, ExtractStats* stats,
+                               const std::function<void()>& on_failure = {}) {
   const auto r = static_cast<size_t>(group.rank());
   RankLoad load;
   Mesh mesh = march_in_slabs(plan, march, group, static_cast<int64_t>(shares[r]), static_cast<int64_t>(shares[r + 1]),
-                             &load.seconds, rule.options().keep_shares);
+                             &load.seconds, keep_shares, on_failure);
   for (size_t s = shares[r]; s < shares[r + 1]; ++s) load.cost += costs[s];
   load.items = static_cast<int64_t>(shares[r + 1] - shares[r]);
   load.work = cells;
-  if constexpr (requires { source.bytes_read(); }) load.bytes_read = source.bytes_read();
+  if (bytes_read) load.bytes_read = bytes_read();
   // The blocks each rank looked at, for the counts: a second small gather keeps RankLoad plain.
   const std::vector<RankLoad> loads = gather_loads(group, load);
   RankLoad seen;
@@ -115,6 +117,19 @@ Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rul
     stats->ranks = loads;
   }
   return mesh;
+}
+
+// extract_finest's slabs shared among processes (include/isotope/distribution.h), by their cost
+// estimated from the source's records (slab_costs).
+template <ValueSource Source>
+Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,
+                           const MarchSlab& march, const Distribution& group, std::atomic<int64_t>& blocks,
+                           std::atomic<int64_t>& cells, ExtractStats* stats) {
+  const std::vector<double> costs = slab_costs(source, rule, plan, group);
+  std::function<uint64_t()> bytes_read;
+  if constexpr (requires { source.bytes_read(); }) bytes_read = [&] { return source.bytes_read(); };
+  return march_finest_share(plan, march, group, costs, share_by_cost(costs, group.ranks()), rule.options().keep_shares,
+                            blocks, cells, bytes_read, stats);
 }
 
 // Blocks are cubes of 8 cells a side (4 or 2 on lattices of side 5 or 3), whose centres are the

@@ -94,7 +94,7 @@ class SlabMerger {
 }  // namespace
 
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribution& group, int64_t first,
-                    int64_t last, double* seconds, bool keep_share) {
+                    int64_t last, double* seconds, bool keep_share, const std::function<void()>& on_failure) {
   const int64_t count = slab_count(plan);
   std::vector<Slab> mine(static_cast<size_t>(last - first));
   settle_together(group, [&] {
@@ -102,7 +102,13 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
     const auto start = std::chrono::steady_clock::now();
     parallel_for_in_order(first, last, [&](int64_t s) {
       const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
-      mine[static_cast<size_t>(s - first)] = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
+      try {
+        mine[static_cast<size_t>(s - first)] =
+            extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
+      } catch (...) {
+        if (on_failure) on_failure();
+        throw;
+      }
     });
     *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   });

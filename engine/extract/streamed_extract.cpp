@@ -40,17 +40,19 @@ int64_t window_layers(const std::array<int64_t, 3>& dims, int64_t slab_layers) {
 // Node layers a window's buffer holds: its cell layers and the top node layer.
 int64_t window_nodes(const std::array<int64_t, 3>& dims, int64_t layers) { return std::min(layers, dims[2] - 1) + 1; }
 
-// Windows of cell layers, filled in order by a reader thread into a ring of buffers. Window w holds
-// the nodes of cell layers [w * layers, (w + 1) * layers), its top node layer included (the next
-// window reads it again). A buffer is filled again once every slab of its window was marched.
+// Windows of the cell layers [first, end) this process marches (all of them, or its share of the
+// slabs), filled in order by a reader thread into a ring of buffers. Window w holds the nodes of
+// cell layers [first + w * layers, first + (w + 1) * layers), its top node layer included (the
+// next window reads it again). A buffer is filled again once every slab of its window was marched.
 // Progress: slabs are handed out in increasing order (parallel_for_in_order), so the lowest slab
 // not yet marched is in a window already filled, or the next to fill, whose buffer is free.
 class LayerRing {
  public:
-  LayerRing(const LayerSource& source, const ExtractOptions& options, int64_t cell_layers, int64_t layers,
+  // `first` and `layers`: whole slabs.
+  LayerRing(const LayerSource& source, const ExtractOptions& options, int64_t first, int64_t end, int64_t layers,
             int64_t slab_layers, int64_t held)
-      : source_(source), options_(options), cell_layers_(cell_layers), layers_(layers), slab_layers_(slab_layers) {
-    const int64_t windows = (cell_layers + layers - 1) / layers;
+      : source_(source), options_(options), first_(first), end_(end), layers_(layers), slab_layers_(slab_layers) {
+    const int64_t windows = std::max<int64_t>(0, (end - first + layers - 1) / layers);
     marched_.assign(static_cast<size_t>(windows), 0);
     const auto values = static_cast<size_t>(source.dims[0] * source.dims[1] * window_nodes(source.dims, layers));
     // Written whole by each read before any of it is used: not zero-filled first.
@@ -68,7 +70,9 @@ class LayerRing {
   LayerRing(const LayerRing&) = delete;
   LayerRing& operator=(const LayerRing&) = delete;
 
-  int64_t first_layer(int64_t w) const { return w * layers_; }
+  // The window that holds slab z0..., and its first cell layer.
+  int64_t window_of(int64_t z0) const { return (z0 - first_) / layers_; }
+  int64_t first_layer(int64_t w) const { return first_ + w * layers_; }
 
   // Window w's values, once filled. Rethrows what stopped the extraction (a read, a march, a
   // cancellation).
@@ -101,7 +105,7 @@ class LayerRing {
 
  private:
   bool cancelled() const { return options_.cancel && options_.cancel->load(std::memory_order_relaxed); }
-  int64_t cells_in(int64_t w) const { return std::min(layers_, cell_layers_ - w * layers_); }
+  int64_t cells_in(int64_t w) const { return std::min(layers_, end_ - first_layer(w)); }
   int64_t slabs_in(int64_t w) const { return (cells_in(w) + slab_layers_ - 1) / slab_layers_; }
 
   void fill() {
@@ -130,7 +134,7 @@ class LayerRing {
 
   const LayerSource& source_;
   const ExtractOptions& options_;
-  const int64_t cell_layers_, layers_, slab_layers_;
+  const int64_t first_, end_, layers_, slab_layers_;
   std::vector<std::unique_ptr<float[]>> buffers_;
   std::mutex mutex_;
   std::condition_variable changed_;
@@ -143,8 +147,7 @@ class LayerRing {
 }  // namespace
 
 bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractOptions& options) {
-  return !needs_hierarchy(options) && options.distribution == nullptr &&
-         finest_extract_applies(Lattice::enclosing(dims));
+  return !needs_hierarchy(options) && finest_extract_applies(Lattice::enclosing(dims));
 }
 
 int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims) {
@@ -157,7 +160,7 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   options.validate();
   validate_layout(source.dims, source.spacing, source.origin);
   if (!streamed_extract_applies(source.dims, options))
-    throw std::invalid_argument("a streamed extraction is at full resolution, in one process");
+    throw std::invalid_argument("a streamed extraction is at full resolution");
   const auto start = std::chrono::steady_clock::now();
   const std::array<int64_t, 3>& dims = source.dims;
   const Lattice lattice = Lattice::enclosing(dims);
@@ -166,24 +169,45 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   const int64_t layers = window_layers(dims, plan.slab_layers);
   const int64_t window_bytes = streamed_window_bytes(dims);
   const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes));
-  LayerRing ring(source, options, plan.cell_layers, layers, plan.slab_layers, held);
+  // Under several processes each streams the layers of its own share of the slabs only. Their
+  // costs are their cells, as for a volume in memory, which has no records to tell which blocks
+  // are cut (finest_extract.h's slab_costs): the same shares.
+  const Distribution* group = options.distribution;
+  std::vector<double> costs;
+  std::vector<size_t> shares{0, static_cast<size_t>(slab_count(plan))};
+  if (group) {
+    costs.resize(shares[1]);
+    for (size_t s = 0; s < costs.size(); ++s)
+      costs[s] = static_cast<double>((dims[0] - 1) * (dims[1] - 1) *
+                                     (std::min(static_cast<int64_t>(s + 1) * plan.slab_layers, plan.cell_layers) -
+                                      static_cast<int64_t>(s) * plan.slab_layers));
+    shares = share_by_cost(costs, group->ranks());
+  }
+  const auto rank = static_cast<size_t>(group ? group->rank() : 0);
+  LayerRing ring(source, options, static_cast<int64_t>(shares[rank]) * plan.slab_layers,
+                 std::min(static_cast<int64_t>(shares[rank + 1]) * plan.slab_layers, plan.cell_layers), layers,
+                 plan.slab_layers, held);
   std::atomic<int64_t> blocks{0}, cells{0};
   // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
   // worker and not the reader wait for a window that slab will never release.
   const auto on_failure = [&] { ring.fail(std::current_exception()); };
-  Mesh mesh = march_in_slabs(
-      plan,
-      [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
-        const int64_t w = z0 / layers;
-        const float* values = ring.acquire(w);
-        throw_if_cancelled(options);
-        ArrayReader reader(values, dims, ring.first_layer(w));
-        march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
-        ring.release(w);
-      },
-      on_failure);
+  const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
+    const int64_t w = ring.window_of(z0);
+    const float* values = ring.acquire(w);
+    throw_if_cancelled(options);
+    ArrayReader reader(values, dims, ring.first_layer(w));
+    march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+    ring.release(w);
+  };
+  if (stats) *stats = ExtractStats{};
+  if (group) {
+    Mesh mesh = march_finest_share(plan, march, *group, costs, shares, options.keep_shares, blocks, cells, {}, stats,
+                                   on_failure);
+    if (stats) stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return mesh;
+  }
+  Mesh mesh = march_in_slabs(plan, march, on_failure);
   if (stats) {
-    *stats = ExtractStats{};
     count_finest(blocks, cells, stats);
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }

@@ -24,7 +24,8 @@ struct LayerSource {
 };
 
 // Whether extract_streamed makes what these options ask for: full resolution with no tie classes
-// and no budget (nothing that needs the hierarchy), in one process, on a lattice with blocks.
+// and no budget (nothing that needs the hierarchy), on a lattice with blocks. Under several
+// processes (ExtractOptions::distribution) each streams the layers of its share of the slabs.
 bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractOptions& options);
 
 // The bytes of one window's values: one layer of blocks at least, more when the layers are small.

@@ -55,6 +55,45 @@ def test_extract_from_a_raw_volume_and_to_every_format(tmp_path, isotope_command
         assert (tmp_path / f"r.{fmt}").read_bytes() == expected, name
 
 
+PEAK_OF_EACH_RANK = """#!/usr/bin/env python3
+# Runs the rank, then writes its peak resident set (KiB) to $PEAKS/RANK.
+import os, resource, subprocess, sys
+code = subprocess.call(sys.argv[1:])
+with open(os.path.join(os.environ["PEAKS"], os.environ["OMPI_COMM_WORLD_RANK"]), "w") as f:
+    f.write(str(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss))
+sys.exit(code)
+"""
+
+
+def test_eps_0_from_a_volume_file_streams_each_ranks_share(tmp_path, isotope_command, monkeypatch):
+    """At eps 0 each rank streams the layers of its own share of the slabs (docs/METHOD.md, "eps = 0
+    from a file"): the single process's bytes, and no rank holds the volume as float. A 385^3 uint8
+    sphere field, 228 MB as float: read whole, every rank peaked at 249-283 MB; streamed, at 56-90 MB
+    (2 and 3 ranks, 2026-11-29). The limit is half the volume as float."""
+    raw = tmp_path / "sphere_385x385x385_uint8.raw"
+    r = run([isotope_command, "generate", "sphere", "--size", 385, "--type", "uint8", "-o", raw, "--quiet"])
+    assert r.returncode == 0, r.stderr
+    args = ["extract", raw, "--iso", "200.5"]
+    expected = single(isotope_command, args, tmp_path / "one.ply")
+    peaks = tmp_path / "peaks"
+    peaks.mkdir()
+    monkeypatch.setenv("PEAKS", str(peaks))
+    volume_kib = 385 ** 3 * 4 / 1024
+    for ranks in (2, 3):
+        r = mpirun(ranks, args + ["--threads", 1, "-o", tmp_path / "r.ply", "--report", tmp_path / "r.json", "--quiet"],
+                   wrapper=wrapper_file(tmp_path, PEAK_OF_EACH_RANK))
+        assert r.returncode == 0, r.stderr
+        assert (tmp_path / "r.ply").read_bytes() == expected, f"{ranks} ranks"
+        report = json.loads((tmp_path / "r.json").read_text())
+        assert [l["items"] > 0 for l in report["ranks"]] == [True] * ranks
+        rss = {p.name: int(p.read_text()) for p in peaks.iterdir()}
+        print(ranks, "ranks: peak KiB", rss)
+        assert sorted(rss) == [str(i) for i in range(ranks)]
+        assert max(rss.values()) < volume_kib / 2, rss
+        for p in peaks.iterdir():
+            p.unlink()
+
+
 CONVERSIONS = {
     "embryo-raw": ["embryo_256x256x256_uint8.raw"],
     "bolt-hdf5": ["bolt.h5"],
