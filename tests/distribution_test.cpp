@@ -302,6 +302,54 @@ TEST(DistributedExtract, EpsZeroStreamedReadsEachRanksShareOnly) {
   expect_every_rank_threw(failed, "rank 1 of 2: layer 30 unreadable");
 }
 
+// The same on 3 ranks where a window could hold the whole volume: each rank reads its share in one
+// window, the last slab 5 cell layers thin, and with keep_shares each rank keeps
+// the mesh of its share that a volume in memory gives it: the same shares. On more ranks than slabs
+// a rank with no share reads nothing.
+TEST(DistributedExtract, EpsZeroStreamedSharesAreTheInMemoryOnes) {
+  const Volume volume = testing::make_volume({100, 90, 70}, [](int64_t x, int64_t y, int64_t z) {
+    return 20 - std::hypot(static_cast<double>(x - 50), static_cast<double>(y - 45), static_cast<double>(z - 34));
+  });
+  ExtractOptions o = options_for(0);
+  o.keep_shares = true;
+  for (const int ranks : {3, 12}) {
+    std::vector<std::vector<std::array<int64_t, 2>>> reads(static_cast<size_t>(ranks));
+    const auto out = on_ranks<std::pair<Mesh, Mesh>>(ranks, [&](const Distribution& g) {
+      ExtractOptions mine = o;
+      mine.distribution = &g;
+      const LayerSource source{volume.dims, volume.spacing, volume.origin, [&](int64_t z, int64_t n, float* to) {
+                                 reads[static_cast<size_t>(g.rank())].push_back({z, n});
+                                 std::copy(volume.data() + volume.index(0, 0, z),
+                                           volume.data() + volume.index(0, 0, z + n), to);
+                               }};
+      Mesh streamed = extract_streamed(source, mine);
+      return std::pair{std::move(streamed), extract(volume, mine)};
+    });
+    for (int r = 0; r < ranks; ++r) {
+      ASSERT_FALSE(out[static_cast<size_t>(r)].error) << ranks << " ranks, rank " << r;
+      const auto& [streamed, in_memory] = *out[static_cast<size_t>(r)].value;
+      expect_same(streamed, in_memory);
+    }
+    using Reads = std::vector<std::array<int64_t, 2>>;
+    if (ranks == 3) {  // 9 slabs, the last 5 cell layers thin: 3 a rank, each one window
+      EXPECT_EQ(reads[0], (Reads{{0, 25}}));
+      EXPECT_EQ(reads[1], (Reads{{24, 25}}));
+      EXPECT_EQ(reads[2], (Reads{{48, 22}}));
+    } else {
+      int64_t next = 0, idle = 0;
+      for (const Reads& rank_reads : reads) {
+        idle += rank_reads.empty();
+        for (const auto& [z, n] : rank_reads) {
+          EXPECT_EQ(z, next);
+          next = z + n - 1;
+        }
+      }
+      EXPECT_EQ(next, 69) << "every layer read, once, in rank order";
+      EXPECT_EQ(idle, 3) << "9 slabs on 12 ranks";
+    }
+  }
+}
+
 // A fresh folder per test (tests/temp_dir_test.h): what a failed convert must leave empty.
 class DistributedStore : public testing::TempDirTest {};
 

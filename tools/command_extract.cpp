@@ -212,7 +212,9 @@ int run_extract(const ExtractArgs& a) {
     const double elapsed = seconds_since(start);
     describe(input.info(), run);  // before --compare-full: the cache's reads are the extraction's own
     // A volume file is read whole, and its hierarchy built, on demand inside the extraction: that
-    // part is reading and preprocessing (under mpirun both were done before, above).
+    // part is reading and preprocessing (under mpirun both were done before, above). A file
+    // streamed at eps 0 is read while it is marched, in one process or under mpirun: its reading
+    // is part of the extraction's time.
     run.extract_seconds = elapsed - (run.read_seconds - read_before) - (process_group() ? 0.0 : run.preprocess_seconds);
     if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
     if (a.compare_full) {

@@ -7,6 +7,7 @@
 #include <exception>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -166,9 +167,6 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   const Lattice lattice = Lattice::enclosing(dims);
   const traversal::SplitRule rule(options, lattice, source.origin, source.spacing);
   const SlabPlan plan = finest_plan(lattice, dims, options.iso, source.origin, source.spacing);
-  const int64_t layers = window_layers(dims, plan.slab_layers);
-  const int64_t window_bytes = streamed_window_bytes(dims);
-  const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes));
   // Under several processes each streams the layers of its own share of the slabs only. Their
   // costs are their cells, as for a volume in memory, which has no records to tell which blocks
   // are cut (finest_extract.h's slab_costs): the same shares.
@@ -184,20 +182,33 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
     shares = share_by_cost(costs, group->ranks());
   }
   const auto rank = static_cast<size_t>(group ? group->rank() : 0);
-  LayerRing ring(source, options, static_cast<int64_t>(shares[rank]) * plan.slab_layers,
-                 std::min(static_cast<int64_t>(shares[rank + 1]) * plan.slab_layers, plan.cell_layers), layers,
-                 plan.slab_layers, held);
+  const int64_t first = static_cast<int64_t>(shares[rank]) * plan.slab_layers;
+  const int64_t end = std::min(static_cast<int64_t>(shares[rank + 1]) * plan.slab_layers, plan.cell_layers);
+  // Windows of whole slabs, none larger than this process's share.
+  const int64_t share_slabs = static_cast<int64_t>(shares[rank + 1] - shares[rank]);
+  const int64_t layers =
+      std::min(window_layers(dims, plan.slab_layers), plan.slab_layers * std::max<int64_t>(share_slabs, 1));
+  const int64_t window_bytes = dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) * window_nodes(dims, layers);
+  const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes));
+  // The ring's buffers may be more than one process has memory for: under several processes made
+  // where a failure on one stops them all, as reading the volume whole was.
+  std::optional<LayerRing> ring;
+  const auto make_ring = [&] { ring.emplace(source, options, first, end, layers, plan.slab_layers, held); };
+  if (group)
+    settle_together(*group, make_ring);
+  else
+    make_ring();
   std::atomic<int64_t> blocks{0}, cells{0};
   // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
   // worker and not the reader wait for a window that slab will never release.
-  const auto on_failure = [&] { ring.fail(std::current_exception()); };
+  const auto on_failure = [&] { ring->fail(std::current_exception()); };
   const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
-    const int64_t w = ring.window_of(z0);
-    const float* values = ring.acquire(w);
+    const int64_t w = ring->window_of(z0);
+    const float* values = ring->acquire(w);
     throw_if_cancelled(options);
-    ArrayReader reader(values, dims, ring.first_layer(w));
+    ArrayReader reader(values, dims, ring->first_layer(w));
     march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
-    ring.release(w);
+    ring->release(w);
   };
   if (stats) *stats = ExtractStats{};
   if (group) {

@@ -69,7 +69,8 @@ def test_eps_0_from_a_volume_file_streams_each_ranks_share(tmp_path, isotope_com
     """At eps 0 each rank streams the layers of its own share of the slabs (docs/METHOD.md, "eps = 0
     from a file"): the single process's bytes, and no rank holds the volume as float. A 385^3 uint8
     sphere field, 228 MB as float: read whole, every rank peaked at 249-283 MB; streamed, at 56-90 MB
-    (2 and 3 ranks, 2026-11-29). The limit is half the volume as float."""
+    (2 and 3 ranks, 2026-11-29). The limit is 60% of the volume as float: rank 0 also holds the
+    gathered mesh."""
     raw = tmp_path / "sphere_385x385x385_uint8.raw"
     r = run([isotope_command, "generate", "sphere", "--size", 385, "--type", "uint8", "-o", raw, "--quiet"])
     assert r.returncode == 0, r.stderr
@@ -89,7 +90,7 @@ def test_eps_0_from_a_volume_file_streams_each_ranks_share(tmp_path, isotope_com
         rss = {p.name: int(p.read_text()) for p in peaks.iterdir()}
         print(ranks, "ranks: peak KiB", rss)
         assert sorted(rss) == [str(i) for i in range(ranks)]
-        assert max(rss.values()) < volume_kib / 2, rss
+        assert max(rss.values()) < 0.6 * volume_kib, rss
         for p in peaks.iterdir():
             p.unlink()
 
