@@ -41,6 +41,11 @@ int64_t window_layers(const std::array<int64_t, 3>& dims, int64_t slab_layers) {
 // Node layers a window's buffer holds: its cell layers and the top node layer.
 int64_t window_nodes(const std::array<int64_t, 3>& dims, int64_t layers) { return std::min(layers, dims[2] - 1) + 1; }
 
+// The bytes of a window of `layers` cell layers' values.
+int64_t window_bytes(const std::array<int64_t, 3>& dims, int64_t layers) {
+  return dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) * window_nodes(dims, layers);
+}
+
 // Windows of the cell layers [first, end) this process marches (all of them, or its share of the
 // slabs), filled in order by a reader thread into a ring of buffers. Window w holds the nodes of
 // cell layers [first + w * layers, first + (w + 1) * layers), its top node layer included (the
@@ -153,8 +158,7 @@ bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractO
 
 int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims) {
   const SlabPlan plan = finest_plan(Lattice::enclosing(dims), dims, 0, {0, 0, 0}, {1, 1, 1});
-  return dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) *
-         window_nodes(dims, window_layers(dims, plan.slab_layers));
+  return window_bytes(dims, window_layers(dims, plan.slab_layers));
 }
 
 Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, ExtractStats* stats) {
@@ -188,8 +192,7 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   const int64_t share_slabs = static_cast<int64_t>(shares[rank + 1] - shares[rank]);
   const int64_t layers =
       std::min(window_layers(dims, plan.slab_layers), plan.slab_layers * std::max<int64_t>(share_slabs, 1));
-  const int64_t window_bytes = dims[0] * dims[1] * static_cast<int64_t>(sizeof(float)) * window_nodes(dims, layers);
-  const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes));
+  const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes(dims, layers)));
   // The ring's buffers may be more than one process has memory for: under several processes made
   // where a failure on one stops them all, as reading the volume whole was.
   std::optional<LayerRing> ring;
@@ -211,15 +214,11 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
     ring->release(w);
   };
   if (stats) *stats = ExtractStats{};
-  if (group) {
-    Mesh mesh = march_finest_share(plan, march, *group, costs, shares, options.keep_shares, blocks, cells, {}, stats,
-                                   on_failure);
-    if (stats) stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return mesh;
-  }
-  Mesh mesh = march_in_slabs(plan, march, on_failure);
+  Mesh mesh = group ? march_finest_share(plan, march, *group, costs, shares, options.keep_shares, blocks, cells, {},
+                                         stats, on_failure)
+                    : march_in_slabs(plan, march, on_failure);
   if (stats) {
-    count_finest(blocks, cells, stats);
+    if (!group) count_finest(blocks, cells, stats);  // march_finest_share counts every rank's
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   return mesh;
