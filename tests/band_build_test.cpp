@@ -3,10 +3,13 @@
 // chains them through its scratch files.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cstring>
+#include <map>
 
 #include "engine/core/fields.h"
 #include "engine/hierarchy/band_tile.h"
+#include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
@@ -114,6 +117,143 @@ TEST(BandBuild, EqualsInMemoryBuildOnRealVolume) {
     const Volume v = testing::load_shared(shared);
     EXPECT_GT(check_banded(v, 4), v.node_count() / 2) << shared.name;
   }
+}
+
+// ---- The stage: a group of tiles reads its input and hand-over at once, and writes what it
+// hands the next band a row at a time; the output does not change.
+
+// Every brick's values and records, as the sink saw them, and the order of the commits.
+struct RecordingSink {
+  const StoreLayout* layout;
+  std::map<int64_t, std::vector<uint8_t>> bricks;
+  std::vector<int64_t> order;
+  std::vector<uint8_t> process(int band, const Box3& b, const BandTile& tile) const {
+    std::vector<uint8_t> bytes;
+    const int64_t t = layout->brick_width();
+    const Band& bd = layout->band(band);
+    for (int64_t z = b[2] * t; z < std::min((b[2] + 1) * t, bd.nodes[2]); ++z)
+      for (int64_t y = b[1] * t; y < std::min((b[1] + 1) * t, bd.nodes[1]); ++y)
+        for (int64_t x = b[0] * t; x < std::min((b[0] + 1) * t, bd.nodes[0]); ++x) {
+          const float v = tile.node_value({x, y, z});
+          const auto* p = reinterpret_cast<const uint8_t*>(&v);
+          bytes.insert(bytes.end(), p, p + sizeof v);
+          if (((x | y | z) & 1) && band < layout->lattice().k) {
+            const auto* r = reinterpret_cast<const uint8_t*>(&tile.node_record({x, y, z}));
+            bytes.insert(bytes.end(), r, r + sizeof(Record));
+          }
+        }
+    return bytes;
+  }
+  void commit(int band, const Box3& b, std::vector<uint8_t>&& bytes) {
+    const int64_t i = layout->brick_index(band, b);
+    order.push_back(i);
+    bricks[i] = std::move(bytes);
+  }
+};
+
+// A hand-over in memory that counts the calls made to it: a scratch file's cost.
+class CountingHandover : public MemoryHandover {
+ public:
+  using MemoryHandover::MemoryHandover;
+  void write_row(int64_t x0, int64_t y, int64_t z, const float* v, const Record* r, int64_t n) override {
+    ++calls;
+    MemoryHandover::write_row(x0, y, z, v, r, n);
+  }
+  void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const override {
+    ++calls;
+    MemoryHandover::read_values(x0, count, y, z, out);
+  }
+  void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const override {
+    ++calls;
+    MemoryHandover::read_children(x0, count, y, z, out);
+  }
+  mutable std::atomic<int64_t> calls{0};
+};
+
+struct StagedRun {
+  RecordingSink sink;
+  int64_t handover_calls = 0;
+};
+
+// The whole build, band by band, each band's tiles cut into RANKS runs of its Morton order built
+// one after the other from the last to the first (as the ranks of a distributed convert, which
+// share one hand-over file: a run that wrote rows beyond its own tiles would overwrite the rows of
+// a run built before it).
+StagedRun build_staged(const Volume& v, const StoreLayout& layout, bool staged, int64_t stage_tiles, int ranks) {
+  const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
+    for (int64_t z = 0; z < size[2]; ++z)
+      for (int64_t y = 0; y < size[1]; ++y)
+        for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
+  };
+  StagedRun run{RecordingSink{&layout, {}, {}}, 0};
+  std::unique_ptr<CountingHandover> in;
+  for (const Band& band : layout.bands()) {
+    const int j = band.scale;
+    std::unique_ptr<CountingHandover> next;
+    if (j < layout.lattice().k) next = std::make_unique<CountingHandover>(layout.band(j + 1).nodes);
+    const size_t tiles = tile_count(band, 1);
+    std::vector<RecordingSink> parts;
+    for (int r = ranks - 1; r >= 0; --r) {
+      BandedBuildOptions o;
+      o.first_band = o.last_band = j;
+      o.tile_bricks = 1;
+      o.first_tile = tiles * static_cast<size_t>(r) / static_cast<size_t>(ranks);
+      o.last_tile = tiles * static_cast<size_t>(r + 1) / static_cast<size_t>(ranks);
+      o.handover_in = in.get();
+      o.handover_out = next.get();
+      o.staged = staged;
+      o.stage_tiles = stage_tiles;
+      RecordingSink part{&layout, {}, {}};
+      build_bands(layout, read, part, 0, o);
+      parts.insert(parts.begin(), std::move(part));
+    }
+    for (RecordingSink& part : parts) {  // in rank order, as the store places the runs
+      run.sink.order.insert(run.sink.order.end(), part.order.begin(), part.order.end());
+      run.sink.bricks.merge(part.bricks);
+    }
+    if (in) run.handover_calls += in->calls;
+    in = std::move(next);
+  }
+  return run;
+}
+
+TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
+  // Odd sizes: groups cut by the volume's far faces, bands of a few tiles, the corners.
+  for (const Box3& dims : std::vector<Box3>{{70, 53, 61}, {33, 70, 9}}) {
+    const Volume v = testing::crop(generate_noise(70, 11), dims);
+    const StoreLayout layout(v.dims, 2);  // bricks and tiles of 4^3 nodes: 18 x 14 x 16 tiles in band 0
+    for (int ranks : {1, 3}) {
+      SCOPED_TRACE(::testing::Message() << dims[0] << "x" << dims[1] << "x" << dims[2] << ", " << ranks << " ranks");
+      const StagedRun alone = build_staged(v, layout, false, 0, ranks);
+      EXPECT_EQ(alone.sink.bricks.size(), static_cast<size_t>(layout.brick_count()));
+      for (int64_t s : {2, 4, 32}) {
+        SCOPED_TRACE(::testing::Message() << "groups of " << s << "^3 tiles");
+        const StagedRun staged = build_staged(v, layout, true, s, ranks);
+        EXPECT_TRUE(staged.sink.bricks == alone.sink.bricks);
+        EXPECT_EQ(staged.sink.order, alone.sink.order);  // file order
+        // A row of a group's box instead of a row of each tile's: s times fewer, less the halo,
+        // while the groups are smaller than the bands (the grid of band 1 is 9 tiles across).
+        EXPECT_LT(staged.handover_calls * std::min<int64_t>(s, 8), alone.handover_calls * 2)
+            << staged.handover_calls << " calls staged, " << alone.handover_calls << " alone";
+      }
+    }
+  }
+  const Volume v = testing::crop(generate_noise(70, 11), {70, 53, 61});
+  const StoreLayout layout(v.dims, 2);
+  BandedBuildOptions o;
+  o.staged = true;  // by the budget: the whole band 0 in one group here
+  RecordingSink budgeted{&layout, {}, {}};
+  build_bands(
+      layout,
+      [&](const Box3& lo, const Box3& size, float* out) {
+        for (int64_t z = 0; z < size[2]; ++z)
+          for (int64_t y = 0; y < size[1]; ++y)
+            for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
+      },
+      budgeted, 0, o);
+  EXPECT_TRUE(budgeted.bricks == build_staged(v, layout, false, 0, 1).sink.bricks);
+  EXPECT_GE(stage_tiles_for(layout, 0, 1, o.memory_bytes), 16);
+  EXPECT_EQ(stage_tiles_for(layout, 0, 1, 1 << 10), 0);  // not even 2^3 tiles fit: no stage
 }
 
 // A hierarchy held in memory keeps the store's 16^3 bricks for every volume of usual shape, and

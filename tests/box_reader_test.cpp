@@ -259,6 +259,33 @@ TEST_F(BoxReaderTest, RunsLongerThanTheStagingBufferAreReadInPieces) {
   expect_boxes_match(*r, read_volume({p, {}, {}}), 9);
 }
 
+TEST_F(BoxReaderTest, RowsOfANarrowBoxAreReadSeveralAtACallAcrossTheStagingBuffer) {
+  // Rows of 4000 bytes: a box narrower than the volume reads about 262 rows (1 MiB) a call, so a
+  // box 700 rows deep takes three calls a plane, the last one short.
+  const Xyz dims = {1000, 700, 5};
+  std::vector<float> values(1000 * 700 * 5);
+  for (size_t i = 0; i < values.size(); ++i) values[i] = static_cast<float>(i) * 0.5f;
+  const std::string p = path("wide_1000x700x5_float32.raw");
+  write_file(p, "", bytes_of(values, std::endian::little));
+  const auto r = open_reader(p, dir_.string());
+  Volume expected;
+  expected.dims = dims;
+  expected.values = values;
+  for (const Box& b : std::vector<Box>{{{1, 0, 0}, {998, 700, 3}},
+                                       {{0, 3, 1}, {999, 697, 2}},
+                                       {{500, 0, 2}, {7, 700, 1}},
+                                       {{999, 261, 0}, {1, 264, 3}}}) {
+    SCOPED_TRACE(box_text(b));
+    EXPECT_TRUE(read(*r, b) == cut(expected, b));
+  }
+  expect_boxes_match(*r, expected, 10);
+  // The file cut short within a plane's second call: the read fails, naming the file.
+  fs::resize_file(p, (1000 * 700 * 4 + 1000 * 400) * 4);
+  const std::string msg = io_error_of([&] { read(*r, {{1, 0, 4}, {998, 700, 1}}); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "short read");
+}
+
 // ---------------------------------------------------------------- NRRD
 
 TEST_F(BoxReaderTest, AttachedRawNrrdWithByteSkipEqualsReadVolume) {

@@ -18,6 +18,19 @@ std::pair<Box3, Box3> BandTile::window_of(const StoreLayout& layout, int band, c
   return {lo, hi};
 }
 
+std::pair<Box3, Box3> BandTile::next_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi) {
+  Box3 lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = core_lo[a] / 2;
+    hi[a] = core_hi[a] / 2;
+    if (band == layout.lattice().k)
+      hi[a] = lo[a];  // no band above the corners
+    else if (core_hi[a] == layout.band(band).nodes[a])
+      hi[a] = layout.band(band + 1).nodes[a];
+  }
+  return {lo, hi};
+}
+
 BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi, Buffers buffers)
     : layout_(layout),
       j_(band),
@@ -31,13 +44,8 @@ BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, con
   for (int a = 0; a < 3; ++a) {
     size_[a] = hi_[a] - lo_[a] + 1;
     cells_[a] = std::max<int64_t>(1, size_[a] - 1);
-    next_lo_[a] = core_lo[a] / 2;
-    next_hi_[a] = core_hi[a] / 2;
-    if (band == layout.lattice().k)
-      next_hi_[a] = next_lo_[a];  // no band above the corners
-    else if (core_hi[a] == layout.band(band).nodes[a])
-      next_hi_[a] = layout.band(band + 1).nodes[a];
   }
+  std::tie(next_lo_, next_hi_) = next_of(layout, band, core_lo, core_hi);
   // Grown, never cleared: every entry read is written first (values by the caller, records by
   // build() before any parent reads them, children by the caller where they exist), and
   // re-initializing the arrays of a large tile costs as much as filling them.
@@ -230,6 +238,8 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
           const bool box_yz = y >= box_first[1] && y <= box_last[1] && z >= box_first[2] && z <= box_last[2];
           const bool trivial_yz =
               trivial && y >= trivial_first[1] && y <= trivial_last[1] && z >= trivial_first[2] && z <= trivial_last[2];
+          // x steps by 2: a row's nodes are of two template classes, alternately.
+          const DiamondTemplate* row_templates[2] = {nullptr, nullptr};
           for (int64_t x = first[0]; x <= last[0]; x += 2) {
             if (trivial_yz && x >= trivial_first[0] && x <= trivial_last[0] &&
                 constant_[static_cast<size_t>((((z - lo_[2]) >> 2) * blocks_[1] + ((y - lo_[1]) >> 2)) * blocks_[0] +
@@ -242,10 +252,13 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
             }
             const bool core = core_yz && x >= core_first[0] && x <= core_last[0];
             CriticalCounts& c = core ? counts : halo_counts;
-            if (box_yz && x >= box_first[0] && x <= box_last[0])
-              build_fast({x, y, z}, template_for({x, y, z}), c, topology);
-            else
+            if (box_yz && x >= box_first[0] && x <= box_last[0]) {
+              const DiamondTemplate*& t = row_templates[(x >> 1) & 1];
+              if (!t) t = &template_for({x, y, z});
+              build_fast({x, y, z}, *t, c, topology);
+            } else {
               builder.build({x << j_, y << j_, z << j_}, c, topology);
+            }
           }
         }
     }

@@ -37,6 +37,8 @@ class BandTile {
 
   // The window of a core: two nodes more each side, within the lattice (G_j units, inclusive).
   static std::pair<Box3, Box3> window_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi);
+  // What band j+1 needs of a core (next_lo, next_hi below).
+  static std::pair<Box3, Box3> next_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi);
   // This tile's window.
   const Box3& window_lo() const { return lo_; }
   const Box3& window_hi() const { return hi_; }
@@ -57,7 +59,7 @@ class BandTile {
   void build(CriticalCounts& counts, bool topology = true);
 
   // G_j coordinates: node_value() anywhere in the window, node_record() of computed scale-j nodes.
-  float node_value(const Box3& g) const { return values_[static_cast<size_t>(index(g, size_))]; }
+  const float& node_value(const Box3& g) const { return values_[static_cast<size_t>(index(g, size_))]; }
   const Record& node_record(const Box3& g) const { return records_[static_cast<size_t>(index(g, size_))]; }
   const Record& child_record(const Box3& cell) const { return children_[static_cast<size_t>(index(cell, cells_))]; }
   // What band j+1 needs from this tile, for its nodes g in [next_lo, next_hi) (G_{j+1} units):

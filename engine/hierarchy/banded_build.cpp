@@ -1,5 +1,8 @@
 #include "engine/hierarchy/banded_build.h"
 
+#include <algorithm>
+#include <tuple>
+
 namespace isotope {
 
 std::vector<Box3> in_morton_order(const Box3& count) {
@@ -34,26 +37,108 @@ int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uin
   return c;
 }
 
+int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room) {
+  const Band& b = layout.band(band);
+  const Box3 grid = tile_grid(b, c);
+  const int64_t most = std::max({grid[0], grid[1], grid[2]});
+  const int64_t w = c * layout.brick_width();
+  int64_t best = 0;
+  for (int64_t s = 2; s / 2 < most; s *= 2) {
+    Box3 hi, next_hi;
+    for (int a = 0; a < 3; ++a) {
+      const int64_t side = std::min(s * w, b.nodes[a]);
+      hi[a] = side + 3;  // two nodes of halo each side
+      next_hi[a] = side / 2 + 1;
+    }
+    uint64_t bytes = banded_build_internal::StagedBox::bytes({0, 0, 0}, hi, band > 0);
+    if (band < layout.lattice().k) bytes += 2 * banded_build_internal::StagedNext::bytes({0, 0, 0}, next_hi);
+    if (bytes > room) break;
+    best = s;
+  }
+  return best;
+}
+
 namespace banded_build_internal {
 
-void fill_from_input(BandTile& tile, const StoreLayout& layout, const ReadBox& read) {
-  const auto& dims = layout.dims();
-  const Box3 lo = tile.window_lo(), hi = tile.window_hi(), size = tile.window_size();
-  Box3 rlo, rsize;
+void StagedBox::frame(const Box3& lo, const Box3& hi, const Box3& grid) {
+  grid_ = grid;
   for (int a = 0; a < 3; ++a) {
-    rlo[a] = std::min(lo[a], dims[a] - 1);
-    rsize[a] = std::min(hi[a], dims[a] - 1) - rlo[a] + 1;
+    lo_[a] = std::min(lo[a], grid[a] - 1);
+    size_[a] = std::min(hi[a], grid[a] - 1) - lo_[a] + 1;
   }
-  thread_local std::vector<float> box;
-  box.resize(static_cast<size_t>(rsize[0] * rsize[1] * rsize[2]));
-  read(rlo, rsize, box.data());
+}
+
+uint64_t StagedBox::bytes(const Box3& lo, const Box3& hi, bool children) {
+  uint64_t nodes = 1, cells = 1;
+  for (int a = 0; a < 3; ++a) {
+    nodes *= static_cast<uint64_t>(hi[a] - lo[a] + 1);
+    cells *= static_cast<uint64_t>(hi[a] - lo[a]);
+  }
+  return nodes * sizeof(float) + (children ? cells * sizeof(Record) : 0);
+}
+
+void StagedBox::read_input(const Box3& lo, const Box3& hi, const Box3& dims, const ReadBox& read) {
+  frame(lo, hi, dims);
+  children_ = false;
+  const int64_t plane = size_[0] * size_[1];
+  values_.resize(static_cast<size_t>(plane * size_[2]));
+  // A plane a call: a box that spans whole rows is one contiguous read a plane; planes on every
+  // thread, as the input's reader allows (a tile's own box is read by its thread, at once).
+  const int64_t chunks = std::min(size_[2], thread_count() > 1 && plane * size_[2] > (int64_t{1} << 20) ? size_[2] : 1);
+  parallel_for(int64_t{0}, chunks, [&](int64_t i) {
+    const int64_t z0 = size_[2] * i / chunks, z1 = size_[2] * (i + 1) / chunks;
+    read({lo_[0], lo_[1], lo_[2] + z0}, {size_[0], size_[1], z1 - z0}, values_.data() + z0 * plane);
+  });
+}
+
+void StagedBox::read_handover(const Box3& lo, const Box3& hi, const BandHandover& in) {
+  const Box3& n = in.nodes();
+  frame(lo, hi, n);
+  children_ = true;
+  // Cells of the box whose corner node lies in the grid; the others' centres are beyond
+  // record_extent and never read.
+  for (int a = 0; a < 3; ++a) cell_size_[a] = std::max<int64_t>(0, std::min(hi[a], n[a]) - lo[a]);
+  cell_lo_ = lo;
+  values_.resize(static_cast<size_t>(size_[0] * size_[1] * size_[2]));
+  records_.resize(static_cast<size_t>(cell_size_[0] * cell_size_[1] * cell_size_[2]));
+  const bool parallel = thread_count() > 1 && size_[0] * size_[1] * size_[2] > (int64_t{1} << 18);
+  parallel_for(int64_t{0}, parallel ? size_[2] : 1, [&](int64_t i) {
+    const int64_t z0 = parallel ? i : 0, z1 = parallel ? i + 1 : size_[2];
+    for (int64_t z = z0; z < z1; ++z) {
+      for (int64_t y = 0; y < size_[1]; ++y)
+        in.read_values(lo_[0], size_[0], lo_[1] + y, lo_[2] + z, values_.data() + (z * size_[1] + y) * size_[0]);
+      if (z >= cell_size_[2] || cell_size_[0] == 0) continue;
+      for (int64_t y = 0; y < cell_size_[1]; ++y)
+        in.read_children(cell_lo_[0], cell_size_[0], cell_lo_[1] + y, cell_lo_[2] + z,
+                         records_.data() + (z * cell_size_[1] + y) * cell_size_[0]);
+    }
+  });
+}
+
+void StagedBox::fill(BandTile& tile) const {
+  const Box3 lo = tile.window_lo(), size = tile.window_size();
   auto& v = tile.values();
+  // Along x, the nodes up to the grid's last, then that last one repeated.
+  const int64_t inside = std::clamp<int64_t>(grid_[0] - lo[0], 0, size[0]);
   for (int64_t z = 0; z < size[2]; ++z)
     for (int64_t y = 0; y < size[1]; ++y) {
-      const int64_t bz = std::min(lo[2] + z, dims[2] - 1) - rlo[2], by = std::min(lo[1] + y, dims[1] - 1) - rlo[1];
-      const float* row = box.data() + (bz * rsize[1] + by) * rsize[0];
+      const int64_t bz = std::min(lo[2] + z, grid_[2] - 1) - lo_[2], by = std::min(lo[1] + y, grid_[1] - 1) - lo_[1];
+      const float* row = values_.data() + (bz * size_[1] + by) * size_[0];
       float* dst = v.data() + (z * size[1] + y) * size[0];
-      for (int64_t x = 0; x < size[0]; ++x) dst[x] = row[std::min(lo[0] + x, dims[0] - 1) - rlo[0]];
+      std::copy_n(row + (lo[0] - lo_[0]), inside, dst);
+      if (inside < size[0]) std::fill(dst + inside, dst + size[0], row[grid_[0] - 1 - lo_[0]]);
+    }
+  if (!children_) return;
+  const Box3 cells{size[0] - 1, size[1] - 1, size[2] - 1};
+  const int64_t cx = std::min(cells[0], grid_[0] - lo[0]);
+  if (cx <= 0) return;
+  auto& c = tile.children();
+  for (int64_t z = 0; z < cells[2] && lo[2] + z < grid_[2]; ++z)
+    for (int64_t y = 0; y < cells[1] && lo[1] + y < grid_[1]; ++y) {
+      const Record* src = records_.data() +
+                          ((lo[2] + z - cell_lo_[2]) * cell_size_[1] + (lo[1] + y - cell_lo_[1])) * cell_size_[0] +
+                          (lo[0] - cell_lo_[0]);
+      std::copy_n(src, cx, c.data() + (z * cells[1] + y) * cells[0]);
     }
 }
 
@@ -81,6 +166,57 @@ void fill_from_handover(BandTile& tile, const BandHandover& in) {
       in.read_children(lo[0], cx, lo[1] + y, lo[2] + z, c.data() + (z * cells[1] + y) * cells[0]);
 }
 
+void StagedNext::reset(const Box3& lo, const Box3& hi) {
+  lo_ = lo;
+  for (int a = 0; a < 3; ++a) size_[a] = std::max<int64_t>(0, hi[a] - lo[a]);
+  const auto count = static_cast<size_t>(size_[0] * size_[1] * size_[2]);
+  values_.resize(count);
+  children_.resize(count);
+}
+
+uint64_t StagedNext::bytes(const Box3& lo, const Box3& hi) {
+  uint64_t n = 1;
+  for (int a = 0; a < 3; ++a) n *= static_cast<uint64_t>(std::max<int64_t>(0, hi[a] - lo[a]));
+  return n * (sizeof(float) + sizeof(Record));
+}
+
+void StagedNext::take(const BandTile& tile) {
+  const Box3 lo = tile.next_lo(), hi = tile.next_hi();
+  for (int64_t z = lo[2]; z < hi[2]; ++z)
+    for (int64_t y = lo[1]; y < hi[1]; ++y)
+      for (int64_t x = lo[0]; x < hi[0]; ++x) {
+        values_[index(x, y, z)] = tile.next_value({x, y, z});
+        children_[index(x, y, z)] = tile.next_child({x, y, z});
+      }
+}
+
+void StagedNext::write(const std::vector<std::pair<Box3, Box3>>& tile_boxes, BandHandover& next) const {
+  // Runs along x of boxes with the same rows (a row of tiles of the group).
+  std::vector<std::pair<Box3, Box3>> boxes;
+  for (const auto& [lo, hi] : tile_boxes)
+    if (lo[0] < hi[0] && lo[1] < hi[1] && lo[2] < hi[2]) boxes.emplace_back(lo, hi);
+  std::sort(boxes.begin(), boxes.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.first[2], a.first[1], a.first[0]) < std::tie(b.first[2], b.first[1], b.first[0]);
+  });
+  std::vector<std::pair<Box3, Box3>> runs;
+  for (const auto& [lo, hi] : boxes) {
+    if (!runs.empty()) {
+      auto& [rlo, rhi] = runs.back();
+      if (rlo[1] == lo[1] && rlo[2] == lo[2] && rhi[1] == hi[1] && rhi[2] == hi[2] && rhi[0] == lo[0]) {
+        rhi[0] = hi[0];
+        continue;
+      }
+    }
+    runs.emplace_back(lo, hi);
+  }
+  // On one thread: writes to one file take its inode's lock, for which a second thread would spin.
+  for (const auto& [lo, hi] : runs)
+    for (int64_t z = lo[2]; z < hi[2]; ++z)
+      for (int64_t y = lo[1]; y < hi[1]; ++y)
+        next.write_row(lo[0], y, z, values_.data() + index(lo[0], y, z), children_.data() + index(lo[0], y, z),
+                       hi[0] - lo[0]);
+}
+
 void write_next(const BandTile& tile, BandHandover& next) {
   const Box3 lo = tile.next_lo(), hi = tile.next_hi();
   const auto n = static_cast<size_t>(std::max<int64_t>(0, hi[0] - lo[0]));
@@ -101,13 +237,16 @@ void write_next(const BandTile& tile, BandHandover& next) {
 
 void value_range(const BandTile& tile, const StoreLayout& layout, float& lo, float& hi) {
   const auto& d = layout.dims();
-  for (int64_t z = tile.core_lo()[2]; z < std::min(tile.core_hi()[2], d[2]); ++z)
-    for (int64_t y = tile.core_lo()[1]; y < std::min(tile.core_hi()[1], d[1]); ++y)
-      for (int64_t x = tile.core_lo()[0]; x < std::min(tile.core_hi()[0], d[0]); ++x) {
-        const float v = tile.node_value({x, y, z});
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-      }
+  const Box3& c0 = tile.core_lo();
+  const int64_t x1 = std::min(tile.core_hi()[0], d[0]);
+  if (x1 <= c0[0]) return;
+  for (int64_t z = c0[2]; z < std::min(tile.core_hi()[2], d[2]); ++z)
+    for (int64_t y = c0[1]; y < std::min(tile.core_hi()[1], d[1]); ++y) {
+      const float* row = &tile.node_value({c0[0], y, z});
+      const auto [mn, mx] = std::minmax_element(row, row + (x1 - c0[0]));
+      lo = std::min(lo, *mn);
+      hi = std::max(hi, *mx);
+    }
 }
 
 }  // namespace banded_build_internal

@@ -10,9 +10,11 @@
 // Two sinks: the in-memory hierarchy (engine/hierarchy/hierarchy.h), and the store writer (io/store/store_writer.cpp),
 // which compresses the bricks and appends them to the file.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <future>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -89,6 +91,10 @@ struct BandedBuildOptions {
   int64_t tile_bricks = 0;
   const BandHandover* handover_in = nullptr;
   BandHandover* handover_out = nullptr;
+  // Whether tiles read their input and hand-overs through a stage (below) where the budget has
+  // room: for inputs that cost a call per row (files); an input already in memory gains nothing.
+  bool staged = false;
+  int64_t stage_tiles = 0;  // tiles a side of a staged group (a power of two); 0: as the budget allows
 };
 
 struct BandedBuildStats {
@@ -108,6 +114,9 @@ int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes);
 // Bricks per tile side that keep every thread busy within three quarters of the budget and give
 // every thread a few tiles of band 0 (what build_bands uses unless told).
 int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes);
+// Tiles per side of a staged group (below: a power of two, aligned, so that a group is a run of
+// the band's Morton order) whose stage fits in `room` bytes; 0 when not even two a side fit.
+int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room);
 // A band's tiles of c^3 bricks per axis, and how many (build_bands' first_tile and last_tile
 // count them in Morton order).
 inline Box3 tile_grid(const Band& band, int64_t c) {
@@ -130,12 +139,57 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
 
 namespace banded_build_internal {
 
-// Band 0's window: the data box part read from the input, the rest clamped to it.
-void fill_from_input(BandTile& tile, const StoreLayout& layout, const ReadBox& read);
-// Band j > 0's window, from band j-1's hand-over: values clamped to the grid, children where they exist.
+// Band j > 0's window read row by row from band j-1's hand-over into the tile, as StagedBox
+// would fill it (without a stage: no box beside the tile's own arrays).
 void fill_from_handover(BandTile& tile, const BandHandover& in);
 void write_next(const BandTile& tile, BandHandover& next);
 void value_range(const BandTile& tile, const StoreLayout& layout, float& lo, float& hi);
+
+// The stage: the reads of a group of tiles gathered into one box of the band's grid, read at
+// once (one call per row of the box, or per plane when the box spans whole rows) and copied
+// into each tile's window; and what the group hands the next band, gathered so that each row is
+// written once. A tile's window is its own box otherwise. Whatever the box, a tile's window holds
+// the same entries, so the stage changes no byte of the output.
+class StagedBox {
+ public:
+  // The union lo .. hi (inclusive) of the windows of tiles of band 0, values read from the
+  // input of `dims` nodes a side.
+  void read_input(const Box3& lo, const Box3& hi, const Box3& dims, const ReadBox& read);
+  // Of tiles of band j > 0: values and the children of the cells, from band j-1's hand-over.
+  void read_handover(const Box3& lo, const Box3& hi, const BandHandover& in);
+  // The window of a tile inside the box: its values clamped to the grid, its children where
+  // their corner node lies in the grid.
+  void fill(BandTile& tile) const;
+  static uint64_t bytes(const Box3& lo, const Box3& hi, bool children);
+
+ private:
+  void frame(const Box3& lo, const Box3& hi, const Box3& grid);
+  Box3 grid_{}, lo_{}, size_{};   // values: nodes lo_ .. lo_ + size_ - 1 of a grid of grid_
+  Box3 cell_lo_{}, cell_size_{};  // children: cells cell_lo_ .. cell_lo_ + cell_size_ - 1
+  bool children_ = false;
+  std::vector<float> values_;
+  std::vector<Record> records_;
+};
+
+// What a group of tiles hands band j + 1: nodes lo .. hi - 1 of its grid, each tile's part
+// written by that tile (disjoint: concurrently), then every row the tiles cover written once.
+class StagedNext {
+ public:
+  void reset(const Box3& lo, const Box3& hi);
+  void take(const BandTile& tile);
+  // Rows of the tiles' boxes only (under a distribution, the rest of the box may be another
+  // process's), each maximal run of tiles along x in one call per row.
+  void write(const std::vector<std::pair<Box3, Box3>>& tile_boxes, BandHandover& next) const;
+  static uint64_t bytes(const Box3& lo, const Box3& hi);
+
+ private:
+  size_t index(int64_t x, int64_t y, int64_t z) const {
+    return static_cast<size_t>(((z - lo_[2]) * size_[1] + (y - lo_[1])) * size_[0] + (x - lo_[0]));
+  }
+  Box3 lo_{}, size_{};
+  std::vector<float> values_;
+  std::vector<Record> children_;
+};
 
 template <class Payload>
 struct TileResult {
@@ -187,6 +241,15 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       b.children.resize(cells);
     }
   }
+  // What the tiles in flight leave of the budget goes to the stage.
+  const int64_t tiles_held = in_flight * tile_bytes(layout, c, sink_brick_bytes);
+  const auto stage_room = static_cast<uint64_t>(std::max<int64_t>(0, budget - tiles_held));
+  StagedBox stage;
+  // Two: a group's rows are written on a thread of their own while the next group is built
+  // (the writes hold the file's lock, and would leave the other workers idle).
+  std::array<StagedNext, 2> staged_next;
+  size_t writing_to = 0;
+  std::vector<std::pair<Box3, Box3>> tile_boxes;  // a group's boxes of the next band
   std::unique_ptr<BandHandover> owned_in;
   const BandHandover* in = first_band > 0 ? options.handover_in : nullptr;
   for (const Band& band : layout.bands()) {
@@ -207,51 +270,109 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
     std::vector<Box3> tile_coords = in_morton_order(tile_grid(band, c));
     tile_coords = std::vector<Box3>(tile_coords.begin() + std::min(options.first_tile, tile_coords.size()),
                                     tile_coords.begin() + std::min(options.last_tile, tile_coords.size()));
-    std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
-    for (size_t first = 0; first < tile_coords.size(); first += results.size()) {
-      if (options.check_cancel) options.check_cancel();
-      const size_t count = std::min(results.size(), tile_coords.size() - first);
-      parallel_for(int64_t{0}, static_cast<int64_t>(count), [&](int64_t i) {
-        const auto slot = static_cast<size_t>(i);
-        const Box3& tc = tile_coords[first + slot];
-        const int64_t t = layout.brick_width();
-        Box3 lo, hi;
-        for (int a = 0; a < 3; ++a) {
-          lo[a] = tc[a] * c * t;
-          hi[a] = std::min(lo[a] + c * t, band.nodes[a]);
-        }
-        TileResult<Payload> r;
-        BandTile tile(layout, band.scale, lo, hi, std::move(buffers[slot]));
-        if (in)
-          fill_from_handover(tile, *in);
-        else
-          fill_from_input(tile, layout, read);
-        tile.build(r.counts, options.topology);
-        if (next) write_next(tile, *next);
-        if (band.scale == 0) value_range(tile, layout, r.lo, r.hi);
-        // The tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
-        // the band's bricks are committed in Morton order whatever the tile size.
-        for (const Box3& l : in_morton_order({c, c, c})) {
-          const Box3 b{tc[0] * c + l[0], tc[1] * c + l[1], tc[2] * c + l[2]};
-          if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
-          r.bricks.emplace_back(b, sink.process(band.scale, b, tile));
-        }
-        progress.advance((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
-        buffers[slot] = tile.release();
-        results[slot] = std::move(r);
-      });
-      for (size_t i = 0; i < count; ++i) {
-        TileResult<Payload>& r = results[i];
-        for (auto& [b, payload] : r.bricks) sink.commit(band.scale, b, std::move(payload));
-        r.bricks.clear();
-        for (int t = 0; t < 3; ++t) {
-          stats.critical[0][t] += r.counts[0][t];
-          stats.critical[1][t] += r.counts[1][t];
-        }
-        stats.lo = std::min(stats.lo, r.lo);
-        stats.hi = std::max(stats.hi, r.hi);
+    auto core_of = [&](const Box3& tc) {
+      Box3 lo, hi;
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = tc[a] * c * layout.brick_width();
+        hi[a] = std::min(lo[a] + c * layout.brick_width(), band.nodes[a]);
       }
+      return std::pair{lo, hi};
+    };
+    // A group: the tiles of one aligned cube of s^3 tiles, which share a stage; without a stage,
+    // a batch of tiles in flight.
+    const int64_t s = !options.staged           ? 0
+                      : options.stage_tiles > 0 ? options.stage_tiles
+                                                : stage_tiles_for(layout, band.scale, c, stage_room);
+    std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
+    std::future<void> writing;  // a group's rows to `next`; waited for before this band's end
+    for (size_t group = 0; group < tile_coords.size();) {
+      size_t group_end = std::min(tile_coords.size(), group + results.size());
+      if (s > 0) {
+        group_end = group + 1;
+        auto cube = [s](const Box3& tc) { return Box3{tc[0] / s, tc[1] / s, tc[2] / s}; };
+        while (group_end < tile_coords.size() && cube(tile_coords[group_end]) == cube(tile_coords[group])) ++group_end;
+        Box3 lo{INT64_MAX, INT64_MAX, INT64_MAX}, hi{0, 0, 0}, next_lo = lo, next_hi = hi;
+        tile_boxes.clear();
+        for (size_t i = group; i < group_end; ++i) {
+          const auto [core_lo, core_hi] = core_of(tile_coords[i]);
+          const auto [wlo, whi] = BandTile::window_of(layout, band.scale, core_lo, core_hi);
+          const auto [nlo, nhi] = BandTile::next_of(layout, band.scale, core_lo, core_hi);
+          tile_boxes.emplace_back(nlo, nhi);
+          for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], wlo[a]);
+            hi[a] = std::max(hi[a], whi[a]);
+            next_lo[a] = std::min(next_lo[a], nlo[a]);
+            next_hi[a] = std::max(next_hi[a], nhi[a]);
+          }
+        }
+        if (in)
+          stage.read_handover(lo, hi, *in);
+        else
+          stage.read_input(lo, hi, layout.dims(), read);
+        if (next) staged_next[writing_to].reset(next_lo, next_hi);
+      }
+      for (size_t first = group; first < group_end; first += results.size()) {
+        if (options.check_cancel) options.check_cancel();
+        const size_t count = std::min(results.size(), group_end - first);
+        parallel_for(int64_t{0}, static_cast<int64_t>(count), [&](int64_t i) {
+          const auto slot = static_cast<size_t>(i);
+          const Box3& tc = tile_coords[first + slot];
+          const auto [lo, hi] = core_of(tc);
+          TileResult<Payload> r;
+          BandTile tile(layout, band.scale, lo, hi, std::move(buffers[slot]));
+          if (s > 0) {
+            stage.fill(tile);
+          } else {
+            if (in) {
+              fill_from_handover(tile, *in);
+            } else {
+              thread_local StagedBox own;  // the tile's window alone
+              own.read_input(tile.window_lo(), tile.window_hi(), layout.dims(), read);
+              own.fill(tile);
+            }
+          }
+          tile.build(r.counts, options.topology);
+          if (next && s > 0)
+            staged_next[writing_to].take(tile);
+          else if (next)
+            write_next(tile, *next);
+          if (band.scale == 0) value_range(tile, layout, r.lo, r.hi);
+          // The tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
+          // the band's bricks are committed in Morton order whatever the tile size.
+          for (const Box3& l : in_morton_order({c, c, c})) {
+            const Box3 b{tc[0] * c + l[0], tc[1] * c + l[1], tc[2] * c + l[2]};
+            if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
+            r.bricks.emplace_back(b, sink.process(band.scale, b, tile));
+          }
+          progress.advance((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+          buffers[slot] = tile.release();
+          results[slot] = std::move(r);
+        });
+        for (size_t i = 0; i < count; ++i) {
+          TileResult<Payload>& r = results[i];
+          for (auto& [b, payload] : r.bricks) sink.commit(band.scale, b, std::move(payload));
+          r.bricks.clear();
+          for (int t = 0; t < 3; ++t) {
+            stats.critical[0][t] += r.counts[0][t];
+            stats.critical[1][t] += r.counts[1][t];
+          }
+          stats.lo = std::min(stats.lo, r.lo);
+          stats.hi = std::max(stats.hi, r.hi);
+        }
+      }
+      if (next && s > 0) {
+        if (writing.valid()) writing.get();  // rethrows what failed
+        if (threads > 1) {
+          writing = std::async(std::launch::async,
+                               [&, i = writing_to, boxes = tile_boxes] { staged_next[i].write(boxes, *next); });
+          writing_to ^= 1;
+        } else {
+          staged_next[writing_to].write(tile_boxes, *next);
+        }
+      }
+      group = group_end;
     }
+    if (writing.valid()) writing.get();
     owned_in = std::move(owned_next);
     in = next;
   }

@@ -118,26 +118,33 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
         f.values[yz | spread_bits_3(x)] = tile.node_value({origin[0] + x, origin[1] + y, origin[2] + z});
     }
   if (!stores_records(layout, j)) return f;
-  for (auto& r : f.records) r.reserve(nodes - nodes / 8);
+  // Nodes beyond the band's grid: 0 in every field.
+  std::array<float*, BrickFields::count> out;
+  for (size_t k = 0; k < out.size(); ++k) {
+    f.records[k].assign(nodes - nodes / 8, 0.0f);
+    out[k] = f.records[k].data();
+  }
+  size_t i = 0;
   for (uint32_t m = 0; m < nodes; ++m) {
     if ((m & 7) == 0) continue;
     const Box3 g{origin[0] + compact_bits_3(m), origin[1] + compact_bits_3(m >> 1), origin[2] + compact_bits_3(m >> 2)};
     if (!(g[0] < band.nodes[0] && g[1] < band.nodes[1] && g[2] < band.nodes[2])) {
-      for (auto& r : f.records) r.push_back(0.0f);
+      ++i;
       continue;
     }
     const Record& r = tile.node_record(g);
     const PackedBounds b = pack_bounds(r.bounds);
     const PackedTopology p = pack_topology(r.topology, r.bounds.error_surplus);
-    f.records[BrickFields::lo].push_back(bf16_to_float(b.lo));
-    f.records[BrickFields::hi].push_back(bf16_to_float(b.hi));
-    f.records[BrickFields::bound].push_back(b.bound);
-    f.records[BrickFields::exact_lo].push_back(bf16_to_float(p.exact_lo));
-    f.records[BrickFields::exact_hi].push_back(bf16_to_float(p.exact_hi));
-    for (int w = 0; w < 3; ++w) f.records[BrickFields::w0 + w].push_back(bf16_to_float(p.weight[w]));
-    f.records[BrickFields::paper_lo].push_back(bf16_to_float(p.paper_lo));
-    f.records[BrickFields::paper_hi].push_back(bf16_to_float(p.paper_hi));
-    f.records[BrickFields::surplus].push_back(bf16_to_float(p.surplus));
+    out[BrickFields::lo][i] = bf16_to_float(b.lo);
+    out[BrickFields::hi][i] = bf16_to_float(b.hi);
+    out[BrickFields::bound][i] = b.bound;
+    out[BrickFields::exact_lo][i] = bf16_to_float(p.exact_lo);
+    out[BrickFields::exact_hi][i] = bf16_to_float(p.exact_hi);
+    for (int w = 0; w < 3; ++w) out[BrickFields::w0 + w][i] = bf16_to_float(p.weight[w]);
+    out[BrickFields::paper_lo][i] = bf16_to_float(p.paper_lo);
+    out[BrickFields::paper_hi][i] = bf16_to_float(p.paper_hi);
+    out[BrickFields::surplus][i] = bf16_to_float(p.surplus);
+    ++i;
   }
   return f;
 }
@@ -271,6 +278,7 @@ class Converter {
   BandedBuildOptions build_options() {
     BandedBuildOptions build;
     build.memory_bytes = static_cast<uint64_t>(options_.memory_mb) << 20;
+    build.staged = true;  // a file's reader, and scratch hand-overs, cost a call a row
     build.progress = options_.progress;
     build.check_cancel = [this] {
       if (options_.cancel && options_.cancel->load()) throw IoError("interrupted");
