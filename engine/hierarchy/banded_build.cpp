@@ -182,12 +182,25 @@ uint64_t StagedNext::bytes(const Box3& lo, const Box3& hi) {
 
 void StagedNext::take(const BandTile& tile) {
   const Box3 lo = tile.next_lo(), hi = tile.next_hi();
+  if (lo[0] >= hi[0]) return;
+  // Per row, as BandTile::next_value and next_child give them: the value at 2g, the record of the
+  // cube centre 2g + 1 where it lies in band j's grid (else an empty record).
+  const Box3& nodes = tile.layout().band(tile.band()).nodes;
+  const int64_t inside = std::clamp<int64_t>(nodes[0] / 2 - lo[0], 0, hi[0] - lo[0]);  // 2x + 1 < nodes
   for (int64_t z = lo[2]; z < hi[2]; ++z)
-    for (int64_t y = lo[1]; y < hi[1]; ++y)
-      for (int64_t x = lo[0]; x < hi[0]; ++x) {
-        values_[index(x, y, z)] = tile.next_value({x, y, z});
-        children_[index(x, y, z)] = tile.next_child({x, y, z});
+    for (int64_t y = lo[1]; y < hi[1]; ++y) {
+      float* v = values_.data() + index(lo[0], y, z);
+      Record* c = children_.data() + index(lo[0], y, z);
+      const float* from = &tile.node_value({2 * lo[0], 2 * y, 2 * z});
+      for (int64_t i = 0; i < hi[0] - lo[0]; ++i) v[i] = from[2 * i];
+      if (2 * y + 1 >= nodes[1] || 2 * z + 1 >= nodes[2]) {
+        std::fill(c, c + (hi[0] - lo[0]), Record{});
+        continue;
       }
+      const Record* centre = &tile.node_record({2 * lo[0] + 1, 2 * y + 1, 2 * z + 1});
+      for (int64_t i = 0; i < inside; ++i) c[i] = centre[2 * i];
+      std::fill(c + inside, c + (hi[0] - lo[0]), Record{});
+    }
 }
 
 void StagedNext::write(const std::vector<std::pair<Box3, Box3>>& tile_boxes, BandHandover& next) const {

@@ -118,34 +118,36 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
         f.values[yz | spread_bits_3(x)] = tile.node_value({origin[0] + x, origin[1] + y, origin[2] + z});
     }
   if (!stores_records(layout, j)) return f;
-  // Nodes beyond the band's grid: 0 in every field.
+  // Nodes beyond the band's grid: 0 in every field. Walked row by row (the tile's records in
+  // memory order), each written at its place among the brick's nodes with records: Morton order
+  // without the nodes whose three coordinates are even (m & 7 == 0), i = m - m / 8 - 1.
   std::array<float*, BrickFields::count> out;
   for (size_t k = 0; k < out.size(); ++k) {
     f.records[k].assign(nodes - nodes / 8, 0.0f);
     out[k] = f.records[k].data();
   }
-  size_t i = 0;
-  for (uint32_t m = 0; m < nodes; ++m) {
-    if ((m & 7) == 0) continue;
-    const Box3 g{origin[0] + compact_bits_3(m), origin[1] + compact_bits_3(m >> 1), origin[2] + compact_bits_3(m >> 2)};
-    if (!(g[0] < band.nodes[0] && g[1] < band.nodes[1] && g[2] < band.nodes[2])) {
-      ++i;
-      continue;
+  for (int64_t z = 0; z < end[2]; ++z)
+    for (int64_t y = 0; y < end[1]; ++y) {
+      const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
+      const Record* row = &tile.node_record({origin[0], origin[1] + y, origin[2] + z});
+      for (int64_t x = 0; x < end[0]; ++x) {
+        const uint32_t m = yz | spread_bits_3(x);
+        if ((m & 7) == 0) continue;
+        const size_t i = m - m / 8 - 1;
+        const Record& r = row[x];
+        const PackedBounds b = pack_bounds(r.bounds);
+        const PackedTopology p = pack_topology(r.topology, r.bounds.error_surplus);
+        out[BrickFields::lo][i] = bf16_to_float(b.lo);
+        out[BrickFields::hi][i] = bf16_to_float(b.hi);
+        out[BrickFields::bound][i] = b.bound;
+        out[BrickFields::exact_lo][i] = bf16_to_float(p.exact_lo);
+        out[BrickFields::exact_hi][i] = bf16_to_float(p.exact_hi);
+        for (int w = 0; w < 3; ++w) out[BrickFields::w0 + w][i] = bf16_to_float(p.weight[w]);
+        out[BrickFields::paper_lo][i] = bf16_to_float(p.paper_lo);
+        out[BrickFields::paper_hi][i] = bf16_to_float(p.paper_hi);
+        out[BrickFields::surplus][i] = bf16_to_float(p.surplus);
+      }
     }
-    const Record& r = tile.node_record(g);
-    const PackedBounds b = pack_bounds(r.bounds);
-    const PackedTopology p = pack_topology(r.topology, r.bounds.error_surplus);
-    out[BrickFields::lo][i] = bf16_to_float(b.lo);
-    out[BrickFields::hi][i] = bf16_to_float(b.hi);
-    out[BrickFields::bound][i] = b.bound;
-    out[BrickFields::exact_lo][i] = bf16_to_float(p.exact_lo);
-    out[BrickFields::exact_hi][i] = bf16_to_float(p.exact_hi);
-    for (int w = 0; w < 3; ++w) out[BrickFields::w0 + w][i] = bf16_to_float(p.weight[w]);
-    out[BrickFields::paper_lo][i] = bf16_to_float(p.paper_lo);
-    out[BrickFields::paper_hi][i] = bf16_to_float(p.paper_hi);
-    out[BrickFields::surplus][i] = bf16_to_float(p.surplus);
-    ++i;
-  }
   return f;
 }
 
