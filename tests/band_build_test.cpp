@@ -155,6 +155,7 @@ struct RecordingSink {
 class CountingHandover : public MemoryHandover {
  public:
   using MemoryHandover::MemoryHandover;
+  bool in_memory() const override { return false; }
   void write_row(int64_t x0, int64_t y, int64_t z, const float* v, const Record* r, int64_t n) override {
     ++calls;
     MemoryHandover::write_row(x0, y, z, v, r, n);
@@ -241,7 +242,7 @@ TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
   const Volume v = testing::crop(generate_noise(70, 11), {70, 53, 61});
   const StoreLayout layout(v.dims, 2);
   BandedBuildOptions o;
-  o.staged = true;  // by the budget: the whole band 0 in one group here
+  o.staged = true;  // hand-overs in memory: no stage (one more copy for nothing), the same bricks
   RecordingSink budgeted{&layout, {}, {}};
   build_bands(
       layout,

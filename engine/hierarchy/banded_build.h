@@ -45,6 +45,8 @@ class BandHandover {
     return static_cast<uint64_t>((z * nodes_[1] + y) * nodes_[0] + x);
   }
 
+  // Whether a call costs a copy only (else a system call: a stage pays, below).
+  virtual bool in_memory() const { return false; }
   virtual void write_row(int64_t x0, int64_t y, int64_t z, const float* values, const Record* children, int64_t n) = 0;
   virtual void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const = 0;
   virtual void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const = 0;
@@ -59,6 +61,7 @@ class MemoryHandover : public BandHandover {
       : BandHandover(nodes),
         values_(std::make_unique_for_overwrite<float[]>(count(nodes))),
         children_(std::make_unique_for_overwrite<Record[]>(count(nodes))) {}
+  bool in_memory() const override { return true; }
   void write_row(int64_t x0, int64_t y, int64_t z, const float* values, const Record* children, int64_t n) override {
     std::copy(values, values + n, values_.get() + at(x0, y, z));
     std::copy(children, children + n, children_.get() + at(x0, y, z));
@@ -92,7 +95,8 @@ struct BandedBuildOptions {
   const BandHandover* handover_in = nullptr;
   BandHandover* handover_out = nullptr;
   // Whether tiles read their input and hand-overs through a stage (below) where the budget has
-  // room: for inputs that cost a call per row (files); an input already in memory gains nothing.
+  // room, in the bands whose hand-over in or out is not in memory: there a row costs a system
+  // call; from memory, a stage would be one more copy (and its memory, for nothing).
   bool staged = false;
   int64_t stage_tiles = 0;  // tiles a side of a staged group (a power of two); 0: as the budget allows
 };
@@ -280,9 +284,10 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
     };
     // A group: the tiles of one aligned cube of s^3 tiles, which share a stage; without a stage,
     // a batch of tiles in flight.
-    const int64_t s = !options.staged           ? 0
-                      : options.stage_tiles > 0 ? options.stage_tiles
-                                                : stage_tiles_for(layout, band.scale, c, stage_room);
+    const bool costly = (in && !in->in_memory()) || (next && !next->in_memory());
+    const int64_t s = !options.staged || !costly ? 0
+                      : options.stage_tiles > 0  ? options.stage_tiles
+                                                 : stage_tiles_for(layout, band.scale, c, stage_room);
     std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
     std::future<void> writing;  // a group's rows to `next`; waited for before this band's end
     for (size_t group = 0; group < tile_coords.size();) {
