@@ -124,6 +124,7 @@ TEST(BandBuild, EqualsInMemoryBuildOnRealVolume) {
 
 // Every brick's values and records, as the sink saw them, and the order of the commits.
 struct RecordingSink {
+  explicit RecordingSink(const StoreLayout* l) : layout(l) {}
   const StoreLayout* layout;
   std::map<int64_t, std::vector<uint8_t>> bricks;
   std::vector<int64_t> order;
@@ -148,6 +149,18 @@ struct RecordingSink {
     const int64_t i = layout->brick_index(band, b);
     order.push_back(i);
     bricks[i] = std::move(bytes);
+  }
+  // Held in a map by Morton code: released in Morton order.
+  std::map<uint64_t, std::pair<int, Box3>> held;
+  void hold(int band, const Box3& b, std::vector<uint8_t>&& bytes) {
+    const int64_t i = layout->brick_index(band, b);
+    held[morton_encode(static_cast<uint64_t>(b[0]), static_cast<uint64_t>(b[1]), static_cast<uint64_t>(b[2]))] = {band,
+                                                                                                                  b};
+    bricks[i] = std::move(bytes);
+  }
+  void release() {
+    for (const auto& [code, at] : held) order.push_back(layout->brick_index(at.first, at.second));
+    held.clear();
   }
 };
 
@@ -186,7 +199,7 @@ StagedRun build_staged(const Volume& v, const StoreLayout& layout, bool staged, 
       for (int64_t y = 0; y < size[1]; ++y)
         for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
   };
-  StagedRun run{RecordingSink{&layout, {}, {}}, 0};
+  StagedRun run{RecordingSink(&layout), 0};
   std::unique_ptr<CountingHandover> in;
   for (const Band& band : layout.bands()) {
     const int j = band.scale;
@@ -204,7 +217,7 @@ StagedRun build_staged(const Volume& v, const StoreLayout& layout, bool staged, 
       o.handover_out = next.get();
       o.staged = staged;
       o.stage_tiles = stage_tiles;
-      RecordingSink part{&layout, {}, {}};
+      RecordingSink part(&layout);
       build_bands(layout, read, part, 0, o);
       parts.insert(parts.begin(), std::move(part));
     }
@@ -243,7 +256,7 @@ TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
   const StoreLayout layout(v.dims, 2);
   BandedBuildOptions o;
   o.staged = true;  // hand-overs in memory: no stage (one more copy for nothing), the same bricks
-  RecordingSink budgeted{&layout, {}, {}};
+  RecordingSink budgeted(&layout);
   build_bands(
       layout,
       [&](const Box3& lo, const Box3& size, float* out) {
@@ -255,6 +268,69 @@ TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
   EXPECT_TRUE(budgeted.bricks == build_staged(v, layout, false, 0, 1).sink.bricks);
   EXPECT_GE(stage_tiles_for(layout, 0, 1, o.memory_bytes), 16);
   EXPECT_EQ(stage_tiles_for(layout, 0, 1, 1 << 10), 0);  // not even 2^3 tiles fit: no stage
+}
+
+// ---- A fused pass: band j+1 built beside band j, each of its tiles from a widened tile of band j,
+// where the hand-over between them would be a file; the output does not change.
+
+TEST(BandBuild, ABandBuiltBesideTheOneBeforeItIsTheBandBuiltFromItsHandOver) {
+  // Odd sizes, and sides one short of a multiple of the tiles' (63 data nodes: band 0 has 64, its
+  // records reaching one node beyond the data, band 1 has 33: one node beyond band 0's last tile).
+  for (const Box3& dims : std::vector<Box3>{{70, 53, 61}, {33, 70, 9}, {63, 47, 31}, {64, 40, 17}}) {
+    const Volume v = testing::crop(generate_noise(70, 13), dims);
+    const StoreLayout layout(v.dims, 2);  // bricks of 4^3 nodes
+    const StagedRun alone = build_staged(v, layout, false, 0, 1);
+    const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
+      for (int64_t z = 0; z < size[2]; ++z)
+        for (int64_t y = 0; y < size[1]; ++y)
+          for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
+    };
+    for (int64_t c : {2, 4})
+      for (bool staged : {false, true}) {
+        SCOPED_TRACE(::testing::Message() << dims[0] << "x" << dims[1] << "x" << dims[2] << ", tiles of " << c
+                                          << "^3 bricks" << (staged ? ", staged" : ""));
+        std::map<int, int64_t> calls;  // per band, the calls made to the hand-over it reads
+        struct Tallied : CountingHandover {
+          Tallied(const Box3& nodes, int64_t& total) : CountingHandover(nodes), total_(total) {}
+          ~Tallied() override { total_ += calls; }
+          int64_t& total_;
+        };
+        BandedBuildOptions o;
+        o.fuse = true;
+        o.tile_bricks = c;
+        o.staged = staged;
+        o.make_handover = [&](const Box3& nodes, uint64_t) -> std::unique_ptr<BandHandover> {
+          for (const Band& b : layout.bands())
+            if (b.nodes == nodes) return std::make_unique<Tallied>(nodes, calls[b.scale]);
+          ADD_FAILURE() << "a hand-over to no band";
+          return nullptr;
+        };
+        RecordingSink fused(&layout);
+        const BandedBuildStats stats = build_bands(layout, read, fused, 0, o);
+        EXPECT_TRUE(fused.bricks == alone.sink.bricks);
+        EXPECT_EQ(fused.order, alone.sink.order);  // file order
+        // Bands 0 and 1 in one pass, 2 and 3 in the next, ...: the hand-overs into bands 1, 3, ...
+        // are made (to learn they would be files) but never used.
+        const int k = layout.lattice().k;
+        EXPECT_EQ(stats.bands_built_beside, (k + 1) / 2);
+        for (int j = 1; j <= k; ++j)
+          if (j % 2)
+            EXPECT_EQ(calls[j], 0) << "band " << j;
+          else
+            EXPECT_GT(calls[j], 0) << "band " << j;
+      }
+    // Tiles of one brick (band j+1's would be half a brick) and hand-overs in memory: no fused pass.
+    for (int64_t c : {1, 2}) {
+      BandedBuildOptions o;
+      o.fuse = true;
+      o.tile_bricks = c;
+      if (c == 1)
+        o.make_handover = [](const Box3& nodes, uint64_t) { return std::make_unique<CountingHandover>(nodes); };
+      RecordingSink sink(&layout);
+      EXPECT_EQ(build_bands(layout, read, sink, 0, o).bands_built_beside, 0);
+      EXPECT_TRUE(sink.bricks == alone.sink.bricks);
+    }
+  }
 }
 
 // A hierarchy held in memory keeps the store's 16^3 bricks for every volume of usual shape, and

@@ -31,6 +31,7 @@
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
+#include "isotope/convert.h"
 #include "isotope/error.h"
 #include "tbb/global_control.h"
 #include "tests/byte_files.h"
@@ -387,6 +388,33 @@ TEST_F(Store, FileDoesNotDependOnThreadsOrMemoryBudget) {
   EXPECT_FALSE(a.empty());
   EXPECT_TRUE(a == b);
   EXPECT_TRUE(a == c);
+}
+
+// Where band 1's hand-over would be a scratch file (at 256 MB, 129^3 x 48 bytes is beyond a
+// quarter of the budget), bands 0 and 1 are built in one pass and band 1's bricks held aside
+// until band 0's last is written: the same file as band by band (at 1024 MB, in memory). 255
+// nodes along x: band 0 has 256 (records reach one node beyond the data), band 1 129, whose last
+// brick comes with band 0's last tile, out of Morton order.
+TEST_F(Store, AFileBuiltWithTwoBandsInOnePassIsTheFileBuiltBandByBand) {
+  const Volume v = testing::crop(generate_noise(257, 9), {255, 250, 243});
+  auto store = [&](const std::string& name, int memory_mb, int expect_beside) {
+    ConvertOptions o;
+    o.memory_mb = memory_mb;
+    const std::string path = (dir_ / (name + ".isotope")).string();
+    EXPECT_EQ(isotope::convert(v, path, o).bands_built_beside, expect_beside) << name;
+    return read_bytes(path);
+  };
+  const auto band_by_band = store("apart", 1024, 0);
+  const auto fused = store("fused", 256, 1);
+  testing::Bytes one_thread;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    one_thread = store("fused1", 256, 1);
+  }
+  EXPECT_FALSE(fused.empty());
+  EXPECT_TRUE(fused == band_by_band);
+  EXPECT_TRUE(one_thread == band_by_band);
+  verify_store((dir_ / "fused.isotope").string());
 }
 
 TEST_F(Store, CancelledConvertLeavesNothing) {

@@ -9,10 +9,13 @@ namespace isotope {
 
 std::pair<Box3, Box3> BandTile::window_of(const StoreLayout& layout, int band, const Box3& core_lo,
                                           const Box3& core_hi) {
+  // A node's record reads nodes two steps away along the axes where it is odd (face and cube
+  // centres), one step along the others (computable(), below): an even first node of the core
+  // (the start of a brick) needs one node below it, an odd one two; two above its last.
   const int64_t top = layout.lattice().n >> band;
   Box3 lo, hi;
   for (int a = 0; a < 3; ++a) {
-    lo[a] = std::max<int64_t>(0, core_lo[a] - 2);
+    lo[a] = std::max<int64_t>(0, core_lo[a] - ((core_lo[a] & 1) ? 2 : 1));
     hi[a] = std::min(top, core_hi[a] - 1 + 2);
   }
   return {lo, hi};
@@ -36,6 +39,8 @@ BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, con
       j_(band),
       core_lo_(core_lo),
       core_hi_(core_hi),
+      count_lo_(core_lo),
+      count_hi_(core_hi),
       values_(std::move(buffers.values)),
       records_(std::move(buffers.records)),
       children_(std::move(buffers.children)) {
@@ -82,6 +87,23 @@ Record BandTile::next_child(const Box3& g) const {
   for (int a = 0; a < 3; ++a)
     if (c[a] >= band.nodes[a]) return Record{};
   return node_record(c);
+}
+
+void BandTile::next_row(int64_t x0, int64_t x1, int64_t y, int64_t z, float* values, Record* children,
+                        int64_t child_count) const {
+  if (x1 <= x0) return;
+  const float* from = &node_value({2 * x0, 2 * y, 2 * z});
+  for (int64_t i = 0; i < x1 - x0; ++i) values[i] = from[2 * i];
+  const int64_t n = child_count < 0 ? x1 - x0 : child_count;
+  // The cube centres 2g + 1 in band j's grid: g < nodes / 2 along x.
+  const Box3& nodes = layout_.band(j_).nodes;
+  const int64_t inside =
+      2 * y + 1 >= nodes[1] || 2 * z + 1 >= nodes[2] ? 0 : std::clamp<int64_t>(nodes[0] / 2 - x0, 0, n);
+  if (inside > 0) {
+    const Record* centre = &node_record({2 * x0 + 1, 2 * y + 1, 2 * z + 1});
+    for (int64_t i = 0; i < inside; ++i) children[i] = centre[2 * i];
+  }
+  std::fill(children + inside, children + n, Record{});
 }
 
 void BandTile::store(const Coord& v, const Record& r) {
@@ -233,7 +255,7 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
         k.first[a] = lo;
         k.last[a] = hi;
         empty = empty || lo > hi;
-        k.core_first[a] = core_lo_[a], k.core_last[a] = core_hi_[a] - 1;
+        k.core_first[a] = count_lo_[a], k.core_last[a] = count_hi_[a] - 1;
         // inside_data_box: (g << j) - h >= 0 and (g << j) + h <= dims - 1
         k.box_first[a] = (h + (int64_t{1} << j_) - 1) >> j_;
         k.box_last[a] = (layout_.dims()[a] - 1 - h) >> j_;

@@ -35,7 +35,8 @@ class BandTile {
   BandTile(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi, Buffers buffers = {});
   Buffers release() { return {std::move(values_), std::move(records_), std::move(children_)}; }
 
-  // The window of a core: two nodes more each side, within the lattice (G_j units, inclusive).
+  // The window of a core: the nodes its records read, one or two more below it and two above,
+  // within the lattice (G_j units, inclusive).
   static std::pair<Box3, Box3> window_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi);
   // What band j+1 needs of a core (next_lo, next_hi below).
   static std::pair<Box3, Box3> next_of(const StoreLayout& layout, int band, const Box3& core_lo, const Box3& core_hi);
@@ -56,7 +57,10 @@ class BandTile {
   // Computes the records of the core's scale-j nodes (and of the halo nodes they depend on).
   // Without `topology`, their range and errors only (critical intervals empty, weights 0, no
   // critical point counted): what an extraction in mode none reads, for a fraction of the work.
+  // The critical points counted are those of the core, or of the part of it set by count_only
+  // (a core widened to hand a fused band its halo, whose nodes other tiles count).
   void build(CriticalCounts& counts, bool topology = true);
+  void count_only(const Box3& lo, const Box3& hi) { count_lo_ = lo, count_hi_ = hi; }
 
   // G_j coordinates: node_value() anywhere in the window, node_record() of computed scale-j nodes.
   const float& node_value(const Box3& g) const { return values_[static_cast<size_t>(index(g, size_))]; }
@@ -69,6 +73,10 @@ class BandTile {
   const Box3& next_hi() const { return next_hi_; }
   float next_value(const Box3& g) const { return node_value({2 * g[0], 2 * g[1], 2 * g[2]}); }
   Record next_child(const Box3& g) const;
+  // Nodes x0 .. x1 - 1 of row (y, z) of band j+1's grid: next_value of each, and next_child of
+  // each (or of the first child_count).
+  void next_row(int64_t x0, int64_t x1, int64_t y, int64_t z, float* values, Record* children,
+                int64_t child_count = -1) const;
 
   const StoreLayout& layout() const { return layout_; }
   int band() const { return j_; }
@@ -111,7 +119,7 @@ class BandTile {
 
   const StoreLayout& layout_;
   int j_;
-  Box3 core_lo_, core_hi_, lo_{}, hi_{}, size_{}, cells_{}, next_lo_{}, next_hi_{};
+  Box3 core_lo_, core_hi_, count_lo_, count_hi_, lo_{}, hi_{}, size_{}, cells_{}, next_lo_{}, next_hi_{};
   int64_t top_ = 0;  // n >> j: the lattice's far face in G_j units
   Array<float> values_;
   Array<Record> records_;

@@ -1,6 +1,7 @@
 #include "engine/hierarchy/banded_build.h"
 
 #include <algorithm>
+#include <cassert>
 #include <tuple>
 
 namespace isotope {
@@ -19,39 +20,50 @@ std::vector<Box3> in_morton_order(const Box3& count) {
   return out;
 }
 
-int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes) {
-  const int64_t w = c * layout.brick_width() + 4;
-  return w * w * w * static_cast<int64_t>(sizeof(float) + 2 * sizeof(Record)) + c * c * c * brick_bytes;
+int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes, bool fused) {
+  const int64_t window = sizeof(float) + 2 * sizeof(Record);  // values, records, children a node
+  const int64_t side = c * layout.brick_width();
+  if (!fused) {
+    const int64_t w = side + 4;
+    return w * w * w * window + c * c * c * brick_bytes;
+  }
+  // The widened tile of band j, the tile of band j+1 (one node more at the grid's far faces),
+  // and the box between them; band j+1's bricks, an eighth as many.
+  const int64_t w = side + kFuseBelow + kFuseAbove + 4, u = side / 2 + 1 + 4;
+  return w * w * w * window + u * u * u * (window + static_cast<int64_t>(sizeof(float) + sizeof(Record))) +
+         c * c * c * brick_bytes * 9 / 8;
 }
 
-int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes) {
+int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes, bool fused) {
   // Larger tiles compute fewer halo records twice and read their input in fewer, longer calls:
   // the largest c (tiles up to 64^3 nodes) that keeps every thread busy within three quarters of
   // the budget, and gives every thread a few tiles of band 0.
   const int64_t threads = thread_count();
   const auto budget = static_cast<int64_t>(memory_bytes / 4 * 3);
-  int64_t c = std::max<int64_t>(1, int64_t{64} >> layout.brick_bits());
-  while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes) < threads ||
+  int64_t c = std::max<int64_t>(1, int64_t{fused ? 128 : 64} >> layout.brick_bits());
+  while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes, fused) < threads ||
                    static_cast<int64_t>(tile_count(layout.band(0), c)) < 4 * threads))
     c /= 2;
   return c;
 }
 
-int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room) {
+int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room, bool fused) {
   const Band& b = layout.band(band);
   const Box3 grid = tile_grid(b, c);
   const int64_t most = std::max({grid[0], grid[1], grid[2]});
   const int64_t w = c * layout.brick_width();
+  // What the group hands on: band j+1's nodes, or band j+2's when band j+1 is built beside it.
+  const int step = fused ? 2 : 1;
   int64_t best = 0;
   for (int64_t s = 2; s / 2 < most; s *= 2) {
     Box3 hi, next_hi;
     for (int a = 0; a < 3; ++a) {
       const int64_t side = std::min(s * w, b.nodes[a]);
-      hi[a] = side + 3;  // two nodes of halo each side
-      next_hi[a] = side / 2 + 1;
+      hi[a] = side + 3 + (fused ? kFuseBelow + kFuseAbove : 0);  // up to two nodes of halo each side
+      next_hi[a] = (side >> step) + 1;
     }
     uint64_t bytes = banded_build_internal::StagedBox::bytes({0, 0, 0}, hi, band > 0);
-    if (band < layout.lattice().k) bytes += 2 * banded_build_internal::StagedNext::bytes({0, 0, 0}, next_hi);
+    if (band + step <= layout.lattice().k) bytes += 2 * banded_build_internal::StagedNext::bytes({0, 0, 0}, next_hi);
     if (bytes > room) break;
     best = s;
   }
@@ -115,8 +127,28 @@ void StagedBox::read_handover(const Box3& lo, const Box3& hi, const BandHandover
   });
 }
 
+void StagedBox::take_next(const BandTile& from, const BandTile& to) {
+  frame(to.window_lo(), to.window_hi(), to.layout().band(to.band()).nodes);
+  children_ = true;
+  cell_lo_ = lo_;
+  for (int a = 0; a < 3; ++a) cell_size_[a] = std::max<int64_t>(0, std::min(to.window_hi()[a], grid_[a]) - lo_[a]);
+  values_.resize(static_cast<size_t>(size_[0] * size_[1] * size_[2]));
+  records_.resize(values_.size());
+  // The cells (one fewer than the nodes along each axis, but at the grid's far faces) are the
+  // first entries of a row; their rows packed as fill() reads them.
+  for (int64_t z = 0; z < size_[2]; ++z)
+    for (int64_t y = 0; y < size_[1]; ++y) {
+      const bool cells = z < cell_size_[2] && y < cell_size_[1];
+      from.next_row(lo_[0], lo_[0] + size_[0], lo_[1] + y, lo_[2] + z, values_.data() + (z * size_[1] + y) * size_[0],
+                    records_.data() + (cells ? (z * cell_size_[1] + y) * cell_size_[0] : 0), cells ? cell_size_[0] : 0);
+    }
+}
+
 void StagedBox::fill(BandTile& tile) const {
   const Box3 lo = tile.window_lo(), size = tile.window_size();
+  for (int a = 0; a < 3; ++a)
+    assert(std::min(lo[a], grid_[a] - 1) >= lo_[a] && std::min(tile.window_hi()[a], grid_[a] - 1) < lo_[a] + size_[a] &&
+           "the box holds the tile's window");
   auto& v = tile.values();
   // Along x, the nodes up to the grid's last, then that last one repeated.
   const int64_t inside = std::clamp<int64_t>(grid_[0] - lo[0], 0, size[0]);
@@ -183,24 +215,9 @@ uint64_t StagedNext::bytes(const Box3& lo, const Box3& hi) {
 void StagedNext::take(const BandTile& tile) {
   const Box3 lo = tile.next_lo(), hi = tile.next_hi();
   if (lo[0] >= hi[0]) return;
-  // Per row, as BandTile::next_value and next_child give them: the value at 2g, the record of the
-  // cube centre 2g + 1 where it lies in band j's grid (else an empty record).
-  const Box3& nodes = tile.layout().band(tile.band()).nodes;
-  const int64_t inside = std::clamp<int64_t>(nodes[0] / 2 - lo[0], 0, hi[0] - lo[0]);  // 2x + 1 < nodes
   for (int64_t z = lo[2]; z < hi[2]; ++z)
-    for (int64_t y = lo[1]; y < hi[1]; ++y) {
-      float* v = values_.data() + index(lo[0], y, z);
-      Record* c = children_.data() + index(lo[0], y, z);
-      const float* from = &tile.node_value({2 * lo[0], 2 * y, 2 * z});
-      for (int64_t i = 0; i < hi[0] - lo[0]; ++i) v[i] = from[2 * i];
-      if (2 * y + 1 >= nodes[1] || 2 * z + 1 >= nodes[2]) {
-        std::fill(c, c + (hi[0] - lo[0]), Record{});
-        continue;
-      }
-      const Record* centre = &tile.node_record({2 * lo[0] + 1, 2 * y + 1, 2 * z + 1});
-      for (int64_t i = 0; i < inside; ++i) c[i] = centre[2 * i];
-      std::fill(c + inside, c + (hi[0] - lo[0]), Record{});
-    }
+    for (int64_t y = lo[1]; y < hi[1]; ++y)
+      tile.next_row(lo[0], hi[0], y, z, values_.data() + index(lo[0], y, z), children_.data() + index(lo[0], y, z));
 }
 
 void StagedNext::write(const std::vector<std::pair<Box3, Box3>>& tile_boxes, BandHandover& next) const {
@@ -240,10 +257,7 @@ void write_next(const BandTile& tile, BandHandover& next) {
   r.resize(n);
   for (int64_t z = lo[2]; z < hi[2]; ++z)
     for (int64_t y = lo[1]; y < hi[1]; ++y) {
-      for (int64_t x = lo[0]; x < hi[0]; ++x) {
-        v[static_cast<size_t>(x - lo[0])] = tile.next_value({x, y, z});
-        r[static_cast<size_t>(x - lo[0])] = tile.next_child({x, y, z});
-      }
+      tile.next_row(lo[0], hi[0], y, z, v.data(), r.data());
       next.write_row(lo[0], y, z, v.data(), r.data(), static_cast<int64_t>(n));
     }
 }

@@ -18,6 +18,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -99,12 +100,26 @@ struct BandedBuildOptions {
   // call; from memory, a stage would be one more copy (and its memory, for nothing).
   bool staged = false;
   int64_t stage_tiles = 0;  // tiles a side of a staged group (a power of two); 0: as the budget allows
+  // Whether band j+1 is built in band j's pass where the hand-over between them would not be in
+  // memory (make_handover gave a file): each tile of band j, widened by a halo (kFuseBelow,
+  // kFuseAbove), hands a tile of band j+1 its window, so that hand-over never exists, for a
+  // little work done twice (the halo). Needs a sink that holds (below), tiles of an even number
+  // of bricks, and whole bands (no first_tile, last_tile).
+  bool fuse = false;
 };
+
+// How far a tile of band j reaches beyond its core when it hands band j+1's tile its window
+// (G_{j+1} nodes L-1 .. H+1 and cells L-1 .. H for a core L .. H-1, L even: BandTile::window_of):
+// that window's children, band j's cube centres 2g + 1, are records of band j's nodes 2L-1 .. 2H+1,
+// its values reach 2H+2, in the window of the widened core.
+inline constexpr int64_t kFuseBelow = 1, kFuseAbove = 2;
+inline constexpr int64_t kFusedSide = 64;  // the least tile side (nodes) fused when the tile size is not given
 
 struct BandedBuildStats {
   CriticalCounts critical = {{0, 0, 0}, {0, 0, 0}};
   float lo = std::numeric_limits<float>::infinity(), hi = -std::numeric_limits<float>::infinity();  // data values
   int tiles_in_flight = 0;
+  int bands_built_beside = 0;  // in the pass of the band before them: their hand-over never existed
 };
 
 // The cells of a grid of `count` per axis in Morton order of their coordinates: bricks of a band
@@ -112,15 +127,15 @@ struct BandedBuildStats {
 std::vector<Box3> in_morton_order(const Box3& count);
 
 // Bytes a tile of c^3 bricks holds while in flight: its window (values, records, children), and
-// what the sink makes of its bricks (`brick_bytes` each, at most).
-int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes);
+// what the sink makes of its bricks (`brick_bytes` each, at most); fused, with band j+1's tile.
+int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes, bool fused = false);
 
 // Bricks per tile side that keep every thread busy within three quarters of the budget and give
 // every thread a few tiles of band 0 (what build_bands uses unless told).
-int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes);
+int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes, bool fused = false);
 // Tiles per side of a staged group (below: a power of two, aligned, so that a group is a run of
 // the band's Morton order) whose stage fits in `room` bytes; 0 when not even two a side fit.
-int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room);
+int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room, bool fused = false);
 // A band's tiles of c^3 bricks per axis, and how many (build_bands' first_tile and last_tile
 // count them in Morton order).
 inline Box3 tile_grid(const Band& band, int64_t c) {
@@ -134,6 +149,9 @@ inline size_t tile_count(const Band& band, int64_t c) {
 // Sink:
 //   Payload process(int band, const Box3& brick, const BandTile& tile);  // concurrently, any order
 //   void commit(int band, const Box3& brick, Payload&& payload);          // one at a time, in file order
+//   void hold(int band, const Box3& brick, Payload&& payload);  // one at a time: band j+1's bricks of a
+//                                                              // fused pass, in no particular order
+//   void release();  // after band j's last commit: what was held, committed in file order
 // `sink_brick_bytes`: what one processed brick holds until committed (for the budget).
 template <class Sink>
 BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sink& sink, int64_t sink_brick_bytes,
@@ -161,6 +179,9 @@ class StagedBox {
   void read_input(const Box3& lo, const Box3& hi, const Box3& dims, const ReadBox& read);
   // Of tiles of band j > 0: values and the children of the cells, from band j-1's hand-over.
   void read_handover(const Box3& lo, const Box3& hi, const BandHandover& in);
+  // The window of `to`, a tile of band j+1 built beside band j (a fused pass), from `from`, a
+  // tile of band j whose core holds the records it needs (kFuseBelow, kFuseAbove).
+  void take_next(const BandTile& from, const BandTile& to);
   // The window of a tile inside the box: its values clamped to the grid, its children where
   // their corner node lies in the grid.
   void fill(BandTile& tile) const;
@@ -197,7 +218,7 @@ class StagedNext {
 
 template <class Payload>
 struct TileResult {
-  std::vector<std::pair<Box3, Payload>> bricks;
+  std::vector<std::pair<Box3, Payload>> bricks, held;  // of band j, and of band j+1 in a fused pass
   CriticalCounts counts = {{0, 0, 0}, {0, 0, 0}};
   float lo = std::numeric_limits<float>::infinity(), hi = -std::numeric_limits<float>::infinity();
 };
@@ -211,12 +232,24 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   using Payload = decltype(sink.process(0, Box3{}, std::declval<const BandTile&>()));
   const int64_t threads = thread_count();
   const auto budget = static_cast<int64_t>(options.memory_bytes / 4 * 3);
-  const int64_t c =
-      options.tile_bricks > 0 ? options.tile_bricks : tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
+  const bool may_fuse = options.fuse && options.first_tile == 0 && options.last_tile == SIZE_MAX;
+  // Band j+1's tiles are c/2 of its bricks a side: c even. Chosen here, fused passes only with
+  // tiles of kFusedSide nodes or more: the halo computed twice costs less than the hand-over's
+  // file (at 64^3, a third more of band j's work; at 32^3, 70%).
+  int64_t c = options.tile_bricks;
+  bool can_fuse = may_fuse && c % 2 == 0;
+  if (c <= 0) {
+    c = tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
+    const int64_t fused = may_fuse ? tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes, true) : 0;
+    can_fuse = fused % 2 == 0 && fused * layout.brick_width() >= kFusedSide;
+    if (can_fuse) c = fused;
+  }
   const int in_flight =
-      static_cast<int>(std::clamp<int64_t>(budget / tile_bytes(layout, c, sink_brick_bytes), 1, 2 * threads));
+      static_cast<int>(std::clamp<int64_t>(budget / tile_bytes(layout, c, sink_brick_bytes, can_fuse), 1, 2 * threads));
   const int first_band = options.first_band;
   const int last_band = options.last_band < 0 ? layout.lattice().k : options.last_band;
+  const int k = layout.lattice().k;
+  const int64_t width = layout.brick_width();
 
   BandedBuildStats stats;
   stats.tiles_in_flight = in_flight;
@@ -231,63 +264,98 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   ProgressReporter progress(options.progress, work);
   // Band 0 has the largest windows; sized once for them, a slot's arrays never grow again (growing
   // would copy them and fault in fresh pages for every larger tile at the volume's edges).
-  std::vector<BandTile::Buffers> buffers(static_cast<size_t>(in_flight));
-  {
+  auto sized = [](const Box3& core, const Box3& grid) {
     size_t nodes = 1, cells = 1;
     for (int a = 0; a < 3; ++a) {
-      const auto w = static_cast<size_t>(std::min(c * layout.brick_width(), layout.band(0).nodes[a]) + 4);
+      const auto w = static_cast<size_t>(std::min(core[a], grid[a]) + 4);
       nodes *= w;
       cells *= w - 1;
     }
-    for (BandTile::Buffers& b : buffers) {
-      b.values.resize(nodes);
-      b.records.resize(nodes);
-      b.children.resize(cells);
-    }
+    BandTile::Buffers b;
+    b.values.resize(nodes);
+    b.records.resize(nodes);
+    b.children.resize(cells);
+    return b;
+  };
+  const int64_t side = c * width, widened = side + (can_fuse ? kFuseBelow + kFuseAbove : 0);
+  std::vector<BandTile::Buffers> buffers, upper_buffers;
+  std::vector<StagedBox> handed(can_fuse ? static_cast<size_t>(in_flight) : 0);  // band j to j+1, in a fused pass
+  for (int i = 0; i < in_flight; ++i) {
+    buffers.push_back(sized({widened, widened, widened}, layout.band(0).nodes));
+    if (can_fuse && k > 0)
+      upper_buffers.push_back(sized({side / 2 + 1, side / 2 + 1, side / 2 + 1}, layout.band(1).nodes));
   }
   // What the tiles in flight leave of the budget goes to the stage.
-  const int64_t tiles_held = in_flight * tile_bytes(layout, c, sink_brick_bytes);
+  const int64_t tiles_held = in_flight * tile_bytes(layout, c, sink_brick_bytes, can_fuse);
   const auto stage_room = static_cast<uint64_t>(std::max<int64_t>(0, budget - tiles_held));
   StagedBox stage;
   // Two: a group's rows are written on a thread of their own while the next group is built
   // (the writes hold the file's lock, and would leave the other workers idle).
   std::array<StagedNext, 2> staged_next;
   size_t writing_to = 0;
-  std::vector<std::pair<Box3, Box3>> tile_boxes;  // a group's boxes of the next band
+  std::vector<std::pair<Box3, Box3>> tile_boxes;  // a group's boxes of the band it hands on to
   std::unique_ptr<BandHandover> owned_in;
   const BandHandover* in = first_band > 0 ? options.handover_in : nullptr;
+  int built_beside = -1;  // the band built in the pass of the band before it
   for (const Band& band : layout.bands()) {
-    if (band.scale < first_band || band.scale > last_band) continue;
+    const int j = band.scale;
+    if (j < first_band || j > last_band || j == built_beside) continue;
     std::unique_ptr<BandHandover> owned_next;
-    BandHandover* next = nullptr;
-    if (band.scale < layout.lattice().k) {
-      if (band.scale == last_band && options.handover_out) {
-        next = options.handover_out;
-      } else {
-        const Box3& nodes = layout.band(band.scale + 1).nodes;
-        const uint64_t held = BandHandover::bytes(nodes) + (in ? BandHandover::bytes(in->nodes()) : 0);
-        if (options.make_handover) owned_next = options.make_handover(nodes, held);
-        if (!owned_next) owned_next = std::make_unique<MemoryHandover>(nodes);
-        next = owned_next.get();
-      }
+    // The hand-over band `to` reads: the one asked for after the last band, else as
+    // make_handover chooses (in memory by default).
+    auto handover_to = [&](int to) -> BandHandover* {
+      if (to - 1 == last_band && options.handover_out) return options.handover_out;
+      const Box3& nodes = layout.band(to).nodes;
+      const uint64_t held = BandHandover::bytes(nodes) + (in ? BandHandover::bytes(in->nodes()) : 0);
+      if (options.make_handover) owned_next = options.make_handover(nodes, held);
+      if (!owned_next) owned_next = std::make_unique<MemoryHandover>(nodes);
+      return owned_next.get();
+    };
+    BandHandover* next = j < k ? handover_to(j + 1) : nullptr;
+    // A fused pass: bands j and j+1, whose hand-over would have been a file.
+    const bool fuse = can_fuse && next && next == owned_next.get() && !next->in_memory() && j + 1 <= last_band;
+    if (fuse) {
+      owned_next.reset();
+      next = j + 1 < k ? handover_to(j + 2) : nullptr;
+      built_beside = j + 1;
+      ++stats.bands_built_beside;
     }
+    const Band* upper = fuse ? &layout.band(j + 1) : nullptr;
     std::vector<Box3> tile_coords = in_morton_order(tile_grid(band, c));
     tile_coords = std::vector<Box3>(tile_coords.begin() + std::min(options.first_tile, tile_coords.size()),
                                     tile_coords.begin() + std::min(options.last_tile, tile_coords.size()));
     auto core_of = [&](const Box3& tc) {
       Box3 lo, hi;
       for (int a = 0; a < 3; ++a) {
-        lo[a] = tc[a] * c * layout.brick_width();
-        hi[a] = std::min(lo[a] + c * layout.brick_width(), band.nodes[a]);
+        lo[a] = tc[a] * side;
+        hi[a] = std::min(lo[a] + side, band.nodes[a]);
       }
       return std::pair{lo, hi};
+    };
+    // Of a fused pass: the core band j's tile computes (its own widened by the halo band j+1's
+    // tile needs), and that tile's core (up to band j+1's last node at the grid's far faces).
+    auto widened_of = [&](const Box3& lo, const Box3& hi) {
+      Box3 wlo, whi;
+      for (int a = 0; a < 3; ++a) {
+        wlo[a] = std::max<int64_t>(0, lo[a] - kFuseBelow);
+        whi[a] = std::min(hi[a] + kFuseAbove, band.nodes[a]);
+      }
+      return std::pair{wlo, whi};
+    };
+    auto upper_of = [&](const Box3& lo, const Box3& hi) {
+      Box3 ulo, uhi;
+      for (int a = 0; a < 3; ++a) {
+        ulo[a] = lo[a] / 2;
+        uhi[a] = hi[a] == band.nodes[a] ? upper->nodes[a] : hi[a] / 2;
+      }
+      return std::pair{ulo, uhi};
     };
     // A group: the tiles of one aligned cube of s^3 tiles, which share a stage; without a stage,
     // a batch of tiles in flight.
     const bool costly = (in && !in->in_memory()) || (next && !next->in_memory());
     const int64_t s = !options.staged || !costly ? 0
                       : options.stage_tiles > 0  ? options.stage_tiles
-                                                 : stage_tiles_for(layout, band.scale, c, stage_room);
+                                                 : stage_tiles_for(layout, j, c, stage_room, fuse);
     std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
     std::future<void> writing;  // a group's rows to `next`; waited for before this band's end
     for (size_t group = 0; group < tile_coords.size();) {
@@ -299,9 +367,14 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
         Box3 lo{INT64_MAX, INT64_MAX, INT64_MAX}, hi{0, 0, 0}, next_lo = lo, next_hi = hi;
         tile_boxes.clear();
         for (size_t i = group; i < group_end; ++i) {
-          const auto [core_lo, core_hi] = core_of(tile_coords[i]);
-          const auto [wlo, whi] = BandTile::window_of(layout, band.scale, core_lo, core_hi);
-          const auto [nlo, nhi] = BandTile::next_of(layout, band.scale, core_lo, core_hi);
+          auto [core_lo, core_hi] = core_of(tile_coords[i]);
+          auto [nlo, nhi] = BandTile::next_of(layout, j, core_lo, core_hi);
+          if (fuse) {
+            const auto [ulo, uhi] = upper_of(core_lo, core_hi);
+            std::tie(nlo, nhi) = BandTile::next_of(layout, j + 1, ulo, uhi);
+            std::tie(core_lo, core_hi) = widened_of(core_lo, core_hi);
+          }
+          const auto [wlo, whi] = BandTile::window_of(layout, j, core_lo, core_hi);
           tile_boxes.emplace_back(nlo, nhi);
           for (int a = 0; a < 3; ++a) {
             lo[a] = std::min(lo[a], wlo[a]);
@@ -323,8 +396,10 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
           const auto slot = static_cast<size_t>(i);
           const Box3& tc = tile_coords[first + slot];
           const auto [lo, hi] = core_of(tc);
+          const auto [clo, chi] = fuse ? widened_of(lo, hi) : std::pair{lo, hi};
           TileResult<Payload> r;
-          BandTile tile(layout, band.scale, lo, hi, std::move(buffers[slot]));
+          BandTile tile(layout, j, clo, chi, std::move(buffers[slot]));
+          tile.count_only(lo, hi);
           if (s > 0) {
             stage.fill(tile);
           } else {
@@ -337,26 +412,49 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
             }
           }
           tile.build(r.counts, options.topology);
-          if (next && s > 0)
-            staged_next[writing_to].take(tile);
-          else if (next)
-            write_next(tile, *next);
-          if (band.scale == 0) value_range(tile, layout, r.lo, r.hi);
-          // The tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
+          if (j == 0) value_range(tile, layout, r.lo, r.hi);
+          // A tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
           // the band's bricks are committed in Morton order whatever the tile size.
           for (const Box3& l : in_morton_order({c, c, c})) {
             const Box3 b{tc[0] * c + l[0], tc[1] * c + l[1], tc[2] * c + l[2]};
             if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
-            r.bricks.emplace_back(b, sink.process(band.scale, b, tile));
+            r.bricks.emplace_back(b, sink.process(j, b, tile));
           }
           progress.advance((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+          std::optional<BandTile> beside;  // band j+1's tile of a fused pass
+          if (fuse) {
+            const auto [ulo, uhi] = upper_of(lo, hi);
+            beside.emplace(layout, j + 1, ulo, uhi, std::move(upper_buffers[slot]));
+            handed[slot].take_next(tile, *beside);
+            handed[slot].fill(*beside);
+            beside->build(r.counts, options.topology);
+            // Its bricks: those whose first node is in its core (at the far faces, beyond c/2).
+            Box3 first_brick, bricks;
+            for (int a = 0; a < 3; ++a) {
+              first_brick[a] = ulo[a] / width;
+              bricks[a] = (uhi[a] - 1) / width + 1 - first_brick[a];
+            }
+            for (const Box3& l : in_morton_order(bricks)) {
+              const Box3 b{first_brick[0] + l[0], first_brick[1] + l[1], first_brick[2] + l[2]};
+              r.held.emplace_back(b, sink.process(j + 1, b, *beside));
+            }
+            progress.advance((uhi[0] - ulo[0]) * (uhi[1] - ulo[1]) * (uhi[2] - ulo[2]));
+          }
+          const BandTile& handing = beside ? *beside : tile;  // what `next` reads: band j+1's (or j+2's) nodes
+          if (next && s > 0)
+            staged_next[writing_to].take(handing);
+          else if (next)
+            write_next(handing, *next);
           buffers[slot] = tile.release();
+          if (beside) upper_buffers[slot] = beside->release();
           results[slot] = std::move(r);
         });
         for (size_t i = 0; i < count; ++i) {
           TileResult<Payload>& r = results[i];
-          for (auto& [b, payload] : r.bricks) sink.commit(band.scale, b, std::move(payload));
+          for (auto& [b, payload] : r.bricks) sink.commit(j, b, std::move(payload));
+          for (auto& [b, payload] : r.held) sink.hold(j + 1, b, std::move(payload));
           r.bricks.clear();
+          r.held.clear();
           for (int t = 0; t < 3; ++t) {
             stats.critical[0][t] += r.counts[0][t];
             stats.critical[1][t] += r.counts[1][t];
@@ -378,6 +476,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       group = group_end;
     }
     if (writing.valid()) writing.get();
+    if (fuse) sink.release();
     owned_in = std::move(owned_next);
     in = next;
   }

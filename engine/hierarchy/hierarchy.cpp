@@ -82,6 +82,8 @@ struct MemorySink {
     return 0;
   }
   void commit(int, const Box3&, int&&) {}
+  void hold(int, const Box3&, int&&) {}
+  void release() {}
 };
 
 }  // namespace

@@ -44,6 +44,7 @@ struct ConvertStats {
   uint64_t output_bytes = 0;  // the store file
   int64_t bricks = 0;
   int tiles_in_flight = 0;
+  int bands_built_beside = 0;  // in one pass with the band before them, where their hand-over would have been a file
 };
 
 // Writes OUTPUT atomically (temporary name, renamed when complete): on any error or cancellation

@@ -181,8 +181,12 @@ class ScratchOut {
 template <class Out>
 class FileSink {
  public:
-  FileSink(const StoreLayout& layout, Out& out, int zstd_level)
-      : layout_(layout), out_(out), zstd_level_(zstd_level), entries_(static_cast<size_t>(layout.brick_count())) {}
+  FileSink(const StoreLayout& layout, Out& out, int zstd_level, std::string scratch_dir)
+      : layout_(layout),
+        out_(out),
+        zstd_level_(zstd_level),
+        scratch_dir_(std::move(scratch_dir)),
+        entries_(static_cast<size_t>(layout.brick_count())) {}
 
   using Sections = std::array<std::vector<uint8_t>, kSections>;
   Sections process(int band, const Box3& b, const BandTile& tile) const {
@@ -198,13 +202,56 @@ class FileSink {
       e.bytes[static_cast<size_t>(s)] = static_cast<uint32_t>(bytes.size());
     }
   }
+  // The bricks of a band built beside the one before it (a fused pass), which come before that
+  // band's last: in an unlinked scratch file until release() appends them in file order (Morton
+  // order: those at the grid's far faces come with the tiles before them).
+  void hold(int band, const Box3& b, Sections&& sections) {
+    if (!held_file_) held_file_.emplace(scratch_dir_);
+    const int64_t index = layout_.brick_index(band, b);
+    BrickEntry& e = entries_[static_cast<size_t>(index)];
+    e.offset = held_bytes_;
+    for (int s = 0; s < kSections; ++s) {
+      const std::vector<uint8_t>& bytes = sections[static_cast<size_t>(s)];
+      held_file_->write(bytes.data(), bytes.size(), held_bytes_);
+      held_bytes_ += bytes.size();
+      e.bytes[static_cast<size_t>(s)] = static_cast<uint32_t>(bytes.size());
+    }
+    held_.push_back(
+        {morton_encode(static_cast<uint64_t>(b[0]), static_cast<uint64_t>(b[1]), static_cast<uint64_t>(b[2])), index});
+  }
+  void release() {
+    std::sort(held_.begin(), held_.end());
+    // Runs of bricks that lie one after the other in the scratch file (nearly all), a few MiB a call.
+    std::vector<char> buf;
+    for (size_t i = 0; i < held_.size();) {
+      const uint64_t from = entry(held_[i]).offset;
+      uint64_t to = from;
+      size_t end = i;
+      for (; end < held_.size() && entry(held_[end]).offset == to && to - from < (uint64_t{8} << 20); ++end)
+        for (uint32_t bytes : entry(held_[end]).bytes) to += bytes;
+      buf.resize(static_cast<size_t>(to - from));
+      held_file_->read(buf.data(), buf.size(), from);
+      const uint64_t at = out_.size();
+      for (size_t m = i; m < end; ++m) entry(held_[m]).offset += at - from;
+      out_.write(buf.data(), buf.size());
+      i = end;
+    }
+    held_.clear();
+    held_file_.reset();
+    held_bytes_ = 0;
+  }
   std::vector<BrickEntry>& entries() { return entries_; }
 
  private:
+  BrickEntry& entry(const std::pair<uint64_t, int64_t>& held) { return entries_[static_cast<size_t>(held.second)]; }
   const StoreLayout& layout_;
   Out& out_;
   int zstd_level_;
+  std::string scratch_dir_;
   std::vector<BrickEntry> entries_;
+  std::optional<ScratchFile> held_file_;
+  uint64_t held_bytes_ = 0;
+  std::vector<std::pair<uint64_t, int64_t>> held_;  // Morton code, brick index
 };
 
 // A band's hand-over to the next in one named file beside the output, which every rank of a
@@ -264,6 +311,7 @@ class Converter {
     stats.input_bytes = input_bytes();
     stats.bricks = layout_.brick_count();
     stats.tiles_in_flight = built.tiles_in_flight;
+    stats.bands_built_beside = built.bands_built_beside;
     if (out_) stats.output_bytes = out_->size();  // this process wrote the store (alone, or rank 0)
     auto commit = [this] {
       if (out_) out_->commit();
@@ -281,6 +329,7 @@ class Converter {
     BandedBuildOptions build;
     build.memory_bytes = static_cast<uint64_t>(options_.memory_mb) << 20;
     build.staged = true;  // a file's reader, and scratch hand-overs, cost a call a row
+    build.fuse = true;    // a hand-over that would be a scratch file: built beside instead
     build.progress = options_.progress;
     build.check_cancel = [this] {
       if (options_.cancel && options_.cancel->load()) throw IoError("interrupted");
@@ -303,7 +352,7 @@ class Converter {
     out_.emplace(output_);
     const std::array<uint8_t, kHeaderBytes> blank{};
     out_->write(blank.data(), blank.size());
-    FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level);
+    FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_);
     const BandedBuildStats built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build_options());
     finish(sink.entries(), built);
     return built;
@@ -380,13 +429,13 @@ class Converter {
         BandedBuildStats built;
         if (root) {
           out_->continue_at(end);
-          FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level);
+          FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_);
           built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
           take_band(sink.entries(), band, entries);
           share.bytes = out_->size() - end;
         } else {
           scratch.emplace(scratch_dir_);
-          FileSink<ScratchOut> sink(layout_, *scratch, options_.zstd_level);
+          FileSink<ScratchOut> sink(layout_, *scratch, options_.zstd_level, scratch_dir_);
           built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
           take_band(sink.entries(), band, entries);
           share.bytes = scratch->size();
