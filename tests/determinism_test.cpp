@@ -5,15 +5,64 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <atomic>
+#include <chrono>
+#include <stdexcept>
+#include <thread>
 #include <vector>
 
 #include "engine/core/fields.h"
+#include "engine/core/parallel.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {
 namespace {
+
+// The loop behind the banded build's tiles: builds run ahead of the commits by at most a window
+// (each in its slot, never two at once in one), commits come in order, and a failed build stops
+// the loop without a hang.
+TEST(Determinism, BuildsRunAtMostAWindowAheadOfCommitsThatComeInOrder) {
+  for (int threads : {1, 2, 4})
+    for (int64_t window : {1, 2, 3}) {
+      SCOPED_TRACE(::testing::Message() << threads << " threads, window " << window);
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+      std::atomic<int64_t> committed{0};
+      std::vector<std::atomic<int>> busy(static_cast<size_t>(window));
+      std::atomic<int> ahead{0}, clashes{0};
+      std::vector<int64_t> order;
+      parallel_in_order_committed(
+          0, 120, window,
+          [&](int64_t i) {
+            if (i >= committed + window) ++ahead;
+            std::atomic<int>& slot = busy[static_cast<size_t>(i % window)];
+            if (slot.exchange(1)) ++clashes;
+            if (i % 5 == 0) std::this_thread::sleep_for(std::chrono::microseconds(300));  // a long one
+            slot = 0;
+          },
+          [&](int64_t i) {
+            order.push_back(i);
+            committed = i + 1;
+          });
+      std::vector<int64_t> expected(120);
+      for (int64_t i = 0; i < 120; ++i) expected[static_cast<size_t>(i)] = i;
+      EXPECT_EQ(order, expected);
+      EXPECT_EQ(ahead, 0);
+      EXPECT_EQ(clashes, 0);
+
+      order.clear();
+      EXPECT_THROW(parallel_in_order_committed(
+                       0, 120, window,
+                       [&](int64_t i) {
+                         if (i == 37) throw std::runtime_error("tile 37");
+                       },
+                       [&](int64_t i) { order.push_back(i); }),
+                   std::runtime_error);
+      ASSERT_LT(order.size(), 38u);  // nothing after the failed build
+      for (size_t i = 0; i < order.size(); ++i) EXPECT_EQ(order[i], static_cast<int64_t>(i));
+    }
+}
 
 Mesh extract_with_threads(const Volume& v, const ExtractOptions& o, size_t threads) {
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);

@@ -6,9 +6,11 @@
 // the same body serially.
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
 #include <exception>
 #include <mutex>
@@ -70,6 +72,53 @@ void parallel_for_in_order(int64_t begin, int64_t end, const Body& body) {
         throw;
       }
     }
+  });
+}
+
+// Calls build(i) for every i in [begin, end), possibly concurrently, handed out in increasing
+// order, and commit(i) for every i in increasing order, one at a time, as soon as build(i) and
+// every commit before it are done (on the thread whose build the next commit waited for). build(i)
+// starts only once i - window is committed, so that it may use slot (i - begin) % window and at
+// most `window` results wait at once. Unlike batches of `window` builds, a long build holds up
+// only the commits after it, not the builds. Once a build throws, no build starts again (those
+// running go on to their end), and the first exception is rethrown.
+template <class Build, class Commit>
+void parallel_in_order_committed(int64_t begin, int64_t end, int64_t window, const Build& build, const Commit& commit) {
+  std::mutex mutex;
+  std::condition_variable freed;
+  int64_t committed = begin;  // [begin, committed) committed
+  std::vector<char> built(static_cast<size_t>(std::max<int64_t>(window, 1)), 0);
+  bool failed = false;
+  parallel_for_in_order(begin, end, [&](int64_t i) {
+    const auto slot = static_cast<size_t>((i - begin) % window);
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      freed.wait(lock, [&] { return failed || i < committed + window; });
+      if (failed) return;
+    }
+    try {
+#ifdef ISOTOPE_STD_THREADS
+      build(i);
+#else
+      // While a build waits for parallel work of its own, its thread runs only that work: a
+      // build taken up there would wait for a commit that waits for this build.
+      tbb::this_task_arena::isolate([&] { build(i); });
+#endif
+      std::lock_guard<std::mutex> lock(mutex);
+      built[slot] = 1;
+      for (size_t next = static_cast<size_t>((committed - begin) % window); committed < end && built[next];
+           next = static_cast<size_t>((committed - begin) % window)) {
+        built[next] = 0;
+        commit(committed);
+        ++committed;
+      }
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(mutex);
+      failed = true;
+      freed.notify_all();
+      throw;
+    }
+    freed.notify_all();
   });
 }
 

@@ -40,7 +40,7 @@ int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uin
   // the budget, and gives every thread a few tiles of band 0.
   const int64_t threads = thread_count();
   const auto budget = static_cast<int64_t>(memory_bytes / 4 * 3);
-  int64_t c = std::max<int64_t>(1, int64_t{fused ? 128 : 64} >> layout.brick_bits());
+  int64_t c = std::max<int64_t>(1, int64_t{64} >> layout.brick_bits());
   while (c > 1 && (budget / tile_bytes(layout, c, sink_brick_bytes, fused) < threads ||
                    static_cast<int64_t>(tile_count(layout.band(0), c)) < 4 * threads))
     c /= 2;

@@ -235,12 +235,20 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   const bool may_fuse = options.fuse && options.first_tile == 0 && options.last_tile == SIZE_MAX;
   // Band j+1's tiles are c/2 of its bricks a side: c even. Chosen here, fused passes only with
   // tiles of kFusedSide nodes or more: the halo computed twice costs less than the hand-over's
-  // file (at 64^3, a third more of band j's work; at 32^3, 70%).
+  // file (at 64^3, 15% more of band j's work; at 32^3, 31%).
+  // Whether a pass will be fused at all: band 0's hand-over, the largest, would be a file (each
+  // later one, with the one before it, is smaller than band 0's alone).
+  bool fusing = may_fuse && options.first_band == 0 && layout.lattice().k >= 1 && options.make_handover;
+  if (fusing) {
+    const Box3& nodes = layout.band(1).nodes;
+    const std::unique_ptr<BandHandover> probe = options.make_handover(nodes, BandHandover::bytes(nodes));
+    fusing = probe && !probe->in_memory();
+  }
   int64_t c = options.tile_bricks;
-  bool can_fuse = may_fuse && c % 2 == 0;
+  bool can_fuse = fusing && c % 2 == 0;
   if (c <= 0) {
     c = tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
-    const int64_t fused = may_fuse ? tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes, true) : 0;
+    const int64_t fused = fusing ? tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes, true) : 0;
     can_fuse = fused % 2 == 0 && fused * layout.brick_width() >= kFusedSide;
     if (can_fuse) c = fused;
   }
@@ -389,80 +397,84 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
           stage.read_input(lo, hi, layout.dims(), read);
         if (next) staged_next[writing_to].reset(next_lo, next_hi);
       }
-      for (size_t first = group; first < group_end; first += results.size()) {
-        if (options.check_cancel) options.check_cancel();
-        const size_t count = std::min(results.size(), group_end - first);
-        parallel_for(int64_t{0}, static_cast<int64_t>(count), [&](int64_t i) {
-          const auto slot = static_cast<size_t>(i);
-          const Box3& tc = tile_coords[first + slot];
-          const auto [lo, hi] = core_of(tc);
-          const auto [clo, chi] = fuse ? widened_of(lo, hi) : std::pair{lo, hi};
-          TileResult<Payload> r;
-          BandTile tile(layout, j, clo, chi, std::move(buffers[slot]));
-          tile.count_only(lo, hi);
-          if (s > 0) {
-            stage.fill(tile);
-          } else {
-            if (in) {
-              fill_from_handover(tile, *in);
+      // Tiles built ahead of the commits by at most the tiles in flight, each in its slot; their
+      // bricks committed in the band's Morton order.
+      const auto slot_of = [&](int64_t i) {
+        return static_cast<size_t>(i - static_cast<int64_t>(group)) % results.size();
+      };
+      parallel_in_order_committed(
+          static_cast<int64_t>(group), static_cast<int64_t>(group_end), static_cast<int64_t>(results.size()),
+          [&](int64_t i) {
+            if (options.check_cancel) options.check_cancel();
+            const size_t slot = slot_of(i);
+            const Box3& tc = tile_coords[static_cast<size_t>(i)];
+            const auto [lo, hi] = core_of(tc);
+            const auto [clo, chi] = fuse ? widened_of(lo, hi) : std::pair{lo, hi};
+            TileResult<Payload> r;
+            BandTile tile(layout, j, clo, chi, std::move(buffers[slot]));
+            tile.count_only(lo, hi);
+            if (s > 0) {
+              stage.fill(tile);
             } else {
-              thread_local StagedBox own;  // the tile's window alone
-              own.read_input(tile.window_lo(), tile.window_hi(), layout.dims(), read);
-              own.fill(tile);
+              if (in) {
+                fill_from_handover(tile, *in);
+              } else {
+                thread_local StagedBox own;  // the tile's window alone
+                own.read_input(tile.window_lo(), tile.window_hi(), layout.dims(), read);
+                own.fill(tile);
+              }
             }
-          }
-          tile.build(r.counts, options.topology);
-          if (j == 0) value_range(tile, layout, r.lo, r.hi);
-          // A tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
-          // the band's bricks are committed in Morton order whatever the tile size.
-          for (const Box3& l : in_morton_order({c, c, c})) {
-            const Box3 b{tc[0] * c + l[0], tc[1] * c + l[1], tc[2] * c + l[2]};
-            if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
-            r.bricks.emplace_back(b, sink.process(j, b, tile));
-          }
-          progress.advance((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
-          std::optional<BandTile> beside;  // band j+1's tile of a fused pass
-          if (fuse) {
-            const auto [ulo, uhi] = upper_of(lo, hi);
-            beside.emplace(layout, j + 1, ulo, uhi, std::move(upper_buffers[slot]));
-            handed[slot].take_next(tile, *beside);
-            handed[slot].fill(*beside);
-            beside->build(r.counts, options.topology);
-            // Its bricks: those whose first node is in its core (at the far faces, beyond c/2).
-            Box3 first_brick, bricks;
-            for (int a = 0; a < 3; ++a) {
-              first_brick[a] = ulo[a] / width;
-              bricks[a] = (uhi[a] - 1) / width + 1 - first_brick[a];
+            tile.build(r.counts, options.topology);
+            if (j == 0) value_range(tile, layout, r.lo, r.hi);
+            // A tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
+            // the band's bricks are committed in Morton order whatever the tile size.
+            for (const Box3& l : in_morton_order({c, c, c})) {
+              const Box3 b{tc[0] * c + l[0], tc[1] * c + l[1], tc[2] * c + l[2]};
+              if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
+              r.bricks.emplace_back(b, sink.process(j, b, tile));
             }
-            for (const Box3& l : in_morton_order(bricks)) {
-              const Box3 b{first_brick[0] + l[0], first_brick[1] + l[1], first_brick[2] + l[2]};
-              r.held.emplace_back(b, sink.process(j + 1, b, *beside));
+            progress.advance((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+            std::optional<BandTile> beside;  // band j+1's tile of a fused pass
+            if (fuse) {
+              const auto [ulo, uhi] = upper_of(lo, hi);
+              beside.emplace(layout, j + 1, ulo, uhi, std::move(upper_buffers[slot]));
+              handed[slot].take_next(tile, *beside);
+              handed[slot].fill(*beside);
+              beside->build(r.counts, options.topology);
+              // Its bricks: those whose first node is in its core (at the far faces, beyond c/2).
+              Box3 first_brick, bricks;
+              for (int a = 0; a < 3; ++a) {
+                first_brick[a] = ulo[a] / width;
+                bricks[a] = (uhi[a] - 1) / width + 1 - first_brick[a];
+              }
+              for (const Box3& l : in_morton_order(bricks)) {
+                const Box3 b{first_brick[0] + l[0], first_brick[1] + l[1], first_brick[2] + l[2]};
+                r.held.emplace_back(b, sink.process(j + 1, b, *beside));
+              }
+              progress.advance((uhi[0] - ulo[0]) * (uhi[1] - ulo[1]) * (uhi[2] - ulo[2]));
             }
-            progress.advance((uhi[0] - ulo[0]) * (uhi[1] - ulo[1]) * (uhi[2] - ulo[2]));
-          }
-          const BandTile& handing = beside ? *beside : tile;  // what `next` reads: band j+1's (or j+2's) nodes
-          if (next && s > 0)
-            staged_next[writing_to].take(handing);
-          else if (next)
-            write_next(handing, *next);
-          buffers[slot] = tile.release();
-          if (beside) upper_buffers[slot] = beside->release();
-          results[slot] = std::move(r);
-        });
-        for (size_t i = 0; i < count; ++i) {
-          TileResult<Payload>& r = results[i];
-          for (auto& [b, payload] : r.bricks) sink.commit(j, b, std::move(payload));
-          for (auto& [b, payload] : r.held) sink.hold(j + 1, b, std::move(payload));
-          r.bricks.clear();
-          r.held.clear();
-          for (int t = 0; t < 3; ++t) {
-            stats.critical[0][t] += r.counts[0][t];
-            stats.critical[1][t] += r.counts[1][t];
-          }
-          stats.lo = std::min(stats.lo, r.lo);
-          stats.hi = std::max(stats.hi, r.hi);
-        }
-      }
+            const BandTile& handing = beside ? *beside : tile;  // what `next` reads: band j+1's (or j+2's) nodes
+            if (next && s > 0)
+              staged_next[writing_to].take(handing);
+            else if (next)
+              write_next(handing, *next);
+            buffers[slot] = tile.release();
+            if (beside) upper_buffers[slot] = beside->release();
+            results[slot] = std::move(r);
+          },
+          [&](int64_t i) {
+            TileResult<Payload>& r = results[slot_of(i)];
+            for (auto& [b, payload] : r.bricks) sink.commit(j, b, std::move(payload));
+            for (auto& [b, payload] : r.held) sink.hold(j + 1, b, std::move(payload));
+            r.bricks.clear();
+            r.held.clear();
+            for (int t = 0; t < 3; ++t) {
+              stats.critical[0][t] += r.counts[0][t];
+              stats.critical[1][t] += r.counts[1][t];
+            }
+            stats.lo = std::min(stats.lo, r.lo);
+            stats.hi = std::max(stats.hi, r.hi);
+          });
       if (next && s > 0) {
         if (writing.valid()) writing.get();  // rethrows what failed
         if (threads > 1) {
