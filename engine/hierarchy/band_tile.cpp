@@ -231,11 +231,18 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
   // Finest first, as in MultiresVolume::build: edge midpoints, face centres, cube centres; each
   // class of parities (which coordinates are odd) walked with stride 2. Per axis, the nodes whose
   // records this window can compute (computable()), and those in the core and inside the data
-  // box, are ranges: fixed once the class is.
+  // box, are ranges: the first fixed once the class is, the others the same for every class.
   struct Class {
     int m = 0;
-    Box3 first, last, core_first, core_last, box_first, box_last;
+    Box3 first, last;
   };
+  Box3 core_first, core_last, box_first, box_last;
+  for (int a = 0; a < 3; ++a) {
+    core_first[a] = count_lo_[a], core_last[a] = count_hi_[a] - 1;
+    // inside_data_box: (g << j) - h >= 0 and (g << j) + h <= dims - 1
+    box_first[a] = (h + (int64_t{1} << j_) - 1) >> j_;
+    box_last[a] = (layout_.dims()[a] - 1 - h) >> j_;
+  }
   std::vector<Class> classes;
   int64_t z_first = INT64_MAX, z_last = INT64_MIN;
   for (int m = 1; m <= 3; ++m)
@@ -255,10 +262,6 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
         k.first[a] = lo;
         k.last[a] = hi;
         empty = empty || lo > hi;
-        k.core_first[a] = count_lo_[a], k.core_last[a] = count_hi_[a] - 1;
-        // inside_data_box: (g << j) - h >= 0 and (g << j) + h <= dims - 1
-        k.box_first[a] = (h + (int64_t{1} << j_) - 1) >> j_;
-        k.box_last[a] = (layout_.dims()[a] - 1 - h) >> j_;
       }
       if (empty) continue;
       classes.push_back(k);
@@ -274,8 +277,7 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
     for (const Class& k : classes) {
       const int64_t z = p - (k.m - 1);
       if (z < k.first[2] || z > k.last[2] || ((z - k.first[2]) & 1)) continue;
-      const Box3 &first = k.first, &last = k.last, &core_first = k.core_first, &core_last = k.core_last,
-                 &box_first = k.box_first, &box_last = k.box_last;
+      const Box3 &first = k.first, &last = k.last;
       for (int64_t y = first[1]; y <= last[1]; y += 2) {
         const bool core_yz = y >= core_first[1] && y <= core_last[1] && z >= core_first[2] && z <= core_last[2];
         const bool box_yz = y >= box_first[1] && y <= box_last[1] && z >= box_first[2] && z <= box_last[2];

@@ -96,7 +96,7 @@ void StagedBox::read_input(const Box3& lo, const Box3& hi, const Box3& dims, con
   values_.resize(static_cast<size_t>(plane * size_[2]));
   // A plane a call: a box that spans whole rows is one contiguous read a plane; planes on every
   // thread, as the input's reader allows (a tile's own box is read by its thread, at once).
-  const int64_t chunks = std::min(size_[2], thread_count() > 1 && plane * size_[2] > (int64_t{1} << 20) ? size_[2] : 1);
+  const int64_t chunks = thread_count() > 1 && plane * size_[2] > (int64_t{1} << 20) ? size_[2] : 1;
   parallel_for(int64_t{0}, chunks, [&](int64_t i) {
     const int64_t z0 = size_[2] * i / chunks, z1 = size_[2] * (i + 1) / chunks;
     read({lo_[0], lo_[1], lo_[2] + z0}, {size_[0], size_[1], z1 - z0}, values_.data() + z0 * plane);

@@ -180,6 +180,10 @@ struct PlaneHistograms {
   void add(uint32_t word) {
     for (int b = 0; b < W; ++b) ++counts[static_cast<size_t>(b)][word >> (8 * b) & 0xff];
   }
+  void merge(const PlaneHistograms& o) {
+    for (size_t b = 0; b < counts.size(); ++b)
+      for (size_t v = 0; v < 256; ++v) counts[b][v] += o.counts[b][v];
+  }
   // Order-0 entropy of all planes in bits, up to a term that depends on the value count alone.
   double bits() const {
     double sum = 0;
@@ -197,15 +201,21 @@ struct PlaneHistograms {
 // offsets only 1.84/1.69/0.55, summed bit lengths as the judge 1.76/1.67/0.58, entropy 1.73/1.65/0.57.
 template <int W, class OffsetOf>
 bool deltas_pay_off(size_t n, OffsetOf offset_of) {
-  PlaneHistograms<W> deltas, offsets;
+  // Four histograms of each, taken in turn: in a run of one value (most of a field) one counter
+  // would take every increment, each waiting for the last.
+  std::array<PlaneHistograms<W>, 4> deltas, offsets;
   uint32_t prev = 0;
   for (size_t i = 0; i < n; ++i) {
     const uint32_t o = offset_of(i);
-    deltas.add(zigzag<W>(o - prev));
-    offsets.add(o);
+    deltas[i & 3].add(zigzag<W>(o - prev));
+    offsets[i & 3].add(o);
     prev = o;
   }
-  return deltas.bits() <= offsets.bits();
+  for (size_t k = 1; k < 4; ++k) {
+    deltas[0].merge(deltas[k]);
+    offsets[0].merge(offsets[k]);
+  }
+  return deltas[0].bits() <= offsets[0].bits();
 }
 
 // Appends the integer header after the count, then W byte planes of offsets or of their deltas.
@@ -237,10 +247,15 @@ void encode_integer(std::span<const float> values, const IntegerPlan& plan, std:
   };
   const uint32_t range = (plan.has_inf ? inf_code : static_cast<uint32_t>(plan.max_code)) - min_code;
   const size_t n = values.size();
+  // Each offset once: the choice between offsets and deltas, and the planes, read them again.
+  thread_local std::vector<uint32_t> offsets;
+  offsets.resize(n);
+  for (size_t i = 0; i < n; ++i) offsets[i] = offset_of(i);
+  const auto at = [&](size_t i) { return offsets[i]; };
   switch (width_of(range)) {
-    case 1: append_integer<1>(n, offset_of, plan, min_code, inf_code, out); break;
-    case 2: append_integer<2>(n, offset_of, plan, min_code, inf_code, out); break;
-    default: append_integer<4>(n, offset_of, plan, min_code, inf_code, out); break;
+    case 1: append_integer<1>(n, at, plan, min_code, inf_code, out); break;
+    case 2: append_integer<2>(n, at, plan, min_code, inf_code, out); break;
+    default: append_integer<4>(n, at, plan, min_code, inf_code, out); break;
   }
 }
 
