@@ -3,6 +3,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <random>
+#include <vector>
+
 #include "engine/hierarchy/critical_rule.h"
 
 namespace isotope {
@@ -75,6 +79,43 @@ TEST(CriticalRule, ExactIntervalIsTheHullOfTheIsovaluesWhereTheRuleFires) {
   EXPECT_LE(x.hi, std::min(d.fa, d.fb));
   // An isovalue equal to a data value counts as just above it (inside means value > iso).
   EXPECT_EQ(sign_pattern(d, 1.0f) & 1u, 0u);
+}
+
+// The rule checked on every elementary interval between all of the polyhedron's values, as
+// docs/METHOD.md states it: what exact_interval, which visits only the intervals that can fire,
+// must return bit for bit.
+IsoInterval exact_interval_on_every_interval(const DiamondValues& d) {
+  std::vector<float> w{d.fa, d.fb, d.fv};
+  w.insert(w.end(), d.ring, d.ring + ring_size(d.type));
+  std::sort(w.begin(), w.end());
+  w.erase(std::unique(w.begin(), w.end()), w.end());
+  IsoInterval x;
+  for (size_t i = 0; i + 1 < w.size(); ++i)
+    if (exact_rule_fires(d, w[i])) x.hull({w[i], w[i + 1]});
+  return x;
+}
+
+TEST(CriticalRule, ExactIntervalIsTheRuleOnEveryIntervalBetweenTheValuesWithTies) {
+  std::mt19937 rng(7);
+  int fired = 0;
+  for (int type = 0; type < 3; ++type)
+    for (int trial = 0; trial < 20000; ++trial) {
+      // Few distinct values, so that ties between ring, a, b and v are common.
+      std::uniform_int_distribution<int> value(0, trial % 2 ? 4 : 12);
+      DiamondValues d;
+      d.type = static_cast<PolyhedronType>(type);
+      d.fa = static_cast<float>(value(rng));
+      d.fb = static_cast<float>(value(rng));
+      d.fv = static_cast<float>(value(rng));
+      for (int i = 0; i < ring_size(d.type); ++i) d.ring[i] = static_cast<float>(value(rng)) * 0.5f;
+      const IsoInterval want = exact_interval_on_every_interval(d), got = exact_interval(d);
+      ASSERT_EQ(got.empty(), want.empty()) << type << " " << trial;
+      if (want.empty()) continue;
+      ++fired;
+      ASSERT_EQ(got.lo, want.lo) << type << " " << trial;
+      ASSERT_EQ(got.hi, want.hi) << type << " " << trial;
+    }
+  EXPECT_GT(fired, 1000);
 }
 
 }  // namespace
