@@ -12,6 +12,7 @@
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "isotope/distribution.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -362,6 +363,50 @@ TEST(BandBuild, AHierarchyInMemoryPadsLittleWhateverTheVolumesShape) {
              store_bricks = extract(Hierarchy::build(thin, all, 4), o);
   EXPECT_GT(chosen.triangles.size(), 0u);
   EXPECT_TRUE(chosen.positions == store_bricks.positions && chosen.triangles == store_bricks.triangles);
+}
+
+// A distributed convert cuts each band's tiles, in Morton order, into one run per rank. Tiles at
+// the grid's far faces are thin and come last, so runs of equal tile counts gave the last rank
+// half the nodes of the first (513^3, tiles of 64 nodes: 8 full tiles and one of 1 node a side).
+// Runs cut by tile_costs hold about equal numbers of nodes.
+TEST(BandBuild, RanksGetRunsOfTilesOfAboutEqualNodes) {
+  int checked = 0;
+  for (const Box3& dims : std::vector<Box3>{{513, 513, 513}, {300, 200, 129}, {257, 257, 257}})
+    for (const int64_t c : {2, 4}) {
+      const StoreLayout layout(dims, 4);
+      for (const Band& band : layout.bands()) {
+        const std::vector<double> costs = tile_costs(layout, band, c);
+        ASSERT_EQ(costs.size(), tile_count(band, c));
+        // Each a tile's core, as build_bands cuts it; together every node of the band once.
+        const int64_t side = c * layout.brick_width();
+        const std::vector<Box3> tiles = in_morton_order(tile_grid(band, c));
+        double total = 0;
+        for (size_t i = 0; i < tiles.size(); ++i) {
+          double nodes = 1;
+          for (int a = 0; a < 3; ++a)
+            nodes *= static_cast<double>(std::min((tiles[i][a] + 1) * side, band.nodes[a]) - tiles[i][a] * side);
+          ASSERT_EQ(costs[i], nodes);
+          total += nodes;
+        }
+        ASSERT_EQ(total, static_cast<double>(band.nodes[0] * band.nodes[1] * band.nodes[2]));
+        if (tiles.size() < 64) continue;  // too few tiles to share evenly
+        for (const int ranks : {2, 3}) {
+          const std::vector<size_t> bounds = share_by_cost(costs, ranks);
+          double most = 0, least = total;
+          for (int r = 0; r < ranks; ++r) {
+            double nodes = 0;
+            for (size_t i = bounds[static_cast<size_t>(r)]; i < bounds[static_cast<size_t>(r) + 1]; ++i)
+              nodes += costs[i];
+            most = std::max(most, nodes);
+            least = std::min(least, nodes);
+          }
+          EXPECT_LE(most, 1.1 * least) << dims[0] << "x" << dims[1] << "x" << dims[2] << " band " << band.scale
+                                       << " tiles of " << c << " bricks, " << ranks << " ranks";
+          ++checked;
+        }
+      }
+    }
+  EXPECT_GE(checked, 8);
 }
 
 }  // namespace

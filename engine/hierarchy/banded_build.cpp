@@ -20,6 +20,17 @@ std::vector<Box3> in_morton_order(const Box3& count) {
   return out;
 }
 
+std::vector<double> tile_costs(const StoreLayout& layout, const Band& band, int64_t c) {
+  const int64_t side = c * layout.brick_width();
+  std::vector<double> costs;
+  for (const Box3& t : in_morton_order(tile_grid(band, c))) {
+    double nodes = 1;
+    for (int a = 0; a < 3; ++a) nodes *= static_cast<double>(std::min(side, band.nodes[a] - t[a] * side));
+    costs.push_back(nodes);
+  }
+  return costs;
+}
+
 int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes, bool fused) {
   const int64_t window = sizeof(float) + 2 * sizeof(Record);  // values, records, children a node
   const int64_t side = c * layout.brick_width();

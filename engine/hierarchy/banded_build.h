@@ -145,6 +145,11 @@ inline size_t tile_count(const Band& band, int64_t c) {
   const Box3 g = tile_grid(band, c);
   return static_cast<size_t>(g[0] * g[1] * g[2]);
 }
+// The band's nodes in each tile's core, in that order: what a tile costs to build. The tiles at
+// the grid's far faces are thin (a 513^3 volume's band 0 has 8 full tiles of 64 nodes a side and
+// one of a single node), and Morton order puts them last: shares of equal tile counts gave the
+// last rank half the work of the first.
+std::vector<double> tile_costs(const StoreLayout& layout, const Band& band, int64_t c);
 
 // Sink:
 //   Payload process(int band, const Box3& brick, const BandTile& tile);  // concurrently, any order

@@ -361,10 +361,10 @@ class Converter {
   // The distributed convert (include/isotope/distribution.h; docs/DISTRIBUTED.md), band by band:
   //  1. rank 0 creates the output's temporary file; the ranks agree on the tile size (the
   //     smallest any of them would choose), so that the tiles are the same on all;
-  //  2. each band's tiles, in Morton order, are cut into one contiguous run per rank, whose
-  //     bricks are hence a contiguous run of the file: rank 0 appends its own to the file, every
-  //     other rank to an unlinked scratch file of its own; all write their tiles' rows of the
-  //     band's hand-over, a named file beside the output, which the next band reads whole;
+  //  2. each band's tiles, in Morton order, are cut into one contiguous run per rank, about
+  //     equal in nodes (tile_costs), whose bricks are hence a contiguous run of the file: rank 0 appends its own to the
+  //     file, every other rank to an unlinked scratch file of its own; all write their tiles' rows of the band's
+  //     hand-over, a named file beside the output, which the next band reads whole;
   //  3. an exclusive scan of the ranks' byte counts places each run; ranks > 0 copy theirs in
   //     and hand rank 0 their bricks' directory entries;
   //  4. after the last band rank 0 writes the directories and the header.
@@ -412,7 +412,7 @@ class Converter {
         if (root && !last)
           next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::create, layout_.band(j + 1).nodes);
       });
-      const std::vector<size_t> shares = share_by_cost(std::vector<double>(tile_count(band, c), 1.0), group.ranks());
+      const std::vector<size_t> shares = share_by_cost(tile_costs(layout_, band, c), group.ranks());
       std::optional<ScratchOut> scratch;
       BandShare share;
       settle_together(group, [&] {
