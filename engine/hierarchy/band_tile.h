@@ -61,6 +61,8 @@ class BandTile {
   // (a core widened to hand a fused band its halo, whose nodes other tiles count).
   void build(CriticalCounts& counts, bool topology = true);
   void count_only(const Box3& lo, const Box3& hi) { count_lo_ = lo, count_hi_ = hi; }
+  const Box3& count_lo() const { return count_lo_; }
+  const Box3& count_hi() const { return count_hi_; }
 
   // G_j coordinates: node_value() anywhere in the window, node_record() of computed scale-j nodes.
   const float& node_value(const Box3& g) const { return values_[static_cast<size_t>(index(g, size_))]; }

@@ -274,12 +274,13 @@ void write_next(const BandTile& tile, BandHandover& next) {
 }
 
 void value_range(const BandTile& tile, const StoreLayout& layout, float& lo, float& hi) {
+  // Over the nodes the tile counts: a fused tile's widened core reaches into its neighbours'.
   const auto& d = layout.dims();
-  const Box3& c0 = tile.core_lo();
-  const int64_t x1 = std::min(tile.core_hi()[0], d[0]);
+  const Box3 &c0 = tile.count_lo(), &c1 = tile.count_hi();
+  const int64_t x1 = std::min(c1[0], d[0]);
   if (x1 <= c0[0]) return;
-  for (int64_t z = c0[2]; z < std::min(tile.core_hi()[2], d[2]); ++z)
-    for (int64_t y = c0[1]; y < std::min(tile.core_hi()[1], d[1]); ++y) {
+  for (int64_t z = c0[2]; z < std::min(c1[2], d[2]); ++z)
+    for (int64_t y = c0[1]; y < std::min(c1[1], d[1]); ++y) {
       const float* row = &tile.node_value({c0[0], y, z});
       const auto [mn, mx] = std::minmax_element(row, row + (x1 - c0[0]));
       lo = std::min(lo, *mn);
