@@ -67,14 +67,14 @@ int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t
   const int step = fused ? 2 : 1;
   int64_t best = 0;
   for (int64_t s = 2; s / 2 < most; s *= 2) {
-    Box3 hi, next_hi;
+    Box3 box, next;
     for (int a = 0; a < 3; ++a) {
       const int64_t side = std::min(s * w, b.nodes[a]);
-      hi[a] = side + 3 + (fused ? kFuseBelow + kFuseAbove : 0);  // up to two nodes of halo each side
-      next_hi[a] = (side >> step) + 1;
+      box[a] = side + 4 + (fused ? kFuseBelow + kFuseAbove : 0);  // up to two nodes of halo each side
+      next[a] = (side >> step) + 1;
     }
-    uint64_t bytes = banded_build_internal::StagedBox::bytes({0, 0, 0}, hi, band > 0);
-    if (band + step <= layout.lattice().k) bytes += 2 * banded_build_internal::StagedNext::bytes({0, 0, 0}, next_hi);
+    uint64_t bytes = banded_build_internal::StagedBox::bytes(box, band > 0);
+    if (band + step <= layout.lattice().k) bytes += 2 * banded_build_internal::StagedNext::bytes(next);
     if (bytes > room) break;
     best = s;
   }
@@ -83,28 +83,33 @@ int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t
 
 namespace banded_build_internal {
 
-void StagedBox::frame(const Box3& lo, const Box3& hi, const Box3& grid) {
+void StagedBox::frame(const Box3& lo, const Box3& hi, const Box3& grid, bool children) {
   grid_ = grid;
+  children_ = children;
   for (int a = 0; a < 3; ++a) {
     lo_[a] = std::min(lo[a], grid[a] - 1);
     size_[a] = std::min(hi[a], grid[a] - 1) - lo_[a] + 1;
+    // The cells whose corner node lies in the grid; the others' centres are beyond record_extent
+    // and never read.
+    assert(!children || lo[a] < grid[a]);
+    cell_size_[a] = children ? std::max<int64_t>(0, std::min(hi[a], grid[a]) - lo_[a]) : 0;
   }
+  cell_lo_ = lo_;
+  values_.resize(static_cast<size_t>(size_[0] * size_[1] * size_[2]));
 }
 
-uint64_t StagedBox::bytes(const Box3& lo, const Box3& hi, bool children) {
+uint64_t StagedBox::bytes(const Box3& size, bool children) {
   uint64_t nodes = 1, cells = 1;
   for (int a = 0; a < 3; ++a) {
-    nodes *= static_cast<uint64_t>(hi[a] - lo[a] + 1);
-    cells *= static_cast<uint64_t>(hi[a] - lo[a]);
+    nodes *= static_cast<uint64_t>(size[a]);
+    cells *= static_cast<uint64_t>(size[a] - 1);
   }
   return nodes * sizeof(float) + (children ? cells * sizeof(Record) : 0);
 }
 
 void StagedBox::read_input(const Box3& lo, const Box3& hi, const Box3& dims, const ReadBox& read) {
-  frame(lo, hi, dims);
-  children_ = false;
+  frame(lo, hi, dims, false);
   const int64_t plane = size_[0] * size_[1];
-  values_.resize(static_cast<size_t>(plane * size_[2]));
   // A plane a call: a box that spans whole rows is one contiguous read a plane; planes on every
   // thread, as the input's reader allows (a tile's own box is read by its thread, at once).
   const int64_t chunks = thread_count() > 1 && plane * size_[2] > (int64_t{1} << 20) ? size_[2] : 1;
@@ -115,14 +120,7 @@ void StagedBox::read_input(const Box3& lo, const Box3& hi, const Box3& dims, con
 }
 
 void StagedBox::read_handover(const Box3& lo, const Box3& hi, const BandHandover& in) {
-  const Box3& n = in.nodes();
-  frame(lo, hi, n);
-  children_ = true;
-  // Cells of the box whose corner node lies in the grid; the others' centres are beyond
-  // record_extent and never read.
-  for (int a = 0; a < 3; ++a) cell_size_[a] = std::max<int64_t>(0, std::min(hi[a], n[a]) - lo[a]);
-  cell_lo_ = lo;
-  values_.resize(static_cast<size_t>(size_[0] * size_[1] * size_[2]));
+  frame(lo, hi, in.nodes(), true);
   records_.resize(static_cast<size_t>(cell_size_[0] * cell_size_[1] * cell_size_[2]));
   const bool parallel = thread_count() > 1 && size_[0] * size_[1] * size_[2] > (int64_t{1} << 18);
   parallel_for(int64_t{0}, parallel ? size_[2] : 1, [&](int64_t i) {
@@ -139,11 +137,7 @@ void StagedBox::read_handover(const Box3& lo, const Box3& hi, const BandHandover
 }
 
 void StagedBox::take_next(const BandTile& from, const BandTile& to) {
-  frame(to.window_lo(), to.window_hi(), to.layout().band(to.band()).nodes);
-  children_ = true;
-  cell_lo_ = lo_;
-  for (int a = 0; a < 3; ++a) cell_size_[a] = std::max<int64_t>(0, std::min(to.window_hi()[a], grid_[a]) - lo_[a]);
-  values_.resize(static_cast<size_t>(size_[0] * size_[1] * size_[2]));
+  frame(to.window_lo(), to.window_hi(), to.layout().band(to.band()).nodes, true);
   records_.resize(values_.size());
   // The cells (one fewer than the nodes along each axis, but at the grid's far faces) are the
   // first entries of a row; their rows packed as fill() reads them.
@@ -217,9 +211,9 @@ void StagedNext::reset(const Box3& lo, const Box3& hi) {
   children_.resize(count);
 }
 
-uint64_t StagedNext::bytes(const Box3& lo, const Box3& hi) {
+uint64_t StagedNext::bytes(const Box3& size) {
   uint64_t n = 1;
-  for (int a = 0; a < 3; ++a) n *= static_cast<uint64_t>(std::max<int64_t>(0, hi[a] - lo[a]));
+  for (int a = 0; a < 3; ++a) n *= static_cast<uint64_t>(std::max<int64_t>(0, size[a]));
   return n * (sizeof(float) + sizeof(Record));
 }
 

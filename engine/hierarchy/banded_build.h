@@ -190,10 +190,11 @@ class StagedBox {
   // The window of a tile inside the box: its values clamped to the grid, its children where
   // their corner node lies in the grid.
   void fill(BandTile& tile) const;
-  static uint64_t bytes(const Box3& lo, const Box3& hi, bool children);
+  static uint64_t bytes(const Box3& size, bool children);  // a box of size[a] nodes a side
 
  private:
-  void frame(const Box3& lo, const Box3& hi, const Box3& grid);
+  // The box lo .. hi clamped to the grid, its values' room, and with `children` its cells.
+  void frame(const Box3& lo, const Box3& hi, const Box3& grid, bool children);
   Box3 grid_{}, lo_{}, size_{};   // values: nodes lo_ .. lo_ + size_ - 1 of a grid of grid_
   Box3 cell_lo_{}, cell_size_{};  // children: cells cell_lo_ .. cell_lo_ + cell_size_ - 1
   bool children_ = false;
@@ -210,7 +211,7 @@ class StagedNext {
   // Rows of the tiles' boxes only (under a distribution, the rest of the box may be another
   // process's), each maximal run of tiles along x in one call per row.
   void write(const std::vector<std::pair<Box3, Box3>>& tile_boxes, BandHandover& next) const;
-  static uint64_t bytes(const Box3& lo, const Box3& hi);
+  static uint64_t bytes(const Box3& size);  // rows of a box of size[a] nodes a side
 
  private:
   size_t index(int64_t x, int64_t y, int64_t z) const {
