@@ -58,6 +58,11 @@ int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uin
   return c;
 }
 
+int64_t fused_tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes) {
+  const int64_t c = tile_bricks_for(layout, sink_brick_bytes, memory_bytes, true);
+  return c % 2 == 0 && c * layout.brick_width() >= kFusedSide ? c : 0;
+}
+
 int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room, bool fused) {
   const Band& b = layout.band(band);
   const Box3 grid = tile_grid(b, c);

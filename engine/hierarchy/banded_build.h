@@ -18,6 +18,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -106,6 +107,11 @@ struct BandedBuildOptions {
   // little work done twice (the halo). Needs a sink that holds (below), tiles of an even number
   // of bricks, and whole bands (no first_tile, last_tile).
   bool fuse = false;
+  // A distributed convert's pass (io/store/store_writer.cpp): bands first_band and last_band =
+  // first_band + 1 built as `fuse` builds them, over this process's run of band first_band's
+  // tiles, whatever the hand-overs; `tile_bricks` even (fused_tile_bricks_for). The caller places
+  // the held bricks.
+  bool fuse_pair = false;
 };
 
 // How far a tile of band j reaches beyond its core when it hands band j+1's tile its window
@@ -133,6 +139,9 @@ int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes, bo
 // Bricks per tile side that keep every thread busy within three quarters of the budget and give
 // every thread a few tiles of band 0 (what build_bands uses unless told).
 int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes, bool fused = false);
+// tile_bricks_for's fused tile, where band j+1 can be built in band j's pass with it: an even
+// count of at least kFusedSide nodes a side; else 0.
+int64_t fused_tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes);
 // Tiles per side of a staged group (below: a power of two, aligned, so that a group is a run of
 // the band's Morton order) whose stage fits in `room` bytes; 0 when not even two a side fit.
 int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room, bool fused = false);
@@ -251,11 +260,13 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
     fusing = probe && !probe->in_memory();
   }
   int64_t c = options.tile_bricks;
-  bool can_fuse = fusing && c % 2 == 0;
+  if (options.fuse_pair && (c <= 0 || c % 2 != 0 || options.last_band != options.first_band + 1))
+    throw std::logic_error("build_bands: a fused pair is two bands in tiles of an even number of bricks");
+  bool can_fuse = (fusing || options.fuse_pair) && c % 2 == 0;
   if (c <= 0) {
     c = tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
-    const int64_t fused = fusing ? tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes, true) : 0;
-    can_fuse = fused % 2 == 0 && fused * layout.brick_width() >= kFusedSide;
+    const int64_t fused = fusing ? fused_tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes) : 0;
+    can_fuse = fused > 0;
     if (can_fuse) c = fused;
   }
   const int in_flight =
@@ -325,9 +336,12 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       if (!owned_next) owned_next = std::make_unique<MemoryHandover>(nodes);
       return owned_next.get();
     };
-    BandHandover* next = j < k ? handover_to(j + 1) : nullptr;
-    // A fused pass: bands j and j+1, whose hand-over would have been a file.
-    const bool fuse = can_fuse && next && next == owned_next.get() && !next->in_memory() && j + 1 <= last_band;
+    // A fused pass: bands j and j+1, whose hand-over would have been a file (or a distributed
+    // convert's pair, whose hand-over would be shared: never made).
+    const bool pair = options.fuse_pair && j == first_band;
+    BandHandover* next = j < k && !pair ? handover_to(j + 1) : nullptr;
+    const bool fuse =
+        pair || (can_fuse && next && next == owned_next.get() && !next->in_memory() && j + 1 <= last_band);
     if (fuse) {
       owned_next.reset();
       next = j + 1 < k ? handover_to(j + 2) : nullptr;

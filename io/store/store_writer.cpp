@@ -161,12 +161,14 @@ class ScratchOut {
     size_ += bytes;
   }
   uint64_t size() const { return size_; }
-  // Copies everything written into `to` at `offset`, a few MiB at a time.
-  void copy_to(const SharedFile& to, uint64_t offset) const {
-    std::vector<char> buf(size_t{8} << 20);
-    for (uint64_t at = 0; at < size_; at += buf.size()) {
-      const size_t n = static_cast<size_t>(std::min<uint64_t>(buf.size(), size_ - at));
-      file_.read(buf.data(), n, at);
+  // Copies everything written into `to` at `offset`.
+  void copy_to(const SharedFile& to, uint64_t offset) const { copy_to(0, size_, to, offset); }
+  // Copies `bytes` from `from` on into `to` at `offset`, a few MiB at a time.
+  void copy_to(uint64_t from, uint64_t bytes, const SharedFile& to, uint64_t offset) const {
+    std::vector<char> buf(static_cast<size_t>(std::min<uint64_t>(bytes, uint64_t{8} << 20)));
+    for (uint64_t at = 0; at < bytes; at += buf.size()) {
+      const size_t n = static_cast<size_t>(std::min<uint64_t>(buf.size(), bytes - at));
+      file_.read(buf.data(), n, from + at);
       to.write(buf.data(), n, offset + at);
     }
   }
@@ -219,6 +221,9 @@ class FileSink {
     held_.push_back(
         {morton_encode(static_cast<uint64_t>(b[0]), static_cast<uint64_t>(b[1]), static_cast<uint64_t>(b[2])), index});
   }
+  // A distributed convert's pair of bands: release() appends the held bricks to `to` instead,
+  // their entries' offsets counted from its start; the ranks place them (Converter::run_shared).
+  void release_to(ScratchOut* to) { release_to_ = to; }
   void release() {
     std::sort(held_.begin(), held_.end());
     // Runs of bricks that lie one after the other in the scratch file (nearly all), a few MiB a call.
@@ -231,9 +236,12 @@ class FileSink {
         for (uint32_t bytes : entry(held_[end]).bytes) to += bytes;
       buf.resize(static_cast<size_t>(to - from));
       held_file_->read(buf.data(), buf.size(), from);
-      const uint64_t at = out_.size();
+      const uint64_t at = release_to_ ? release_to_->size() : out_.size();
       for (size_t m = i; m < end; ++m) entry(held_[m]).offset += at - from;
-      out_.write(buf.data(), buf.size());
+      if (release_to_)
+        release_to_->write(buf.data(), buf.size());
+      else
+        out_.write(buf.data(), buf.size());
       i = end;
     }
     held_.clear();
@@ -252,6 +260,7 @@ class FileSink {
   std::optional<ScratchFile> held_file_;
   uint64_t held_bytes_ = 0;
   std::vector<std::pair<uint64_t, int64_t>> held_;  // Morton code, brick index
+  ScratchOut* release_to_ = nullptr;
 };
 
 // A band's hand-over to the next in one named file beside the output, which every rank of a
@@ -280,6 +289,12 @@ class SharedHandover : public BandHandover {
 struct PlacedEntry {
   int64_t index;
   BrickEntry entry;
+};
+
+// A brick's index and size, as a rank of a distributed convert tells the others.
+struct BrickSize {
+  int64_t index;
+  uint64_t bytes;
 };
 
 // What one rank of a distributed convert tells the others after each band.
@@ -358,15 +373,18 @@ class Converter {
     return built;
   }
 
-  // The distributed convert (include/isotope/distribution.h; docs/DISTRIBUTED.md), band by band:
+  // The distributed convert (include/isotope/distribution.h; docs/DISTRIBUTED.md), a pass a
+  // band or, where the tiles allow, two bands a pass (j and j+1, as one process fuses them):
   //  1. rank 0 creates the output's temporary file; the ranks agree on the tile size (the
   //     smallest any of them would choose), so that the tiles are the same on all;
-  //  2. each band's tiles, in Morton order, are cut into one contiguous run per rank, about
-  //     equal in nodes (tile_costs), whose bricks are hence a contiguous run of the file: rank 0 appends its own to the
-  //     file, every other rank to an unlinked scratch file of its own; all write their tiles' rows of the band's
-  //     hand-over, a named file beside the output, which the next band reads whole;
-  //  3. an exclusive scan of the ranks' byte counts places each run; ranks > 0 copy theirs in
-  //     and hand rank 0 their bricks' directory entries;
+  //  2. band j's tiles, in Morton order, are cut into one contiguous run per rank, about equal in
+  //     nodes (tile_costs), whose bricks are hence a contiguous run of the file: rank 0 appends
+  //     its own to the file, every other rank to an unlinked scratch file of its own; band j+1's
+  //     bricks (a pair's) go to another scratch file; all write their tiles' rows of the pass's
+  //     hand-over, a named file beside the output, which the next pass reads whole;
+  //  3. an exclusive scan of the ranks' byte counts places each run of band j; every brick's size
+  //     of band j+1, told to all, places each of those; the ranks copy theirs in and hand rank 0
+  //     their bricks' directory entries;
   //  4. after the last band rank 0 writes the directories and the header.
   // Every step that may fail on one rank alone runs under settle_together: all stop together,
   // and rank 0's temporary files are removed as it unwinds. Coarse bands with fewer tiles than
@@ -382,17 +400,24 @@ class Converter {
       out_->continue_at(kHeaderBytes);  // flushed: the file exists with its header's room
     });
     ByteWriter mine;
-    mine.put(tile_bricks_for(layout_, sink_brick_bytes(), static_cast<uint64_t>(options_.memory_mb) << 20));
+    // The tiles every rank can build, and whether bands go two to a pass (BandedBuildOptions::
+    // fuse_pair): under mpirun every hand-over is a shared file, and a pair's is never made.
+    const uint64_t memory = static_cast<uint64_t>(options_.memory_mb) << 20;
+    mine.put(fused_tile_bricks_for(layout_, sink_brick_bytes(), memory));
+    mine.put(tile_bricks_for(layout_, sink_brick_bytes(), memory));
     mine.put_array(root ? out_->temp_path() : std::string());
-    int64_t c = INT64_MAX;
+    int64_t fused = INT64_MAX, c = INT64_MAX;
     std::string temp_path;
     for (const std::vector<uint8_t>& bytes : group.all_gather(mine.bytes())) {
       ByteReader rd(bytes);
+      fused = std::min(fused, rd.get<int64_t>());  // 0 where a rank cannot fuse
       c = std::min(c, rd.get<int64_t>());
       std::string path;
       rd.get_array(path);
       if (!path.empty()) temp_path = path;
     }
+    const bool pairs = fused > 0;
+    if (pairs) c = fused;
     std::optional<SharedFile> temp;
     settle_together(group, [&] {
       if (!root) temp.emplace(temp_path, SharedFile::Mode::open);
@@ -402,49 +427,59 @@ class Converter {
     std::vector<BrickEntry> entries(static_cast<size_t>(layout_.brick_count()));
     uint64_t end = kHeaderBytes;  // where the next band's bricks begin
     std::unique_ptr<SharedHandover> in;
-    for (const Band& band : layout_.bands()) {
-      const int j = band.scale;
-      const bool last = j == layout_.lattice().k;
-      // The hand-over to band j + 1: created by rank 0, opened by the others once it exists.
+    const int k = layout_.lattice().k;
+    for (int j = 0; j <= k;) {
+      const Band& band = layout_.band(j);
+      const bool pair = pairs && j + 1 <= k;
+      const int top = pair ? j + 1 : j;  // the last band of this pass
+      const bool last = top == k;
+      // The hand-over to band top + 1: created by rank 0, opened by the others once it exists.
       std::unique_ptr<SharedHandover> next;
-      const std::string next_path = temp_path + ".band" + std::to_string(j + 1);
+      const std::string next_path = temp_path + ".band" + std::to_string(top + 1);
       settle_together(group, [&] {
         if (root && !last)
-          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::create, layout_.band(j + 1).nodes);
+          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::create, layout_.band(top + 1).nodes);
       });
       const std::vector<size_t> shares = share_by_cost(tile_costs(layout_, band, c), group.ranks());
-      std::optional<ScratchOut> scratch;
+      std::optional<ScratchOut> scratch, held;  // held: a pair's band top, in Morton order
       BandShare share;
       settle_together(group, [&] {
         if (!root && !last)
-          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::open, layout_.band(j + 1).nodes);
+          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::open, layout_.band(top + 1).nodes);
         BandedBuildOptions build = build_options();
         if (j > 0) build.progress = nullptr;  // band 0 is seven eighths of the work: its progress is the convert's
-        build.first_band = build.last_band = j;
+        build.first_band = j;
+        build.last_band = top;
+        build.fuse_pair = pair;
         build.first_tile = shares[r];
         build.last_tile = shares[r + 1];
         build.tile_bricks = c;
         build.handover_in = in.get();
         build.handover_out = next.get();
+        if (pair) held.emplace(scratch_dir_);
         BandedBuildStats built;
+        auto run = [&](auto& sink) {
+          if (pair) sink.release_to(&*held);
+          built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
+          for (int b = j; b <= top; ++b) take_band(sink.entries(), layout_.band(b), entries);
+        };
         if (root) {
           out_->continue_at(end);
           FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_);
-          built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
-          take_band(sink.entries(), band, entries);
+          run(sink);
           share.bytes = out_->size() - end;
         } else {
           scratch.emplace(scratch_dir_);
           FileSink<ScratchOut> sink(layout_, *scratch, options_.zstd_level, scratch_dir_);
-          built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
-          take_band(sink.entries(), band, entries);
+          run(sink);
           share.bytes = scratch->size();
         }
-        for (int k = 0; k < 2; ++k)
-          for (int t = 0; t < 3; ++t) share.critical[k][t] = built.critical[k][t];
+        for (int m = 0; m < 2; ++m)
+          for (int t = 0; t < 3; ++t) share.critical[m][t] = built.critical[m][t];
         share.lo = built.lo;
         share.hi = built.hi;
         stats.tiles_in_flight = std::max(stats.tiles_in_flight, built.tiles_in_flight);
+        stats.bands_built_beside += built.bands_built_beside;
       });
       // The exclusive scan of the runs' sizes, and the totals of what the band counted.
       ByteWriter told;
@@ -456,20 +491,86 @@ class Converter {
         const auto s = rd.get<BandShare>();
         if (i < r) offset += s.bytes;
         band_bytes += s.bytes;
-        for (int k = 0; k < 2; ++k)
-          for (int t = 0; t < 3; ++t) stats.critical[k][t] += s.critical[k][t];
+        for (int m = 0; m < 2; ++m)
+          for (int t = 0; t < 3; ++t) stats.critical[m][t] += s.critical[m][t];
         stats.lo = std::min(stats.lo, s.lo);
         stats.hi = std::max(stats.hi, s.hi);
       }
-      // Ranks > 0 copy their run into place, then every rank tells rank 0 where its bricks are.
-      ByteWriter placed;
+      // A pair's band top follows band j. A rank's bricks of it are not one run of the file
+      // (those at the grid's far faces come with the tiles before them): every rank learns every
+      // brick's size, and so where each goes.
+      uint64_t top_bytes = 0;
+      std::vector<int64_t> top_mine;  // this rank's bricks of band top, in file (Morton) order
+      std::vector<uint64_t> top_at;   // where each brick of band top goes, by directory index
+      if (pair) {
+        const Band& up = layout_.band(top);
+        std::vector<int64_t> order;  // directory indices in file order
+        for (const Box3& b : in_morton_order(up.bricks)) order.push_back(layout_.brick_index(top, b));
+        std::vector<BrickSize> sizes;
+        for (const int64_t i : order)
+          if (entries[static_cast<size_t>(i)].total() > 0) {
+            top_mine.push_back(i);
+            sizes.push_back({i, entries[static_cast<size_t>(i)].total()});
+          }
+        ByteWriter mine_sizes;
+        mine_sizes.put_array(sizes);
+        std::vector<uint64_t> size_of(static_cast<size_t>(up.brick_count()), 0);
+        for (const std::vector<uint8_t>& bytes : group.all_gather(mine_sizes.bytes())) {
+          ByteReader rd(bytes);
+          std::vector<BrickSize> theirs;
+          rd.get_array(theirs);
+          for (const auto& [i, n] : theirs) {
+            const int64_t local = i - up.first_brick;
+            if (local < 0 || local >= up.brick_count())
+              throw IoError(output_ + ": ranks disagree on brick " + std::to_string(i));
+            size_of[static_cast<size_t>(local)] = n;  // a brick from two ranks: place_band says so
+          }
+        }
+        top_at.resize(size_of.size());
+        uint64_t at = end + band_bytes;
+        for (const int64_t i : order) {
+          const auto local = static_cast<size_t>(i - up.first_brick);
+          top_at[local] = at;
+          at += size_of[local];
+        }
+        top_bytes = at - (end + band_bytes);
+      }
+      // Ranks > 0 copy their run into place, every rank its bricks of a pair's band top, then
+      // every rank tells rank 0 where its bricks are.
+      ByteWriter placed, placed_top;
       settle_together(group, [&] {
-        std::vector<PlacedEntry> run;
+        std::vector<PlacedEntry> run, run_top;
         for (int64_t i = band.first_brick; i < band.first_brick + band.brick_count(); ++i) {
           BrickEntry& e = entries[static_cast<size_t>(i)];
           if (e.total() == 0) continue;   // not this rank's
           if (!root) e.offset += offset;  // was relative to the rank's scratch file
           run.push_back({i, e});
+        }
+        if (pair) {
+          std::optional<SharedFile> own;  // rank 0's file, written where its appends do not reach
+          if (root) own.emplace(out_->temp_path(), SharedFile::Mode::open);
+          const SharedFile& to = root ? *own : *temp;
+          const int64_t first = layout_.band(top).first_brick;
+          // Runs of bricks one after the other both in `held` and in the file (nearly all).
+          for (size_t a = 0; a < top_mine.size();) {
+            const BrickEntry& e0 = entries[static_cast<size_t>(top_mine[a])];
+            const uint64_t from = e0.offset, to_at = top_at[static_cast<size_t>(top_mine[a] - first)];
+            uint64_t bytes = 0;
+            size_t b = a;
+            for (; b < top_mine.size(); ++b) {
+              const BrickEntry& e = entries[static_cast<size_t>(top_mine[b])];
+              if (e.offset != from + bytes || top_at[static_cast<size_t>(top_mine[b] - first)] != to_at + bytes) break;
+              bytes += e.total();
+            }
+            held->copy_to(from, bytes, to, to_at);
+            a = b;
+          }
+          for (const int64_t i : top_mine) {
+            BrickEntry& e = entries[static_cast<size_t>(i)];
+            e.offset = top_at[static_cast<size_t>(i - first)];
+            run_top.push_back({i, e});
+          }
+          if (root) own->sync();
         }
         if (!root) {
           // Its bricks are durable when rank 0 commits the store (rank 0's fsync covers only its own
@@ -479,13 +580,18 @@ class Converter {
           temp->sync();
         }
         placed.put_array(run);
+        placed_top.put_array(run_top);
       });
       std::vector<std::vector<uint8_t>> runs = group.gather(placed.bytes());
+      std::vector<std::vector<uint8_t>> runs_top = group.gather(placed_top.bytes());
       settle_together(group, [&] {
-        if (root) place_band(runs, band, entries);
+        if (!root) return;
+        place_band(runs, band, entries);
+        if (pair) place_band(runs_top, layout_.band(top), entries);
       });
-      end += band_bytes;
-      in = std::move(next);  // band j's hand-over, read by band j + 1 (rank 0's removes its file)
+      end += band_bytes + top_bytes;
+      in = std::move(next);  // band top's hand-over, read by band top + 1 (rank 0's removes its file)
+      j = top + 1;
     }
     settle_together(group, [&] {
       if (!root) return;
