@@ -152,7 +152,8 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
 }
 
 // Where a sink's bricks go: the store's file, or (a distributed convert's rank > 0) an unlinked
-// scratch file of its own, copied into the store once the ranks before it know their sizes.
+// scratch file of its own, copied into the store once the ranks before it know their sizes; and,
+// in a distributed pass of two bands, every rank's bricks of the upper band.
 class ScratchOut {
  public:
   explicit ScratchOut(const std::string& dir) : file_(dir) {}
@@ -291,13 +292,22 @@ struct PlacedEntry {
   BrickEntry entry;
 };
 
-// A brick's index and size, as a rank of a distributed convert tells the others.
-struct BrickSize {
-  int64_t index;
+// A run of bricks of consecutive Morton codes in one band, as a rank of a distributed convert
+// tells the others where they lie in its scratch file.
+struct BrickRun {
+  uint64_t code;   // the first brick's
+  uint64_t count;  // bricks
   uint64_t bytes;
 };
 
-// What one rank of a distributed convert tells the others after each band.
+// One of this rank's runs: where it lies in the rank's scratch file and goes in the store, and its
+// bricks' directory indices in order.
+struct TopRun {
+  uint64_t from = 0, to = 0;
+  std::vector<int64_t> bricks;
+};
+
+// What one rank of a distributed convert tells the others after each pass.
 struct BandShare {
   uint64_t bytes = 0;
   CriticalCounts critical = {{0, 0, 0}, {0, 0, 0}};
@@ -447,7 +457,9 @@ class Converter {
         if (!root && !last)
           next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::open, layout_.band(top + 1).nodes);
         BandedBuildOptions build = build_options();
-        if (j > 0) build.progress = nullptr;  // band 0 is seven eighths of the work: its progress is the convert's
+        if (j > 0)
+          build.progress =
+              nullptr;  // band 0's pass is 7/8 of the work (with band 1, 63/64): its progress is the convert's
         build.first_band = j;
         build.last_band = top;
         build.fuse_pair = pair;
@@ -497,47 +509,68 @@ class Converter {
         stats.hi = std::max(stats.hi, s.hi);
       }
       // A pair's band top follows band j. A rank's bricks of it are not one run of the file
-      // (those at the grid's far faces come with the tiles before them): every rank learns every
-      // brick's size, and so where each goes.
+      // (those at the grid's far faces come with the tiles before them): the ranks tell each
+      // other their runs of consecutive Morton codes and each run's bytes (a run for each part of
+      // a rank's tiles, and one for each brick at the grid's far faces), and so each learns where
+      // its own go.
+      std::vector<TopRun> top_mine;  // this rank's runs of band top, in file (Morton) order
       uint64_t top_bytes = 0;
-      std::vector<int64_t> top_mine;  // this rank's bricks of band top, in file (Morton) order
-      std::vector<uint64_t> top_at;   // where each brick of band top goes, by directory index
-      if (pair) {
-        const Band& up = layout_.band(top);
-        std::vector<int64_t> order;  // directory indices in file order
-        for (const Box3& b : in_morton_order(up.bricks)) order.push_back(layout_.brick_index(top, b));
-        std::vector<BrickSize> sizes;
-        for (const int64_t i : order)
-          if (entries[static_cast<size_t>(i)].total() > 0) {
-            top_mine.push_back(i);
-            sizes.push_back({i, entries[static_cast<size_t>(i)].total()});
-          }
-        ByteWriter mine_sizes;
-        mine_sizes.put_array(sizes);
-        std::vector<uint64_t> size_of(static_cast<size_t>(up.brick_count()), 0);
-        for (const std::vector<uint8_t>& bytes : group.all_gather(mine_sizes.bytes())) {
-          ByteReader rd(bytes);
-          std::vector<BrickSize> theirs;
-          rd.get_array(theirs);
-          for (const auto& [i, n] : theirs) {
+      ByteWriter told_runs;
+      if (pair)
+        settle_together(group, [&] {
+          const Band& up = layout_.band(top);
+          std::vector<std::pair<uint64_t, int64_t>> mine_top;  // Morton code, directory index
+          for (int64_t i = up.first_brick; i < up.first_brick + up.brick_count(); ++i) {
+            if (entries[static_cast<size_t>(i)].total() == 0) continue;  // not this rank's
             const int64_t local = i - up.first_brick;
-            if (local < 0 || local >= up.brick_count())
-              throw IoError(output_ + ": ranks disagree on brick " + std::to_string(i));
-            size_of[static_cast<size_t>(local)] = n;  // a brick from two ranks: place_band says so
+            const auto x = static_cast<uint64_t>(local % up.bricks[0]),
+                       y = static_cast<uint64_t>(local / up.bricks[0] % up.bricks[1]),
+                       z = static_cast<uint64_t>(local / up.bricks[0] / up.bricks[1]);
+            mine_top.push_back({morton_encode(x, y, z), i});
           }
-        }
-        top_at.resize(size_of.size());
-        uint64_t at = end + band_bytes;
-        for (const int64_t i : order) {
-          const auto local = static_cast<size_t>(i - up.first_brick);
-          top_at[local] = at;
-          at += size_of[local];
-        }
-        top_bytes = at - (end + band_bytes);
-      }
-      // Ranks > 0 copy their run into place, every rank its bricks of a pair's band top, then
-      // every rank tells rank 0 where its bricks are.
-      ByteWriter placed, placed_top;
+          std::sort(mine_top.begin(), mine_top.end());
+          std::vector<BrickRun> runs;
+          for (const auto& [code, i] : mine_top) {
+            const BrickEntry& e = entries[static_cast<size_t>(i)];
+            if (runs.empty() || code != runs.back().code + runs.back().count) {
+              runs.push_back({code, 0, 0});
+              top_mine.push_back({e.offset, 0, {}});
+            }
+            ++runs.back().count;
+            runs.back().bytes += e.total();
+            top_mine.back().bricks.push_back(i);
+          }
+          told_runs.put_array(runs);
+        });
+      std::vector<std::vector<uint8_t>> all_runs;
+      if (pair) all_runs = group.all_gather(told_runs.bytes());
+      if (pair)
+        settle_together(group, [&] {
+          std::vector<std::pair<BrickRun, size_t>> every;  // a run, and its rank
+          for (size_t rank = 0; rank < all_runs.size(); ++rank) {
+            ByteReader rd(all_runs[rank]);
+            std::vector<BrickRun> theirs;
+            rd.get_array(theirs);
+            for (const BrickRun& run : theirs) every.push_back({run, rank});
+          }
+          std::sort(every.begin(), every.end(),
+                    [](const auto& u, const auto& v) { return u.first.code < v.first.code; });
+          uint64_t at = end + band_bytes;
+          int64_t bricks = 0;
+          size_t n = 0;  // this rank's runs met so far, in order
+          for (const auto& [run, rank] : every) {
+            if (rank == r) top_mine[n++].to = at;
+            at += run.bytes;
+            bricks += static_cast<int64_t>(run.count);
+          }
+          if (bricks != layout_.band(top).brick_count())
+            throw IoError(output_ + ": the ranks' band " + std::to_string(top) + " holds " + std::to_string(bricks) +
+                          " bricks, not " + std::to_string(layout_.band(top).brick_count()));
+          top_bytes = at - (end + band_bytes);
+        });
+      // Ranks > 0 copy their run into place, every rank its runs of a pair's band top, then every
+      // rank tells rank 0 where its bricks are.
+      ByteWriter placed;
       settle_together(group, [&] {
         std::vector<PlacedEntry> run, run_top;
         for (int64_t i = band.first_brick; i < band.first_brick + band.brick_count(); ++i) {
@@ -549,28 +582,16 @@ class Converter {
         if (pair) {
           std::optional<SharedFile> own;  // rank 0's file, written where its appends do not reach
           if (root) own.emplace(out_->temp_path(), SharedFile::Mode::open);
-          const SharedFile& to = root ? *own : *temp;
-          const int64_t first = layout_.band(top).first_brick;
-          // Runs of bricks one after the other both in `held` and in the file (nearly all).
-          for (size_t a = 0; a < top_mine.size();) {
-            const BrickEntry& e0 = entries[static_cast<size_t>(top_mine[a])];
-            const uint64_t from = e0.offset, to_at = top_at[static_cast<size_t>(top_mine[a] - first)];
+          for (const TopRun& t : top_mine) {
             uint64_t bytes = 0;
-            size_t b = a;
-            for (; b < top_mine.size(); ++b) {
-              const BrickEntry& e = entries[static_cast<size_t>(top_mine[b])];
-              if (e.offset != from + bytes || top_at[static_cast<size_t>(top_mine[b] - first)] != to_at + bytes) break;
+            for (const int64_t i : t.bricks) {
+              BrickEntry& e = entries[static_cast<size_t>(i)];
+              e.offset = t.to + bytes;
               bytes += e.total();
+              run_top.push_back({i, e});
             }
-            held->copy_to(from, bytes, to, to_at);
-            a = b;
+            held->copy_to(t.from, bytes, root ? *own : *temp, t.to);  // one after the other in `held` too
           }
-          for (const int64_t i : top_mine) {
-            BrickEntry& e = entries[static_cast<size_t>(i)];
-            e.offset = top_at[static_cast<size_t>(i - first)];
-            run_top.push_back({i, e});
-          }
-          if (root) own->sync();
         }
         if (!root) {
           // Its bricks are durable when rank 0 commits the store (rank 0's fsync covers only its own
@@ -580,12 +601,18 @@ class Converter {
           temp->sync();
         }
         placed.put_array(run);
-        placed_top.put_array(run_top);
+        placed.put_array(run_top);
       });
-      std::vector<std::vector<uint8_t>> runs = group.gather(placed.bytes());
-      std::vector<std::vector<uint8_t>> runs_top = group.gather(placed_top.bytes());
+      std::vector<std::vector<uint8_t>> where;
+      settle_together(group, [&] { where = group.gather(placed.bytes()); });  // rank 0 may run out of memory receiving
       settle_together(group, [&] {
         if (!root) return;
+        std::vector<std::vector<PlacedEntry>> runs(where.size()), runs_top(where.size());
+        for (size_t i = 0; i < where.size(); ++i) {
+          ByteReader rd(where[i]);
+          rd.get_array(runs[i]);
+          rd.get_array(runs_top[i]);
+        }
         place_band(runs, band, entries);
         if (pair) place_band(runs_top, layout_.band(top), entries);
       });
@@ -610,14 +637,11 @@ class Converter {
 
   // Rank 0: every rank's entries of the band, each at its directory index; every brick from
   // exactly one rank.
-  void place_band(const std::vector<std::vector<uint8_t>>& runs, const Band& band,
+  void place_band(const std::vector<std::vector<PlacedEntry>>& runs, const Band& band,
                   std::vector<BrickEntry>& entries) const {
     std::vector<bool> seen(static_cast<size_t>(band.brick_count()), false);
     int64_t placed = 0;
-    for (const std::vector<uint8_t>& bytes : runs) {
-      ByteReader rd(bytes);
-      std::vector<PlacedEntry> run;
-      rd.get_array(run);
+    for (const std::vector<PlacedEntry>& run : runs) {
       for (const auto& [i, e] : run) {
         const int64_t local = i - band.first_brick;
         if (local < 0 || local >= band.brick_count() || seen[static_cast<size_t>(local)])
