@@ -76,6 +76,11 @@ class StoreLayout {
     const Band& band = bands_[static_cast<size_t>(j)];
     return band.first_brick + (b[2] * band.bricks[1] + b[1]) * band.bricks[0] + b[0];
   }
+  // Brick coordinates of directory index `index` of `band` (brick_index's inverse).
+  static std::array<int64_t, 3> brick_of(const Band& band, int64_t index) {
+    const int64_t i = index - band.first_brick;
+    return {i % band.bricks[0], i / band.bricks[0] % band.bricks[1], i / (band.bricks[0] * band.bricks[1])};
+  }
 
  private:
   Lattice lattice_;

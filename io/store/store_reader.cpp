@@ -119,10 +119,8 @@ const BrickEntry& StoreReader::entry(int64_t index) const {
 
 std::pair<int, Box3> StoreReader::locate_brick(int64_t index) const {
   for (const Band& b : layout_.bands())
-    if (index >= b.first_brick && index < b.first_brick + b.brick_count()) {
-      const int64_t i = index - b.first_brick;
-      return {b.scale, {i % b.bricks[0], i / b.bricks[0] % b.bricks[1], i / (b.bricks[0] * b.bricks[1])}};
-    }
+    if (index >= b.first_brick && index < b.first_brick + b.brick_count())
+      return {b.scale, StoreLayout::brick_of(b, index)};
   return {-1, {0, 0, 0}};
 }
 

@@ -303,6 +303,7 @@ struct BrickRun {
 // One of this rank's runs: where it lies in the rank's scratch file and goes in the store, and its
 // bricks' directory indices in order.
 struct TopRun {
+  BrickRun run;
   uint64_t from = 0, to = 0;
   std::vector<int64_t> bricks;
 };
@@ -522,24 +523,23 @@ class Converter {
           std::vector<std::pair<uint64_t, int64_t>> mine_top;  // Morton code, directory index
           for (int64_t i = up.first_brick; i < up.first_brick + up.brick_count(); ++i) {
             if (entries[static_cast<size_t>(i)].total() == 0) continue;  // not this rank's
-            const int64_t local = i - up.first_brick;
-            const auto x = static_cast<uint64_t>(local % up.bricks[0]),
-                       y = static_cast<uint64_t>(local / up.bricks[0] % up.bricks[1]),
-                       z = static_cast<uint64_t>(local / up.bricks[0] / up.bricks[1]);
-            mine_top.push_back({morton_encode(x, y, z), i});
+            const Box3 b = StoreLayout::brick_of(up, i);
+            mine_top.push_back(
+                {morton_encode(static_cast<uint64_t>(b[0]), static_cast<uint64_t>(b[1]), static_cast<uint64_t>(b[2])),
+                 i});
           }
           std::sort(mine_top.begin(), mine_top.end());
           std::vector<BrickRun> runs;
           for (const auto& [code, i] : mine_top) {
             const BrickEntry& e = entries[static_cast<size_t>(i)];
-            if (runs.empty() || code != runs.back().code + runs.back().count) {
-              runs.push_back({code, 0, 0});
-              top_mine.push_back({e.offset, 0, {}});
-            }
-            ++runs.back().count;
-            runs.back().bytes += e.total();
-            top_mine.back().bricks.push_back(i);
+            if (top_mine.empty() || code != top_mine.back().run.code + top_mine.back().run.count)
+              top_mine.push_back({{code, 0, 0}, e.offset, 0, {}});
+            TopRun& t = top_mine.back();
+            ++t.run.count;
+            t.run.bytes += e.total();
+            t.bricks.push_back(i);
           }
+          for (const TopRun& t : top_mine) runs.push_back(t.run);
           told_runs.put_array(runs);
         });
       std::vector<std::vector<uint8_t>> all_runs;
@@ -583,14 +583,14 @@ class Converter {
           std::optional<SharedFile> own;  // rank 0's file, written where its appends do not reach
           if (root) own.emplace(out_->temp_path(), SharedFile::Mode::open);
           for (const TopRun& t : top_mine) {
-            uint64_t bytes = 0;
+            uint64_t at = t.to;
             for (const int64_t i : t.bricks) {
               BrickEntry& e = entries[static_cast<size_t>(i)];
-              e.offset = t.to + bytes;
-              bytes += e.total();
+              e.offset = at;
+              at += e.total();
               run_top.push_back({i, e});
             }
-            held->copy_to(t.from, bytes, root ? *own : *temp, t.to);  // one after the other in `held` too
+            held->copy_to(t.from, t.run.bytes, root ? *own : *temp, t.to);  // one after the other in `held` too
           }
         }
         if (!root) {
