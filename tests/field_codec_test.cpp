@@ -251,6 +251,51 @@ TEST(FieldCodecRoundTrip, SpecialValuesAmongIntegersKeepTheirBits) {
   }
 }
 
+// The integer plan reads a field several values at a time: whatever decides it (a value that is no
+// integer code, the least and largest codes, a half-integer, +inf) counts wherever it stands, in
+// the first block of values, a later one, or the few left over at the end.
+TEST(FieldCodecRoundTrip, WhatDecidesTheIntegerPlanCountsAtEveryPlace) {
+  const std::vector<float> not_codes = {from_bits(0x80000000u), -kInf, from_bits(0x7fc00001u), 0.25f, -1.75f,
+                                        1073741824.0f};  // -0.0, -inf, NaN, quarters, 2^30 (2v past 2^30)
+  auto min_code = [](const Bytes& b) {
+    uint32_t c = 0;
+    for (int k = 0; k < 4; ++k) c |= uint32_t{b.at(kCommonHeader + 3 + static_cast<size_t>(k))} << (8 * k);
+    return static_cast<int32_t>(c);
+  };
+  for (size_t n : {size_t{7}, size_t{257}, size_t{262}, size_t{263}, size_t{520}}) {
+    const Floats base = smooth_uint8(n);  // codes 7..248
+    for (size_t at = 0; at < n; ++at) {
+      SCOPED_TRACE(std::to_string(n) + " values, at " + std::to_string(at));
+      for (float x : not_codes) {
+        Floats v = base;
+        v[at] = x;
+        EXPECT_EQ(mode_of(expect_round_trip(v)), kFloat) << x;
+      }
+      Floats low = base;
+      low[at] = -300;
+      const Bytes low_bytes = expect_round_trip(low);
+      ASSERT_EQ(mode_of(low_bytes), kInteger);
+      EXPECT_EQ(min_code(low_bytes), -300);
+      EXPECT_EQ(integer_width(low_bytes), 2);  // codes -300..248
+      Floats high = base;
+      high[at] = 536870912.0f;  // 2v = 2^30: the largest that stays integer
+      const Bytes high_bytes = expect_round_trip(high);
+      ASSERT_EQ(mode_of(high_bytes), kInteger);
+      EXPECT_EQ(integer_width(high_bytes), 4);
+      Floats half = base;
+      half[at] = 100.5f;
+      const Bytes half_bytes = expect_round_trip(half);
+      ASSERT_EQ(mode_of(half_bytes), kInteger);
+      EXPECT_EQ(integer_multiplier(half_bytes), 2);
+      Floats inf = base;
+      inf[at] = kInf;
+      const Bytes inf_bytes = expect_round_trip(inf);
+      ASSERT_EQ(mode_of(inf_bytes), kInteger);
+      EXPECT_EQ(integer_multiplier(inf_bytes), 1);
+    }
+  }
+}
+
 TEST(FieldCodecRoundTrip, EverySizeFromOneToThreeHundredOfEveryKind) {
   for (const Kind& kind : kKinds)
     for (size_t n = 1; n <= 300; ++n) {

@@ -111,11 +111,17 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
   // Walked row by row of the tile's window (x fastest), written at each node's Morton position.
   const Box3 end{std::min(t, band.nodes[0] - origin[0]), std::min(t, band.nodes[1] - origin[1]),
                  std::min(t, band.nodes[2] - origin[2])};
+  // x's Morton bits, once for every row.
+  thread_local std::vector<uint32_t> spread_x;
+  spread_x.resize(static_cast<size_t>(t));
+  for (int64_t x = 0; x < t; ++x) spread_x[static_cast<size_t>(x)] = spread_bits_3(x);
+  const uint32_t* const sx = spread_x.data();
   for (int64_t z = 0; z < end[2]; ++z)
     for (int64_t y = 0; y < end[1]; ++y) {
       const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
-      for (int64_t x = 0; x < end[0]; ++x)
-        f.values[yz | spread_bits_3(x)] = tile.node_value({origin[0] + x, origin[1] + y, origin[2] + z});
+      const float* row = &tile.node_value({origin[0], origin[1] + y, origin[2] + z});
+      float* const values = f.values.data();
+      for (int64_t x = 0; x < end[0]; ++x) values[yz | sx[x]] = row[x];
     }
   if (!stores_records(layout, j)) return f;
   // Nodes beyond the band's grid: 0 in every field. Walked row by row (the tile's records in
@@ -131,7 +137,7 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
       const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
       const Record* row = &tile.node_record({origin[0], origin[1] + y, origin[2] + z});
       for (int64_t x = 0; x < end[0]; ++x) {
-        const uint32_t m = yz | spread_bits_3(x);
+        const uint32_t m = yz | sx[x];
         if ((m & 7) == 0) continue;
         const size_t i = m - m / 8 - 1;
         const Record& r = row[x];
