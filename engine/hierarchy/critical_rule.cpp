@@ -7,13 +7,6 @@
 
 namespace isotope {
 
-uint32_t sign_pattern(const DiamondValues& d, float t) {
-  uint32_t p = (d.fa > t ? 1u : 0u) | (d.fb > t ? 2u : 0u);
-  const int r = ring_size(d.type);
-  for (int i = 0; i < r; ++i) p |= (d.ring[i] > t ? 1u : 0u) << (2 + i);
-  return p;
-}
-
 IsoInterval paper_interval(const DiamondValues& d) {
   // Every critical pattern has equal signs at a and b (tests/critical_table_test.cpp): most
   // vertices of smooth data lie between their edge's ends and are settled without the table.

@@ -32,8 +32,14 @@ struct DiamondValues {
   float ring[8] = {};
 };
 
-// Sign pattern (bit set = value > t) in the layout of critical_table.h.
-uint32_t sign_pattern(const DiamondValues& d, float t);
+// Sign pattern (bit set = value > t) in the layout of critical_table.h. Inline: both rules take
+// it for nearly every vertex whose v lies beyond a and b.
+inline uint32_t sign_pattern(const DiamondValues& d, float t) {
+  uint32_t p = (d.fa > t ? 1u : 0u) | (d.fb > t ? 2u : 0u);
+  const int r = ring_size(d.type);
+  for (int i = 0; i < r; ++i) p |= (d.ring[i] > t ? 1u : 0u) << (2 + i);
+  return p;
+}
 
 // Paper: signs relative to f(v); if critical, I = [f(v), min(fa, fb)) or [max(fa, fb), f(v)).
 IsoInterval paper_interval(const DiamondValues& d);
