@@ -1,8 +1,10 @@
 #include "engine/hierarchy/hierarchy.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "engine/core/volume_check.h"
 #include "engine/extract/adaptive_extract.h"
@@ -35,16 +37,33 @@ void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, 
   const Band& band = layout.band(tile.band());
   const bool records = tile.band() < layout.lattice().k;  // the corners have none: all absent
   const Record absent{DiamondBounds{0, 0, 0, 0}, DiamondTopology{0, 0, 0, 0, {0, 0, 0}}};
-  for (uint32_t m = 0; m < static_cast<uint32_t>(layout.brick_nodes()); ++m) {
-    const Box3 g{origin[0] + compact_bits_3(m), origin[1] + compact_bits_3(m >> 1), origin[2] + compact_bits_3(m >> 2)};
-    const bool in_grid = g[0] < band.nodes[0] && g[1] < band.nodes[1] && g[2] < band.nodes[2];
-    values[m] = in_grid ? tile.node_value(g) : 0.0f;
-    if ((m & 7) == 0 || !in_grid || !records) {
-      store_record(out, m, absent);  // coarser nodes' entries are never read; written all the same
-      continue;
+  const int64_t t = layout.brick_width();
+  const Box3 end{std::min(t, band.nodes[0] - origin[0]), std::min(t, band.nodes[1] - origin[1]),
+                 std::min(t, band.nodes[2] - origin[2])};
+  // A brick past the band's grid: its nodes beyond it absent, value 0, before the others are written.
+  if (end[0] < t || end[1] < t || end[2] < t)
+    for (uint32_t m = 0; m < static_cast<uint32_t>(layout.brick_nodes()); ++m) {
+      values[m] = 0.0f;
+      store_record(out, m, absent);
     }
-    store_record(out, m, tile.node_record(g));
-  }
+  // Row by row of the tile's window (x fastest), each node written at its Morton place in the
+  // brick; x's Morton bits from a table.
+  thread_local std::vector<uint32_t> spread_x;
+  spread_x.resize(static_cast<size_t>(end[0]));
+  for (int64_t x = 0; x < end[0]; ++x) spread_x[static_cast<size_t>(x)] = spread_bits_3(x);
+  for (int64_t z = 0; z < end[2]; ++z)
+    for (int64_t y = 0; y < end[1]; ++y) {
+      const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
+      const Box3 first{origin[0], origin[1] + y, origin[2] + z};
+      const float* row_values = &tile.node_value(first);
+      const Record* row_records = &tile.node_record(first);
+      for (int64_t x = 0; x < end[0]; ++x) {
+        const uint32_t m = yz | spread_x[static_cast<size_t>(x)];
+        values[m] = row_values[x];
+        // Coarser nodes' entries (all coordinates even) are never read; written all the same.
+        store_record(out, m, (m & 7) == 0 || !records ? absent : row_records[x]);
+      }
+    }
 }
 
 Hierarchy Hierarchy::allocate(const std::array<int64_t, 3>& dims, int brick_bits, const RecordFields& fields) {
