@@ -257,11 +257,15 @@ TEST(FieldCodecRoundTrip, SpecialValuesAmongIntegersKeepTheirBits) {
 TEST(FieldCodecRoundTrip, WhatDecidesTheIntegerPlanCountsAtEveryPlace) {
   const std::vector<float> not_codes = {from_bits(0x80000000u), -kInf, from_bits(0x7fc00001u), 0.25f, -1.75f,
                                         1073741824.0f};  // -0.0, -inf, NaN, quarters, 2^30 (2v past 2^30)
-  auto min_code = [](const Bytes& b) {
+  // The integer header after the count: multiplier, width, flags, then the least and +inf codes.
+  auto code_at = [](const Bytes& b, size_t offset) {
     uint32_t c = 0;
-    for (int k = 0; k < 4; ++k) c |= uint32_t{b.at(kCommonHeader + 3 + static_cast<size_t>(k))} << (8 * k);
+    for (size_t k = 0; k < 4; ++k) c |= uint32_t{b.at(kCommonHeader + offset + k)} << (8 * k);
     return static_cast<int32_t>(c);
   };
+  auto min_code = [&](const Bytes& b) { return code_at(b, 3); };
+  auto inf_code = [&](const Bytes& b) { return code_at(b, 7); };  // the largest finite code + 1
+  auto has_inf = [](const Bytes& b) { return (b.at(kCommonHeader + 2) & 1) != 0; };
   for (size_t n : {size_t{7}, size_t{257}, size_t{262}, size_t{263}, size_t{520}}) {
     const Floats base = smooth_uint8(n);  // codes 7..248
     for (size_t at = 0; at < n; ++at) {
@@ -282,6 +286,8 @@ TEST(FieldCodecRoundTrip, WhatDecidesTheIntegerPlanCountsAtEveryPlace) {
       const Bytes high_bytes = expect_round_trip(high);
       ASSERT_EQ(mode_of(high_bytes), kInteger);
       EXPECT_EQ(integer_width(high_bytes), 4);
+      EXPECT_EQ(inf_code(high_bytes), 536870913);
+      EXPECT_FALSE(has_inf(high_bytes));
       Floats half = base;
       half[at] = 100.5f;
       const Bytes half_bytes = expect_round_trip(half);
@@ -292,6 +298,11 @@ TEST(FieldCodecRoundTrip, WhatDecidesTheIntegerPlanCountsAtEveryPlace) {
       const Bytes inf_bytes = expect_round_trip(inf);
       ASSERT_EQ(mode_of(inf_bytes), kInteger);
       EXPECT_EQ(integer_multiplier(inf_bytes), 1);
+      EXPECT_TRUE(has_inf(inf_bytes));
+      float largest = 0;  // of the finite values: +inf takes the code just above it
+      for (size_t i = 0; i < n; ++i)
+        if (i != at) largest = std::max(largest, base[i]);
+      EXPECT_EQ(inf_code(inf_bytes), static_cast<int32_t>(largest) + 1);
     }
   }
 }
