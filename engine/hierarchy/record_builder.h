@@ -155,7 +155,7 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     sat.paper.hull({-kInf, kInf});
   } else {
     // Where one of a and b lies above v and the other not, neither rule can fire (docs/METHOD.md,
-    // "The exact rule"; the paper's asks for equal signs at a and b too): most vertices of smooth
+    // "The exact rule"; the paper's rule asks for equal signs at a and b too): most vertices of smooth
     // data, settled here without a call.
     IsoInterval exact, paper;
     if ((dv.fa > dv.fv) == (dv.fb > dv.fv)) {

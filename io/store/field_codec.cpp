@@ -309,7 +309,8 @@ void encode_integer(std::span<const float> values, const IntegerPlan& plan, std:
   const uint32_t range = (plan.has_inf ? inf_code : static_cast<uint32_t>(plan.max_code)) - min_code;
   const size_t n = values.size();
   // Each offset once: the choice between offsets and deltas, and the planes, read them again.
-  // Without a branch, so that it vectorizes (+inf's code is the one above all others).
+  // Four at a time where SSE2 is (the compiler vectorized no loop that branched on +inf, whose code
+  // is the one above all others).
   thread_local std::vector<uint32_t> offsets;
   offsets.resize(n);
   const float* v = values.data();
