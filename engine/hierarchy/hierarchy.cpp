@@ -4,7 +4,6 @@
 #include <chrono>
 #include <cmath>
 #include <string>
-#include <vector>
 
 #include "engine/core/volume_check.h"
 #include "engine/extract/adaptive_extract.h"
@@ -17,7 +16,6 @@ namespace isotope {
 BrickIndexer::BrickIndexer(const StoreLayout& layout) : bits_(layout.brick_bits()) {
   mask_ = layout.brick_width() - 1;
   nodes_ = layout.brick_nodes();
-  for (int64_t i = 0; i <= mask_; ++i) spread_[static_cast<size_t>(i)] = spread_bits_3(i);
   for (const Band& b : layout.bands())
     band_[static_cast<size_t>(b.scale)] = {b.first_brick, b.bricks[0], b.bricks[1], b.nodes};
 }
@@ -47,18 +45,15 @@ void fill_brick(const BandTile& tile, const Box3& origin, const BrickView& out, 
       store_record(out, m, absent);
     }
   // Row by row of the tile's window (x fastest), each node written at its Morton place in the
-  // brick; x's Morton bits from a table.
-  thread_local std::vector<uint32_t> spread_x;
-  spread_x.resize(static_cast<size_t>(end[0]));
-  for (int64_t x = 0; x < end[0]; ++x) spread_x[static_cast<size_t>(x)] = spread_bits_3(x);
+  // brick.
   for (int64_t z = 0; z < end[2]; ++z)
     for (int64_t y = 0; y < end[1]; ++y) {
-      const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
+      const uint32_t yz = kSpreadBits3[static_cast<size_t>(y)] << 1 | kSpreadBits3[static_cast<size_t>(z)] << 2;
       const Box3 first{origin[0], origin[1] + y, origin[2] + z};
       const float* row_values = &tile.node_value(first);
       const Record* row_records = &tile.node_record(first);
       for (int64_t x = 0; x < end[0]; ++x) {
-        const uint32_t m = yz | spread_x[static_cast<size_t>(x)];
+        const uint32_t m = yz | kSpreadBits3[static_cast<size_t>(x)];
         values[m] = row_values[x];
         // Coarser nodes' entries (all coordinates even) are never read; written all the same.
         store_record(out, m, (m & 7) == 0 || !records ? absent : row_records[x]);

@@ -72,8 +72,8 @@ class BrickIndexer {
   // Brick index (directory order) and Morton code of node g of band j (G_j units, inside the grid).
   int64_t locate(int j, int64_t gx, int64_t gy, int64_t gz, uint32_t* m) const {
     const int bits = bits_;
-    *m = spread_[static_cast<size_t>(gx & mask_)] | spread_[static_cast<size_t>(gy & mask_)] << 1 |
-         spread_[static_cast<size_t>(gz & mask_)] << 2;
+    *m = kSpreadBits3[static_cast<size_t>(gx & mask_)] | kSpreadBits3[static_cast<size_t>(gy & mask_)] << 1 |
+         kSpreadBits3[static_cast<size_t>(gz & mask_)] << 2;
     const BandInfo& b = band_[static_cast<size_t>(j)];
     return b.first_brick + ((gz >> bits) * b.bricks_y + (gy >> bits)) * b.bricks_x + (gx >> bits);
   }
@@ -90,7 +90,6 @@ class BrickIndexer {
   };
   int bits_ = 0;
   int64_t mask_ = 0, nodes_ = 0;
-  std::array<uint32_t, 256> spread_{};
   std::array<BandInfo, 24> band_{};
 };
 

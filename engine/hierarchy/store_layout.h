@@ -107,7 +107,7 @@ inline std::array<int64_t, 3> morton_decode(uint64_t m) {
 // Position of local node (x, y, z) of a brick in the values array, and of a scale-j node in the
 // records array.
 // Spreads the low 10 bits of v to every third bit (brick coordinates have at most 8).
-inline uint32_t spread_bits_3(int64_t v) {
+constexpr uint32_t spread_bits_3(int64_t v) {
   auto x = static_cast<uint32_t>(v) & 0x3ffu;
   x = (x | x << 16) & 0x30000ffu;
   x = (x | x << 8) & 0x300f00fu;
@@ -115,6 +115,13 @@ inline uint32_t spread_bits_3(int64_t v) {
   x = (x | x << 2) & 0x9249249u;
   return x;
 }
+// spread_bits_3 of every brick coordinate, by table: the loops that place a brick's nodes (the
+// store's writer and reader, the hierarchy in memory) look their bits up here.
+inline constexpr std::array<uint32_t, 256> kSpreadBits3 = [] {
+  std::array<uint32_t, 256> t{};
+  for (size_t i = 0; i < t.size(); ++i) t[i] = spread_bits_3(static_cast<int64_t>(i));
+  return t;
+}();
 // The inverse: every third bit of m, from bit 0, packed.
 inline int64_t compact_bits_3(uint32_t m) {
   uint32_t x = m & 0x9249249u;

@@ -148,11 +148,19 @@ struct IntegerScan {
     hi = std::max(hi, c);
     finite = 1;
   }
+};
+
 #if defined(__SSE2__)
-  // Four values at a time, without a branch: every field of every brick a convert writes comes
-  // through here, and the compiler does not vectorize add() (SSE2 has no 32-bit min or max).
-  static void add4(const float* p, __m128i& lo4, __m128i& hi4, __m128i& odd4, __m128i& finite4, __m128i& inf4,
-                   __m128i& good4) {
+// IntegerScan four values at a time, without a branch, one lane each: every field of every brick
+// a convert writes comes through here, and the compiler does not vectorize add() (SSE2 has no
+// 32-bit min or max).
+struct IntegerScan4 {
+  __m128i lo = _mm_set1_epi32(std::numeric_limits<int32_t>::max());
+  __m128i hi = _mm_set1_epi32(std::numeric_limits<int32_t>::min());
+  __m128i odd = _mm_setzero_si128(), finite = _mm_setzero_si128(), inf = _mm_setzero_si128();
+  __m128i good = _mm_set1_epi32(-1);  // per lane: every value so far +inf or a code
+
+  void add(const float* p) {
     const __m128 v = _mm_loadu_ps(p);
     const __m128i bits = _mm_castps_si128(v);
     const __m128i is_inf = _mm_cmpeq_epi32(bits, _mm_set1_epi32(static_cast<int>(kInfBits)));
@@ -162,22 +170,39 @@ struct IntegerScan {
     const __m128i c = _mm_cvttps_epi32(_mm_and_ps(twice, in_range));
     const __m128i exact = _mm_castps_si128(_mm_and_ps(_mm_cmpeq_ps(_mm_cvtepi32_ps(c), twice), in_range));
     const __m128i negative_zero = _mm_and_si128(_mm_cmpeq_epi32(c, _mm_setzero_si128()), _mm_srai_epi32(bits, 31));
-    good4 = _mm_and_si128(good4, _mm_or_si128(is_inf, _mm_andnot_si128(negative_zero, exact)));
-    inf4 = _mm_or_si128(inf4, is_inf);
-    finite4 = _mm_or_si128(finite4, _mm_andnot_si128(is_inf, _mm_set1_epi32(-1)));
+    good = _mm_and_si128(good, _mm_or_si128(is_inf, _mm_andnot_si128(negative_zero, exact)));
+    inf = _mm_or_si128(inf, is_inf);
+    finite = _mm_or_si128(finite, _mm_andnot_si128(is_inf, _mm_set1_epi32(-1)));
     const __m128i code = _mm_andnot_si128(is_inf, c);
-    odd4 = _mm_or_si128(odd4, code);
+    odd = _mm_or_si128(odd, code);
     const __m128i for_lo =
         _mm_or_si128(code, _mm_and_si128(is_inf, _mm_set1_epi32(std::numeric_limits<int32_t>::max())));
-    const __m128i below = _mm_cmpgt_epi32(lo4, for_lo);
-    lo4 = _mm_or_si128(_mm_and_si128(below, for_lo), _mm_andnot_si128(below, lo4));
+    const __m128i below = _mm_cmpgt_epi32(lo, for_lo);
+    lo = _mm_or_si128(_mm_and_si128(below, for_lo), _mm_andnot_si128(below, lo));
     const __m128i for_hi =
         _mm_or_si128(code, _mm_and_si128(is_inf, _mm_set1_epi32(std::numeric_limits<int32_t>::min())));
-    const __m128i above = _mm_cmpgt_epi32(for_hi, hi4);
-    hi4 = _mm_or_si128(_mm_and_si128(above, for_hi), _mm_andnot_si128(above, hi4));
+    const __m128i above = _mm_cmpgt_epi32(for_hi, hi);
+    hi = _mm_or_si128(_mm_and_si128(above, for_hi), _mm_andnot_si128(above, hi));
   }
-#endif
+  bool all_good() const { return _mm_movemask_epi8(good) == 0xffff; }
+  // The four lanes folded into a scan of one value at a time.
+  void fold_into(IntegerScan& scan) const {
+    alignas(16) std::array<int32_t, 4> l, h, o, f, i;
+    _mm_store_si128(reinterpret_cast<__m128i*>(l.data()), lo);
+    _mm_store_si128(reinterpret_cast<__m128i*>(h.data()), hi);
+    _mm_store_si128(reinterpret_cast<__m128i*>(o.data()), odd);
+    _mm_store_si128(reinterpret_cast<__m128i*>(f.data()), finite);
+    _mm_store_si128(reinterpret_cast<__m128i*>(i.data()), inf);
+    for (size_t k = 0; k < 4; ++k) {
+      scan.lo = std::min(scan.lo, l[k]);
+      scan.hi = std::max(scan.hi, h[k]);
+      scan.odd |= static_cast<uint32_t>(o[k]);
+      scan.finite |= f[k] != 0;
+      scan.inf |= i[k] != 0;
+    }
+  }
 };
+#endif
 
 // Empty when some value is neither +inf nor an exactly representable (half-)integer code; -0.0
 // is excluded because code 0 decodes to +0.0.
@@ -187,26 +212,13 @@ std::optional<IntegerPlan> plan_integer(std::span<const float> values) {
 #if defined(__SSE2__)
   // A field that is not integer-valued shows it within its first block.
   constexpr size_t kBlock = 256;
-  __m128i lo4 = _mm_set1_epi32(scan.lo), hi4 = _mm_set1_epi32(scan.hi), odd4 = _mm_setzero_si128(),
-          finite4 = _mm_setzero_si128(), inf4 = _mm_setzero_si128(), good4 = _mm_set1_epi32(-1);
+  IntegerScan4 lanes;
   while (i + 4 <= values.size()) {
     const size_t end = std::min(values.size() & ~size_t{3}, i + kBlock);
-    for (; i < end; i += 4) scan.add4(values.data() + i, lo4, hi4, odd4, finite4, inf4, good4);
-    if (_mm_movemask_epi8(good4) != 0xffff) return std::nullopt;
+    for (; i < end; i += 4) lanes.add(values.data() + i);
+    if (!lanes.all_good()) return std::nullopt;
   }
-  alignas(16) std::array<int32_t, 4> lo, hi, odd, finite, inf;
-  _mm_store_si128(reinterpret_cast<__m128i*>(lo.data()), lo4);
-  _mm_store_si128(reinterpret_cast<__m128i*>(hi.data()), hi4);
-  _mm_store_si128(reinterpret_cast<__m128i*>(odd.data()), odd4);
-  _mm_store_si128(reinterpret_cast<__m128i*>(finite.data()), finite4);
-  _mm_store_si128(reinterpret_cast<__m128i*>(inf.data()), inf4);
-  for (size_t k = 0; k < 4; ++k) {
-    scan.lo = std::min(scan.lo, lo[k]);
-    scan.hi = std::max(scan.hi, hi[k]);
-    scan.odd |= static_cast<uint32_t>(odd[k]);
-    scan.finite |= finite[k] != 0;
-    scan.inf |= inf[k] != 0;
-  }
+  lanes.fold_into(scan);
 #endif
   for (; i < values.size(); ++i) scan.add(values[i]);
   if (scan.bad != 0 || scan.finite == 0) return std::nullopt;

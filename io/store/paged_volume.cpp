@@ -30,7 +30,6 @@ PagedVolume::PagedVolume(BrickCache& cache)
       indexer_(layout_),
       value_offset_(header_.value_offset),
       value_scale_(header_.value_scale) {
-  for (int i = 0; i < 256; ++i) spread_[static_cast<size_t>(i)] = spread_bits_3(i);
   // Templates from a reference vertex of each class on a large lattice, far from its faces: at
   // scale 0 the shape does not depend on the lattice, and the leaves (children of edge
   // midpoints) are the same levels below.
@@ -122,7 +121,7 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint
   const Band0Template& t = pv.band0_templates_[static_cast<size_t>((v[0] & 3) | (v[1] & 3) << 2 | (v[2] & 3) << 4)];
   const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
   const int64_t mask = pv.layout_.brick_width() - 1;
-  const Near near{v[0] & mask, v[1] & mask, v[2] & mask, mask, pv.spread_.data()};
+  const Near near{v[0] & mask, v[1] & mask, v[2] & mask, mask};
   if (home->narrow() && home->surplus() == nullptr) return band0_narrow_inside(v, t, index, *home, m, near);
   float f[11];
   home->values().visit([&](const auto* values) {

@@ -89,14 +89,14 @@ class PagedVolume {
     // brick, and where there. (Within the data box: the vertex lies inside it by one node.)
     struct Near {
       int64_t lx, ly, lz, mask;  // the vertex within its brick; the brick's width - 1
-      const uint32_t* spread;    // spread_bits_3, by table
       [[gnu::always_inline]] bool in_brick(const std::array<int8_t, 3>& o) const {
         return static_cast<uint64_t>(lx + o[0]) <= static_cast<uint64_t>(mask) &&
                static_cast<uint64_t>(ly + o[1]) <= static_cast<uint64_t>(mask) &&
                static_cast<uint64_t>(lz + o[2]) <= static_cast<uint64_t>(mask);
       }
       [[gnu::always_inline]] uint32_t index(const std::array<int8_t, 3>& o) const {
-        return spread[lx + o[0]] | spread[ly + o[1]] << 1 | spread[lz + o[2]] << 2;
+        return kSpreadBits3[static_cast<size_t>(lx + o[0])] | kSpreadBits3[static_cast<size_t>(ly + o[1])] << 1 |
+               kSpreadBits3[static_cast<size_t>(lz + o[2])] << 2;
       }
     };
     // band0_bounds_inside where the brick's words are narrow and it holds no surplus: in integers.
@@ -149,7 +149,6 @@ class PagedVolume {
   BrickIndexer indexer_;
   double value_offset_ = 0, value_scale_ = 1;
   std::array<Band0Template, 64> band0_templates_;
-  std::array<uint32_t, 256> spread_{};  // spread_bits_3, by table
 };
 
 class BudgetMemo;

@@ -111,14 +111,10 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
   // Walked row by row of the tile's window (x fastest), written at each node's Morton position.
   const Box3 end{std::min(t, band.nodes[0] - origin[0]), std::min(t, band.nodes[1] - origin[1]),
                  std::min(t, band.nodes[2] - origin[2])};
-  // x's Morton bits, once for every row.
-  thread_local std::vector<uint32_t> spread_x;
-  spread_x.resize(static_cast<size_t>(t));
-  for (int64_t x = 0; x < t; ++x) spread_x[static_cast<size_t>(x)] = spread_bits_3(x);
-  const uint32_t* const sx = spread_x.data();
+  const uint32_t* const sx = kSpreadBits3.data();
   for (int64_t z = 0; z < end[2]; ++z)
     for (int64_t y = 0; y < end[1]; ++y) {
-      const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
+      const uint32_t yz = sx[y] << 1 | sx[z] << 2;
       const float* row = &tile.node_value({origin[0], origin[1] + y, origin[2] + z});
       float* const values = f.values.data();
       for (int64_t x = 0; x < end[0]; ++x) values[yz | sx[x]] = row[x];
@@ -134,7 +130,7 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
   }
   for (int64_t z = 0; z < end[2]; ++z)
     for (int64_t y = 0; y < end[1]; ++y) {
-      const uint32_t yz = spread_bits_3(y) << 1 | spread_bits_3(z) << 2;
+      const uint32_t yz = sx[y] << 1 | sx[z] << 2;
       const Record* row = &tile.node_record({origin[0], origin[1] + y, origin[2] + z});
       for (int64_t x = 0; x < end[0]; ++x) {
         const uint32_t m = yz | sx[x];
