@@ -395,9 +395,10 @@ class Converter {
   //     its own to the file, every other rank to an unlinked scratch file of its own; band j+1's
   //     bricks (a pair's) go to another scratch file; all write their tiles' rows of the pass's
   //     hand-over, a named file beside the output, which the next pass reads whole;
-  //  3. an exclusive scan of the ranks' byte counts places each run of band j; every brick's size
-  //     of band j+1, told to all, places each of those; the ranks copy theirs in and hand rank 0
-  //     their bricks' directory entries;
+  //  3. an exclusive scan of the ranks' byte counts places each run of band j; band j+1's bricks
+  //     are placed from the runs of consecutive Morton codes every rank tells all (BrickRun: its
+  //     first code, bricks and bytes); the ranks copy theirs in and hand rank 0 their bricks'
+  //     directory entries;
   //  4. after the last band rank 0 writes the directories and the header.
   // Every step that may fail on one rank alone runs under settle_together: all stop together,
   // and rank 0's temporary files are removed as it unwinds. Coarse bands with fewer tiles than
