@@ -1,8 +1,6 @@
 #include "io/store/brick_pool.h"
 
 #include <algorithm>
-#include <cstdlib>
-#include <new>
 
 #include "isotope/detail/huge_page_allocator.h"
 
@@ -11,7 +9,7 @@ namespace isotope {
 BrickPool::BrickPool(size_t block_bytes) : block_((block_bytes + 63) / 64 * 64) {}
 
 BrickPool::~BrickPool() {
-  for (void* c : chunks_) std::free(c);
+  for (void* c : chunks_) detail::free_huge(c);
 }
 
 void* BrickPool::allocate() {
@@ -24,10 +22,13 @@ void* BrickPool::allocate() {
   if (next_ == nullptr || static_cast<size_t>(end_ - next_) < block_) {
     constexpr size_t kHuge = detail::kHugePage;
     const size_t chunk = std::max<size_t>(8 * kHuge, (block_ + kHuge - 1) / kHuge * kHuge);
-    void* c = std::aligned_alloc(kHuge, chunk);
-    if (!c) throw std::bad_alloc();
-    detail::advise_huge_pages(c, chunk);
-    chunks_.push_back(c);
+    void* c = detail::allocate_huge(chunk);
+    try {
+      chunks_.push_back(c);
+    } catch (...) {
+      detail::free_huge(c);
+      throw;
+    }
     next_ = static_cast<char*>(c);
     end_ = next_ + chunk;
   }

@@ -15,6 +15,8 @@
 #include <utility>
 #include <vector>
 
+#include "isotope/detail/huge_page_allocator.h"
+
 namespace isotope::tools {
 namespace {
 
@@ -205,7 +207,11 @@ void ResponseBudget::release(size_t bytes) {
   held_ -= bytes;
 }
 
-MemoryReturner::MemoryReturner() : thread_([this] { run(); }) {}
+namespace {
+constexpr size_t kKeptBusy = size_t{256} << 20, kKeptIdle = size_t{64} << 20;
+}  // namespace
+
+MemoryReturner::MemoryReturner() : thread_([this] { run(); }) { detail::keep_freed_huge_blocks(kKeptBusy); }
 
 MemoryReturner::~MemoryReturner() {
   {
@@ -221,15 +227,25 @@ void MemoryReturner::busy() {
 }
 
 void MemoryReturner::run() {
-  constexpr size_t kKeptBusy = size_t{256} << 20, kKeptIdle = size_t{64} << 20;
   // Idle: ten seconds without an extraction. A viewer's user pauses between requests for seconds;
   // within them the next request finds the memory the last one freed (docs/SERVE.md).
   constexpr auto kIdleAfter = std::chrono::seconds(10);
+  // malloc_trim walks the whole heap and advises every free page in it, even those it gave back
+  // before (what it gave back still counts as free): once for each extraction seen and level kept,
+  // not every quarter second of an idle server.
+  int64_t trimmed_after = -1;
+  size_t trimmed_to = 0;
   std::unique_lock<std::mutex> lock(mutex_);
   while (!wake_.wait_for(lock, std::chrono::milliseconds(250), [this] { return stop_; })) {
-    const auto since_busy = Clock::now().time_since_epoch() - std::chrono::nanoseconds(last_busy_ns_.load());
+    const int64_t last_busy = last_busy_ns_.load();
+    const auto since_busy = Clock::now().time_since_epoch() - std::chrono::nanoseconds(last_busy);
     const size_t kept = since_busy > kIdleAfter ? kKeptIdle : kKeptBusy;
-    if (mallinfo2().fordblks > kept) malloc_trim(0);
+    detail::give_back_huge_blocks(kept);
+    if ((last_busy != trimmed_after || kept != trimmed_to) && mallinfo2().fordblks > kept) {
+      malloc_trim(0);
+      trimmed_after = last_busy;
+      trimmed_to = kept;
+    }
   }
 }
 

@@ -25,6 +25,21 @@ inline void advise_huge_pages(void* p, size_t bytes) {
   if (end > first) madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
 }
 
+// A block of at least BYTES, aligned to 2 MB and advised for huge pages; throws std::bad_alloc.
+// By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
+// store's own, outside malloc's heap: a freed block is kept (up to the bytes given) and handed out
+// again whole or in part, so a process that repeats the same work (a server answering the same
+// request) finds its large arrays where the last run left them, already faulted in, whatever
+// smaller allocations came and went in between. In malloc's one heap, a small long-lived allocation
+// in the hole a freed array left pushes the next array to fresh pages.
+void* allocate_huge(size_t bytes);
+void free_huge(void* p) noexcept;  // P from allocate_huge
+// Keeps up to BYTES of freed huge blocks from now on (0: none, and malloc again for new blocks).
+void keep_freed_huge_blocks(size_t bytes);
+// Gives kept blocks back to the kernel until at most KEEP bytes of them are left.
+void give_back_huge_blocks(size_t keep) noexcept;
+size_t kept_huge_block_bytes() noexcept;
+
 template <class T>
 struct HugePageAllocator {
   using value_type = T;
@@ -40,13 +55,14 @@ struct HugePageAllocator {
       if (!p) throw std::bad_alloc();
       return static_cast<T*>(p);
     }
-    const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
-    void* p = std::aligned_alloc(kHugePage, rounded);
-    if (!p) throw std::bad_alloc();
-    advise_huge_pages(p, rounded);
-    return static_cast<T*>(p);
+    return static_cast<T*>(allocate_huge(bytes));
   }
-  void deallocate(T* p, size_t) noexcept { std::free(p); }
+  void deallocate(T* p, size_t n) noexcept {
+    if (n * sizeof(T) < kHugePage)
+      std::free(p);
+    else
+      free_huge(p);
+  }
 
   template <class U>
   bool operator==(const HugePageAllocator<U>&) const noexcept {

@@ -1,0 +1,153 @@
+// The huge-block store behind detail::HugePageAllocator (isotope/detail/huge_page_allocator.h).
+#include <sys/mman.h>
+
+#include <cstdlib>
+#include <iterator>
+#include <map>
+#include <mutex>
+#include <new>
+#include <unordered_map>
+
+#include "isotope/detail/huge_page_allocator.h"
+
+namespace isotope::detail {
+namespace {
+
+constexpr uintptr_t kHugeMask = kHugePage - 1;
+
+size_t round_to_huge_pages(size_t bytes) { return (bytes + kHugeMask) & ~kHugeMask; }
+
+// BYTES (a multiple of 2 MB) mapped at a 2 MB boundary: one more huge page is mapped, and what lies
+// before the boundary and after the block unmapped again.
+void* map_aligned(size_t bytes) {
+  const size_t span = bytes + kHugePage;
+  void* m = mmap(nullptr, span, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (m == MAP_FAILED) return nullptr;
+  const auto begin = reinterpret_cast<uintptr_t>(m);
+  const uintptr_t first = (begin + kHugeMask) & ~kHugeMask, end = first + bytes;
+  if (first > begin) munmap(m, first - begin);
+  if (begin + span > end) munmap(reinterpret_cast<void*>(end), begin + span - end);
+  return reinterpret_cast<void*>(first);
+}
+
+struct HugeBlocks {
+  std::mutex mutex;
+  size_t cap = 0;                              // bytes of freed blocks kept; 0: malloc's blocks
+  std::unordered_map<uintptr_t, size_t> live;  // blocks of the store's own, handed out
+  std::map<uintptr_t, size_t> kept;            // freed ones, by address, neighbours joined
+  size_t kept_bytes = 0;
+
+  // The smallest kept range that holds BYTES, its rest kept; 0 if none does.
+  uintptr_t take(size_t bytes) {
+    auto best = kept.end();
+    for (auto it = kept.begin(); it != kept.end(); ++it)
+      if (it->second >= bytes && (best == kept.end() || it->second < best->second)) best = it;
+    if (best == kept.end()) return 0;
+    const uintptr_t p = best->first;
+    const size_t rest = best->second - bytes;
+    kept.erase(best);
+    if (rest > 0) kept.emplace(p + bytes, rest);
+    kept_bytes -= bytes;
+    return p;
+  }
+
+  void keep(uintptr_t p, size_t bytes) {
+    auto next = kept.lower_bound(p);
+    if (next != kept.end() && p + bytes == next->first) {
+      bytes += next->second;
+      next = kept.erase(next);
+    }
+    if (next != kept.begin()) {
+      const auto before = std::prev(next);
+      if (before->first + before->second == p) {
+        before->second += bytes;
+        return;
+      }
+    }
+    kept.emplace(p, bytes);
+  }
+
+  // Unmaps the largest kept ranges first until at most KEEP bytes are kept.
+  void give_back(size_t keep_at_most) {
+    while (kept_bytes > keep_at_most) {
+      auto largest = kept.begin();
+      for (auto it = kept.begin(); it != kept.end(); ++it)
+        if (it->second > largest->second) largest = it;
+      munmap(reinterpret_cast<void*>(largest->first), largest->second);
+      kept_bytes -= largest->second;
+      kept.erase(largest);
+    }
+  }
+};
+
+HugeBlocks& huge_blocks() {
+  static HugeBlocks* blocks = new HugeBlocks;  // never destroyed: blocks may be freed at exit
+  return *blocks;
+}
+
+}  // namespace
+
+void* allocate_huge(size_t bytes) {
+  const size_t rounded = round_to_huge_pages(bytes);
+  HugeBlocks& b = huge_blocks();
+  {
+    const std::lock_guard<std::mutex> lock(b.mutex);
+    if (b.cap > 0) {
+      uintptr_t p = b.take(rounded);
+      if (p == 0) {
+        void* m = map_aligned(rounded);
+        if (!m) throw std::bad_alloc();
+        advise_huge_pages(m, rounded);
+        p = reinterpret_cast<uintptr_t>(m);
+      }
+      b.live.emplace(p, rounded);
+      return reinterpret_cast<void*>(p);
+    }
+  }
+  void* p = std::aligned_alloc(kHugePage, rounded);
+  if (!p) throw std::bad_alloc();
+  advise_huge_pages(p, rounded);
+  return p;
+}
+
+void free_huge(void* p) noexcept {
+  if (!p) return;
+  HugeBlocks& b = huge_blocks();
+  {
+    const std::lock_guard<std::mutex> lock(b.mutex);
+    const auto it = b.live.find(reinterpret_cast<uintptr_t>(p));
+    if (it != b.live.end()) {
+      const size_t bytes = it->second;
+      b.live.erase(it);
+      if (b.kept_bytes + bytes > b.cap) {
+        munmap(p, bytes);
+      } else {
+        b.keep(reinterpret_cast<uintptr_t>(p), bytes);
+        b.kept_bytes += bytes;
+      }
+      return;
+    }
+  }
+  std::free(p);  // from malloc, before the store kept blocks
+}
+
+void keep_freed_huge_blocks(size_t bytes) {
+  HugeBlocks& b = huge_blocks();
+  const std::lock_guard<std::mutex> lock(b.mutex);
+  b.cap = bytes;
+  b.give_back(bytes);
+}
+
+void give_back_huge_blocks(size_t keep) noexcept {
+  HugeBlocks& b = huge_blocks();
+  const std::lock_guard<std::mutex> lock(b.mutex);
+  b.give_back(keep);
+}
+
+size_t kept_huge_block_bytes() noexcept {
+  HugeBlocks& b = huge_blocks();
+  const std::lock_guard<std::mutex> lock(b.mutex);
+  return b.kept_bytes;
+}
+
+}  // namespace isotope::detail

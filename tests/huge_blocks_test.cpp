@@ -1,0 +1,119 @@
+// The huge-block store (isotope/detail/huge_page_allocator.h): once asked to keep freed blocks,
+// it hands a freed block out again where it lay, already faulted in, whole or in part, and keeps
+// no more than it was told.
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+
+#include <cstdint>
+#include <cstring>
+
+#include "isotope/detail/huge_page_allocator.h"
+
+namespace isotope::detail {
+namespace {
+
+constexpr size_t kMB = size_t{1} << 20;
+
+int64_t minor_faults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
+bool on_huge_page_boundary(const void* p) { return reinterpret_cast<uintptr_t>(p) % kHugePage == 0; }
+
+// Every test starts and ends with nothing kept and malloc's blocks.
+class HugeBlocks : public testing::Test {
+ protected:
+  void SetUp() override { keep_freed_huge_blocks(0); }
+  void TearDown() override { keep_freed_huge_blocks(0); }
+};
+
+TEST_F(HugeBlocks, AFreedBlockIsHandedOutAgainWhereItLayWithItsPagesFaultedIn) {
+  keep_freed_huge_blocks(64 * kMB);
+  char* first = static_cast<char*>(allocate_huge(6 * kMB));
+  ASSERT_TRUE(on_huge_page_boundary(first));
+  const int64_t before_fresh = minor_faults();
+  std::memset(first, 1, 6 * kMB);
+  const int64_t fresh = minor_faults() - before_fresh;
+  free_huge(first);
+  EXPECT_EQ(kept_huge_block_bytes(), 6 * kMB);
+
+  char* again = static_cast<char*>(allocate_huge(5 * kMB + 1));  // rounds to the same 6 MB
+  EXPECT_EQ(again, first);
+  EXPECT_EQ(kept_huge_block_bytes(), 0u);
+  const int64_t before_reuse = minor_faults();
+  std::memset(again, 2, 6 * kMB);
+  EXPECT_EQ(minor_faults() - before_reuse, 0) << "touching 6 MB fresh took " << fresh << " faults";
+  free_huge(again);
+}
+
+TEST_F(HugeBlocks, ASmallerRequestTakesPartOfAKeptBlockAndFreedNeighboursJoin) {
+  keep_freed_huge_blocks(64 * kMB);
+  char* block = static_cast<char*>(allocate_huge(8 * kMB));
+  free_huge(block);
+  char* head = static_cast<char*>(allocate_huge(2 * kMB));
+  EXPECT_EQ(head, block);
+  EXPECT_EQ(kept_huge_block_bytes(), 6 * kMB);
+  char* tail = static_cast<char*>(allocate_huge(6 * kMB));
+  EXPECT_EQ(tail, block + 2 * kMB);
+  EXPECT_EQ(kept_huge_block_bytes(), 0u);
+  free_huge(tail);
+  free_huge(head);
+  EXPECT_EQ(kept_huge_block_bytes(), 8 * kMB);
+  char* whole = static_cast<char*>(allocate_huge(8 * kMB));  // only the joined pieces hold it
+  EXPECT_EQ(whole, block);
+  free_huge(whole);
+}
+
+TEST_F(HugeBlocks, TheSmallestKeptBlockThatHoldsARequestServesIt) {
+  keep_freed_huge_blocks(64 * kMB);
+  // Mapped one after the other, the small block lies between the large ones, whichever way the
+  // kernel places mappings: the first that fits, from either end, is a large one. The spacers keep
+  // freed blocks from joining.
+  void* large_one = allocate_huge(8 * kMB);
+  void* spacer_one = allocate_huge(2 * kMB);
+  void* small = allocate_huge(4 * kMB);
+  void* spacer_two = allocate_huge(2 * kMB);
+  void* large_two = allocate_huge(8 * kMB);
+  free_huge(large_one);
+  free_huge(small);
+  free_huge(large_two);
+  void* taken = allocate_huge(4 * kMB);
+  EXPECT_EQ(taken, small);
+  EXPECT_EQ(kept_huge_block_bytes(), 16 * kMB);
+  free_huge(taken);
+  free_huge(spacer_one);
+  free_huge(spacer_two);
+}
+
+TEST_F(HugeBlocks, NoMoreIsKeptThanAskedAndTheRestGoesBack) {
+  keep_freed_huge_blocks(4 * kMB);
+  void* big = allocate_huge(8 * kMB);
+  free_huge(big);
+  EXPECT_EQ(kept_huge_block_bytes(), 0u) << "a block beyond what may be kept is unmapped";
+  void* a = allocate_huge(2 * kMB);
+  void* b = allocate_huge(2 * kMB);
+  free_huge(a);
+  free_huge(b);
+  EXPECT_EQ(kept_huge_block_bytes(), 4 * kMB);
+  give_back_huge_blocks(2 * kMB);
+  EXPECT_LE(kept_huge_block_bytes(), 2 * kMB);
+  give_back_huge_blocks(0);
+  EXPECT_EQ(kept_huge_block_bytes(), 0u);
+}
+
+TEST_F(HugeBlocks, ABlockMallocGaveBeforeKeepingIsFreedByMalloc) {
+  void* from_malloc = allocate_huge(4 * kMB);
+  EXPECT_TRUE(on_huge_page_boundary(from_malloc));
+  keep_freed_huge_blocks(64 * kMB);
+  free_huge(from_malloc);  // under ASan, a block freed by the wrong hand is an error
+  EXPECT_EQ(kept_huge_block_bytes(), 0u);
+  keep_freed_huge_blocks(0);
+  void* again_malloc = allocate_huge(2 * kMB);
+  free_huge(again_malloc);
+  EXPECT_EQ(kept_huge_block_bytes(), 0u);
+}
+
+}  // namespace
+}  // namespace isotope::detail
