@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <vector>
 
 #include "isotope/detail/huge_page_allocator.h"
 
@@ -66,6 +67,52 @@ TEST_F(HugeBlocks, ASmallerRequestTakesPartOfAKeptBlockAndFreedNeighboursJoin) {
   free_huge(whole);
 }
 
+TEST_F(HugeBlocks, APieceFreedBetweenItsKeptNeighboursJoinsBoth) {
+  keep_freed_huge_blocks(64 * kMB);
+  char* block = static_cast<char*>(allocate_huge(6 * kMB));
+  free_huge(block);
+  char* head = static_cast<char*>(allocate_huge(2 * kMB));
+  char* middle = static_cast<char*>(allocate_huge(2 * kMB));
+  char* tail = static_cast<char*>(allocate_huge(2 * kMB));
+  ASSERT_EQ(head, block);
+  ASSERT_EQ(middle, block + 2 * kMB);
+  ASSERT_EQ(tail, block + 4 * kMB);
+  free_huge(head);  // and the tail: 4 MB kept in two pieces, 2 MB apart
+  free_huge(tail);
+  EXPECT_EQ(kept_huge_block_bytes(), 4 * kMB);
+  char* elsewhere = static_cast<char*>(allocate_huge(4 * kMB));
+  EXPECT_TRUE(elsewhere < block || elsewhere >= block + 6 * kMB) << "two pieces 2 MB apart held 4 MB";
+  EXPECT_EQ(kept_huge_block_bytes(), 4 * kMB);
+  free_huge(middle);  // joins the head before it and the tail after it
+  EXPECT_EQ(allocate_huge(6 * kMB), block);
+  free_huge(block);
+  free_huge(elsewhere);
+}
+
+TEST_F(HugeBlocks, FreedInAnyOrderThePiecesOfABlockMakeItWholeAgain) {
+  keep_freed_huge_blocks(64 * kMB);
+  char* block = static_cast<char*>(allocate_huge(6 * kMB));
+  free_huge(block);
+  char* pieces[3] = {static_cast<char*>(allocate_huge(2 * kMB)), static_cast<char*>(allocate_huge(2 * kMB)),
+                     static_cast<char*>(allocate_huge(2 * kMB))};
+  ASSERT_EQ(pieces[0], block);
+  // The tail first, then the head (joins the one after it: no), then the middle (joins both).
+  free_huge(pieces[2]);
+  free_huge(pieces[0]);
+  free_huge(pieces[1]);
+  EXPECT_EQ(kept_huge_block_bytes(), 6 * kMB);
+  EXPECT_EQ(allocate_huge(6 * kMB), block);
+  free_huge(block);
+  // The head first, then the middle (joins the head before it), then the tail.
+  for (char*& p : pieces) p = static_cast<char*>(allocate_huge(2 * kMB));
+  ASSERT_EQ(pieces[0], block);
+  free_huge(pieces[0]);
+  free_huge(pieces[1]);
+  free_huge(pieces[2]);
+  EXPECT_EQ(allocate_huge(6 * kMB), block);
+  free_huge(block);
+}
+
 TEST_F(HugeBlocks, TheSmallestKeptBlockThatHoldsARequestServesIt) {
   keep_freed_huge_blocks(64 * kMB);
   // Mapped one after the other, the small block lies between the large ones, whichever way the
@@ -113,6 +160,26 @@ TEST_F(HugeBlocks, ABlockMallocGaveBeforeKeepingIsFreedByMalloc) {
   void* again_malloc = allocate_huge(2 * kMB);
   free_huge(again_malloc);
   EXPECT_EQ(kept_huge_block_bytes(), 0u);
+}
+
+TEST_F(HugeBlocks, ABlockOfTheStoreStillInUseWhenKeepingStopsIsUnmappedNotGivenToMalloc) {
+  keep_freed_huge_blocks(64 * kMB);
+  char* p = static_cast<char*>(allocate_huge(4 * kMB));
+  std::memset(p, 1, 4 * kMB);
+  keep_freed_huge_blocks(0);
+  free_huge(p);  // std::free of a mapping aborts (glibc: "free(): invalid pointer"), as ASan reports
+  EXPECT_EQ(kept_huge_block_bytes(), 0u);
+}
+
+// The allocator sends arrays of 2 MB and more to the store, smaller ones to malloc, both ways.
+TEST_F(HugeBlocks, TheAllocatorSendsLargeArraysThroughTheStoreAndSmallOnesToMalloc) {
+  keep_freed_huge_blocks(64 * kMB);
+  {
+    std::vector<char, HugePageAllocator<char>> large(kHugePage), small(kHugePage - 1);
+    EXPECT_TRUE(on_huge_page_boundary(large.data()));
+    EXPECT_EQ(kept_huge_block_bytes(), 0u);
+  }
+  EXPECT_EQ(kept_huge_block_bytes(), kHugePage) << "the large array's block kept, the small one freed by malloc";
 }
 
 }  // namespace

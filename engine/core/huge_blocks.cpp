@@ -1,12 +1,12 @@
 // The huge-block store behind detail::HugePageAllocator (isotope/detail/huge_page_allocator.h).
 #include <sys/mman.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <iterator>
 #include <map>
 #include <mutex>
 #include <new>
-#include <unordered_map>
 
 #include "isotope/detail/huge_page_allocator.h"
 
@@ -30,11 +30,14 @@ void* map_aligned(size_t bytes) {
   return reinterpret_cast<void*>(first);
 }
 
+// Both maps hold std::map nodes, moved between them with extract() and insert(): freeing a block
+// allocates nothing (free_huge is noexcept), and taking one allocates only the entry in `live`.
 struct HugeBlocks {
+  using Ranges = std::map<uintptr_t, size_t>;  // address -> bytes
   std::mutex mutex;
-  size_t cap = 0;                              // bytes of freed blocks kept; 0: malloc's blocks
-  std::unordered_map<uintptr_t, size_t> live;  // blocks of the store's own, handed out
-  std::map<uintptr_t, size_t> kept;            // freed ones, by address, neighbours joined
+  size_t cap = 0;  // bytes of freed blocks kept; 0: malloc's blocks
+  Ranges live;     // blocks of the store's own, handed out
+  Ranges kept;     // freed ones, neighbours joined
   size_t kept_bytes = 0;
 
   // The smallest kept range that holds BYTES, its rest kept; 0 if none does.
@@ -43,33 +46,38 @@ struct HugeBlocks {
     for (auto it = kept.begin(); it != kept.end(); ++it)
       if (it->second >= bytes && (best == kept.end() || it->second < best->second)) best = it;
     if (best == kept.end()) return 0;
-    const uintptr_t p = best->first;
-    const size_t rest = best->second - bytes;
-    kept.erase(best);
-    if (rest > 0) kept.emplace(p + bytes, rest);
+    Ranges::node_type range = kept.extract(best);
+    const uintptr_t p = range.key();
+    if (range.mapped() > bytes) {
+      range.mapped() -= bytes;
+      range.key() = p + bytes;
+      kept.insert(std::move(range));
+    }
     kept_bytes -= bytes;
     return p;
   }
 
-  void keep(uintptr_t p, size_t bytes) {
-    auto next = kept.lower_bound(p);
-    if (next != kept.end() && p + bytes == next->first) {
-      bytes += next->second;
+  // Keeps a freed block, joined with the kept ranges it touches.
+  void keep(Ranges::node_type block) {
+    kept_bytes += block.mapped();
+    auto next = kept.lower_bound(block.key());
+    if (next != kept.end() && block.key() + block.mapped() == next->first) {
+      block.mapped() += next->second;
       next = kept.erase(next);
     }
     if (next != kept.begin()) {
       const auto before = std::prev(next);
-      if (before->first + before->second == p) {
-        before->second += bytes;
+      if (before->first + before->second == block.key()) {
+        before->second += block.mapped();
         return;
       }
     }
-    kept.emplace(p, bytes);
+    kept.insert(next, std::move(block));
   }
 
   // Unmaps the largest kept ranges first until at most KEEP bytes are kept.
   void give_back(size_t keep_at_most) {
-    while (kept_bytes > keep_at_most) {
+    while (kept_bytes > keep_at_most && !kept.empty()) {
       auto largest = kept.begin();
       for (auto it = kept.begin(); it != kept.end(); ++it)
         if (it->second > largest->second) largest = it;
@@ -88,7 +96,7 @@ HugeBlocks& huge_blocks() {
 }  // namespace
 
 void* allocate_huge(size_t bytes) {
-  const size_t rounded = round_to_huge_pages(bytes);
+  const size_t rounded = std::max<size_t>(kHugePage, round_to_huge_pages(bytes));
   HugeBlocks& b = huge_blocks();
   {
     const std::lock_guard<std::mutex> lock(b.mutex);
@@ -96,11 +104,20 @@ void* allocate_huge(size_t bytes) {
       uintptr_t p = b.take(rounded);
       if (p == 0) {
         void* m = map_aligned(rounded);
+        if (!m) {  // the address space or the commit limit: what is kept may be what is missing
+          b.give_back(0);
+          m = map_aligned(rounded);
+        }
         if (!m) throw std::bad_alloc();
         advise_huge_pages(m, rounded);
         p = reinterpret_cast<uintptr_t>(m);
       }
-      b.live.emplace(p, rounded);
+      try {
+        b.live.emplace(p, rounded);
+      } catch (...) {
+        munmap(reinterpret_cast<void*>(p), rounded);
+        throw;
+      }
       return reinterpret_cast<void*>(p);
     }
   }
@@ -117,14 +134,11 @@ void free_huge(void* p) noexcept {
     const std::lock_guard<std::mutex> lock(b.mutex);
     const auto it = b.live.find(reinterpret_cast<uintptr_t>(p));
     if (it != b.live.end()) {
-      const size_t bytes = it->second;
-      b.live.erase(it);
-      if (b.kept_bytes + bytes > b.cap) {
-        munmap(p, bytes);
-      } else {
-        b.keep(reinterpret_cast<uintptr_t>(p), bytes);
-        b.kept_bytes += bytes;
-      }
+      HugeBlocks::Ranges::node_type block = b.live.extract(it);
+      if (b.kept_bytes + block.mapped() > b.cap)
+        munmap(p, block.mapped());
+      else
+        b.keep(std::move(block));
       return;
     }
   }

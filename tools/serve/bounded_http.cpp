@@ -209,9 +209,19 @@ void ResponseBudget::release(size_t bytes) {
 
 namespace {
 constexpr size_t kKeptBusy = size_t{256} << 20, kKeptIdle = size_t{64} << 20;
+
+// The huge-block store keeps freed blocks while some returner runs (servers, one each).
+std::mutex returners_mutex;
+int returners = 0;
 }  // namespace
 
-MemoryReturner::MemoryReturner() : thread_([this] { run(); }) { detail::keep_freed_huge_blocks(kKeptBusy); }
+MemoryReturner::MemoryReturner() {
+  {
+    const std::lock_guard<std::mutex> lock(returners_mutex);
+    if (returners++ == 0) detail::keep_freed_huge_blocks(kKeptBusy);
+  }
+  thread_ = std::thread([this] { run(); });
+}
 
 MemoryReturner::~MemoryReturner() {
   {
@@ -220,6 +230,8 @@ MemoryReturner::~MemoryReturner() {
   }
   wake_.notify_one();
   thread_.join();
+  const std::lock_guard<std::mutex> lock(returners_mutex);
+  if (--returners == 0) detail::keep_freed_huge_blocks(0);
 }
 
 void MemoryReturner::busy() {
@@ -230,21 +242,22 @@ void MemoryReturner::run() {
   // Idle: ten seconds without an extraction. A viewer's user pauses between requests for seconds;
   // within them the next request finds the memory the last one freed (docs/SERVE.md).
   constexpr auto kIdleAfter = std::chrono::seconds(10);
-  // malloc_trim walks the whole heap and advises every free page in it, even those it gave back
-  // before (what it gave back still counts as free): once for each extraction seen and level kept,
-  // not every quarter second of an idle server.
-  int64_t trimmed_after = -1;
-  size_t trimmed_to = 0;
+  // malloc_trim walks the whole heap and advises every free page in it, those it gave back before
+  // included, which still count as free (mallinfo2's fordblks): so not whenever fordblks is above
+  // what may be kept, but when what was freed since the last trim is. `given_back` follows fordblks
+  // down from the last trim (allocations take the given-back pages first), so fordblks - given_back
+  // is what has been freed and kept since.
+  size_t given_back = 0;
   std::unique_lock<std::mutex> lock(mutex_);
   while (!wake_.wait_for(lock, std::chrono::milliseconds(250), [this] { return stop_; })) {
-    const int64_t last_busy = last_busy_ns_.load();
-    const auto since_busy = Clock::now().time_since_epoch() - std::chrono::nanoseconds(last_busy);
+    const auto since_busy = Clock::now().time_since_epoch() - std::chrono::nanoseconds(last_busy_ns_.load());
     const size_t kept = since_busy > kIdleAfter ? kKeptIdle : kKeptBusy;
     detail::give_back_huge_blocks(kept);
-    if ((last_busy != trimmed_after || kept != trimmed_to) && mallinfo2().fordblks > kept) {
+    const size_t free_bytes = mallinfo2().fordblks;
+    given_back = std::min(given_back, free_bytes);
+    if (free_bytes - given_back > kept) {
       malloc_trim(0);
-      trimmed_after = last_busy;
-      trimmed_to = kept;
+      given_back = mallinfo2().fordblks;
     }
   }
 }
