@@ -43,7 +43,7 @@ void march_block(const float* f, int64_t stride, const Coord& base, const std::a
                              stride * stride + 1,
                              stride * stride + stride,
                              stride * stride + stride + 1};
-  memo.start(base);
+  memo.start(base, cells);
   for (int64_t z = 0; z < cells[2]; ++z)
     for (int64_t y = 0; y < cells[1]; ++y)
       for (int64_t x = 0; x < cells[0]; ++x) {

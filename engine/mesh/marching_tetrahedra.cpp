@@ -159,6 +159,12 @@ void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<
     uint64_t& slot = memo->slot(corners[a], corners[b]);
     if (slot >> 32 == memo->stamp()) {
       v[i] = static_cast<uint32_t>(slot);
+    } else if (memo->interior(corners[a], corners[b])) {
+      // Seen here first and nowhere else: a new vertex, numbered as the welding table would have.
+      v[i] = static_cast<uint32_t>(mesh_.positions.size());
+      mesh_.positions.push_back(cutter_.point(corners[a], values[a], corners[b], values[b]));
+      if (keep_keys_) keys_.push_back(cutter_.edge_key(corners[a], corners[b]));
+      slot = memo->stamp() << 32 | v[i];
     } else {
       v[i] = vertex(cutter_.edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
       slot = memo->stamp() << 32 | v[i];

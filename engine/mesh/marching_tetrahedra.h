@@ -24,8 +24,10 @@ class EdgeMemo {
  public:
   // A box of at most `cells` cells per axis.
   explicit EdgeMemo(int64_t cells) : width_(2 * cells + 1), slots_(static_cast<size_t>(width_ * width_ * width_), 0) {}
-  void start(const Coord& base) {
+  // A new box: CELLS per axis from BASE.
+  void start(const Coord& base, const std::array<int64_t, 3>& cells) {
     base2_ = {2 * base[0], 2 * base[1], 2 * base[2]};
+    end2_ = {2 * cells[0], 2 * cells[1], 2 * cells[2]};
     if (++stamp_ == 0) {  // the stamps wrapped: no slot may look current
       std::fill(slots_.begin(), slots_.end(), 0);
       stamp_ = 1;
@@ -37,10 +39,16 @@ class EdgeMemo {
     return slots_[static_cast<size_t>((z * width_ + y) * width_ + x)];
   }
   uint64_t stamp() const { return stamp_; }
+  // Edge (p, q) lies inside the box, on none of its faces: only the box's own cells have it, so no
+  // other box will ask for its vertex.
+  bool interior(const Coord& p, const Coord& q) const {
+    const int64_t x = p[0] + q[0] - base2_[0], y = p[1] + q[1] - base2_[1], z = p[2] + q[2] - base2_[2];
+    return x > 0 && x < end2_[0] && y > 0 && y < end2_[1] && z > 0 && z < end2_[2];
+  }
 
  private:
   int64_t width_;
-  Coord base2_{};
+  Coord base2_{}, end2_{};
   uint64_t stamp_ = 0;
   std::vector<uint64_t> slots_;
 };
