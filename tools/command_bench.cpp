@@ -13,8 +13,8 @@ Command add_bench_command(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "bench",
       "Time extraction on a fixed suite against full-resolution marching tetrahedra, in the same run: from memory,\n"
-      "from a warm and a cold store, one shot from the raw file; convert against its ceiling; scikit-image beside;\n"
-      "the paper's Table 1 and VTK Flying Edges reference times; the targets met or missed");
+      "from a warm and a cold store, one shot from the raw file; convert against its ceiling; scikit-image and\n"
+      "VTK Flying Edges on the same array; the paper's Table 1; the targets met or missed");
   cmd->add_flag("--quick", a->quick, "The small suite (algebraic 65^3 and 257^3, the shared volumes): a few minutes");
   cmd->add_option("--json", a->json, "Also write every number as JSON")->type_name("F.json");
   cmd->add_option("--threads", a->threads, "Threads for the parallel rows (0 = all cores)")
