@@ -18,10 +18,7 @@ namespace isotope {
 namespace {
 
 // A vertex that the neighbouring slab may also have: its index in its slab and its edge key.
-struct PlaneVertex {
-  uint32_t local;
-  uint64_t key;
-};
+using PlaneVertex = MeshBuilder::PlaneVertex;
 
 struct Slab {
   Mesh mesh;
@@ -41,18 +38,11 @@ Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, BuilderPool& bui
                   bool below, bool above) {
   std::unique_ptr<MeshBuilder> builder =
       builders.take([&] { return std::make_unique<MeshBuilder>(plan.iso, plan.side, plan.origin, plan.spacing); });
-  builder->keep_keys();
+  builder->keep_plane_keys(below ? 2 * z_begin : -1, above ? 2 * z_end : -1);
   march(z_begin, z_end, *builder);
-  Slab slab{builder->take(), {}, {}};
-  const std::vector<uint64_t> keys = builder->take_keys();
+  Slab slab{builder->take(), builder->take_plane_keys(0), builder->take_plane_keys(1)};
   builder->reset();
   builders.give(std::move(builder));
-  if (!below && !above) return slab;
-  for (size_t k = 0; k < keys.size(); ++k) {
-    const int64_t z = edge_key_sum(keys[k], plan.side)[2];
-    if (below && z == 2 * z_begin) slab.bottom.push_back({static_cast<uint32_t>(k), keys[k]});
-    if (above && z == 2 * z_end) slab.top.push_back({static_cast<uint32_t>(k), keys[k]});
-  }
   return slab;
 }
 

@@ -137,11 +137,21 @@ Coord edge_key_sum(uint64_t key, int64_t side) {
 }
 
 uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
-  const uint32_t fresh = static_cast<uint32_t>(mesh_.positions.size());
-  const uint32_t found = map_->find_or_insert(key, fresh);
-  if (found != EdgeVertexMap::kAbsent) return found;
+  const uint32_t found = map_->find_or_insert(key, static_cast<uint32_t>(mesh_.positions.size()));
+  return found != EdgeVertexMap::kAbsent ? found : new_vertex(key, p, fp, q, fq);
+}
+
+uint32_t MeshBuilder::new_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
+  const auto fresh = static_cast<uint32_t>(mesh_.positions.size());
   mesh_.positions.push_back(cutter_.point(p, fp, q, fq));
-  if (keep_keys_) keys_.push_back(key);
+  const int64_t z2 = p[2] + q[2];
+  const bool on_plane = z2 == plane_z2_[0] || z2 == plane_z2_[1];
+  if (keep_keys_ || on_plane) {
+    if (key == 0) key = cutter_.edge_key(p, q);
+    if (keep_keys_) keys_.push_back(key);
+    for (size_t i = 0; i < 2; ++i)
+      if (z2 == plane_z2_[i]) plane_keys_[i].push_back({fresh, key});
+  }
   return fresh;
 }
 
@@ -161,9 +171,7 @@ void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<
       v[i] = static_cast<uint32_t>(slot);
     } else if (memo->interior(corners[a], corners[b])) {
       // Seen here first and nowhere else: a new vertex, numbered as the welding table would have.
-      v[i] = static_cast<uint32_t>(mesh_.positions.size());
-      mesh_.positions.push_back(cutter_.point(corners[a], values[a], corners[b], values[b]));
-      if (keep_keys_) keys_.push_back(cutter_.edge_key(corners[a], corners[b]));
+      v[i] = new_vertex(0, corners[a], values[a], corners[b], values[b]);
       slot = memo->stamp() << 32 | v[i];
     } else {
       v[i] = vertex(cutter_.edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);

@@ -106,15 +106,29 @@ class MeshBuilder {
   // engine/extract/full_resolution.cpp).
   void keep_keys() { keep_keys_ = true; }
   std::vector<uint64_t> take_keys() { return std::move(keys_); }
+  // A vertex on a plane z = const, with its edge key.
+  struct PlaneVertex {
+    uint32_t local;  // its index in this builder's mesh
+    uint64_t key;
+  };
+  // Only the keys of the vertices whose edge (p, q) has p_z + q_z = BOTTOM or = TOP (-1: neither),
+  // each list in vertex order: what a slab shares with the slabs below and above it
+  // (engine/extract/slab_march.cpp), without a key for every vertex.
+  void keep_plane_keys(int64_t bottom, int64_t top) { plane_z2_ = {bottom, top}; }
+  std::vector<PlaneVertex> take_plane_keys(int plane) { return std::move(plane_keys_[static_cast<size_t>(plane)]); }
   // Ready for another mesh with the same isovalue and grid, its welding table kept at its size.
   void reset() {
     mesh_ = Mesh{};
     keys_.clear();
+    for (auto& k : plane_keys_) k.clear();
     map_->clear();
   }
 
  private:
   uint32_t vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
+  // A new vertex on edge (p, q); KEY its edge key, or 0 when not computed yet (no edge has key 0:
+  // its p + q would be the origin).
+  uint32_t new_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
 
   TetCutter cutter_;
   // Small at first: a builder of its own serves one mesh.
@@ -123,6 +137,8 @@ class MeshBuilder {
   Mesh mesh_;
   bool keep_keys_ = false;
   std::vector<uint64_t> keys_;
+  std::array<int64_t, 2> plane_z2_{-1, -1};
+  std::array<std::vector<PlaneVertex>, 2> plane_keys_;
 };
 
 }  // namespace isotope
