@@ -66,14 +66,6 @@ bool before(const Coord& p, const Coord& q) {
 TetCutter::TetCutter(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing)
     : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing) {}
 
-// p + q in brick order (16^3 doubled coordinates, i.e. the 8^3 node bricks): edges met close
-// together in the traversal get close keys, and the welding table keeps them close in memory.
-uint64_t TetCutter::edge_key(const Coord& p, const Coord& q) const {
-  const int64_t x = p[0] + q[0], y = p[1] + q[1], z = p[2] + q[2];
-  const int64_t brick = ((z >> 4) * key_bricks_ + (y >> 4)) * key_bricks_ + (x >> 4);
-  return static_cast<uint64_t>(brick << 12 | (z & 15) << 8 | (y & 15) << 4 | (x & 15));
-}
-
 std::array<float, 3> TetCutter::point(const Coord& p0, float f0, const Coord& q0, float f1) const {
   // Interpolate from the edge's first node in grid order, so every tetrahedron sharing the
   // edge would compute the same bits.
@@ -155,28 +147,13 @@ uint32_t MeshBuilder::new_vertex(uint64_t key, const Coord& p, float fp, const C
   return fresh;
 }
 
-void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
-                          EdgeMemo* memo) {
+void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive) {
   const TetCutter::Cut k = cutter_.cut(corners, values, positive);
   if (k.points == 0) return;
   uint32_t v[4];
   for (int i = 0; i < k.points; ++i) {
     const int a = k.edges[static_cast<size_t>(i)][0], b = k.edges[static_cast<size_t>(i)][1];
-    if (!memo) {
-      v[i] = vertex(cutter_.edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
-      continue;
-    }
-    uint64_t& slot = memo->slot(corners[a], corners[b]);
-    if (slot >> 32 == memo->stamp()) {
-      v[i] = static_cast<uint32_t>(slot);
-    } else if (memo->interior(corners[a], corners[b])) {
-      // Seen here first and nowhere else: a new vertex, numbered as the welding table would have.
-      v[i] = new_vertex(0, corners[a], values[a], corners[b], values[b]);
-      slot = memo->stamp() << 32 | v[i];
-    } else {
-      v[i] = vertex(cutter_.edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
-      slot = memo->stamp() << 32 | v[i];
-    }
+    v[i] = vertex(cutter_.edge_key(corners[a], corners[b]), corners[a], values[a], corners[b], values[b]);
   }
   for (int t = 0; t < k.triangles; ++t) {
     const auto& tri = k.triangle[static_cast<size_t>(t)];

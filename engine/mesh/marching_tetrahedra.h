@@ -16,43 +16,6 @@ namespace isotope {
 // p + q of the edge whose vertex has this key (MeshBuilder, for a grid of `side` nodes per axis).
 Coord edge_key_sum(uint64_t key, int64_t side);
 
-// The vertices already made for the cut edges of one box of cells, in an array slot per edge (by
-// its p + q): in front of the welding table while a box is marched (engine/extract/block_march.cpp),
-// since most cut edges are shared by several tetrahedra of a box and a slot is cheaper than a
-// hash probe. Forgets everything at the next start(), in O(1).
-class EdgeMemo {
- public:
-  // A box of at most `cells` cells per axis.
-  explicit EdgeMemo(int64_t cells) : width_(2 * cells + 1), slots_(static_cast<size_t>(width_ * width_ * width_), 0) {}
-  // A new box: CELLS per axis from BASE.
-  void start(const Coord& base, const std::array<int64_t, 3>& cells) {
-    base2_ = {2 * base[0], 2 * base[1], 2 * base[2]};
-    end2_ = {2 * cells[0], 2 * cells[1], 2 * cells[2]};
-    if (++stamp_ == 0) {  // the stamps wrapped: no slot may look current
-      std::fill(slots_.begin(), slots_.end(), 0);
-      stamp_ = 1;
-    }
-  }
-  // The slot of edge (p, q), both in the box: stamp << 32 | vertex once filled in this box.
-  uint64_t& slot(const Coord& p, const Coord& q) {
-    const int64_t x = p[0] + q[0] - base2_[0], y = p[1] + q[1] - base2_[1], z = p[2] + q[2] - base2_[2];
-    return slots_[static_cast<size_t>((z * width_ + y) * width_ + x)];
-  }
-  uint64_t stamp() const { return stamp_; }
-  // Edge (p, q) lies inside the box, on none of its faces: only the box's own cells have it, so no
-  // other box will ask for its vertex.
-  bool interior(const Coord& p, const Coord& q) const {
-    const int64_t x = p[0] + q[0] - base2_[0], y = p[1] + q[1] - base2_[1], z = p[2] + q[2] - base2_[2];
-    return x > 0 && x < end2_[0] && y > 0 && y < end2_[1] && z > 0 && z < end2_[2];
-  }
-
- private:
-  int64_t width_;
-  Coord base2_{}, end2_{};
-  uint64_t stamp_ = 0;
-  std::vector<uint64_t> slots_;
-};
-
 // What marching tetrahedra makes of one tetrahedron, before any vertex is welded: the cut edges
 // (pairs of corner indices) and the triangles over them, in the order and winding MeshBuilder emits
 // them. Shared by MeshBuilder and by what counts the triangles a mesh will have after clipping to
@@ -70,7 +33,16 @@ class TetCutter {
   };
   Cut cut(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive) const;
   // The welding key of grid edge (p, q) and the position of its vertex (physical coordinates).
-  uint64_t edge_key(const Coord& p, const Coord& q) const;
+  uint64_t edge_key(const Coord& p, const Coord& q) const {
+    return edge_key_of_sum(p[0] + q[0], p[1] + q[1], p[2] + q[2]);
+  }
+  // The same key from p + q: p + q in brick order (16^3 doubled coordinates, i.e. the 8^3 node
+  // bricks), so that edges met close together in the traversal get close keys, and the welding
+  // table keeps them close in memory.
+  uint64_t edge_key_of_sum(int64_t x, int64_t y, int64_t z) const {
+    const int64_t brick = ((z >> 4) * key_bricks_ + (y >> 4)) * key_bricks_ + (x >> 4);
+    return static_cast<uint64_t>(brick << 12 | (z & 15) << 8 | (y & 15) << 4 | (x & 15));
+  }
   std::array<float, 3> point(const Coord& p, float fp, const Coord& q, float fq) const;
 
  private:
@@ -92,9 +64,17 @@ class MeshBuilder {
   // Triangles are wound counter-clockwise seen from the outside (value <= iso); a quadrilateral
   // is split along the diagonal at its smallest edge key, so the triangle set does not depend on
   // the order of the corners.
-  // With a memo, the corners must lie in its current box.
-  void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive,
-               EdgeMemo* memo = nullptr);
+  void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive);
+
+  // The pieces of add_tet, for a kernel that cuts its tetrahedra itself and remembers the vertices
+  // it made (engine/extract/block_march.cpp): the vertex of edge (p, q) welded by its key, a new
+  // vertex for an edge the kernel knows no other tetrahedron outside its own box has (so it skips
+  // the welding table), and a triangle.
+  uint32_t welded_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
+    return vertex(key, p, fp, q, fq);
+  }
+  uint32_t unwelded_vertex(const Coord& p, float fp, const Coord& q, float fq) { return new_vertex(0, p, fp, q, fq); }
+  void add_triangle(uint32_t a, uint32_t b, uint32_t c) { mesh_.triangles.push_back({a, b, c}); }
 
   // The triangles add_tet emits, unwelded (what a count of the mesh's triangles after clipping
   // builds again: engine/mesh/box_clip.h).
