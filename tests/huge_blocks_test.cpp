@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <initializer_list>
 #include <vector>
 
 #include "isotope/detail/huge_page_allocator.h"
@@ -28,6 +29,21 @@ class HugeBlocks : public testing::Test {
  protected:
   void SetUp() override { keep_freed_huge_blocks(0); }
   void TearDown() override { keep_freed_huge_blocks(0); }
+
+  // A block of `bytes` allocated and freed, so kept, then taken again as pieces of the sizes
+  // given, in order, each checked to lie right after the one before, the first at the block's start.
+  static std::vector<char*> carve(size_t bytes, std::initializer_list<size_t> sizes) {
+    char* block = static_cast<char*>(allocate_huge(bytes));
+    free_huge(block);
+    std::vector<char*> pieces;
+    size_t at = 0;
+    for (const size_t size : sizes) {
+      pieces.push_back(static_cast<char*>(allocate_huge(size)));
+      EXPECT_EQ(pieces.back(), block + at) << "piece " << pieces.size() - 1;
+      at += size;
+    }
+    return pieces;
+  }
 };
 
 TEST_F(HugeBlocks, AFreedBlockIsHandedOutAgainWhereItLayWithItsPagesFaultedIn) {
@@ -69,14 +85,9 @@ TEST_F(HugeBlocks, ASmallerRequestTakesPartOfAKeptBlockAndFreedNeighboursJoin) {
 
 TEST_F(HugeBlocks, APieceFreedBetweenItsKeptNeighboursJoinsBoth) {
   keep_freed_huge_blocks(64 * kMB);
-  char* block = static_cast<char*>(allocate_huge(6 * kMB));
-  free_huge(block);
-  char* head = static_cast<char*>(allocate_huge(2 * kMB));
-  char* middle = static_cast<char*>(allocate_huge(2 * kMB));
-  char* tail = static_cast<char*>(allocate_huge(2 * kMB));
-  ASSERT_EQ(head, block);
-  ASSERT_EQ(middle, block + 2 * kMB);
-  ASSERT_EQ(tail, block + 4 * kMB);
+  const std::vector<char*> pieces = carve(6 * kMB, {2 * kMB, 2 * kMB, 2 * kMB});
+  ASSERT_FALSE(HasFailure());
+  char *block = pieces[0], *head = pieces[0], *middle = pieces[1], *tail = pieces[2];
   free_huge(head);  // and the tail: 4 MB kept in two pieces, 2 MB apart
   free_huge(tail);
   EXPECT_EQ(kept_huge_block_bytes(), 4 * kMB);
@@ -91,11 +102,9 @@ TEST_F(HugeBlocks, APieceFreedBetweenItsKeptNeighboursJoinsBoth) {
 
 TEST_F(HugeBlocks, FreedInAnyOrderThePiecesOfABlockMakeItWholeAgain) {
   keep_freed_huge_blocks(64 * kMB);
-  char* block = static_cast<char*>(allocate_huge(6 * kMB));
-  free_huge(block);
-  char* pieces[3] = {static_cast<char*>(allocate_huge(2 * kMB)), static_cast<char*>(allocate_huge(2 * kMB)),
-                     static_cast<char*>(allocate_huge(2 * kMB))};
-  ASSERT_EQ(pieces[0], block);
+  std::vector<char*> pieces = carve(6 * kMB, {2 * kMB, 2 * kMB, 2 * kMB});
+  ASSERT_FALSE(HasFailure());
+  char* block = pieces[0];
   // The tail first, then the head (joins the one after it: no), then the middle (joins both).
   free_huge(pieces[2]);
   free_huge(pieces[0]);

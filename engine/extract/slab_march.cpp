@@ -40,7 +40,7 @@ Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, BuilderPool& bui
       builders.take([&] { return std::make_unique<MeshBuilder>(plan.iso, plan.side, plan.origin, plan.spacing); });
   builder->keep_plane_keys(below ? 2 * z_begin : -1, above ? 2 * z_end : -1);
   march(z_begin, z_end, *builder);
-  Slab slab{builder->take(), builder->take_plane_keys(0), builder->take_plane_keys(1)};
+  Slab slab{builder->take(), builder->take_bottom_keys(), builder->take_top_keys()};
   builder->reset();
   builders.give(std::move(builder));
   return slab;

@@ -137,12 +137,12 @@ uint32_t MeshBuilder::new_vertex(uint64_t key, const Coord& p, float fp, const C
   const auto fresh = static_cast<uint32_t>(mesh_.positions.size());
   mesh_.positions.push_back(cutter_.point(p, fp, q, fq));
   const int64_t z2 = p[2] + q[2];
-  const bool on_plane = z2 == plane_z2_[0] || z2 == plane_z2_[1];
-  if (keep_keys_ || on_plane) {
+  // The two planes differ (a slab is a cell layer thick at least), so the vertex is on one at most.
+  const int plane = z2 == plane_z2_[0] ? 0 : z2 == plane_z2_[1] ? 1 : -1;
+  if (keep_keys_ || plane >= 0) {
     if (key == 0) key = cutter_.edge_key(p, q);
     if (keep_keys_) keys_.push_back(key);
-    for (size_t i = 0; i < 2; ++i)
-      if (z2 == plane_z2_[i]) plane_keys_[i].push_back({fresh, key});
+    if (plane >= 0) plane_keys_[static_cast<size_t>(plane)].push_back({fresh, key});
   }
   return fresh;
 }

@@ -95,11 +95,13 @@ class MeshBuilder {
   // each list in vertex order: what a slab shares with the slabs below and above it
   // (engine/extract/slab_march.cpp), without a key for every vertex.
   void keep_plane_keys(int64_t bottom, int64_t top) { plane_z2_ = {bottom, top}; }
-  std::vector<PlaneVertex> take_plane_keys(int plane) { return std::move(plane_keys_[static_cast<size_t>(plane)]); }
+  std::vector<PlaneVertex> take_bottom_keys() { return std::move(plane_keys_[0]); }
+  std::vector<PlaneVertex> take_top_keys() { return std::move(plane_keys_[1]); }
   // Ready for another mesh with the same isovalue and grid, its welding table kept at its size.
   void reset() {
     mesh_ = Mesh{};
     keys_.clear();
+    plane_z2_ = {-1, -1};
     for (auto& k : plane_keys_) k.clear();
     map_->clear();
   }
@@ -117,8 +119,8 @@ class MeshBuilder {
   Mesh mesh_;
   bool keep_keys_ = false;
   std::vector<uint64_t> keys_;
-  std::array<int64_t, 2> plane_z2_{-1, -1};
-  std::array<std::vector<PlaneVertex>, 2> plane_keys_;
+  std::array<int64_t, 2> plane_z2_{-1, -1};             // the bottom and top planes' p_z + q_z
+  std::array<std::vector<PlaneVertex>, 2> plane_keys_;  // their vertices: bottom, top
 };
 
 }  // namespace isotope

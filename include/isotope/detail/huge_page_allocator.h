@@ -49,25 +49,28 @@ struct HugePageAllocator {
   HugePageAllocator(const HugePageAllocator<U>&) noexcept {}  // NOLINT: allocators convert implicitly
 
   T* allocate(size_t n) {
-    const size_t bytes = n * sizeof(T);
-    if (bytes < kHugePage) {
-      void* p = std::malloc(bytes);
+    if (!huge(n)) {
+      void* p = std::malloc(n * sizeof(T));
       if (!p) throw std::bad_alloc();
       return static_cast<T*>(p);
     }
-    return static_cast<T*>(allocate_huge(bytes));
+    return static_cast<T*>(allocate_huge(n * sizeof(T)));
   }
   void deallocate(T* p, size_t n) noexcept {
-    if (n * sizeof(T) < kHugePage)
-      std::free(p);
-    else
+    if (huge(n))
       free_huge(p);
+    else
+      std::free(p);
   }
 
   template <class U>
   bool operator==(const HugePageAllocator<U>&) const noexcept {
     return true;
   }
+
+ private:
+  // Whether n elements come from the huge-block store: allocate and deallocate must agree.
+  static bool huge(size_t n) noexcept { return n * sizeof(T) >= kHugePage; }
 };
 
 // As HugePageAllocator, but an element made without a value is left unwritten, as `new T` leaves
