@@ -344,6 +344,28 @@ void BM_FullResolutionBaseline(benchmark::State& state, Dataset d, int threads) 
   set_thread_counter(state);
 }
 
+// measure_topology(): the summary line's counts (components, Euler characteristic, boundary and
+// non-manifold edges) of algebraic 257^3's eps 0 mesh (939 k triangles), which every `isotope
+// extract` without --quiet measures.
+void BM_MeshTopology(benchmark::State& state, int threads) {
+  const Mesh* mesh = nullptr;
+  if (!prepare(state, [&] {
+        static const Mesh full =
+            isotope::extract_full_resolution(volume_of(Dataset::algebraic257), dataset_iso(Dataset::algebraic257));
+        mesh = &full;
+      }))
+    return;
+  const tbb::global_control cap = thread_cap(threads);
+  int64_t triangles = 0;
+  for (auto _ : state) {
+    const isotope::MeshTopology t = isotope::measure_topology(*mesh);
+    triangles += t.triangles;
+    benchmark::DoNotOptimize(t.components);
+  }
+  set_triangle_counters(state, triangles);
+  set_thread_counter(state);
+}
+
 // StoreReader::read_brick() of the core section, which is what a BrickCache miss runs
 // (io/store/brick_cache.cpp, decode): pread, checksum, zstd decompression and field decoding. Not timed:
 // the cache's bookkeeping, and band 0's records, computed when the traversal reads them. One
@@ -535,6 +557,13 @@ void register_benchmarks() {
           ->Unit(benchmark::kMillisecond)
           ->UseRealTime()
           ->MinTime(kMinSeconds);
+  for (const int threads : threads_list)
+    benchmark::RegisterBenchmark(
+        (std::string("BM_MeshTopology/") + dataset_name(Dataset::algebraic257) + threads_suffix(threads)).c_str(),
+        BM_MeshTopology, threads)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime()
+        ->MinTime(kMinSeconds);
   benchmark::RegisterBenchmark("BM_CriticalTableLookup", BM_CriticalTableLookup)->Unit(benchmark::kMicrosecond);
   benchmark::RegisterBenchmark("BM_StoreDirectoryCheck", BM_StoreDirectoryCheck)
       ->ArgName("shuffled")

@@ -50,9 +50,19 @@ class ConcurrentForest {
   std::vector<std::atomic<uint32_t>> parent_;
 };
 
-}  // namespace
+// Adds one to `c`, returning what it held. A locked add costs about 20 cycles even when no other
+// thread touches the counter, and filing the edges makes two for every edge end: on one thread
+// (kConcurrent false) a plain load and store, which nothing else can interleave with.
+template <bool kConcurrent>
+uint32_t bump(std::atomic<uint32_t>& c) {
+  if constexpr (kConcurrent) return c.fetch_add(1, std::memory_order_relaxed);
+  const uint32_t v = c.load(std::memory_order_relaxed);
+  c.store(v + 1, std::memory_order_relaxed);
+  return v;
+}
 
-MeshTopology measure_topology(const Mesh& mesh) {
+template <bool kConcurrent>
+MeshTopology measure(const Mesh& mesh) {
   MeshTopology t;
   t.triangles = static_cast<int64_t>(mesh.triangles.size());
   const size_t n = mesh.positions.size();
@@ -60,7 +70,8 @@ MeshTopology measure_topology(const Mesh& mesh) {
   // Each undirected edge is filed under its lower vertex (counting pass, then filling): a vertex's
   // few entries are then sorted in place, where one sort of all 3F edges took most of the time
   // (20 ms of a 100k-triangle mesh that `isotope serve` answers interactively). Both passes run on
-  // all threads; a 2.5 M-triangle mesh took 126 ms on one.
+  // all threads; a 2.5 M-triangle mesh took 126 ms on one. Algebraic 257^3's eps 0 mesh (939 k
+  // triangles, the bench's BM_MeshTopology): 23 ms on one thread, 29 ms with locked adds there.
   std::vector<std::atomic<uint32_t>> count(n + 1);
   std::vector<std::atomic<uint8_t>> used(n);
   parallel_for(int64_t{0}, tasks, [&](int64_t task) {
@@ -68,7 +79,7 @@ MeshTopology measure_topology(const Mesh& mesh) {
     for (size_t i = static_cast<size_t>(task) * kTrianglesPerTask; i < end; ++i) {
       const auto& tri = mesh.triangles[i];
       for (int k = 0; k < 3; ++k) {
-        count[std::min(tri[k], tri[(k + 1) % 3]) + 1].fetch_add(1, std::memory_order_relaxed);
+        bump<kConcurrent>(count[std::min(tri[k], tri[(k + 1) % 3]) + 1]);
         used[tri[k]].store(1, std::memory_order_relaxed);
       }
     }
@@ -87,7 +98,7 @@ MeshTopology measure_topology(const Mesh& mesh) {
       const auto& tri = mesh.triangles[i];
       for (int k = 0; k < 3; ++k) {
         const uint32_t a = tri[k], b = tri[(k + 1) % 3];
-        upper[count[std::min(a, b)].fetch_add(1, std::memory_order_relaxed)] = std::max(a, b);
+        upper[bump<kConcurrent>(count[std::min(a, b)])] = std::max(a, b);
       }
     }
   });
@@ -131,6 +142,14 @@ MeshTopology measure_topology(const Mesh& mesh) {
   }
   t.euler_characteristic = t.vertices - t.edges + t.triangles;
   return t;
+}
+
+}  // namespace
+
+MeshTopology measure_topology(const Mesh& mesh) {
+  // One task, or one thread: no two bodies ever run at once.
+  if (thread_count() == 1 || tasks_for(mesh.triangles.size()) <= 1) return measure<false>(mesh);
+  return measure<true>(mesh);
 }
 
 }  // namespace isotope
