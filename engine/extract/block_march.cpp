@@ -62,10 +62,10 @@ constexpr int64_t dz(int corner) { return corner >> 2; }
 void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells, float iso,
                  EdgeMemo& memo, MeshBuilder& builder) {
   static const ParityTets kTets = make_parity_tets();
-  int64_t offset[8];  // of each cell corner's value from the cell's lowest
+  int64_t offset[8];  // each cell corner's value, from the cell's lowest corner's
   for (int k = 0; k < 8; ++k) offset[k] = (dz(k) * stride + dy(k)) * stride + dx(k);
-  // Of the memo slot of the edge between two cell corners from the slot of the cell's lowest
-  // corner doubled.
+  // The step from a cell's memo slot (its lowest corner doubled) to the slot of the edge between
+  // two of its corners.
   const int64_t w = memo.width();
   int64_t slot_step[8][8];
   for (int a = 0; a < 8; ++a)
