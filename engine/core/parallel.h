@@ -25,17 +25,21 @@ inline int64_t thread_count() {
   return static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
+// Whether parallel_for(begin, end, ...) calls its bodies one after the other on the calling
+// thread: one thread allowed, or at most one index. A body may then skip what guards it against
+// the others (locked adds).
+inline bool runs_serially(int64_t begin, int64_t end) { return thread_count() <= 1 || end - begin <= 1; }
+
 // Calls body(i) for every i in [begin, end), in any order, possibly concurrently.
 template <class Body>
 void parallel_for(int64_t begin, int64_t end, const Body& body) {
-  const int64_t threads = thread_count();
-  if (threads <= 1 || end - begin <= 1) {
+  if (runs_serially(begin, end)) {
     for (int64_t i = begin; i < end; ++i) body(i);
     return;
   }
 #ifdef ISOTOPE_STD_THREADS
   std::vector<std::thread> pool;
-  const int64_t count = std::min(threads, end - begin);
+  const int64_t count = std::min(thread_count(), end - begin);
   std::mutex mutex;
   std::exception_ptr first;  // rethrown after the join, as tbb::parallel_for does
   for (int64_t t = 0; t < count; ++t)

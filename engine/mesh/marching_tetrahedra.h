@@ -82,8 +82,7 @@ class MeshBuilder {
 
   Mesh take() { return std::move(mesh_); }
   // The edge key of every vertex, in vertex order (kept only when asked for, by keep_keys()):
-  // what welds the meshes of separately built parts into one (engine/mesh/piece_weld.cpp,
-  // engine/extract/full_resolution.cpp).
+  // what welds the meshes of separately built parts into one (engine/mesh/piece_weld.cpp).
   void keep_keys() { keep_keys_ = true; }
   std::vector<uint64_t> take_keys() { return std::move(keys_); }
   // A vertex on a plane z = const, with its edge key.

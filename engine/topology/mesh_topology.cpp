@@ -147,9 +147,8 @@ MeshTopology measure(const Mesh& mesh) {
 }  // namespace
 
 MeshTopology measure_topology(const Mesh& mesh) {
-  // One task, or one thread: no two bodies ever run at once.
-  if (thread_count() == 1 || tasks_for(mesh.triangles.size()) <= 1) return measure<false>(mesh);
-  return measure<true>(mesh);
+  // The adds run in the passes over the triangles' tasks.
+  return runs_serially(0, tasks_for(mesh.triangles.size())) ? measure<false>(mesh) : measure<true>(mesh);
 }
 
 }  // namespace isotope
