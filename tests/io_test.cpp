@@ -23,6 +23,7 @@
 #include <limits>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -768,6 +769,40 @@ TEST_F(IoTest, AtomicFileCommitReplacesTheTargetAndRemovesTheTemporary) {
   }
   EXPECT_EQ(read_bytes(p), (std::vector<unsigned char>{'x', 'y', 'z'}));
   EXPECT_EQ(entries(), (std::vector<std::string>{"done.bin"}));
+}
+
+// A region appended and then filled on several threads at once, out of order, in blocks that
+// straddle no boundary in particular: the file holds the bytes before it, the region's bytes in
+// their places, and what was written after it; writing outside the regions made is refused.
+TEST_F(IoTest, AtomicFileRegionsAreFilledOnSeveralThreadsBetweenOrdinaryWrites) {
+  const std::string p = path("regions.bin");
+  std::vector<unsigned char> expected{'h', 'e', 'a', 'd'};
+  const size_t n = 1000003;
+  {
+    AtomicFile f(p);
+    f.write("head", 4);
+    const uint64_t at = f.append_region(n);
+    EXPECT_EQ(at, 4u);
+    EXPECT_EQ(f.size(), 4 + n);
+    std::vector<unsigned char> bytes(n);
+    for (size_t i = 0; i < n; ++i) bytes[i] = static_cast<unsigned char>(i * 7 + i / 251);
+    const size_t block = 65537, blocks = (n + block - 1) / block;
+    std::vector<std::thread> threads;
+    for (size_t t = 0; t < 3; ++t)
+      threads.emplace_back([&, t] {
+        for (auto b = static_cast<int64_t>(blocks - 1 - t); b >= 0; b -= 3) {  // last block first
+          const size_t begin = static_cast<size_t>(b) * block, end = std::min(n, begin + block);
+          f.write_region(at + begin, bytes.data() + begin, end - begin);
+        }
+      });
+    for (std::thread& th : threads) th.join();
+    EXPECT_CONTAINS(io_error_of([&] { f.write_region(at + n - 1, "xy", 2); }), "past the regions appended");
+    f.write("tail", 4);
+    expected.insert(expected.end(), bytes.begin(), bytes.end());
+    expected.insert(expected.end(), {'t', 'a', 'i', 'l'});
+    f.commit();
+  }
+  EXPECT_EQ(read_bytes(p), expected);
 }
 
 // The output policy (io/file/atomic_file.h): what is not a regular file is never replaced, and

@@ -172,6 +172,30 @@ void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
   if (!ok) throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
 }
 
+uint64_t AtomicFile::append_region(uint64_t bytes) {
+  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
+  const uint64_t at = size_;
+  errno = 0;
+  if (std::fflush(file_) != 0 || fseeko(file_, static_cast<off_t>(at + bytes), SEEK_SET) != 0)
+    throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
+  size_ = at + bytes;
+  return at;
+}
+
+void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) const {
+  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
+  if (offset + bytes > size_) throw IoError(path_ + ": write_region past the regions appended");
+  const auto* p = static_cast<const unsigned char*>(data);
+  while (bytes > 0) {
+    const ssize_t n = ::pwrite(::fileno(file_), p, bytes, static_cast<off_t>(offset));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw IoError(path_ + ": write failed: " + errno_text(n < 0 ? errno : EIO));
+    p += n;
+    offset += static_cast<uint64_t>(n);
+    bytes -= static_cast<size_t>(n);
+  }
+}
+
 void AtomicFile::continue_at(uint64_t offset) {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   errno = 0;

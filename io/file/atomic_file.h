@@ -42,6 +42,12 @@ class AtomicFile {
   void write(const void* data, size_t bytes);  // throws IoError (e.g. disk full)
   // Overwrites bytes already written (a header completed last); the next write() appends.
   void write_at(uint64_t offset, const void* data, size_t bytes);
+  // Appends BYTES that write_region() fills, then makes the next write() append after them: a
+  // large array encoded and written on several threads at once, each copying its part into the
+  // page cache (a copy on one thread alone held the others back). Returns where the bytes start.
+  uint64_t append_region(uint64_t bytes);
+  // Writes BYTES at OFFSET inside a region append_region() made. Safe on several threads at once.
+  void write_region(uint64_t offset, const void* data, size_t bytes) const;
   // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
   // into temp_path() meanwhile (a distributed convert, io/store/store_writer.cpp).
   void continue_at(uint64_t offset);
