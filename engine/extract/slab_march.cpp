@@ -42,44 +42,79 @@ Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, BuilderPool& bui
   march(z_begin, z_end, *builder);
   Slab slab{builder->take(), builder->take_bottom_keys(), builder->take_top_keys()};
   builder->reset();
+  // The next slab is about as large: room for a quarter more.
+  const size_t vertices = slab.mesh.positions.size(), triangles = slab.mesh.triangles.size();
+  builder->reserve(vertices + vertices / 4, triangles + triangles / 4);
   builders.give(std::move(builder));
   return slab;
 }
 
-// Joins the slabs' meshes, handed to it in order. A vertex of slab s on its bottom plane takes the
-// index slab s - 1 gave it; any other vertex is new, in slab s's order. Since slab s - 1 came
-// first in the serial walk, that is the serial walk's first-appearance numbering exactly.
-class SlabMerger {
- public:
-  // Frees the slab.
-  void append(Slab& s) {
-    if (out_.positions.empty()) {  // nothing before it to share with: its numbering is the output's
-      out_ = std::move(s.mesh);
-      remap_.resize(out_.positions.size());
-      std::iota(remap_.begin(), remap_.end(), 0u);
-    } else {
-      remap_.assign(s.mesh.positions.size(), EdgeVertexMap::kAbsent);
-      for (const PlaneVertex& v : s.bottom)
-        remap_[v.local] = previous_top_.find_or_insert(v.key, EdgeVertexMap::kAbsent);
-      for (size_t k = 0; k < remap_.size(); ++k)
-        if (remap_[k] == EdgeVertexMap::kAbsent) {
-          remap_[k] = static_cast<uint32_t>(out_.positions.size());
-          out_.positions.push_back(s.mesh.positions[k]);
-        }
-      for (const auto& t : s.mesh.triangles) out_.triangles.push_back({remap_[t[0]], remap_[t[1]], remap_[t[2]]});
+// Joins the slabs' meshes in slab order. A vertex of slab s on its bottom plane takes the index
+// slab s - 1 gave it; any other vertex is new, in slab s's order. Since slab s - 1 comes first in
+// the serial walk, that is the serial walk's first-appearance numbering exactly. The numbering
+// looks only at the planes between slabs, so it runs first, alone; then every slab knows where
+// its vertices and triangles go, and the slabs are copied into a mesh of the exact size on all
+// threads, each page of it first touched by the thread that writes it. (Appending each slab to a
+// mesh that grew by doubling copied every vertex and triangle again, about once on average, into
+// fresh pages, on one thread, after the last slab's march: docs/METHOD.md, "eps = 0 by blocks".)
+// Frees the slabs.
+Mesh join_slabs(std::vector<Slab>& slabs) {
+  constexpr uint32_t kAbsent = EdgeVertexMap::kAbsent;
+  struct Place {
+    uint32_t first_vertex = 0;  // the output index of the slab's first new vertex
+    size_t first_triangle = 0;
+    std::vector<uint32_t> bottom;  // per bottom vertex: its index in the slab below, or kAbsent
+  };
+  std::vector<Place> places(slabs.size());
+  size_t vertices = 0, triangles = 0;
+  EdgeVertexMap below(0);  // edge key -> output index, on the plane below the slab
+  for (size_t s = 0; s < slabs.size(); ++s) {
+    const Slab& slab = slabs[s];
+    Place& place = places[s];
+    place.first_vertex = static_cast<uint32_t>(vertices);
+    place.first_triangle = triangles;
+    place.bottom.resize(slab.bottom.size());
+    size_t found = 0;
+    for (size_t i = 0; i < slab.bottom.size(); ++i) {
+      place.bottom[i] = below.find_or_insert(slab.bottom[i].key, kAbsent);
+      found += place.bottom[i] != kAbsent;
     }
-    EdgeVertexMap top(s.top.size());
-    for (const PlaneVertex& v : s.top) top.find_or_insert(v.key, remap_[v.local]);
-    previous_top_ = std::move(top);
-    s = Slab{};
+    // A top vertex is new (the planes differ): its index is the slab's first plus the new vertices
+    // before it, i.e. its own index less the bottom vertices found before it (both lists are in
+    // vertex order).
+    EdgeVertexMap top(slab.top.size());
+    size_t b = 0, found_before = 0;
+    for (const PlaneVertex& v : slab.top) {
+      for (; b < slab.bottom.size() && slab.bottom[b].local < v.local; ++b) found_before += place.bottom[b] != kAbsent;
+      top.find_or_insert(v.key, static_cast<uint32_t>(vertices + v.local - found_before));
+    }
+    below = std::move(top);
+    vertices += slab.mesh.positions.size() - found;
+    triangles += slab.mesh.triangles.size();
   }
-  Mesh take() { return std::move(out_); }
-
- private:
-  Mesh out_;
-  EdgeVertexMap previous_top_{0};  // edge key -> output index, on the plane below the next slab
-  std::vector<uint32_t> remap_;    // the current slab's vertex -> output index
-};
+  Mesh out;
+  out.positions.resize(vertices);
+  out.triangles.resize(triangles);
+  parallel_for(0, static_cast<int64_t>(slabs.size()), [&](int64_t s) {
+    Slab& slab = slabs[static_cast<size_t>(s)];
+    const Place& place = places[static_cast<size_t>(s)];
+    std::vector<uint32_t> remap(slab.mesh.positions.size());
+    uint32_t next = place.first_vertex;
+    size_t b = 0;
+    for (size_t k = 0; k < remap.size(); ++k) {
+      if (b < slab.bottom.size() && slab.bottom[b].local == k && place.bottom[b++] != kAbsent) {
+        remap[k] = place.bottom[b - 1];
+        continue;
+      }
+      remap[k] = next;
+      out.positions[next++] = slab.mesh.positions[k];
+    }
+    auto* to = out.triangles.data() + place.first_triangle;
+    for (const auto& t : slab.mesh.triangles) *to++ = {remap[t[0]], remap[t[1]], remap[t[2]]};
+    slab = Slab{};
+  });
+  return out;
+}
 
 }  // namespace
 
@@ -103,11 +138,9 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
     *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   });
   if (keep_share) {
-    SlabMerger merger;
-    settle_together(group, [&] {
-      for (Slab& s : mine) merger.append(s);
-    });
-    return merger.take();
+    Mesh mesh;
+    settle_together(group, [&] { mesh = join_slabs(mine); });
+    return mesh;
   }
   ByteWriter w;
   settle_together(group, [&] {  // the copy may run out of memory on one rank alone
@@ -123,65 +156,41 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
   std::vector<std::vector<uint8_t>> all;
   settle_together(group, [&] { all = group.gather(w.bytes()); });  // rank 0 may run out of memory receiving
   w = ByteWriter{};
-  SlabMerger merger;
+  Mesh mesh;
   settle_together(group, [&] {
+    std::vector<Slab> slabs;
     for (std::vector<uint8_t>& bytes : all) {
       ByteReader r(bytes);
       const auto n = r.get<uint64_t>();
       for (uint64_t i = 0; i < n; ++i) {
-        Slab s;
+        Slab& s = slabs.emplace_back();
         r.get_array(s.mesh.positions);
         r.get_array(s.mesh.triangles);
         r.get_array(s.bottom);
         r.get_array(s.top);
-        merger.append(s);
       }
       bytes = {};
     }
+    mesh = join_slabs(slabs);
   });
-  return merger.take();
+  return mesh;
 }
 
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure) {
   const int64_t count = slab_count(plan);
   if (count <= 0) return Mesh{};
-  // Each slab is merged as soon as it and all before it are done, by the thread that finished the
-  // last of them (the others go on extracting): only the slabs in flight or waiting for an earlier
-  // one are held, not the whole mesh twice. Slabs are handed out in order, so few wait.
-  SlabMerger merger;
-  std::vector<std::optional<Slab>> done(static_cast<size_t>(count));
-  std::mutex mutex;
-  int64_t next = 0;      // the next slab to merge
-  bool merging = false;  // a thread is merging, and takes any slab that becomes next meanwhile
-  BuilderPool builders;  // a welding table per thread while the slabs are marched and merged
+  std::vector<Slab> slabs(static_cast<size_t>(count));
+  BuilderPool builders;  // a welding table per thread
   parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
     try {
       const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
-      Slab slab = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
-      std::unique_lock<std::mutex> lock(mutex);
-      done[static_cast<size_t>(s)] = std::move(slab);
-      if (merging) return;
-      merging = true;
-      while (next < count && done[static_cast<size_t>(next)]) {
-        Slab ready = std::move(*done[static_cast<size_t>(next)]);
-        done[static_cast<size_t>(next++)].reset();
-        lock.unlock();
-        try {
-          merger.append(ready);
-        } catch (...) {
-          lock.lock();
-          merging = false;  // the next slab's thread may try: the first failure is the one thrown
-          throw;
-        }
-        lock.lock();
-      }
-      merging = false;
+      slabs[static_cast<size_t>(s)] = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
     } catch (...) {
       if (on_failure) on_failure();
       throw;
     }
   });
-  return merger.take();
+  return join_slabs(slabs);
 }
 
 }  // namespace isotope

@@ -96,6 +96,13 @@ class MeshBuilder {
   void keep_plane_keys(int64_t bottom, int64_t top) { plane_z2_ = {bottom, top}; }
   std::vector<PlaneVertex> take_bottom_keys() { return std::move(plane_keys_[0]); }
   std::vector<PlaneVertex> take_top_keys() { return std::move(plane_keys_[1]); }
+  // Room for a mesh of about this size, in memory not touched until written: a builder that serves
+  // one slab after another sizes the next mesh by the last, instead of growing it by doubling into
+  // fresh pages each time.
+  void reserve(size_t vertices, size_t triangles) {
+    mesh_.positions.reserve(vertices);
+    mesh_.triangles.reserve(triangles);
+  }
   // Ready for another mesh with the same isovalue and grid, its welding table kept at its size.
   void reset() {
     mesh_ = Mesh{};
