@@ -186,6 +186,7 @@ void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) c
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (offset + bytes > size_) throw IoError(path_ + ": write_region past the regions appended");
   const auto* p = static_cast<const unsigned char*>(data);
+  const uint64_t start = offset, length = bytes;
   while (bytes > 0) {
     const ssize_t n = ::pwrite(::fileno(file_), p, bytes, static_cast<off_t>(offset));
     if (n < 0 && errno == EINTR) continue;
@@ -194,6 +195,10 @@ void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) c
     offset += static_cast<uint64_t>(n);
     bytes -= static_cast<size_t>(n);
   }
+  // The disk's writeback of these bytes starts now, on this thread, while the other threads still
+  // encode theirs: finish()'s fsync then waits for less (a hint; what fails shows at the fsync).
+  static_cast<void>(
+      ::sync_file_range(::fileno(file_), static_cast<off_t>(start), static_cast<off_t>(length), SYNC_FILE_RANGE_WRITE));
 }
 
 void AtomicFile::continue_at(uint64_t offset) {

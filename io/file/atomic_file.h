@@ -46,7 +46,8 @@ class AtomicFile {
   // large array encoded and written on several threads at once, each copying its part into the
   // page cache (a copy on one thread alone held the others back). Returns where the bytes start.
   uint64_t append_region(uint64_t bytes);
-  // Writes BYTES at OFFSET inside a region append_region() made. Safe on several threads at once.
+  // Writes BYTES at OFFSET inside a region append_region() made, and starts their writeback to the
+  // disk. Safe on several threads at once.
   void write_region(uint64_t offset, const void* data, size_t bytes) const;
   // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
   // into temp_path() meanwhile (a distributed convert, io/store/store_writer.cpp).
