@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <memory>
-#include <mutex>
-#include <numeric>
-#include <optional>
+#include <new>
+#include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -42,9 +42,13 @@ Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, BuilderPool& bui
   march(z_begin, z_end, *builder);
   Slab slab{builder->take(), builder->take_bottom_keys(), builder->take_top_keys()};
   builder->reset();
-  // The next slab is about as large: room for a quarter more.
+  // The next slab is about as large: room for a quarter more. Only a hint: without the memory for
+  // it, the next mesh grows as it goes.
   const size_t vertices = slab.mesh.positions.size(), triangles = slab.mesh.triangles.size();
-  builder->reserve(vertices + vertices / 4, triangles + triangles / 4);
+  try {
+    builder->reserve(vertices + vertices / 4, triangles + triangles / 4);
+  } catch (const std::bad_alloc&) {
+  }
   builders.give(std::move(builder));
   return slab;
 }
@@ -92,6 +96,9 @@ Mesh join_slabs(std::vector<Slab>& slabs) {
     vertices += slab.mesh.positions.size() - found;
     triangles += slab.mesh.triangles.size();
   }
+  if (vertices >= kAbsent)
+    throw std::length_error("the mesh has " + std::to_string(vertices) +
+                            " vertices, more than its 32-bit indices can number");
   Mesh out;
   out.positions.resize(vertices);
   out.triangles.resize(triangles);
@@ -190,6 +197,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
       throw;
     }
   });
+  builders.clear();  // their welding tables and reserved meshes, before the mesh is allocated
   return join_slabs(slabs);
 }
 

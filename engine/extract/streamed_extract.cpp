@@ -24,8 +24,7 @@ namespace {
 // What a window aims to hold: sixteen windows on a 256^3 volume, so that reading one overlaps
 // marching the others from the start, and each read is of whole layers, in file order. Small,
 // since every buffer of the ring is fresh memory, which costs more to touch than the march that
-// reads it: 16 MB windows faulted in twice as many pages on embryo (docs/METHOD.md, "eps = 0 by
-// blocks").
+// reads it (docs/METHOD.md, "eps = 0 from a file").
 constexpr int64_t kWindowBytes = int64_t{4} << 20;
 // How often a worker waiting for a window looks at the cancel flag: a cold read of a window may
 // take a while.

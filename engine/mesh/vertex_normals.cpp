@@ -16,10 +16,11 @@ std::vector<std::array<float, 3>> vertex_normals(const Mesh& mesh) {
   std::vector<std::array<float, 3>> normals(static_cast<size_t>(n), {0, 0, 0});
   const int64_t ranges = std::clamp<int64_t>(n / 4096, 1, thread_count());
   parallel_for(int64_t{0}, ranges, [&](int64_t r) {
-    const auto lo = static_cast<uint32_t>(n * r / ranges), hi = static_cast<uint32_t>(n * (r + 1) / ranges);
+    const auto lo = static_cast<uint64_t>(n * r / ranges), hi = static_cast<uint64_t>(n * (r + 1) / ranges);
+    const auto in_range = [&](uint32_t i) { return i >= lo && i < hi; };
     std::vector<std::array<double, 3>> sum(hi - lo, {0, 0, 0});
     for (const auto& t : mesh.triangles) {
-      if ((t[0] < lo || t[0] >= hi) && (t[1] < lo || t[1] >= hi) && (t[2] < lo || t[2] >= hi)) continue;
+      if (!in_range(t[0]) && !in_range(t[1]) && !in_range(t[2])) continue;
       const auto& a = mesh.positions[t[0]];
       const auto& b = mesh.positions[t[1]];
       const auto& c = mesh.positions[t[2]];
@@ -27,10 +28,10 @@ std::vector<std::array<float, 3>> vertex_normals(const Mesh& mesh) {
       const double v[3] = {double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]};
       const double m[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
       for (const uint32_t i : t)
-        if (i >= lo && i < hi)
+        if (in_range(i))
           for (int k = 0; k < 3; ++k) sum[i - lo][k] += m[k];
     }
-    for (uint32_t i = lo; i < hi; ++i) {
+    for (uint64_t i = lo; i < hi; ++i) {
       const auto& s = sum[i - lo];
       const double len = std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
       if (len > 0)

@@ -167,8 +167,11 @@ void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (offset + bytes > size_) throw IoError(path_ + ": write_at past the end of what was written");
   errno = 0;
-  const bool ok = std::fseek(file_, static_cast<long>(offset), SEEK_SET) == 0 &&
-                  std::fwrite(data, 1, bytes, file_) == bytes && std::fseek(file_, 0, SEEK_END) == 0;
+  // Back to where the next write() appends: size_, which lies past the end of the file while a
+  // region appended is not yet filled.
+  const bool ok = fseeko(file_, static_cast<off_t>(offset), SEEK_SET) == 0 &&
+                  std::fwrite(data, 1, bytes, file_) == bytes &&
+                  fseeko(file_, static_cast<off_t>(size_), SEEK_SET) == 0;
   if (!ok) throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
 }
 
