@@ -109,9 +109,12 @@ Mesh join_slabs(std::vector<Slab>& slabs) {
     uint32_t next = place.first_vertex;
     size_t b = 0;
     for (size_t k = 0; k < remap.size(); ++k) {
-      if (b < slab.bottom.size() && slab.bottom[b].local == k && place.bottom[b++] != kAbsent) {
-        remap[k] = place.bottom[b - 1];
-        continue;
+      if (b < slab.bottom.size() && slab.bottom[b].local == k) {
+        const uint32_t index_below = place.bottom[b++];
+        if (index_below != kAbsent) {
+          remap[k] = index_below;
+          continue;
+        }
       }
       remap[k] = next;
       out.positions[next++] = slab.mesh.positions[k];

@@ -11,6 +11,7 @@
 #include <system_error>
 #include <utility>
 
+#include "io/file/positioned_write.h"
 #include "io/file/temporary_registry.h"
 #include "isotope/error.h"
 
@@ -176,32 +177,20 @@ void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
 }
 
 uint64_t AtomicFile::append_region(uint64_t bytes) {
-  if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   const uint64_t at = size_;
-  errno = 0;
-  if (std::fflush(file_) != 0 || fseeko(file_, static_cast<off_t>(at + bytes), SEEK_SET) != 0)
-    throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
-  size_ = at + bytes;
+  continue_at(at + bytes);
   return at;
 }
 
 void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) const {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (offset + bytes > size_) throw IoError(path_ + ": write_region past the regions appended");
-  const auto* p = static_cast<const unsigned char*>(data);
-  const uint64_t start = offset, length = bytes;
-  while (bytes > 0) {
-    const ssize_t n = ::pwrite(::fileno(file_), p, bytes, static_cast<off_t>(offset));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw IoError(path_ + ": write failed: " + errno_text(n < 0 ? errno : EIO));
-    p += n;
-    offset += static_cast<uint64_t>(n);
-    bytes -= static_cast<size_t>(n);
-  }
+  if (const int err = pwrite_all(::fileno(file_), data, bytes, offset))
+    throw IoError(path_ + ": write failed: " + errno_text(err));
   // The disk's writeback of these bytes starts now, on this thread, while the other threads still
   // encode theirs: finish()'s fsync then waits for less (a hint; what fails shows at the fsync).
   static_cast<void>(
-      ::sync_file_range(::fileno(file_), static_cast<off_t>(start), static_cast<off_t>(length), SYNC_FILE_RANGE_WRITE));
+      ::sync_file_range(::fileno(file_), static_cast<off_t>(offset), static_cast<off_t>(bytes), SYNC_FILE_RANGE_WRITE));
 }
 
 void AtomicFile::continue_at(uint64_t offset) {

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <vector>
 
+#include "io/file/positioned_write.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -32,17 +33,9 @@ void ScratchFile::write(const void* data, size_t bytes, uint64_t offset) const {
     std::memcpy(const_cast<char*>(memory_.data()) + offset, data, bytes);
     return;
   }
-  const auto* p = static_cast<const char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::pwrite(fd_, p, bytes, static_cast<off_t>(offset));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const int err = n < 0 ? errno : ENOSPC;
-      throw IoError("cannot write scratch data in '" + directory_ +
-                    "': " + (err == ENOSPC || err == EDQUOT ? "disk full" : std::strerror(err)));
-    }
-    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
-  }
+  if (const int err = pwrite_all(fd_, data, bytes, offset))
+    throw IoError("cannot write scratch data in '" + directory_ +
+                  "': " + (err == ENOSPC || err == EDQUOT ? "disk full" : std::strerror(err)));
 }
 
 void ScratchFile::read(void* data, size_t bytes, uint64_t offset) const {

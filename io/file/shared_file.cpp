@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cstring>
 
+#include "io/file/positioned_write.h"
 #include "io/file/temporary_registry.h"
 #include "isotope/error.h"
 
@@ -28,13 +29,8 @@ SharedFile::~SharedFile() {
 }
 
 void SharedFile::write(const void* data, size_t bytes, uint64_t offset) const {
-  const auto* p = static_cast<const char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::pwrite(fd_, p, bytes, static_cast<off_t>(offset));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw IoError(path_ + ": write failed: " + std::strerror(n < 0 ? errno : ENOSPC));
-    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
-  }
+  if (const int err = pwrite_all(fd_, data, bytes, offset))
+    throw IoError(path_ + ": write failed: " + std::strerror(err));
 }
 
 void SharedFile::read(void* data, size_t bytes, uint64_t offset) const {
