@@ -86,4 +86,11 @@ MpiSession::MpiSession(int* argc, char*** argv) {
 
 MpiSession::~MpiSession() { MPI_Finalize(); }
 
+void MpiSession::abort(int code) const {
+  MPI_Abort(MPI_COMM_WORLD, code);
+  std::_Exit(code);  // MPI_Abort does not return; should it, the rank still ends
+}
+
+extern "C" MpiRuntime* isotope_start_mpi(int* argc, char*** argv) { return new MpiSession(argc, argv); }
+
 }  // namespace isotope

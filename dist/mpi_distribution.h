@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "dist/mpi_module.h"
 #include "isotope/distribution.h"
 
 namespace isotope {
@@ -29,13 +30,14 @@ class MpiDistribution : public Distribution {
 // MPI for the life of a process that an MPI launcher started (mpirun, srun: the isotope command
 // tells by the variables they set), and nothing at all for one started otherwise, so that the same
 // isotope binary runs alone without an MPI runtime being involved.
-class MpiSession {
+class MpiSession : public MpiRuntime {
  public:
   MpiSession(int* argc, char*** argv);  // MPI_Init_thread; throws std::runtime_error if that fails
-  ~MpiSession();                        // MPI_Finalize
+  ~MpiSession() override;               // MPI_Finalize
   MpiSession(const MpiSession&) = delete;
   MpiSession& operator=(const MpiSession&) = delete;
-  const MpiDistribution& world() const { return world_; }
+  const MpiDistribution& world() const override { return world_; }
+  [[noreturn]] void abort(int code) const override;
 
  private:
   MpiDistribution world_{MPI_COMM_NULL};

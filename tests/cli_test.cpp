@@ -115,6 +115,18 @@ class Cli : public ::testing::Test {
 
   std::string outputs() const { return " -o " + quote(in_work("out.ply")) + " --report " + quote(in_work("out.json")); }
 
+  // Another build of the command (PROGRAM) run with ARGS in ENVIRONMENT ("env NAME=VALUE ..."); its
+  // exit code and stderr.
+  Result run_program(const std::string& program, const std::string& environment, const std::string& args) {
+    const std::string cmd = environment + " " + quote(program) + " " + args + " 2>" + quote(in_work("err.txt"));
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.err = slurp(in_work("err.txt"));
+    fs::remove(in_work("err.txt"));
+    return r;
+  }
+
   fs::path root_;
 };
 
@@ -369,14 +381,8 @@ TEST_F(Cli, ABinaryWithoutMpiRefusesToRunAsOneOfSeveralRanks) {
   const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
   const std::string mesh = in_work("m.ply");
   auto run_as = [&](const std::string& environment) {
-    const std::string cmd = environment + " " + quote(ISOTOPE_WITHOUT_MPI_BINARY) + " extract " + quote(vol) +
-                            " --iso 0 -q -o " + quote(mesh) + " 2>" + quote(in_work("err.txt"));
-    const int status = std::system(cmd.c_str());
-    Result r;
-    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.err = slurp(in_work("err.txt"));
-    fs::remove(in_work("err.txt"));
-    return r;
+    return run_program(ISOTOPE_WITHOUT_MPI_BINARY, environment,
+                       "extract " + quote(vol) + " --iso 0 -q -o " + quote(mesh));
   };
   Result r = run_as("env OMPI_COMM_WORLD_SIZE=3 OMPI_COMM_WORLD_RANK=0");
   EXPECT_EQ(r.code, 1);
@@ -400,6 +406,55 @@ TEST_F(Cli, ABinaryWithoutMpiRefusesToRunAsOneOfSeveralRanks) {
   r = run_as("env -u OMPI_COMM_WORLD_SIZE -u PMI_SIZE -u PMIX_RANK -u PMI_RANK -u OMPI_COMM_WORLD_RANK");
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_TRUE(fs::exists(mesh));
+}
+
+// The libraries that only one command needs are loaded by that command alone (cpp-httplib with
+// OpenSSL by serve, PLplot by plots, MPI under an MPI launcher): every other command starts
+// without them. A copy of the program with no modules beside it still extracts, and each command
+// that needs a module says which one it cannot open, exit 1, and writes nothing.
+TEST_F(Cli, LibrariesOfOneCommandAreLoadedByThatCommandAlone) {
+  // What the dynamic loader maps at start-up (ldd's way: the program itself does not run).
+  const std::string loaded_log = in_work("loaded.txt");
+  ASSERT_EQ(std::system(("LD_TRACE_LOADED_OBJECTS=1 " + quote(ISOTOPE_BINARY) + " > " + quote(loaded_log)).c_str()), 0);
+  const std::string loaded = slurp(loaded_log);
+  fs::remove(loaded_log);
+  EXPECT_NE(loaded.find("libtbb"), std::string::npos) << loaded;  // the listing is what it claims to be
+  for (const char* library : {"libcpp-httplib", "libssl", "libcrypto", "libplplot", "libmpi"})
+    EXPECT_EQ(loaded.find(library), std::string::npos) << library << " is loaded by every command:\n" << loaded;
+
+  const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
+  const std::string store = in_work("s.isotope");
+  ASSERT_EQ(run("convert -q " + quote(vol) + " " + quote(store)).code, 0);
+  const fs::path alone = root_ / "alone" / "bin" / "isotope";
+  fs::create_directories(alone.parent_path());
+  fs::copy_file(ISOTOPE_BINARY, alone);
+  auto run_alone = [&](const std::string& environment, const std::string& args) {
+    return run_program(alone.string(), environment, args);
+  };
+  const std::string mesh = in_work("m.ply");
+  Result r = run_alone("", "extract " + quote(store) + " --iso 0 -q -o " + quote(mesh));
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(mesh));
+  fs::remove(mesh);
+  const std::string missing = (root_ / "alone" / "lib" / "isotope").string();
+  r = run_alone("", "serve " + quote(store) + " --port 0 -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("isotope: error: cannot open isotope's module " + missing + "/isotope-serve.so: "),
+            std::string::npos)
+      << r.err;
+  const std::string png = in_work("p.png");
+  r = run_alone("", "sweep " + quote(store) + " --iso 0 --eps 0 --plot " + quote(png) + " -q");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("cannot open isotope's module " + missing + "/isotope-plot.so: "), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(png));
+  // Under an MPI launcher, where this isotope was built with MPI.
+  if (fs::exists(fs::path(ISOTOPE_BINARY).parent_path() / ISOTOPE_MODULE_DIR / "isotope-mpi.so")) {
+    r = run_alone("env OMPI_COMM_WORLD_SIZE=2 OMPI_COMM_WORLD_RANK=0",
+                  "extract " + quote(store) + " --iso 0 -q -o " + quote(mesh));
+    EXPECT_EQ(r.code, 1);
+    EXPECT_NE(r.err.find("cannot open isotope's module " + missing + "/isotope-mpi.so: "), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(mesh));
+  }
 }
 
 // A full disk, stood in for by a file size limit (ulimit -f: writes past it fail with EFBIG, as

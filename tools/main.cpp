@@ -20,11 +20,12 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <optional>
+#include <memory>
 #include <vector>
 
-#include "dist/mpi_distribution.h"
+#include "dist/mpi_module.h"
 #include "io/file/temporary_registry.h"
+#include "tools/support/command_module.h"
 #endif
 
 // Under AddressSanitizer (CI): fontconfig, which PLplot's cairo driver reaches through pango
@@ -68,10 +69,10 @@ int main(int argc, char** argv) {
 #ifdef ISOTOPE_HAVE_MPI
   // Started by mpirun (or srun): every rank runs the command, sharing its work
   // (docs/DISTRIBUTED.md); only rank 0 prints. Started otherwise: no MPI at all.
-  std::optional<isotope::MpiSession> mpi;
+  std::unique_ptr<isotope::MpiRuntime> mpi;
   if (launcher.launched) {
     try {
-      mpi.emplace(&argc, &argv);
+      mpi.reset(module_function<isotope::StartMpi>(isotope::kMpiModule, isotope::kStartMpi)(&argc, &argv));
     } catch (const std::exception& e) {
       std::cerr << "isotope: error: " << e.what() << '\n';
       return 1;
@@ -161,7 +162,7 @@ int main(int argc, char** argv) {
       std::cerr << "isotope: error: rank " << mpi->world().rank() << " of " << mpi->world().ranks() << ": " << what
                 << '\n';
       isotope::remove_temporaries_now();
-      MPI_Abort(MPI_COMM_WORLD, 1);
+      mpi->abort(1);
     }
 #endif
     if (speaks) std::cerr << "isotope: error: " << what << '\n';

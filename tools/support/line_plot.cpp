@@ -1,5 +1,3 @@
-#include "tools/support/line_plot.h"
-
 #include <plplot.h>
 #include <sys/types.h>  // ssize_t of fopencookie's callbacks
 
@@ -16,8 +14,8 @@
 #include <utility>
 #include <vector>
 
-#include "io/file/atomic_file.h"
 #include "isotope/error.h"
+#include "tools/support/line_plot_module.h"
 
 // PLplot keeps its streams, error handlers and driver table in globals and reports a fatal
 // error by calling exit(). So every call here holds one lock, draws on a stream of its own
@@ -28,8 +26,8 @@
 //   plexit (PLplot gives up, normally exit()): our exit handler longjmps back to the guard
 //     around the drawing code, which therefore holds no object with a destructor. The stream is
 //     then in an unknown state, so later calls refuse at once instead of touching PLplot again.
-// The PNG bytes are written with AtomicFile, which sees every write and flush error; the
-// pngcairo driver itself ignores them.
+// This file is the plot module (tools/support/command_module.h): the command writes the PNG bytes
+// with AtomicFile, which sees every write and flush error; the pngcairo driver itself ignores them.
 
 namespace isotope {
 namespace {
@@ -450,12 +448,9 @@ std::vector<unsigned char> render_png(const LinePlot& plot, const Prepared& p, c
 
 }  // namespace
 
-void write_line_plot_png(const LinePlot& plot, const std::string& path) {
-  const Prepared prepared = prepare(plot, path);
-  AtomicFile out(path);  // before drawing: a missing or read-only directory fails fast
-  const std::vector<unsigned char> png = render_png(plot, prepared, path);
-  out.write(png.data(), png.size());
-  out.commit();
+extern "C" void isotope_render_line_plot(const LinePlot& plot, const std::string& path,
+                                         std::vector<unsigned char>& png) {
+  png = render_png(plot, prepare(plot, path), path);
 }
 
 }  // namespace isotope
