@@ -41,7 +41,8 @@ void* module_symbol(const std::string& name, const char* symbol) {
   dlerror();
   void* address = dlsym(handle, symbol);
   if (address == nullptr)
-    throw IoError("isotope's module " + file + " has no " + symbol + ": it belongs to another isotope (build or "
+    throw IoError("isotope's module " + file + " has no " + symbol +
+                  ": it belongs to another isotope (build or "
                   "install isotope again)");
   return address;
 }
