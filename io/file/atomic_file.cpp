@@ -11,7 +11,7 @@
 #include <system_error>
 #include <utility>
 
-#include "io/file/positioned_write.h"
+#include "io/file/positioned_io.h"
 #include "io/file/temporary_registry.h"
 #include "isotope/error.h"
 

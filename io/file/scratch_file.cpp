@@ -7,7 +7,7 @@
 #include <cstring>
 #include <vector>
 
-#include "io/file/positioned_write.h"
+#include "io/file/positioned_io.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -44,15 +44,10 @@ void ScratchFile::read(void* data, size_t bytes, uint64_t offset) const {
     std::memcpy(data, memory_.data() + offset, bytes);
     return;
   }
-  auto* p = static_cast<char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0)
-      throw IoError("cannot read scratch data in '" + directory_ + "'" +
-                    (n < 0 ? std::string(": ") + std::strerror(errno) : ""));
-    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
-  }
+  const PreadOutcome r = pread_all(fd_, data, bytes, offset);
+  if (r.bytes < bytes)
+    throw IoError("cannot read scratch data in '" + directory_ + "'" +
+                  (r.error != 0 ? std::string(": ") + std::strerror(r.error) : ""));
 }
 
 }  // namespace isotope

@@ -6,7 +6,7 @@
 #include <cerrno>
 #include <cstring>
 
-#include "io/file/positioned_write.h"
+#include "io/file/positioned_io.h"
 #include "io/file/temporary_registry.h"
 #include "isotope/error.h"
 
@@ -34,14 +34,9 @@ void SharedFile::write(const void* data, size_t bytes, uint64_t offset) const {
 }
 
 void SharedFile::read(void* data, size_t bytes, uint64_t offset) const {
-  auto* p = static_cast<char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::pread(fd_, p, bytes, static_cast<off_t>(offset));
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw IoError(path_ + ": read failed: " + std::strerror(errno));
-    if (n == 0) throw IoError(path_ + ": read past the end");
-    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
-  }
+  const PreadOutcome r = pread_all(fd_, data, bytes, offset);
+  if (r.error != 0) throw IoError(path_ + ": read failed: " + std::strerror(r.error));
+  if (r.ended_early(bytes)) throw IoError(path_ + ": read past the end");
 }
 
 void SharedFile::sync() const {

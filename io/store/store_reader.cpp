@@ -17,21 +17,17 @@
 #include "engine/core/parallel.h"
 #include "io/file/checked_size.h"
 #include "io/file/input_file.h"
+#include "io/file/positioned_io.h"
 #include "io/store/held_words.h"
 #include "isotope/error.h"
 
 namespace isotope {
 namespace {
 
-void pread_all(int fd, void* data, size_t bytes, uint64_t offset, const std::string& what) {
-  auto* p = static_cast<char*>(data);
-  while (bytes > 0) {
-    const ssize_t n = ::pread(fd, p, bytes, static_cast<off_t>(offset));
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw IoError(what + ": read failed: " + std::strerror(errno));
-    if (n == 0) throw IoError(what + ": file is truncated");
-    p += n, bytes -= static_cast<size_t>(n), offset += static_cast<uint64_t>(n);
-  }
+void read_span(int fd, void* data, size_t bytes, uint64_t offset, const std::string& what) {
+  const PreadOutcome r = pread_all(fd, data, bytes, offset);
+  if (r.error != 0) throw IoError(what + ": read failed: " + std::strerror(r.error));
+  if (r.ended_early(bytes)) throw IoError(what + ": file is truncated");
 }
 
 // Runs of consecutive sections that `which` names, as (first, end) section indices.
@@ -73,7 +69,7 @@ StoreReader::StoreReader(const std::string& path) : path_(path) {
     file_bytes_ = static_cast<uint64_t>(st.st_size);
     if (file_bytes_ < kHeaderBytes) throw IoError(path + ": not an isotope store (file is shorter than the header)");
     std::vector<uint8_t> head(kHeaderBytes);
-    pread_all(fd_, head.data(), head.size(), 0, path);
+    read_span(fd_, head.data(), head.size(), 0, path);
     header_ = decode_header(head.data(), head.size(), path);
     layout_ = StoreLayout(header_.dims, header_.brick_bits);
     // The directories follow the bricks, band after band, and end the file.
@@ -104,7 +100,7 @@ const StoreReader::Directory& StoreReader::band_directory(int band) const {
     const BandDirectory& where = header_.bands[static_cast<size_t>(band)];
     auto entries = std::make_shared<Directory>(static_cast<size_t>(layout_.band(band).brick_count()));
     if (where.bytes != entries->size() * kEntryBytes) throw IoError(path_ + ": directory is truncated");
-    pread_all(fd_, entries->data(), where.bytes, where.offset, path_);
+    read_span(fd_, entries->data(), where.bytes, where.offset, path_);
     check_directory(*entries, layout_.band(band).bricks, where, area_end_, path_);
     d.entries = std::move(entries);
   }
@@ -143,7 +139,7 @@ void StoreReader::read_range(uint8_t* data, uint64_t begin, uint64_t stop, int64
   // Any shortfall (or a kernel or file system without it) goes the slow way, whole.
   if (::preadv2(fd_, &v, 1, static_cast<off_t>(begin), RWF_NOWAIT) == static_cast<ssize_t>(bytes)) return;
   advise_window(begin, stop);
-  pread_all(fd_, data, bytes, begin, describe_brick(index));
+  read_span(fd_, data, bytes, begin, describe_brick(index));
 }
 
 void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& which) const {

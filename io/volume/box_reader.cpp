@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "io/file/input_file.h"
+#include "io/file/positioned_io.h"
 #include "io/volume/hdf5_handle.h"
 #include "io/volume/nrrd_reader.h"
 #include "io/volume/raw_reader.h"
@@ -114,16 +115,12 @@ void write_fully(int fd, const unsigned char* bytes, size_t size, const std::str
 
 // pread may return less than asked; only 0 (end of file) or an error end the loop early.
 void pread_fully(int fd, unsigned char* out, size_t size, int64_t offset, const std::string& where) {
-  for (size_t done = 0; done < size;) {
-    const int64_t at = offset + static_cast<int64_t>(done);
-    const ssize_t n = ::pread(fd, out + done, size - done, static_cast<off_t>(at));
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw IoError(where + ": read failed at byte " + std::to_string(at) + ": " + errno_text(errno));
-    if (n == 0) {
-      throw IoError(where + ": short read: the file ends at byte " + std::to_string(at) + ", before byte " +
-                    std::to_string(offset + static_cast<int64_t>(size)) + " (was it truncated after opening?)");
-    }
-    done += static_cast<size_t>(n);
+  const PreadOutcome r = pread_all(fd, out, size, static_cast<uint64_t>(offset));
+  const int64_t at = offset + static_cast<int64_t>(r.bytes);
+  if (r.error != 0) throw IoError(where + ": read failed at byte " + std::to_string(at) + ": " + errno_text(r.error));
+  if (r.ended_early(size)) {
+    throw IoError(where + ": short read: the file ends at byte " + std::to_string(at) + ", before byte " +
+                  std::to_string(offset + static_cast<int64_t>(size)) + " (was it truncated after opening?)");
   }
 }
 

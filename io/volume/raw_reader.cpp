@@ -24,6 +24,7 @@
 #include "engine/core/volume_check.h"
 #include "io/file/checked_size.h"
 #include "io/file/input_file.h"
+#include "io/file/positioned_io.h"
 #include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
@@ -100,16 +101,10 @@ void read_values(const std::string& path, ScalarType type, std::vector<float>& v
     const size_t first = static_cast<size_t>(b) * kBlockValues, n = std::min(kBlockValues, values.size() - first);
     thread_local std::vector<unsigned char> buffer;
     buffer.resize(n * elem);
-    size_t got = 0;
-    while (got < buffer.size()) {
-      const ssize_t r =
-          ::pread(file.get(), buffer.data() + got, buffer.size() - got, static_cast<off_t>(first * elem + got));
-      if (r < 0 && errno == EINTR) continue;
-      if (r <= 0) {
-        const std::string why = r < 0 ? std::strerror(errno) : "unexpected end of file";
-        throw IoError(path + ": read failed after " + std::to_string(first * elem + got) + " bytes: " + why);
-      }
-      got += static_cast<size_t>(r);
+    const PreadOutcome r = pread_all(file.get(), buffer.data(), buffer.size(), first * elem);
+    if (r.bytes < buffer.size()) {
+      const std::string why = r.error != 0 ? std::strerror(r.error) : "unexpected end of file";
+      throw IoError(path + ": read failed after " + std::to_string(first * elem + r.bytes) + " bytes: " + why);
     }
     decode_scalars(type, false, buffer.data(), n, values.data() + first);
   });
