@@ -4,6 +4,7 @@
 // under TSan.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <atomic>
 #include <chrono>
@@ -62,6 +63,50 @@ TEST(Determinism, BuildsRunAtMostAWindowAheadOfCommitsThatComeInOrder) {
       ASSERT_LT(order.size(), 38u);  // nothing after the failed build
       for (size_t i = 0; i < order.size(); ++i) EXPECT_EQ(order[i], static_cast<int64_t>(i));
     }
+}
+
+// A commit holds up no build: one that a build finishes during is only noted, and its thread goes
+// on to the next build (the eps-0 march joins its slabs this way while the other threads march).
+// A commit that throws stops the loop as a failed build does.
+TEST(Determinism, BuildsGoOnWhileACommitRuns) {
+  const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+  const bool two_threads = tbb::this_task_arena::max_concurrency() >= 2;
+  std::atomic<bool> started_2{false}, committing{false};
+  std::atomic<int> overlapping_commits{0};
+  bool build_2_ran_during_commit_0 = false;
+  parallel_in_order_committed(
+      0, 40, 4,
+      [&](int64_t i) {
+        if (i == 1) std::this_thread::sleep_for(std::chrono::milliseconds(20));  // done during commit 0
+        if (i == 2) started_2 = true;
+      },
+      [&](int64_t i) {
+        if (committing.exchange(true)) ++overlapping_commits;
+        // Commit 0 waits for build 2, which the other thread starts once it has noted build 1
+        // done: with commits under the lock, it could not note it before this commit ended.
+        if (i == 0 && two_threads) {
+          for (int ms = 0; ms < 2000 && !started_2; ++ms) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+          build_2_ran_during_commit_0 = started_2;
+        }
+        committing = false;
+      });
+  EXPECT_EQ(overlapping_commits, 0);
+  EXPECT_TRUE(build_2_ran_during_commit_0 || !two_threads) << "build 2 waited for commit 0";
+
+  std::vector<int64_t> order;
+  std::atomic<int64_t> built_after{0};
+  EXPECT_THROW(parallel_in_order_committed(
+                   0, 200, 4,
+                   [&](int64_t i) {
+                     if (i > 30) ++built_after;
+                   },
+                   [&](int64_t i) {
+                     if (i == 20) throw std::runtime_error("commit 20");
+                     order.push_back(i);
+                   }),
+               std::runtime_error);
+  ASSERT_EQ(order.size(), 20u);  // nothing committed after the failed commit
+  EXPECT_LE(built_after, 4) << "builds went on after the failed commit";
 }
 
 Mesh extract_with_threads(const Volume& v, const ExtractOptions& o, size_t threads) {

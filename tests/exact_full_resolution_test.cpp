@@ -296,6 +296,31 @@ TEST(FullResolutionSlabs, AnyThreadCountGivesTheOneWalkMeshBitForBit) {
   expect_same_mesh_on_any_threads(testing::crop(generate_noise(70, 4), {37, 70, 23}), 0.0f, "noise 37x70x23");
 }
 
+// Each slab is joined as soon as the slabs before it are, into a mesh reserved, as address space,
+// at the most the volume's cells can make (12 triangles a cell); where that is more than may be
+// reserved (here: a grid 2^18 nodes wide, over 2^46 bytes; a `ulimit -v` does the same), the slabs
+// are all marched and then joined. Both give the one-walk mesh, in arrays of its size.
+TEST(FullResolutionSlabs, WithoutTheAddressSpaceToReserveTheSlabsAreJoinedAfterTheMarch) {
+  Volume wide;
+  wide.dims = {int64_t{1} << 18, 2, 9};
+  wide.values.resize(static_cast<size_t>(wide.node_count()));
+  for (int64_t z = 0; z < wide.dims[2]; ++z)
+    for (int64_t y = 0; y < wide.dims[1]; ++y)
+      for (int64_t x = 0; x < wide.dims[0]; ++x)
+        wide.values[wide.index(x, y, z)] =  // cut through every layer, at its near end only
+            x < 3000 ? static_cast<float>((x * 7 + y * 3 + z * 13) % 17) / 17.0f - 0.5f : -1.0f;
+  const double side = static_cast<double>(wide.dims[0]), bound = 12.0 * 12 * (side - 1) * (side - 1) * 8;
+  ASSERT_GT(bound, 0x1p46);
+  ASSERT_GT(slab_count(wide), 2);
+  expect_same_mesh_on_any_threads(wide, 0.013f, "2^18 x 2 x 9");
+
+  for (const Volume& v : {wide, generate_algebraic(129)}) {
+    const Mesh m = extract_full_resolution(v, v.dims[0] == 129 ? 0.0f : 0.013f);
+    EXPECT_EQ(m.triangles.capacity(), m.triangles.size());
+    EXPECT_EQ(m.positions.capacity(), m.positions.size());
+  }
+}
+
 TEST(FullResolutionSlabs, RealVolumeWithAOneLayerLastSlabGivesTheOneWalkMesh) {
   const testing::SharedVolume& bolt = testing::shared_volumes()[3];
   const Volume v = testing::load_shared(bolt);

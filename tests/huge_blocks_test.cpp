@@ -2,11 +2,14 @@
 // it hands a freed block out again where it lay, already faulted in, whole or in part, and keeps
 // no more than it was told.
 #include <gtest/gtest.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 #include <initializer_list>
+#include <new>
 #include <vector>
 
 #include "isotope/detail/huge_page_allocator.h"
@@ -189,6 +192,77 @@ TEST_F(HugeBlocks, TheAllocatorSendsLargeArraysThroughTheStoreAndSmallOnesToMall
     EXPECT_EQ(kept_huge_block_bytes(), 0u);
   }
   EXPECT_EQ(kept_huge_block_bytes(), kHugePage) << "the large array's block kept, the small one freed by malloc";
+}
+
+// A reservation of address space only: far larger than the memory it will take, handed out
+// however much is kept, never kept itself, and refused beyond an eighth of a `ulimit -v`.
+TEST_F(HugeBlocks, AReservationIsAddressSpaceOnlyAndNeverKept) {
+  keep_freed_huge_blocks(64 * kMB);
+  {
+    const AddressSpaceOnly reserve;
+    std::vector<char, UninitializedHugePageAllocator<char>> reserved;
+    reserved.reserve(size_t{1} << 40);  // a terabyte
+    EXPECT_TRUE(on_huge_page_boundary(reserved.data()));
+    reserved.resize(3 * kMB);
+    std::memset(reserved.data(), 7, reserved.size());
+  }
+  EXPECT_EQ(kept_huge_block_bytes(), 0u) << "a reservation is unmapped when freed";
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)  // they map terabytes of their own
+  rlimit was{};
+  ASSERT_EQ(getrlimit(RLIMIT_AS, &was), 0);
+  rlimit limited = was;
+  limited.rlim_cur = size_t{64} << 30;
+  if (was.rlim_max == RLIM_INFINITY || was.rlim_max >= limited.rlim_cur) {
+    ASSERT_EQ(setrlimit(RLIMIT_AS, &limited), 0);
+    const AddressSpaceOnly reserve;
+    EXPECT_THROW(allocate_huge((size_t{8} << 30) + kHugePage), std::bad_alloc) << "over an eighth of 64 GB";
+    void* p = allocate_huge(size_t{7} << 30);
+    EXPECT_NE(p, nullptr);
+    free_huge(p);
+    ASSERT_EQ(setrlimit(RLIMIT_AS, &was), 0);
+  }
+#endif
+}
+
+// Whole pages of a reservation are moved, not copied: they are no longer mapped where they were
+// (mincore() finds no mapping there), whatever is left is copied, and unaligned arrays, or arrays
+// from malloc, are copied whole.
+TEST_F(HugeBlocks, MovingPagesGivesTheSameBytesAndTakesTheWholePagesAway) {
+  const auto mapped = [](const char* p, size_t bytes) {
+    std::vector<unsigned char> resident((bytes + 4095) / 4096);
+    return mincore(const_cast<char*>(p), bytes, resident.data()) == 0;
+  };
+  for (const size_t bytes : {size_t{0}, size_t{100}, 5 * kMB + 123, 4 * kMB}) {
+    std::vector<char, UninitializedHugePageAllocator<char>> from, to;
+    {
+      const AddressSpaceOnly reserve;
+      from.reserve(64 * kMB);
+    }
+    from.resize(bytes);
+    for (size_t i = 0; i < bytes; ++i) from[i] = static_cast<char>(i * 7 + i / 4096);
+    const std::vector<char> expected(from.begin(), from.end());
+    to.resize(bytes);
+    move_pages(to.data(), from.data(), bytes);
+    EXPECT_TRUE(std::equal(to.begin(), to.end(), expected.begin())) << bytes << " bytes";
+    if (bytes >= kMB) {
+      EXPECT_FALSE(mapped(from.data(), 4 * kMB)) << "the pages were copied, not moved";
+      EXPECT_TRUE(mapped(from.data() + 64 * kMB - 4096, 4096)) << "pages beyond were taken too";
+    }
+  }
+  // From a block malloc gave, on a page boundary though it is, the bytes are copied: taking its
+  // pages would leave a hole where malloc hands out memory again.
+  std::vector<char, UninitializedHugePageAllocator<char>> from_malloc(4 * kMB, 'm'), to(4 * kMB);
+  ASSERT_TRUE(on_huge_page_boundary(from_malloc.data()));
+  move_pages(to.data(), from_malloc.data(), 4 * kMB);
+  EXPECT_TRUE(mapped(from_malloc.data(), 4 * kMB));
+  EXPECT_EQ(std::count(to.begin(), to.end(), 'm'), static_cast<std::ptrdiff_t>(4 * kMB));
+  EXPECT_EQ(std::count(from_malloc.begin(), from_malloc.end(), 'm'), static_cast<std::ptrdiff_t>(4 * kMB));
+
+  std::vector<char> a(10000, 'a'), b(10000, 'b');
+  move_pages(b.data() + 1, a.data() + 3, 9000);
+  EXPECT_EQ(b[0], 'b');
+  EXPECT_EQ(std::count(b.begin() + 1, b.begin() + 9001, 'a'), 9000);
+  EXPECT_EQ(b[9001], 'b');
 }
 
 }  // namespace

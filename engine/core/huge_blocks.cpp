@@ -1,8 +1,12 @@
 // The huge-block store behind detail::HugePageAllocator (isotope/detail/huge_page_allocator.h).
 #include <sys/mman.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <iterator>
 #include <map>
 #include <mutex>
@@ -19,9 +23,9 @@ size_t round_to_huge_pages(size_t bytes) { return (bytes + kHugeMask) & ~kHugeMa
 
 // BYTES (a multiple of 2 MB) mapped at a 2 MB boundary: one more huge page is mapped, and what lies
 // before the boundary and after the block unmapped again.
-void* map_aligned(size_t bytes) {
+void* map_aligned(size_t bytes, int flags = 0) {
   const size_t span = bytes + kHugePage;
-  void* m = mmap(nullptr, span, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  void* m = mmap(nullptr, span, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | flags, -1, 0);
   if (m == MAP_FAILED) return nullptr;
   const auto begin = reinterpret_cast<uintptr_t>(m);
   const uintptr_t first = (begin + kHugeMask) & ~kHugeMask, end = first + bytes;
@@ -35,9 +39,10 @@ void* map_aligned(size_t bytes) {
 struct HugeBlocks {
   using Ranges = std::map<uintptr_t, size_t>;  // address -> bytes
   std::mutex mutex;
-  size_t cap = 0;  // bytes of freed blocks kept; 0: malloc's blocks
-  Ranges live;     // blocks of the store's own, handed out
-  Ranges kept;     // freed ones, neighbours joined
+  size_t cap = 0;   // bytes of freed blocks kept; 0: malloc's blocks
+  Ranges live;      // blocks of the store's own, handed out
+  Ranges reserved;  // address space only (AddressSpaceOnly), handed out: unmapped when freed
+  Ranges kept;      // freed ones, neighbours joined
   size_t kept_bytes = 0;
 
   // The smallest kept range that holds BYTES, its rest kept; 0 if none does.
@@ -93,11 +98,43 @@ HugeBlocks& huge_blocks() {
   return *blocks;
 }
 
+thread_local bool address_space_only = false;
+
+// The most a reservation may take: an eighth of the address space the process may map, where a
+// limit is set (`ulimit -v` or `-d`, as a cluster's scheduler sets them), so that the reservation,
+// which counts against the limit although it costs no memory, leaves the rest of the work room.
+size_t address_space_to_spare() {
+  size_t spare = SIZE_MAX;
+  for (const int resource : {RLIMIT_AS, RLIMIT_DATA}) {
+    rlimit limit{};
+    if (getrlimit(resource, &limit) == 0 && limit.rlim_cur != RLIM_INFINITY)
+      spare = std::min(spare, static_cast<size_t>(limit.rlim_cur / 8));
+  }
+  return spare;
+}
+
 }  // namespace
+
+AddressSpaceOnly::AddressSpaceOnly() : was_(address_space_only) { address_space_only = true; }
+AddressSpaceOnly::~AddressSpaceOnly() { address_space_only = was_; }
 
 void* allocate_huge(size_t bytes) {
   const size_t rounded = std::max<size_t>(kHugePage, round_to_huge_pages(bytes));
   HugeBlocks& b = huge_blocks();
+  if (address_space_only) {
+    if (rounded > address_space_to_spare()) throw std::bad_alloc();
+    void* m = map_aligned(rounded, MAP_NORESERVE);
+    if (!m) throw std::bad_alloc();
+    advise_huge_pages(m, rounded);
+    try {
+      const std::lock_guard<std::mutex> lock(b.mutex);
+      b.reserved.emplace(reinterpret_cast<uintptr_t>(m), rounded);
+    } catch (...) {
+      munmap(m, rounded);
+      throw;
+    }
+    return m;
+  }
   {
     const std::lock_guard<std::mutex> lock(b.mutex);
     if (b.cap > 0) {
@@ -132,6 +169,12 @@ void free_huge(void* p) noexcept {
   HugeBlocks& b = huge_blocks();
   {
     const std::lock_guard<std::mutex> lock(b.mutex);
+    const auto reserved = b.reserved.find(reinterpret_cast<uintptr_t>(p));
+    if (reserved != b.reserved.end()) {
+      munmap(p, reserved->second);
+      b.reserved.erase(reserved);
+      return;
+    }
     const auto it = b.live.find(reinterpret_cast<uintptr_t>(p));
     if (it != b.live.end()) {
       HugeBlocks::Ranges::node_type block = b.live.extract(it);
@@ -143,6 +186,28 @@ void free_huge(void* p) noexcept {
     }
   }
   std::free(p);  // from malloc, before the store kept blocks
+}
+
+void move_pages(void* to, void* from, size_t bytes) noexcept {
+  if (bytes == 0) return;
+  static const auto page = static_cast<uintptr_t>(sysconf(_SC_PAGESIZE));
+  const auto t = reinterpret_cast<uintptr_t>(to), f = reinterpret_cast<uintptr_t>(from);
+  const size_t whole = bytes & ~(page - 1);
+  // Only from a reservation: pages taken from under malloc (whose large blocks may lie on page
+  // boundaries) would leave a hole where it hands out memory again.
+  const auto in_reservation = [&] {
+    HugeBlocks& b = huge_blocks();
+    const std::lock_guard<std::mutex> lock(b.mutex);
+    auto it = b.reserved.upper_bound(f);
+    if (it == b.reserved.begin()) return false;
+    --it;
+    return f + whole <= it->first + it->second;
+  };
+  size_t moved = 0;
+  if (whole > 0 && t % page == 0 && f % page == 0 && in_reservation() &&
+      mremap(from, whole, whole, MREMAP_MAYMOVE | MREMAP_FIXED, to) != MAP_FAILED)
+    moved = whole;
+  std::memcpy(static_cast<char*>(to) + moved, static_cast<const char*>(from) + moved, bytes - moved);
 }
 
 void keep_freed_huge_blocks(size_t bytes) {

@@ -81,11 +81,13 @@ void parallel_for_in_order(int64_t begin, int64_t end, const Body& body) {
 
 // Calls build(i) for every i in [begin, end), possibly concurrently, handed out in increasing
 // order, and commit(i) for every i in increasing order, one at a time, as soon as build(i) and
-// every commit before it are done (on the thread whose build the next commit waited for). build(i)
-// starts only once i - window is committed, so that it may use slot (i - begin) % window and at
-// most `window` results wait at once. Unlike batches of `window` builds, a long build holds up
-// only the commits after it, not the builds. Once a build throws, no build starts again (those
-// running go on to their end), and the first exception is rethrown.
+// every commit before it are done: on the thread whose build completed the run, which goes on
+// committing while the next ones are built. The lock is not held during a commit, so that a build
+// done meanwhile is only noted, and its thread builds on. build(i) starts only once i - window is
+// committed, so that it may use slot (i - begin) % window and at most `window` results wait at
+// once. Unlike batches of `window` builds, a long build holds up only the commits after it, not the
+// builds. Once a build or a commit throws, no build or commit starts again (those running go on to
+// their end), and the first exception is rethrown.
 template <class Build, class Commit>
 void parallel_in_order_committed(int64_t begin, int64_t end, int64_t window, const Build& build, const Commit& commit) {
   std::mutex mutex;
@@ -93,6 +95,7 @@ void parallel_in_order_committed(int64_t begin, int64_t end, int64_t window, con
   int64_t committed = begin;  // [begin, committed) committed
   std::vector<char> built(static_cast<size_t>(std::max<int64_t>(window, 1)), 0);
   bool failed = false;
+  bool committing = false;  // a thread is committing: it takes up what is built meanwhile
   parallel_for_in_order(begin, end, [&](int64_t i) {
     const auto slot = static_cast<size_t>((i - begin) % window);
     {
@@ -100,6 +103,7 @@ void parallel_in_order_committed(int64_t begin, int64_t end, int64_t window, con
       freed.wait(lock, [&] { return failed || i < committed + window; });
       if (failed) return;
     }
+    bool commits = false;  // this thread is the one committing
     try {
 #ifdef ISOTOPE_STD_THREADS
       build(i);
@@ -108,21 +112,28 @@ void parallel_in_order_committed(int64_t begin, int64_t end, int64_t window, con
       // build taken up there would wait for a commit that waits for this build.
       tbb::this_task_arena::isolate([&] { build(i); });
 #endif
-      std::lock_guard<std::mutex> lock(mutex);
+      std::unique_lock<std::mutex> lock(mutex);
       built[slot] = 1;
-      for (size_t next = static_cast<size_t>((committed - begin) % window); committed < end && built[next];
+      if (committing) return;
+      committing = commits = true;
+      for (size_t next = static_cast<size_t>((committed - begin) % window); !failed && committed < end && built[next];
            next = static_cast<size_t>((committed - begin) % window)) {
         built[next] = 0;
-        commit(committed);
+        const int64_t c = committed;
+        lock.unlock();
+        commit(c);
+        lock.lock();
         ++committed;
+        freed.notify_all();
       }
+      committing = false;
     } catch (...) {
       const std::lock_guard<std::mutex> lock(mutex);
       failed = true;
+      if (commits) committing = false;
       freed.notify_all();
       throw;
     }
-    freed.notify_all();
   });
 }
 

@@ -1,8 +1,11 @@
 #include "engine/extract/slab_march.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
+#include <deque>
 #include <memory>
+#include <mutex>
 #include <new>
 #include <stdexcept>
 #include <string>
@@ -13,6 +16,7 @@
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/edge_vertex_map.h"
+#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 namespace {
@@ -31,56 +35,63 @@ struct Slab {
 // (docs/METHOD.md, "eps = 0 by blocks").
 using BuilderPool = LendingPool<MeshBuilder>;
 
+// A slab's builder, and the memory its mesh is built in, come from these: both are lent from slab
+// to slab, since fresh memory costs more than the march that fills it (docs/METHOD.md, "eps = 0 by
+// blocks").
+struct SlabMemory {
+  BuilderPool builders;
+  LendingPool<Mesh> meshes;        // arrays of slabs already joined, for later slabs to be built in
+  bool joined_as_marched = false;  // meshes are given back while slabs are marched
+};
+
 // One slab's own welded mesh. Only an edge lying in the plane z = z0 between two slabs can be cut
 // in both (its p + q has z 2 z0; every other edge has both ends in one slab), so those vertices
 // are the only ones the merge has to look up.
-Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, BuilderPool& builders, int64_t z_begin, int64_t z_end,
+Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, SlabMemory& memory, int64_t z_begin, int64_t z_end,
                   bool below, bool above) {
-  std::unique_ptr<MeshBuilder> builder =
-      builders.take([&] { return std::make_unique<MeshBuilder>(plan.iso, plan.side, plan.origin, plan.spacing); });
+  std::unique_ptr<MeshBuilder> builder = memory.builders.take(
+      [&] { return std::make_unique<MeshBuilder>(plan.iso, plan.side, plan.origin, plan.spacing); });
+  if (std::unique_ptr<Mesh> storage = memory.meshes.take([] { return nullptr; }))
+    builder->build_in(std::move(*storage));
   builder->keep_plane_keys(below ? 2 * z_begin : -1, above ? 2 * z_end : -1);
   march(z_begin, z_end, *builder);
   Slab slab{builder->take(), builder->take_bottom_keys(), builder->take_top_keys()};
   builder->reset();
-  // The next slab is about as large: room for a quarter more. Only a hint: without the memory for
-  // it, the next mesh grows as it goes.
+  // Without joined slabs' arrays to build in, the next slab is about as large: room for a quarter
+  // more. Only a hint: without the memory for it, the next mesh grows as it goes.
   const size_t vertices = slab.mesh.positions.size(), triangles = slab.mesh.triangles.size();
   try {
-    builder->reserve(vertices + vertices / 4, triangles + triangles / 4);
+    if (!memory.joined_as_marched) builder->reserve(vertices + vertices / 4, triangles + triangles / 4);
   } catch (const std::bad_alloc&) {
   }
-  builders.give(std::move(builder));
+  memory.builders.give(std::move(builder));
   return slab;
 }
 
-// Joins the slabs' meshes in slab order. A vertex of slab s on its bottom plane takes the index
-// slab s - 1 gave it; any other vertex is new, in slab s's order. Since slab s - 1 comes first in
-// the serial walk, that is the serial walk's first-appearance numbering exactly. The numbering
-// looks only at the planes between slabs, so it runs first, alone; then every slab knows where
-// its vertices and triangles go, and the slabs are copied into a mesh of the exact size on all
-// threads, each page of it first touched by the thread that writes it. (Appending each slab to a
-// mesh that grew by doubling copied every vertex and triangle again, about once on average, into
-// fresh pages, on one thread, after the last slab's march: docs/METHOD.md, "eps = 0 by blocks".)
-// Frees the slabs.
-Mesh join_slabs(std::vector<Slab>& slabs) {
-  constexpr uint32_t kAbsent = EdgeVertexMap::kAbsent;
+// Numbers the slabs' vertices as one walk over the slabs in order does: a vertex of slab s on its
+// bottom plane takes the index slab s - 1 gave it; any other vertex is new, in slab s's order.
+// Since slab s - 1 comes first in the serial walk, that is the serial walk's first-appearance
+// numbering exactly. It looks only at the planes between slabs, one slab after another; then the
+// slab knows where its vertices and triangles go (its Place), and is copied there.
+class SlabNumbering {
+ public:
+  static constexpr uint32_t kAbsent = EdgeVertexMap::kAbsent;
   struct Place {
     uint32_t first_vertex = 0;  // the output index of the slab's first new vertex
     size_t first_triangle = 0;
+    size_t new_vertices = 0;
     std::vector<uint32_t> bottom;  // per bottom vertex: its index in the slab below, or kAbsent
   };
-  std::vector<Place> places(slabs.size());
-  size_t vertices = 0, triangles = 0;
-  EdgeVertexMap below(0);  // edge key -> output index, on the plane below the slab
-  for (size_t s = 0; s < slabs.size(); ++s) {
-    const Slab& slab = slabs[s];
-    Place& place = places[s];
-    place.first_vertex = static_cast<uint32_t>(vertices);
-    place.first_triangle = triangles;
+
+  // The next slab's place. Throws std::length_error once the vertices outgrow 32-bit indices.
+  Place next(const Slab& slab) {
+    Place place;
+    place.first_vertex = static_cast<uint32_t>(vertices_);
+    place.first_triangle = triangles_;
     place.bottom.resize(slab.bottom.size());
     size_t found = 0;
     for (size_t i = 0; i < slab.bottom.size(); ++i) {
-      place.bottom[i] = below.find_or_insert(slab.bottom[i].key, kAbsent);
+      place.bottom[i] = below_.find_or_insert(slab.bottom[i].key, kAbsent);
       found += place.bottom[i] != kAbsent;
     }
     // A top vertex is new (the planes differ): its index is the slab's first plus the new vertices
@@ -90,40 +101,89 @@ Mesh join_slabs(std::vector<Slab>& slabs) {
     size_t b = 0, found_before = 0;
     for (const PlaneVertex& v : slab.top) {
       for (; b < slab.bottom.size() && slab.bottom[b].local < v.local; ++b) found_before += place.bottom[b] != kAbsent;
-      top.find_or_insert(v.key, static_cast<uint32_t>(vertices + v.local - found_before));
+      top.find_or_insert(v.key, static_cast<uint32_t>(vertices_ + v.local - found_before));
     }
-    below = std::move(top);
-    vertices += slab.mesh.positions.size() - found;
-    triangles += slab.mesh.triangles.size();
+    below_ = std::move(top);
+    place.new_vertices = slab.mesh.positions.size() - found;
+    vertices_ += place.new_vertices;
+    triangles_ += slab.mesh.triangles.size();
+    if (vertices_ >= kAbsent)
+      throw std::length_error("the mesh has " + std::to_string(vertices_) +
+                              " vertices, more than its 32-bit indices can number");
+    return place;
   }
-  if (vertices >= kAbsent)
-    throw std::length_error("the mesh has " + std::to_string(vertices) +
-                            " vertices, more than its 32-bit indices can number");
+  size_t vertices() const { return vertices_; }
+  size_t triangles() const { return triangles_; }
+
+ private:
+  EdgeVertexMap below_{0};  // edge key -> output index, on the plane below the next slab
+  size_t vertices_ = 0, triangles_ = 0;
+};
+
+// Copies SLAB where PLACE says into the mesh's arrays, which have room up to the place's end.
+void copy_slab(const Slab& slab, const SlabNumbering::Place& place, std::array<float, 3>* positions,
+               std::array<uint32_t, 3>* triangles) {
+  std::vector<uint32_t> remap(slab.mesh.positions.size());
+  uint32_t next = place.first_vertex;
+  size_t b = 0;
+  for (size_t k = 0; k < remap.size(); ++k) {
+    if (b < slab.bottom.size() && slab.bottom[b].local == k) {
+      const uint32_t index_below = place.bottom[b++];
+      if (index_below != SlabNumbering::kAbsent) {
+        remap[k] = index_below;
+        continue;
+      }
+    }
+    remap[k] = next;
+    positions[next++] = slab.mesh.positions[k];
+  }
+  auto* to = triangles + place.first_triangle;
+  for (const auto& t : slab.mesh.triangles) *to++ = {remap[t[0]], remap[t[1]], remap[t[2]]};
+}
+
+// Joins the slabs' meshes in slab order, all marched: numbered first, alone; then the slabs are
+// copied into a mesh of the exact size on all threads, each page of it first touched by the
+// thread that writes it. (Appending each slab to a mesh that grew by doubling copied every vertex
+// and triangle again, about once on average, into fresh pages, on one thread, after the last
+// slab's march: docs/METHOD.md, "eps = 0 by blocks".) Frees the slabs.
+Mesh join_slabs(std::vector<Slab>& slabs) {
+  SlabNumbering numbering;
+  std::vector<SlabNumbering::Place> places;
+  places.reserve(slabs.size());
+  for (const Slab& slab : slabs) places.push_back(numbering.next(slab));
   Mesh out;
-  out.positions.resize(vertices);
-  out.triangles.resize(triangles);
+  out.positions.resize(numbering.vertices());
+  out.triangles.resize(numbering.triangles());
   parallel_for(0, static_cast<int64_t>(slabs.size()), [&](int64_t s) {
     Slab& slab = slabs[static_cast<size_t>(s)];
-    const Place& place = places[static_cast<size_t>(s)];
-    std::vector<uint32_t> remap(slab.mesh.positions.size());
-    uint32_t next = place.first_vertex;
-    size_t b = 0;
-    for (size_t k = 0; k < remap.size(); ++k) {
-      if (b < slab.bottom.size() && slab.bottom[b].local == k) {
-        const uint32_t index_below = place.bottom[b++];
-        if (index_below != kAbsent) {
-          remap[k] = index_below;
-          continue;
-        }
-      }
-      remap[k] = next;
-      out.positions[next++] = slab.mesh.positions[k];
-    }
-    auto* to = out.triangles.data() + place.first_triangle;
-    for (const auto& t : slab.mesh.triangles) *to++ = {remap[t[0]], remap[t[1]], remap[t[2]]};
+    copy_slab(slab, places[static_cast<size_t>(s)], out.positions.data(), out.triangles.data());
     slab = Slab{};
   });
   return out;
+}
+
+// Room in OUT for the most vertices and triangles the slabs of PLAN can make, as address space only
+// (detail::AddressSpaceOnly): up to 7 vertices a node (its edges along the axes, the face diagonals
+// and the body diagonal of Kuhn's cells) and 12 triangles a cell (6 tetrahedra of at most 2). A mesh
+// is a fraction of that, so only what the slabs fill costs memory. False where the address space
+// is not there to be reserved.
+bool reserve_for_every_slab(const SlabPlan& plan, Mesh& out) {
+  const auto side = static_cast<double>(plan.side), layers = static_cast<double>(plan.cell_layers);
+  const double vertices = std::min(7 * side * side * (layers + 1), static_cast<double>(SlabNumbering::kAbsent));
+  const double triangles = 12 * (side - 1) * (side - 1) * layers;
+  if (triangles * sizeof(out.triangles[0]) > 0x1p46) return false;  // a quarter of 47-bit address space
+  try {
+    const detail::AddressSpaceOnly reserved;
+    out.positions.reserve(static_cast<size_t>(vertices));
+    out.triangles.reserve(static_cast<size_t>(triangles));
+    return true;
+  } catch (const std::bad_alloc&) {
+    out = Mesh{};
+    return false;
+  } catch (const std::length_error&) {
+    out = Mesh{};
+    return false;
+  }
 }
 
 }  // namespace
@@ -133,13 +193,12 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
   const int64_t count = slab_count(plan);
   std::vector<Slab> mine(static_cast<size_t>(last - first));
   settle_together(group, [&] {
-    BuilderPool builders;  // gone before the slabs are sent and merged
+    SlabMemory memory;  // gone before the slabs are sent and merged
     const auto start = std::chrono::steady_clock::now();
     parallel_for_in_order(first, last, [&](int64_t s) {
       const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
       try {
-        mine[static_cast<size_t>(s - first)] =
-            extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
+        mine[static_cast<size_t>(s - first)] = extract_slab(plan, march, memory, z_begin, z_end, s > 0, s + 1 < count);
       } catch (...) {
         if (on_failure) on_failure();
         throw;
@@ -189,19 +248,94 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure) {
   const int64_t count = slab_count(plan);
   if (count <= 0) return Mesh{};
-  std::vector<Slab> slabs(static_cast<size_t>(count));
-  BuilderPool builders;  // a welding table per thread
-  parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
-    try {
-      const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
-      slabs[static_cast<size_t>(s)] = extract_slab(plan, march, builders, z_begin, z_end, s > 0, s + 1 < count);
-    } catch (...) {
-      if (on_failure) on_failure();
-      throw;
+  const auto slab_layers = [&](int64_t s) {
+    const int64_t z_begin = s * plan.slab_layers;
+    return std::pair{z_begin, std::min(z_begin + plan.slab_layers, plan.cell_layers)};
+  };
+  Mesh out;
+  if (!reserve_for_every_slab(plan, out)) {  // all slabs marched, then joined
+    std::vector<Slab> slabs(static_cast<size_t>(count));
+    {
+      SlabMemory memory;  // a welding table per thread; gone before the mesh is allocated
+      parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
+        try {
+          const auto [z_begin, z_end] = slab_layers(s);
+          slabs[static_cast<size_t>(s)] = extract_slab(plan, march, memory, z_begin, z_end, s > 0, s + 1 < count);
+        } catch (...) {
+          if (on_failure) on_failure();
+          throw;
+        }
+      });
     }
-  });
-  builders.clear();  // their welding tables and reserved meshes, before the mesh is allocated
-  return join_slabs(slabs);
+    return join_slabs(slabs);
+  }
+  // Each slab numbered as soon as it and every slab before it are marched, then copied into the
+  // mesh reserved above by the next thread to start a slab (or, at the end, by all), and its arrays
+  // lent to a slab after it: of the slabs' meshes, only those of the slabs in flight are ever held,
+  // the mesh is the only fresh memory the join writes, and its first touch is spread over the
+  // threads while they march.
+  const int64_t window = 2 * thread_count() + 2;
+  std::vector<Slab> in_flight(static_cast<size_t>(window));
+  SlabMemory memory;
+  memory.joined_as_marched = true;
+  SlabNumbering numbering;
+  struct Numbered {
+    Slab slab;
+    SlabNumbering::Place place;
+  };
+  std::mutex numbered_mutex;
+  std::deque<Numbered> numbered;  // numbered, not copied yet
+  std::array<float, 3>* const positions = out.positions.data();
+  std::array<uint32_t, 3>* const triangles = out.triangles.data();
+  const auto copy_one = [&] {
+    Numbered n;
+    {
+      const std::lock_guard<std::mutex> lock(numbered_mutex);
+      if (numbered.empty()) return false;
+      n = std::move(numbered.front());
+      numbered.pop_front();
+    }
+    copy_slab(n.slab, n.place, positions, triangles);
+    memory.meshes.give(std::make_unique<Mesh>(std::move(n.slab.mesh)));
+    return true;
+  };
+  parallel_in_order_committed(
+      int64_t{0}, count, window,
+      [&](int64_t s) {
+        try {
+          copy_one();
+          const auto [z_begin, z_end] = slab_layers(s);
+          in_flight[static_cast<size_t>(s % window)] =
+              extract_slab(plan, march, memory, z_begin, z_end, s > 0, s + 1 < count);
+        } catch (...) {
+          if (on_failure) on_failure();
+          throw;
+        }
+      },
+      [&](int64_t s) {
+        Slab& slab = in_flight[static_cast<size_t>(s % window)];
+        try {
+          SlabNumbering::Place place = numbering.next(slab);
+          Numbered n{std::move(slab), std::move(place)};
+          if (numbering.vertices() > out.positions.capacity() || numbering.triangles() > out.triangles.capacity())
+            throw std::logic_error("a slab made more than a cell's most triangles or a node's most vertices");
+          const std::lock_guard<std::mutex> lock(numbered_mutex);
+          numbered.push_back(std::move(n));
+        } catch (...) {
+          if (on_failure) on_failure();
+          throw;
+        }
+        slab = Slab{};
+      });
+  parallel_for(int64_t{0}, static_cast<int64_t>(numbered.size()), [&](int64_t) { copy_one(); });
+  // The mesh in arrays of its size, their pages moved there from the reservation, which goes: a
+  // mesh held (by a server, say) holds no address space beyond itself.
+  Mesh mesh;
+  mesh.positions.resize(numbering.vertices());
+  mesh.triangles.resize(numbering.triangles());
+  detail::move_pages(mesh.positions.data(), positions, mesh.positions.size() * sizeof(positions[0]));
+  detail::move_pages(mesh.triangles.data(), triangles, mesh.triangles.size() * sizeof(triangles[0]));
+  return mesh;
 }
 
 }  // namespace isotope

@@ -25,13 +25,14 @@ struct SlabPlan {
 // layers' nodes; may be called concurrently for different slabs.
 using MarchSlab = std::function<void(int64_t z_begin, int64_t z_end, MeshBuilder& builder)>;
 
-// Runs march on every slab, in parallel, and joins the meshes in slab order once all are marched:
-// vertices are numbered in order of first appearance in one walk over the slabs in order, so the
-// mesh is the same bit for bit whatever the number of threads. The slabs' meshes are held until
-// the join, which copies them into the mesh on all threads: at most twice the mesh at once. A slab
-// that throws (its march, its builder) stops the others from starting; on_failure, if given, is
-// called inside the handler first (it may use std::current_exception), for march functions that
-// wait on one another.
+// Runs march on every slab, in parallel, and joins the meshes in slab order: vertices are numbered
+// in order of first appearance in one walk over the slabs in order, so the mesh is the same bit for
+// bit whatever the number of threads. A slab is joined as soon as the slabs before it are, into a
+// mesh reserved as address space, so only the slabs in flight are held beside it; where the
+// reservation is refused, all are marched first and then joined (docs/METHOD.md, "eps = 0 by
+// blocks"). A slab that throws (its march, its builder) stops the others from starting;
+// on_failure, if given, is called inside the handler first (it may use std::current_exception), for
+// march functions that wait on one another.
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure = {});
 
 inline int64_t slab_count(const SlabPlan& plan) {

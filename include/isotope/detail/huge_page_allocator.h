@@ -34,6 +34,32 @@ inline void advise_huge_pages(void* p, size_t bytes) {
 // in the hole a freed array left pushes the next array to fresh pages.
 void* allocate_huge(size_t bytes);
 void free_huge(void* p) noexcept;  // P from allocate_huge
+
+// While one lives, the huge blocks this thread allocates are address space only: mapped without
+// the kernel's commit accounting (MAP_NORESERVE), never from malloc nor kept once freed. For an
+// array reserved at a bound far above what it will hold, so that it fills in place, without a copy,
+// whatever it comes to: a page costs memory only once written. An array that is then written whole
+// runs out of memory at a page fault instead of at its allocation: not for arrays sized by what
+// they will hold. A reservation the address space has no room for, or larger than an eighth of the
+// process's limit on it (`ulimit -v`, `ulimit -d`), throws std::bad_alloc.
+//
+// move_pages() takes what such an array holds to an array of its size, so that the reservation goes.
+class AddressSpaceOnly {
+ public:
+  AddressSpaceOnly();
+  ~AddressSpaceOnly();
+  AddressSpaceOnly(const AddressSpaceOnly&) = delete;
+  AddressSpaceOnly& operator=(const AddressSpaceOnly&) = delete;
+
+ private:
+  bool was_;
+};
+// Moves BYTES from FROM to TO (arrays that do not overlap): where FROM lies in a reservation
+// (AddressSpaceOnly) and both on page boundaries, its whole pages by mapping them at TO (the kernel
+// moves them: no copy, no fresh page at TO), the rest copied. FROM's moved pages are gone
+// (unmapped): for an array about to be freed.
+void move_pages(void* to, void* from, size_t bytes) noexcept;
+
 // Keeps up to BYTES of freed huge blocks from now on (0: none, and malloc again for new blocks).
 void keep_freed_huge_blocks(size_t bytes);
 // Gives kept blocks back to the kernel until at most KEEP bytes of them are left.
