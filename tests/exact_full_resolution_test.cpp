@@ -23,10 +23,12 @@
 #include "engine/extract/extract.h"
 #include "engine/extract/slab_march.h"
 #include "engine/extract/streamed_extract.h"
+#include "engine/extract/traversal.h"
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/mesh/marching_tetrahedra.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 #include "isotope/source.h"
 #include "tests/io_error_of.h"
@@ -296,29 +298,46 @@ TEST(FullResolutionSlabs, AnyThreadCountGivesTheOneWalkMeshBitForBit) {
   expect_same_mesh_on_any_threads(testing::crop(generate_noise(70, 4), {37, 70, 23}), 0.0f, "noise 37x70x23");
 }
 
-// Each slab is joined as soon as the slabs before it are, into a mesh reserved, as address space,
-// at the most the volume's cells can make (12 triangles a cell); where that is more than may be
-// reserved (here: a grid 2^18 nodes wide, over 2^46 bytes; a `ulimit -v` does the same), the slabs
-// are all marched and then joined. Both give the one-walk mesh, in arrays of its size.
+// Each slab is joined as soon as the slabs before it are, into room reserved as address space for
+// the most the plan's cells can make; where that is more than may be reserved (here: layers 2^18
+// nodes on a side, over 2^45 bytes; a `ulimit -v` does the same), the slabs are all marched, then
+// joined. Both give the one-walk mesh, in arrays of its size, on any number of threads; the room
+// reserved while the slabs are marched tells which ran.
 TEST(FullResolutionSlabs, WithoutTheAddressSpaceToReserveTheSlabsAreJoinedAfterTheMarch) {
-  Volume wide;
-  wide.dims = {int64_t{1} << 18, 2, 9};
-  wide.values.resize(static_cast<size_t>(wide.node_count()));
-  for (int64_t z = 0; z < wide.dims[2]; ++z)
-    for (int64_t y = 0; y < wide.dims[1]; ++y)
-      for (int64_t x = 0; x < wide.dims[0]; ++x)
-        wide.values[wide.index(x, y, z)] =  // cut through every layer, at its near end only
-            x < 3000 ? static_cast<float>((x * 7 + y * 3 + z * 13) % 17) / 17.0f - 0.5f : -1.0f;
-  const double side = static_cast<double>(wide.dims[0]), bound = 12.0 * 12 * (side - 1) * (side - 1) * 8;
-  ASSERT_GT(bound, 0x1p46);
-  ASSERT_GT(slab_count(wide), 2);
-  expect_same_mesh_on_any_threads(wide, 0.013f, "2^18 x 2 x 9");
-
-  for (const Volume& v : {wide, generate_algebraic(129)}) {
-    const Mesh m = extract_full_resolution(v, v.dims[0] == 129 ? 0.0f : 0.013f);
-    EXPECT_EQ(m.triangles.capacity(), m.triangles.size());
-    EXPECT_EQ(m.positions.capacity(), m.positions.size());
-  }
+  const Volume v = generate_algebraic(129);
+  const Mesh reference = one_walk(v, 0.0f);
+  SlabPlan plan;
+  plan.cell_layers = v.dims[2] - 1;
+  plan.slab_layers = 8;
+  plan.side = 129;  // one_walk's, so the same edge keys
+  plan.origin = v.origin;
+  plan.spacing = v.spacing;
+  for (const int64_t layer_side : {int64_t{129}, int64_t{1} << 18})
+    for (size_t threads : {1, 2, 3}) {
+      SCOPED_TRACE(::testing::Message() << "layers " << layer_side << " nodes on a side, " << threads << " threads");
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+      plan.layer_nodes = {layer_side, layer_side};
+      std::atomic<size_t> reserved{0};
+      Mesh m = march_in_slabs(plan, [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
+        reserved = std::max(reserved.load(), detail::reserved_huge_block_bytes());
+        for (int64_t z = z0; z < z1; ++z)
+          for (int64_t y = 0; y + 1 < v.dims[1]; ++y)
+            for (int64_t x = 0; x + 1 < v.dims[0]; ++x)
+              for (const Tet& t : cell_tetrahedra({x, y, z})) {
+                std::array<float, 4> f;
+                for (int i = 0; i < 4; ++i) f[i] = v.at(t[i][0], t[i][1], t[i][2]);
+                builder.add_tet(t, f, traversal::orientation(t) > 0);
+              }
+      });
+      EXPECT_EQ(reserved > 0, layer_side == 129) << "reserved while marching: " << reserved;
+      ASSERT_EQ(m.positions.size(), reference.positions.size());
+      EXPECT_TRUE(m.positions == reference.positions);
+      EXPECT_TRUE(m.triangles == reference.triangles);
+      EXPECT_EQ(m.triangles.capacity(), m.triangles.size());
+      EXPECT_EQ(m.positions.capacity(), m.positions.size());
+      m = Mesh{};
+      EXPECT_EQ(detail::reserved_huge_block_bytes(), 0u) << "the mesh's arrays, once freed, hold no reservation";
+    }
 }
 
 TEST(FullResolutionSlabs, RealVolumeWithAOneLayerLastSlabGivesTheOneWalkMesh) {

@@ -2,7 +2,6 @@
 // it hands a freed block out again where it lay, already faulted in, whole or in part, and keeps
 // no more than it was told.
 #include <gtest/gtest.h>
-#include <sys/mman.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -10,6 +9,7 @@
 #include <cstring>
 #include <initializer_list>
 #include <new>
+#include <thread>
 #include <vector>
 
 #include "isotope/detail/huge_page_allocator.h"
@@ -195,74 +195,81 @@ TEST_F(HugeBlocks, TheAllocatorSendsLargeArraysThroughTheStoreAndSmallOnesToMall
 }
 
 // A reservation of address space only: far larger than the memory it will take, handed out
-// however much is kept, never kept itself, and refused beyond an eighth of a `ulimit -v`.
+// however much is kept, never kept itself (though the store would keep a block of its size), and
+// refused beyond an eighth of a `ulimit -v`.
 TEST_F(HugeBlocks, AReservationIsAddressSpaceOnlyAndNeverKept) {
   keep_freed_huge_blocks(64 * kMB);
   {
     const AddressSpaceOnly reserve;
-    std::vector<char, UninitializedHugePageAllocator<char>> reserved;
-    reserved.reserve(size_t{1} << 40);  // a terabyte
-    EXPECT_TRUE(on_huge_page_boundary(reserved.data()));
-    reserved.resize(3 * kMB);
-    std::memset(reserved.data(), 7, reserved.size());
+    std::vector<char, UninitializedHugePageAllocator<char>> terabyte, small;
+    terabyte.reserve(size_t{1} << 40);
+    small.reserve(8 * kMB);
+    EXPECT_TRUE(on_huge_page_boundary(terabyte.data()));
+    EXPECT_EQ(reserved_huge_block_bytes(), (size_t{1} << 40) + 8 * kMB);
+    small.resize(3 * kMB);
+    std::memset(small.data(), 7, small.size());
   }
-  EXPECT_EQ(kept_huge_block_bytes(), 0u) << "a reservation is unmapped when freed";
+  EXPECT_EQ(reserved_huge_block_bytes(), 0u);
+  EXPECT_EQ(kept_huge_block_bytes(), 0u) << "a reservation is unmapped when freed, not kept";
 #if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)  // they map terabytes of their own
-  rlimit was{};
-  ASSERT_EQ(getrlimit(RLIMIT_AS, &was), 0);
-  rlimit limited = was;
+  struct Limit {
+    rlimit was{};
+    Limit() { getrlimit(RLIMIT_AS, &was); }
+    ~Limit() { setrlimit(RLIMIT_AS, &was); }
+  } limit;
+  rlimit limited = limit.was;
   limited.rlim_cur = size_t{64} << 30;
-  if (was.rlim_max == RLIM_INFINITY || was.rlim_max >= limited.rlim_cur) {
+  if (limit.was.rlim_max == RLIM_INFINITY || limit.was.rlim_max >= limited.rlim_cur) {
     ASSERT_EQ(setrlimit(RLIMIT_AS, &limited), 0);
     const AddressSpaceOnly reserve;
     EXPECT_THROW(allocate_huge((size_t{8} << 30) + kHugePage), std::bad_alloc) << "over an eighth of 64 GB";
     void* p = allocate_huge(size_t{7} << 30);
     EXPECT_NE(p, nullptr);
     free_huge(p);
-    ASSERT_EQ(setrlimit(RLIMIT_AS, &was), 0);
   }
 #endif
 }
 
-// Whole pages of a reservation are moved, not copied: they are no longer mapped where they were
-// (mincore() finds no mapping there), whatever is left is copied, and unaligned arrays, or arrays
-// from malloc, are copied whole.
-TEST_F(HugeBlocks, MovingPagesGivesTheSameBytesAndTakesTheWholePagesAway) {
-  const auto mapped = [](const char* p, size_t bytes) {
-    std::vector<unsigned char> resident((bytes + 4095) / 4096);
-    return mincore(const_cast<char*>(p), bytes, resident.data()) == 0;
-  };
-  for (const size_t bytes : {size_t{0}, size_t{100}, 5 * kMB + 123, 4 * kMB}) {
-    std::vector<char, UninitializedHugePageAllocator<char>> from, to;
-    {
-      const AddressSpaceOnly reserve;
-      from.reserve(64 * kMB);
-    }
-    from.resize(bytes);
-    for (size_t i = 0; i < bytes; ++i) from[i] = static_cast<char>(i * 7 + i / 4096);
-    const std::vector<char> expected(from.begin(), from.end());
-    to.resize(bytes);
-    move_pages(to.data(), from.data(), bytes);
-    EXPECT_TRUE(std::equal(to.begin(), to.end(), expected.begin())) << bytes << " bytes";
-    if (bytes >= kMB) {
-      EXPECT_FALSE(mapped(from.data(), 4 * kMB)) << "the pages were copied, not moved";
-      EXPECT_TRUE(mapped(from.data() + 64 * kMB - 4096, 4096)) << "pages beyond were taken too";
-    }
+// A reservation filled before its size is known becomes a vector of that size, in place: shrunk to
+// the size's huge pages, the rest of its address space given back, and adopted by the vector's
+// allocation of exactly that size on this thread only. Freed with the vector.
+TEST_F(HugeBlocks, AReservationShrunkIsAdoptedByAVectorOfItsSize) {
+  using Array = std::vector<uint32_t, UninitializedHugePageAllocator<uint32_t>>;
+  constexpr size_t kCount = (5 * kMB + 123) / sizeof(uint32_t);
+  void* room = nullptr;
+  {
+    const AddressSpaceOnly reserve;
+    room = allocate_huge(256 * kMB);
   }
-  // From a block malloc gave, on a page boundary though it is, the bytes are copied: taking its
-  // pages would leave a hole where malloc hands out memory again.
-  std::vector<char, UninitializedHugePageAllocator<char>> from_malloc(4 * kMB, 'm'), to(4 * kMB);
-  ASSERT_TRUE(on_huge_page_boundary(from_malloc.data()));
-  move_pages(to.data(), from_malloc.data(), 4 * kMB);
-  EXPECT_TRUE(mapped(from_malloc.data(), 4 * kMB));
-  EXPECT_EQ(std::count(to.begin(), to.end(), 'm'), static_cast<std::ptrdiff_t>(4 * kMB));
-  EXPECT_EQ(std::count(from_malloc.begin(), from_malloc.end(), 'm'), static_cast<std::ptrdiff_t>(4 * kMB));
-
-  std::vector<char> a(10000, 'a'), b(10000, 'b');
-  move_pages(b.data() + 1, a.data() + 3, 9000);
-  EXPECT_EQ(b[0], 'b');
-  EXPECT_EQ(std::count(b.begin() + 1, b.begin() + 9001, 'a'), 9000);
-  EXPECT_EQ(b[9001], 'b');
+  auto* values = static_cast<uint32_t*>(room);
+  for (size_t i = 0; i < kCount; ++i) values[i] = static_cast<uint32_t>(i * 2654435761u);
+  shrink_reservation(room, kCount * sizeof(uint32_t));
+  EXPECT_EQ(reserved_huge_block_bytes(), 6 * kMB);
+  {
+    Array array;
+    {
+      const AdoptReservation adopt(room);
+      Array other;
+      other.reserve(kCount / 2);  // another size: not adopted
+      EXPECT_NE(other.data(), room);
+      EXPECT_FALSE(adopt.adopted());
+      std::thread([&] {  // another thread: not adopted
+        Array elsewhere;
+        elsewhere.reserve(kCount);
+        EXPECT_NE(elsewhere.data(), room);
+      })
+          .join();
+      array.reserve(kCount);
+      EXPECT_TRUE(adopt.adopted());
+    }
+    ASSERT_EQ(array.data(), room);
+    array.resize(kCount);
+    for (size_t i = 0; i < kCount; i += 997) ASSERT_EQ(array[i], static_cast<uint32_t>(i * 2654435761u)) << i;
+    Array later;
+    later.reserve(kCount);  // the offer ended with its scope
+    EXPECT_NE(later.data(), room);
+  }
+  EXPECT_EQ(reserved_huge_block_bytes(), 0u) << "freed with the vector that adopted it";
 }
 
 }  // namespace

@@ -1,12 +1,10 @@
 // The huge-block store behind detail::HugePageAllocator (isotope/detail/huge_page_allocator.h).
 #include <sys/mman.h>
 #include <sys/resource.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstdint>
 #include <cstdlib>
-#include <cstring>
 #include <iterator>
 #include <map>
 #include <mutex>
@@ -34,8 +32,9 @@ void* map_aligned(size_t bytes, int flags = 0) {
   return reinterpret_cast<void*>(first);
 }
 
-// Both maps hold std::map nodes, moved between them with extract() and insert(): freeing a block
-// allocates nothing (free_huge is noexcept), and taking one allocates only the entry in `live`.
+// `live` and `kept` hold std::map nodes, moved between them with extract() and insert(): freeing a
+// block allocates nothing (free_huge is noexcept), and taking one allocates only the entry in `live`
+// (or in `reserved`, for a reservation).
 struct HugeBlocks {
   using Ranges = std::map<uintptr_t, size_t>;  // address -> bytes
   std::mutex mutex;
@@ -100,6 +99,13 @@ HugeBlocks& huge_blocks() {
 
 thread_local bool address_space_only = false;
 
+// The reservation AdoptReservation offers to this thread's next allocation of its size.
+struct Adoption {
+  void* offered = nullptr;
+  bool taken = false;
+};
+thread_local Adoption adoption;
+
 // The most a reservation may take: an eighth of the address space the process may map, where a
 // limit is set (`ulimit -v` or `-d`, as a cluster's scheduler sets them), so that the reservation,
 // which counts against the limit although it costs no memory, leaves the rest of the work room.
@@ -118,9 +124,39 @@ size_t address_space_to_spare() {
 AddressSpaceOnly::AddressSpaceOnly() : was_(address_space_only) { address_space_only = true; }
 AddressSpaceOnly::~AddressSpaceOnly() { address_space_only = was_; }
 
+AdoptReservation::AdoptReservation(void* p) noexcept { adoption = {p, false}; }
+AdoptReservation::~AdoptReservation() { adoption = {}; }
+bool AdoptReservation::adopted() const noexcept { return adoption.taken; }
+
+void shrink_reservation(void* p, size_t bytes) noexcept {
+  const size_t keep = std::max<size_t>(kHugePage, round_to_huge_pages(bytes));
+  HugeBlocks& b = huge_blocks();
+  const std::lock_guard<std::mutex> lock(b.mutex);
+  const auto it = b.reserved.find(reinterpret_cast<uintptr_t>(p));
+  if (it == b.reserved.end() || it->second <= keep) return;
+  munmap(static_cast<char*>(p) + keep, it->second - keep);
+  it->second = keep;
+}
+
+size_t reserved_huge_block_bytes() noexcept {
+  HugeBlocks& b = huge_blocks();
+  const std::lock_guard<std::mutex> lock(b.mutex);
+  size_t bytes = 0;
+  for (const auto& [at, size] : b.reserved) bytes += size;
+  return bytes;
+}
+
 void* allocate_huge(size_t bytes) {
   const size_t rounded = std::max<size_t>(kHugePage, round_to_huge_pages(bytes));
   HugeBlocks& b = huge_blocks();
+  if (adoption.offered != nullptr && !adoption.taken) {
+    const std::lock_guard<std::mutex> lock(b.mutex);
+    const auto it = b.reserved.find(reinterpret_cast<uintptr_t>(adoption.offered));
+    if (it != b.reserved.end() && it->second == rounded) {
+      adoption.taken = true;
+      return adoption.offered;
+    }
+  }
   if (address_space_only) {
     if (rounded > address_space_to_spare()) throw std::bad_alloc();
     void* m = map_aligned(rounded, MAP_NORESERVE);
@@ -186,28 +222,6 @@ void free_huge(void* p) noexcept {
     }
   }
   std::free(p);  // from malloc, before the store kept blocks
-}
-
-void move_pages(void* to, void* from, size_t bytes) noexcept {
-  if (bytes == 0) return;
-  static const auto page = static_cast<uintptr_t>(sysconf(_SC_PAGESIZE));
-  const auto t = reinterpret_cast<uintptr_t>(to), f = reinterpret_cast<uintptr_t>(from);
-  const size_t whole = bytes & ~(page - 1);
-  // Only from a reservation: pages taken from under malloc (whose large blocks may lie on page
-  // boundaries) would leave a hole where it hands out memory again.
-  const auto in_reservation = [&] {
-    HugeBlocks& b = huge_blocks();
-    const std::lock_guard<std::mutex> lock(b.mutex);
-    auto it = b.reserved.upper_bound(f);
-    if (it == b.reserved.begin()) return false;
-    --it;
-    return f + whole <= it->first + it->second;
-  };
-  size_t moved = 0;
-  if (whole > 0 && t % page == 0 && f % page == 0 && in_reservation() &&
-      mremap(from, whole, whole, MREMAP_MAYMOVE | MREMAP_FIXED, to) != MAP_FAILED)
-    moved = whole;
-  std::memcpy(static_cast<char*>(to) + moved, static_cast<const char*>(from) + moved, bytes - moved);
 }
 
 void keep_freed_huge_blocks(size_t bytes) {

@@ -141,6 +141,7 @@ inline SlabPlan finest_plan(const Lattice& lattice, const std::array<int64_t, 3>
   plan.cell_layers = dims[2] - 1;
   plan.slab_layers = int64_t{2} << std::min(2, lattice.k - 1);  // cells per block edge
   plan.side = lattice.side;  // the traversal's edge keys, hence its quadrilateral splits
+  plan.layer_nodes = {dims[0], dims[1]};
   plan.iso = iso;
   plan.origin = origin;
   plan.spacing = spacing;

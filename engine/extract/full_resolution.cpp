@@ -51,6 +51,7 @@ Mesh extract_full_resolution(const Volume& volume, float iso) {
   plan.slab_layers = full_resolution_slab_layers(d);
   // The welding keys, and so the quadrilateral splits, depend on the side: the same for all slabs.
   plan.side = std::max({d[0], d[1], d[2]});
+  plan.layer_nodes = {d[0], d[1]};
   plan.iso = iso;
   plan.origin = volume.origin;
   plan.spacing = volume.spacing;

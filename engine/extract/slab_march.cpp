@@ -7,6 +7,7 @@
 #include <memory>
 #include <mutex>
 #include <new>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -162,28 +163,54 @@ Mesh join_slabs(std::vector<Slab>& slabs) {
   return out;
 }
 
-// Room in OUT for the most vertices and triangles the slabs of PLAN can make, as address space only
-// (detail::AddressSpaceOnly): up to 7 vertices a node (its edges along the axes, the face diagonals
-// and the body diagonal of Kuhn's cells) and 12 triangles a cell (6 tetrahedra of at most 2). A mesh
-// is a fraction of that, so only what the slabs fill costs memory. False where the address space
-// is not there to be reserved.
-bool reserve_for_every_slab(const SlabPlan& plan, Mesh& out) {
-  const auto side = static_cast<double>(plan.side), layers = static_cast<double>(plan.cell_layers);
-  const double vertices = std::min(7 * side * side * (layers + 1), static_cast<double>(SlabNumbering::kAbsent));
-  const double triangles = 12 * (side - 1) * (side - 1) * layers;
-  if (triangles * sizeof(out.triangles[0]) > 0x1p46) return false;  // a quarter of 47-bit address space
-  try {
-    const detail::AddressSpaceOnly reserved;
-    out.positions.reserve(static_cast<size_t>(vertices));
-    out.triangles.reserve(static_cast<size_t>(triangles));
-    return true;
-  } catch (const std::bad_alloc&) {
-    out = Mesh{};
-    return false;
-  } catch (const std::length_error&) {
-    out = Mesh{};
-    return false;
+// An array's room, reserved as address space only (detail::AddressSpaceOnly), for a mesh being
+// joined whose size is not known yet: only what the slabs fill costs memory. Once the size is known
+// the room becomes the mesh's array, the address space beyond it given back.
+template <class T>
+class Reserved {
+ public:
+  explicit Reserved(size_t count) {  // throws std::bad_alloc
+    const detail::AddressSpaceOnly address_space_only;
+    data_ = static_cast<T*>(detail::allocate_huge(count * sizeof(T)));
+    count_ = count;
   }
+  ~Reserved() { detail::free_huge(data_); }
+  Reserved(const Reserved&) = delete;
+  Reserved& operator=(const Reserved&) = delete;
+
+  T* data() const { return data_; }
+  size_t count() const { return count_; }
+
+  // ARRAY becomes the first N elements: this room itself, or (under a huge page, which an array
+  // that small takes from malloc) a copy of them.
+  void hand_to(Mesh::Array<T>& array, size_t n) {
+    detail::shrink_reservation(data_, n * sizeof(T));
+    {
+      const detail::AdoptReservation adopt(data_);
+      array.reserve(n);
+      if (adopt.adopted()) data_ = nullptr;
+    }
+    array.resize(n);  // writes nothing (Mesh::Array's allocator): what the slabs wrote stays
+    if (data_ != nullptr && n > 0) std::copy(data_, data_ + n, array.data());
+  }
+
+ private:
+  T* data_ = nullptr;
+  size_t count_ = 0;
+};
+
+// The most vertices and triangles the slabs of PLAN can make: 7 vertices a node (its edges along
+// the axes, the face diagonals and the body diagonal of Kuhn's cells) and 12 triangles a cell (6
+// tetrahedra of at most 2). Nullopt when that is more than a quarter of the 47-bit address space.
+std::optional<std::pair<size_t, size_t>> mesh_bound(const SlabPlan& plan) {
+  const auto nodes = [&](int k) {
+    return static_cast<double>(plan.layer_nodes[k] > 0 ? plan.layer_nodes[k] : plan.side);
+  };
+  const double layers = static_cast<double>(plan.cell_layers);
+  const double vertices = std::min(7 * nodes(0) * nodes(1) * (layers + 1), double{SlabNumbering::kAbsent});
+  const double triangles = 12 * std::max(nodes(0) - 1, 1.0) * std::max(nodes(1) - 1, 1.0) * layers;
+  if (12 * (vertices + triangles) > 0x1p45) return std::nullopt;
+  return std::pair{static_cast<size_t>(vertices), static_cast<size_t>(triangles)};
 }
 
 }  // namespace
@@ -252,8 +279,19 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
     const int64_t z_begin = s * plan.slab_layers;
     return std::pair{z_begin, std::min(z_begin + plan.slab_layers, plan.cell_layers)};
   };
-  Mesh out;
-  if (!reserve_for_every_slab(plan, out)) {  // all slabs marched, then joined
+  // The mesh's room, reserved for the most the slabs can make; where the address space is not there
+  // (the bound past what may be reserved, or a `ulimit -v`), the slabs are all marched, then joined.
+  std::optional<Reserved<std::array<float, 3>>> positions;
+  std::optional<Reserved<std::array<uint32_t, 3>>> triangles;
+  try {
+    if (const auto bound = mesh_bound(plan)) {
+      positions.emplace(bound->first);
+      triangles.emplace(bound->second);
+    }
+  } catch (const std::bad_alloc&) {
+    positions.reset();
+  }
+  if (!positions || !triangles) {
     std::vector<Slab> slabs(static_cast<size_t>(count));
     {
       SlabMemory memory;  // a welding table per thread; gone before the mesh is allocated
@@ -285,8 +323,6 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
   };
   std::mutex numbered_mutex;
   std::deque<Numbered> numbered;  // numbered, not copied yet
-  std::array<float, 3>* const positions = out.positions.data();
-  std::array<uint32_t, 3>* const triangles = out.triangles.data();
   const auto copy_one = [&] {
     Numbered n;
     {
@@ -295,7 +331,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
       n = std::move(numbered.front());
       numbered.pop_front();
     }
-    copy_slab(n.slab, n.place, positions, triangles);
+    copy_slab(n.slab, n.place, positions->data(), triangles->data());
     memory.meshes.give(std::make_unique<Mesh>(std::move(n.slab.mesh)));
     return true;
   };
@@ -317,7 +353,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
         try {
           SlabNumbering::Place place = numbering.next(slab);
           Numbered n{std::move(slab), std::move(place)};
-          if (numbering.vertices() > out.positions.capacity() || numbering.triangles() > out.triangles.capacity())
+          if (numbering.vertices() > positions->count() || numbering.triangles() > triangles->count())
             throw std::logic_error("a slab made more than a cell's most triangles or a node's most vertices");
           const std::lock_guard<std::mutex> lock(numbered_mutex);
           numbered.push_back(std::move(n));
@@ -327,14 +363,12 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
         }
         slab = Slab{};
       });
+  memory.builders.clear();  // their welding tables, before the copies left and the mesh
   parallel_for(int64_t{0}, static_cast<int64_t>(numbered.size()), [&](int64_t) { copy_one(); });
-  // The mesh in arrays of its size, their pages moved there from the reservation, which goes: a
-  // mesh held (by a server, say) holds no address space beyond itself.
+  memory.meshes.clear();
   Mesh mesh;
-  mesh.positions.resize(numbering.vertices());
-  mesh.triangles.resize(numbering.triangles());
-  detail::move_pages(mesh.positions.data(), positions, mesh.positions.size() * sizeof(positions[0]));
-  detail::move_pages(mesh.triangles.data(), triangles, mesh.triangles.size() * sizeof(triangles[0]));
+  positions->hand_to(mesh.positions, numbering.vertices());
+  triangles->hand_to(mesh.triangles, numbering.triangles());
   return mesh;
 }
 

@@ -17,6 +17,8 @@ struct SlabPlan {
   int64_t cell_layers = 0;  // cells along z
   int64_t slab_layers = 1;  // cell layers per slab: slab s covers [s * slab_layers, ...)
   int64_t side = 2;         // the MeshBuilder's grid side (fixes the edge keys)
+  // Nodes along x and y of the cells marched (at most side each; 0: side): what bounds the mesh.
+  std::array<int64_t, 2> layer_nodes{0, 0};
   float iso = 0;
   std::array<double, 3> origin{0, 0, 0}, spacing{1, 1, 1};
 };

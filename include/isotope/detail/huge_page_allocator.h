@@ -42,8 +42,6 @@ void free_huge(void* p) noexcept;  // P from allocate_huge
 // runs out of memory at a page fault instead of at its allocation: not for arrays sized by what
 // they will hold. A reservation the address space has no room for, or larger than an eighth of the
 // process's limit on it (`ulimit -v`, `ulimit -d`), throws std::bad_alloc.
-//
-// move_pages() takes what such an array holds to an array of its size, so that the reservation goes.
 class AddressSpaceOnly {
  public:
   AddressSpaceOnly();
@@ -54,11 +52,26 @@ class AddressSpaceOnly {
  private:
   bool was_;
 };
-// Moves BYTES from FROM to TO (arrays that do not overlap): where FROM lies in a reservation
-// (AddressSpaceOnly) and both on page boundaries, its whole pages by mapping them at TO (the kernel
-// moves them: no copy, no fresh page at TO), the rest copied. FROM's moved pages are gone
-// (unmapped): for an array about to be freed.
-void move_pages(void* to, void* from, size_t bytes) noexcept;
+
+// Gives back a reservation's address space beyond its first BYTES (rounded up to whole huge pages).
+// P: a block allocated under AddressSpaceOnly; anything else is left as it is.
+void shrink_reservation(void* p, size_t bytes) noexcept;
+
+// While one lives, the next allocate_huge() on this thread of exactly the bytes P's reservation
+// spans (after shrink_reservation) returns P itself, which then belongs to the caller of that
+// allocation: so that an array filled in a reservation before its size was known becomes the
+// buffer of a vector of that size (HugePageAllocator) without a copy. adopted(): whether it did.
+class AdoptReservation {
+ public:
+  explicit AdoptReservation(void* p) noexcept;
+  ~AdoptReservation();
+  AdoptReservation(const AdoptReservation&) = delete;
+  AdoptReservation& operator=(const AdoptReservation&) = delete;
+  bool adopted() const noexcept;
+};
+
+// Bytes of address space reserved (AddressSpaceOnly) and not freed yet, in all threads.
+size_t reserved_huge_block_bytes() noexcept;
 
 // Keeps up to BYTES of freed huge blocks from now on (0: none, and malloc again for new blocks).
 void keep_freed_huge_blocks(size_t bytes);
