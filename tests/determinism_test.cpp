@@ -129,7 +129,8 @@ TEST(Determinism, BuildsGoOnWhileACommitRuns) {
     }
     EXPECT_EQ(run.get(), "commit 20") << "window " << window;
     EXPECT_EQ(order.size(), 20u) << "window " << window << ": nothing committed after the failed commit";
-    EXPECT_LE(started_after, 2) << "window " << window << ": builds went on after the failed commit";
+    // Builds already let into the window may start between the throw and the loop's noting it.
+    EXPECT_LE(started_after, window - 1) << "window " << window << ": builds went on after the failed commit";
   }
 }
 

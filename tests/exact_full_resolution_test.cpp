@@ -335,6 +335,16 @@ TEST(FullResolutionSlabs, WithoutTheAddressSpaceToReserveTheSlabsAreJoinedAfterT
       EXPECT_TRUE(m.triangles == reference.triangles);
       EXPECT_EQ(m.triangles.capacity(), m.triangles.size());
       EXPECT_EQ(m.positions.capacity(), m.positions.size());
+      // Joined as marched, the mesh's arrays are the reservations themselves (their huge pages),
+      // not copies of them; an array under a huge page is malloc's, a copy.
+      const auto adopted = [](size_t bytes) {
+        return bytes < detail::kHugePage ? 0 : (bytes + detail::kHugePage - 1) / detail::kHugePage * detail::kHugePage;
+      };
+      ASSERT_GE(m.triangles.size() * sizeof(m.triangles[0]), detail::kHugePage);
+      EXPECT_EQ(detail::reserved_huge_block_bytes(), layer_side == 129
+                                                         ? adopted(m.positions.size() * sizeof(m.positions[0])) +
+                                                               adopted(m.triangles.size() * sizeof(m.triangles[0]))
+                                                         : 0u);
       m = Mesh{};
       EXPECT_EQ(detail::reserved_huge_block_bytes(), 0u) << "the mesh's arrays, once freed, hold no reservation";
     }

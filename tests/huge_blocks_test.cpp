@@ -2,6 +2,7 @@
 // it hands a freed block out again where it lay, already faulted in, whole or in part, and keeps
 // no more than it was told.
 #include <gtest/gtest.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -245,6 +246,18 @@ TEST_F(HugeBlocks, AReservationShrunkIsAdoptedByAVectorOfItsSize) {
   for (size_t i = 0; i < kCount; ++i) values[i] = static_cast<uint32_t>(i * 2654435761u);
   shrink_reservation(room, kCount * sizeof(uint32_t));
   EXPECT_EQ(reserved_huge_block_bytes(), 6 * kMB);
+  std::vector<unsigned char> resident(1);
+  EXPECT_EQ(mincore(static_cast<char*>(room) + 6 * kMB, 4096, resident.data()), -1) << "the tail is still mapped";
+  {
+    const AdoptReservation offer_not_taken(room);
+    Array other;
+    other.reserve(kCount / 2);
+  }
+  {
+    Array after_the_offer;  // an offer ends with its scope, taken or not
+    after_the_offer.reserve(kCount);
+    EXPECT_NE(after_the_offer.data(), room);
+  }
   {
     Array array;
     {
@@ -265,11 +278,25 @@ TEST_F(HugeBlocks, AReservationShrunkIsAdoptedByAVectorOfItsSize) {
     ASSERT_EQ(array.data(), room);
     array.resize(kCount);
     for (size_t i = 0; i < kCount; i += 997) ASSERT_EQ(array[i], static_cast<uint32_t>(i * 2654435761u)) << i;
-    Array later;
-    later.reserve(kCount);  // the offer ended with its scope
-    EXPECT_NE(later.data(), room);
   }
   EXPECT_EQ(reserved_huge_block_bytes(), 0u) << "freed with the vector that adopted it";
+
+  keep_freed_huge_blocks(64 * kMB);  // as a server keeps them: adopted all the same, and not kept after
+  {
+    const AddressSpaceOnly reserve;
+    room = allocate_huge(64 * kMB);
+  }
+  shrink_reservation(room, 4 * kMB);
+  {
+    Array array;
+    {
+      const AdoptReservation adopt(room);
+      array.reserve(4 * kMB / sizeof(uint32_t));
+    }
+    EXPECT_EQ(array.data(), room);
+  }
+  EXPECT_EQ(kept_huge_block_bytes(), 0u);
+  EXPECT_EQ(reserved_huge_block_bytes(), 0u);
 }
 
 }  // namespace

@@ -134,8 +134,7 @@ void shrink_reservation(void* p, size_t bytes) noexcept {
   const std::lock_guard<std::mutex> lock(b.mutex);
   const auto it = b.reserved.find(reinterpret_cast<uintptr_t>(p));
   if (it == b.reserved.end() || it->second <= keep) return;
-  munmap(static_cast<char*>(p) + keep, it->second - keep);
-  it->second = keep;
+  if (munmap(static_cast<char*>(p) + keep, it->second - keep) == 0) it->second = keep;  // else kept whole
 }
 
 size_t reserved_huge_block_bytes() noexcept {

@@ -187,7 +187,12 @@ class Reserved {
     detail::shrink_reservation(data_, n * sizeof(T));
     {
       const detail::AdoptReservation adopt(data_);
-      array.reserve(n);
+      try {
+        array.reserve(n);
+      } catch (...) {
+        if (adopt.adopted()) data_ = nullptr;  // the array's, and freed with it
+        throw;
+      }
       if (adopt.adopted()) data_ = nullptr;
     }
     array.resize(n);  // writes nothing (Mesh::Array's allocator): what the slabs wrote stays

@@ -126,9 +126,12 @@ struct UninitializedHugePageAllocator : HugePageAllocator<T> {
   template <class U>
   UninitializedHugePageAllocator(const UninitializedHugePageAllocator<U>&) noexcept {}  // NOLINT: as above
 
+  // A trivial element is not even made with `new`: its bytes are what was written there, also
+  // before (an array adopted from a reservation, AdoptReservation), which a compiler may take a
+  // placement new to end.
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-    ::new (static_cast<void*>(p)) U;
+    if constexpr (!std::is_trivially_default_constructible_v<U>) ::new (static_cast<void*>(p)) U;
   }
   template <class U, class... Args>
   void construct(U* p, Args&&... args) {
