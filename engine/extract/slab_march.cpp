@@ -45,6 +45,12 @@ struct SlabMemory {
   bool joined_as_marched = false;  // meshes are given back while slabs are marched
 };
 
+// Slab s's cell layers, [z_begin, z_end).
+std::pair<int64_t, int64_t> slab_range(const SlabPlan& plan, int64_t s) {
+  const int64_t z_begin = s * plan.slab_layers;
+  return {z_begin, std::min(z_begin + plan.slab_layers, plan.cell_layers)};
+}
+
 // One slab's own welded mesh. Only an edge lying in the plane z = z0 between two slabs can be cut
 // in both (its p + q has z 2 z0; every other edge has both ends in one slab), so those vertices
 // are the only ones the merge has to look up.
@@ -80,7 +86,6 @@ class SlabNumbering {
   struct Place {
     uint32_t first_vertex = 0;  // the output index of the slab's first new vertex
     size_t first_triangle = 0;
-    size_t new_vertices = 0;
     std::vector<uint32_t> bottom;  // per bottom vertex: its index in the slab below, or kAbsent
   };
 
@@ -105,8 +110,7 @@ class SlabNumbering {
       top.find_or_insert(v.key, static_cast<uint32_t>(vertices_ + v.local - found_before));
     }
     below_ = std::move(top);
-    place.new_vertices = slab.mesh.positions.size() - found;
-    vertices_ += place.new_vertices;
+    vertices_ += slab.mesh.positions.size() - found;
     triangles_ += slab.mesh.triangles.size();
     if (vertices_ >= kAbsent)
       throw std::length_error("the mesh has " + std::to_string(vertices_) +
@@ -228,7 +232,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
     SlabMemory memory;  // gone before the slabs are sent and merged
     const auto start = std::chrono::steady_clock::now();
     parallel_for_in_order(first, last, [&](int64_t s) {
-      const int64_t z_begin = s * plan.slab_layers, z_end = std::min(z_begin + plan.slab_layers, plan.cell_layers);
+      const auto [z_begin, z_end] = slab_range(plan, s);
       try {
         mine[static_cast<size_t>(s - first)] = extract_slab(plan, march, memory, z_begin, z_end, s > 0, s + 1 < count);
       } catch (...) {
@@ -280,10 +284,6 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure) {
   const int64_t count = slab_count(plan);
   if (count <= 0) return Mesh{};
-  const auto slab_layers = [&](int64_t s) {
-    const int64_t z_begin = s * plan.slab_layers;
-    return std::pair{z_begin, std::min(z_begin + plan.slab_layers, plan.cell_layers)};
-  };
   // The mesh's room, reserved for the most the slabs can make; where the address space is not there
   // (the bound past what may be reserved, or a `ulimit -v`), the slabs are all marched, then joined.
   std::optional<Reserved<std::array<float, 3>>> positions;
@@ -302,7 +302,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
       SlabMemory memory;  // a welding table per thread; gone before the mesh is allocated
       parallel_for_in_order(int64_t{0}, count, [&](int64_t s) {
         try {
-          const auto [z_begin, z_end] = slab_layers(s);
+          const auto [z_begin, z_end] = slab_range(plan, s);
           slabs[static_cast<size_t>(s)] = extract_slab(plan, march, memory, z_begin, z_end, s > 0, s + 1 < count);
         } catch (...) {
           if (on_failure) on_failure();
@@ -345,7 +345,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
       [&](int64_t s) {
         try {
           copy_one();
-          const auto [z_begin, z_end] = slab_layers(s);
+          const auto [z_begin, z_end] = slab_range(plan, s);
           in_flight[static_cast<size_t>(s % window)] =
               extract_slab(plan, march, memory, z_begin, z_end, s > 0, s + 1 < count);
         } catch (...) {
