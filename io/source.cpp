@@ -170,7 +170,7 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
                              }};
     return extract_streamed(layers, options, stats);
   }
-  if (!needs_hierarchy(options)) return isotope::extract(impl_->whole(), options, stats);
+  if (!needs_hierarchy(options)) return extract_validated(impl_->whole(), options, stats);  // checked when read
   const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(options));
   return isotope::extract(*hierarchy, options, stats, &impl_->budgets);
 }

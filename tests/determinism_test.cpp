@@ -11,12 +11,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <future>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "engine/core/fields.h"
+#include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
@@ -137,6 +139,21 @@ TEST(Determinism, BuildsGoOnWhileACommitRuns) {
 Mesh extract_with_threads(const Volume& v, const ExtractOptions& o, size_t threads) {
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
   return extract(MultiresVolume::build(v), o);
+}
+
+// A pool kept from one run for the next keeps the first objects given back whose sizes fit in the
+// bytes it may keep, and lets the rest go.
+TEST(LendingPoolTest, KeepsTheFirstObjectsThatFitTheBytesItMayKeep) {
+  LendingPool<size_t> pool;
+  for (size_t bytes : {10, 20, 30, 5}) pool.give(std::make_unique<size_t>(bytes));
+  EXPECT_EQ(pool.keep_at_most(35, [](size_t b) { return b; }), 30u) << "10 and 20; 30 is past the bound";
+  std::vector<size_t> taken;
+  for (int i = 0; i < 3; ++i)
+    if (auto t = pool.take([] { return std::unique_ptr<size_t>(); })) taken.push_back(*t);
+  EXPECT_EQ(taken, (std::vector<size_t>{20, 10}));
+  pool.give(std::make_unique<size_t>(40));
+  EXPECT_EQ(pool.keep_at_most(35, [](size_t b) { return b; }), 0u);
+  EXPECT_EQ(pool.take([] { return std::unique_ptr<size_t>(); }), nullptr);
 }
 
 TEST(Determinism, OneThreadAndAllThreadsGiveTheSameMesh) {

@@ -350,6 +350,32 @@ TEST(FullResolutionSlabs, WithoutTheAddressSpaceToReserveTheSlabsAreJoinedAfterT
     }
 }
 
+// An extraction leaves its slabs' builders and arrays, and its mesh's pages once the mesh is
+// freed, to the next one in the process (docs/METHOD.md, "eps = 0 by blocks"): one after an
+// extraction of another grid, isovalue, origin and spacing gives the one-walk mesh all the same.
+TEST(FullResolutionSlabs, AnExtractionAfterOneOfAnotherGridGivesTheOneWalkMesh) {
+  const Volume algebraic = generate_algebraic(129);
+  Volume noise = testing::crop(generate_noise(97, 11), {97, 90, 75});
+  noise.origin = {1.5, -2.0, 3.0};
+  noise.spacing = {0.5, 2.0, 1.25};
+  const Mesh algebraic_reference = one_walk(algebraic, 0.0f), noise_reference = one_walk(noise, 0.2f);
+  const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+  for (int round = 0; round < 3; ++round) {
+    SCOPED_TRACE(::testing::Message() << "round " << round);
+    detail::give_back_huge_blocks(0);
+    {
+      const Mesh m = extract_full_resolution(algebraic, 0.0f);
+      EXPECT_TRUE(m.positions == algebraic_reference.positions);
+      EXPECT_TRUE(m.triangles == algebraic_reference.triangles);
+    }
+    EXPECT_GE(detail::warm_reservation_bytes(), algebraic_reference.triangles.size() * 12)
+        << "the freed mesh's pages kept for the next";
+    const Mesh m = extract_full_resolution(noise, 0.2f);
+    EXPECT_TRUE(m.positions == noise_reference.positions);
+    EXPECT_TRUE(m.triangles == noise_reference.triangles);
+  }
+}
+
 TEST(FullResolutionSlabs, RealVolumeWithAOneLayerLastSlabGivesTheOneWalkMesh) {
   const testing::SharedVolume& bolt = testing::shared_volumes()[3];
   const Volume v = testing::load_shared(bolt);
@@ -616,6 +642,31 @@ TEST_F(SourceOfAFile, AValueThatIsNotFiniteIsRefusedWhereItIs) {
     EXPECT_CONTAINS(streamed, raw);
     EXPECT_CONTAINS(streamed, "(x,y,z) = (3,4,5)");
     EXPECT_CONTAINS(streamed, "not finite");
+  }
+}
+
+// The check of an array's values finds the first value that is not finite in any block of its
+// parallel scan (at a block's first and last value too), whatever comes after it, on any number of
+// threads; the largest finite floats, -0 and denormals pass.
+TEST(FiniteValues, TheFirstValueThatIsNotFiniteIsFoundInAnyBlock) {
+  constexpr size_t kBlock = size_t{1} << 16, kCount = 5 * kBlock + 123;
+  std::vector<float> values(kCount);
+  for (size_t i = 0; i < kCount; ++i)
+    values[i] = std::array<float, 4>{std::numeric_limits<float>::max(), -std::numeric_limits<float>::max(), -0.0f,
+                                     std::numeric_limits<float>::denorm_min()}[i % 4];
+  for (size_t threads : {1, 2, 8}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    EXPECT_EQ(first_non_finite(values.data(), kCount), kCount);
+    EXPECT_EQ(first_non_finite(values.data(), 0), 0u);
+    for (const size_t at : {size_t{0}, kBlock - 1, kBlock, 3 * kBlock + 7, kCount - 1}) {
+      std::vector<float> bad = values;
+      bad[at] = std::numeric_limits<float>::quiet_NaN();
+      for (const size_t later : {at + 1, at + kBlock, kCount - 1})
+        if (later < kCount && later > at) bad[later] = -std::numeric_limits<float>::infinity();
+      EXPECT_EQ(first_non_finite(bad.data(), kCount), at) << threads << " threads";
+      bad[at] = std::numeric_limits<float>::infinity();
+      EXPECT_EQ(first_non_finite(bad.data(), kCount), at) << threads << " threads";
+    }
   }
 }
 

@@ -31,8 +31,14 @@ bool on_huge_page_boundary(const void* p) { return reinterpret_cast<uintptr_t>(p
 // Every test starts and ends with nothing kept and malloc's blocks.
 class HugeBlocks : public testing::Test {
  protected:
-  void SetUp() override { keep_freed_huge_blocks(0); }
-  void TearDown() override { keep_freed_huge_blocks(0); }
+  void SetUp() override {
+    keep_freed_huge_blocks(0);
+    give_back_huge_blocks(0);
+  }
+  void TearDown() override {
+    keep_freed_huge_blocks(0);
+    give_back_huge_blocks(0);
+  }
 
   // A block of `bytes` allocated and freed, so kept, then taken again as pieces of the sizes
   // given, in order, each checked to lie right after the one before, the first at the block's start.
@@ -211,7 +217,9 @@ TEST_F(HugeBlocks, AReservationIsAddressSpaceOnlyAndNeverKept) {
     std::memset(small.data(), 7, small.size());
   }
   EXPECT_EQ(reserved_huge_block_bytes(), 0u);
-  EXPECT_EQ(kept_huge_block_bytes(), 0u) << "a reservation is unmapped when freed, not kept";
+  EXPECT_EQ(kept_huge_block_bytes(), 0u) << "a reservation is not among the freed blocks kept";
+  EXPECT_EQ(warm_reservation_bytes(), 8 * kMB) << "the small one is kept for the next reservation, the terabyte not";
+  give_back_huge_blocks(0);
 #if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)  // they map terabytes of their own
   struct Limit {
     rlimit was{};
@@ -297,6 +305,61 @@ TEST_F(HugeBlocks, AReservationShrunkIsAdoptedByAVectorOfItsSize) {
   }
   EXPECT_EQ(kept_huge_block_bytes(), 0u);
   EXPECT_EQ(reserved_huge_block_bytes(), 0u);
+}
+
+// A reservation freed is kept with its pages, up to kWarmReservationBytes in all, the oldest given
+// back first: the next reservation of the same purpose starts on them, moved to its first bytes
+// (what was written there is still there, and writing there again faults nothing in); one of
+// another purpose, or too small to hold them, starts on fresh pages.
+TEST_F(HugeBlocks, AReservationFreedLeavesItsPagesToTheNextOfItsPurpose) {
+  const auto reserve = [](size_t bytes, int purpose) {
+    const AddressSpaceOnly only(purpose);
+    return static_cast<uint32_t*>(allocate_huge(bytes));
+  };
+  const auto value = [](size_t i) { return static_cast<uint32_t>(i * 2654435761u); };
+  constexpr size_t kFilled = 16 * kMB, kCount = kFilled / sizeof(uint32_t), kLarge = size_t{1} << 32;
+  uint32_t* first = reserve(kLarge, 1);
+  for (size_t i = 0; i < kCount; ++i) first[i] = value(i);
+  shrink_reservation(first, kFilled);
+  free_huge(first);
+  EXPECT_EQ(warm_reservation_bytes(), kFilled);
+  EXPECT_EQ(reserved_huge_block_bytes(), 0u);
+
+  uint32_t* other = reserve(kLarge, 2);
+  EXPECT_EQ(other[1], 0u) << "another purpose: fresh pages";
+  free_huge(other);  // 4 GB: given back, not kept
+  uint32_t* small = reserve(8 * kMB, 1);
+  EXPECT_EQ(small[1], 0u) << "too small to hold the kept pages: fresh ones";
+  EXPECT_EQ(warm_reservation_bytes(), kFilled);
+
+  uint32_t* second = reserve(kLarge, 1);
+  EXPECT_EQ(warm_reservation_bytes(), 0u);
+  for (size_t i = 0; i < kCount; i += 4099) ASSERT_EQ(second[i], value(i)) << i;
+  const int64_t faults = minor_faults();
+  std::memset(second, 1, kFilled);
+  EXPECT_LT(minor_faults() - faults, 8) << "16 MB written on the pages moved in";
+  EXPECT_EQ(second[kCount], 0u) << "after them, fresh pages";
+
+  free_huge(small);  // unshrunk, but within the bound: kept
+  EXPECT_EQ(warm_reservation_bytes(), 8 * kMB);
+  shrink_reservation(second, kFilled);
+  free_huge(second);
+  EXPECT_EQ(warm_reservation_bytes(), 8 * kMB + kFilled);
+  uint32_t* third = reserve(kLarge, 3);
+  std::memset(third, 2, 48 * kMB);
+  shrink_reservation(third, 48 * kMB);
+  free_huge(third);
+  EXPECT_EQ(warm_reservation_bytes(), kFilled + 48 * kMB) << "the oldest, the small one, given back to make room";
+  give_back_huge_blocks(8 * kMB);
+  EXPECT_EQ(warm_reservation_bytes(), kFilled + 48 * kMB) << "given back only with all kept blocks";
+  give_back_huge_blocks(0);
+  EXPECT_EQ(warm_reservation_bytes(), 0u);
+
+  uint32_t* too_large = reserve(kLarge, 1);
+  std::memset(too_large, 3, kWarmReservationBytes + kMB);
+  shrink_reservation(too_large, kWarmReservationBytes + kMB);
+  free_huge(too_large);
+  EXPECT_EQ(warm_reservation_bytes(), 0u) << "more than the bound: given back";
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstdlib>
+#include <deque>
 #include <iterator>
 #include <map>
 #include <mutex>
@@ -37,12 +38,54 @@ void* map_aligned(size_t bytes, int flags = 0) {
 // (or in `reserved`, for a reservation).
 struct HugeBlocks {
   using Ranges = std::map<uintptr_t, size_t>;  // address -> bytes
+  struct Reservation {
+    size_t bytes;
+    int purpose;
+  };
   std::mutex mutex;
-  size_t cap = 0;   // bytes of freed blocks kept; 0: malloc's blocks
-  Ranges live;      // blocks of the store's own, handed out
-  Ranges reserved;  // address space only (AddressSpaceOnly), handed out: unmapped when freed
-  Ranges kept;      // freed ones, neighbours joined
+  size_t cap = 0;  // bytes of freed blocks kept; 0: malloc's blocks
+  Ranges live;     // blocks of the store's own, handed out
+  Ranges kept;     // freed ones, neighbours joined
   size_t kept_bytes = 0;
+  std::map<uintptr_t, Reservation> reserved;  // address space only (AddressSpaceOnly), handed out
+  // Freed reservations with their pages, oldest first, for the next reservations of their purpose.
+  std::deque<std::pair<uintptr_t, Reservation>> warm;
+  size_t warm_bytes = 0;
+
+  // Keeps a freed reservation warm, the oldest ones given back to make room; or gives it back.
+  void keep_warm(uintptr_t p, Reservation r) {
+    if (r.bytes > kWarmReservationBytes) {
+      munmap(reinterpret_cast<void*>(p), r.bytes);
+      return;
+    }
+    while (warm_bytes + r.bytes > kWarmReservationBytes) give_back_warm();
+    try {
+      warm.emplace_back(p, r);
+      warm_bytes += r.bytes;
+    } catch (...) {
+      munmap(reinterpret_cast<void*>(p), r.bytes);
+    }
+  }
+  void give_back_warm() noexcept {
+    munmap(reinterpret_cast<void*>(warm.front().first), warm.front().second.bytes);
+    warm_bytes -= warm.front().second.bytes;
+    warm.pop_front();
+  }
+
+  // Moves the newest warm reservation of PURPOSE that fits in [at, at + bytes) to AT, replacing
+  // the fresh mapping there: the pages are moved, not copied, and the warm range is left unmapped.
+  void warm_up(uintptr_t at, size_t bytes, int purpose) noexcept {
+    for (auto it = warm.rbegin(); it != warm.rend(); ++it) {
+      if (it->second.purpose != purpose || it->second.bytes > bytes) continue;
+      const auto [from, r] = *it;
+      warm.erase(std::next(it).base());
+      warm_bytes -= r.bytes;
+      if (mremap(reinterpret_cast<void*>(from), r.bytes, r.bytes, MREMAP_MAYMOVE | MREMAP_FIXED,
+                 reinterpret_cast<void*>(at)) == MAP_FAILED)
+        munmap(reinterpret_cast<void*>(from), r.bytes);  // AT keeps its fresh pages
+      return;
+    }
+  }
 
   // The smallest kept range that holds BYTES, its rest kept; 0 if none does.
   uintptr_t take(size_t bytes) {
@@ -98,6 +141,7 @@ HugeBlocks& huge_blocks() {
 }
 
 thread_local bool address_space_only = false;
+thread_local int reservation_purpose = 0;
 
 // The reservation AdoptReservation offers to this thread's next allocation of its size.
 struct Adoption {
@@ -121,8 +165,14 @@ size_t address_space_to_spare() {
 
 }  // namespace
 
-AddressSpaceOnly::AddressSpaceOnly() : was_(address_space_only) { address_space_only = true; }
-AddressSpaceOnly::~AddressSpaceOnly() { address_space_only = was_; }
+AddressSpaceOnly::AddressSpaceOnly(int purpose) : was_(address_space_only), was_purpose_(reservation_purpose) {
+  address_space_only = true;
+  reservation_purpose = purpose;
+}
+AddressSpaceOnly::~AddressSpaceOnly() {
+  address_space_only = was_;
+  reservation_purpose = was_purpose_;
+}
 
 AdoptReservation::AdoptReservation(void* p) noexcept { adoption = {p, false}; }
 AdoptReservation::~AdoptReservation() { adoption = {}; }
@@ -133,16 +183,22 @@ void shrink_reservation(void* p, size_t bytes) noexcept {
   HugeBlocks& b = huge_blocks();
   const std::lock_guard<std::mutex> lock(b.mutex);
   const auto it = b.reserved.find(reinterpret_cast<uintptr_t>(p));
-  if (it == b.reserved.end() || it->second <= keep) return;
-  if (munmap(static_cast<char*>(p) + keep, it->second - keep) == 0) it->second = keep;  // else kept whole
+  if (it == b.reserved.end() || it->second.bytes <= keep) return;
+  if (munmap(static_cast<char*>(p) + keep, it->second.bytes - keep) == 0) it->second.bytes = keep;  // else kept whole
 }
 
 size_t reserved_huge_block_bytes() noexcept {
   HugeBlocks& b = huge_blocks();
   const std::lock_guard<std::mutex> lock(b.mutex);
   size_t bytes = 0;
-  for (const auto& [at, size] : b.reserved) bytes += size;
+  for (const auto& [at, r] : b.reserved) bytes += r.bytes;
   return bytes;
+}
+
+size_t warm_reservation_bytes() noexcept {
+  HugeBlocks& b = huge_blocks();
+  const std::lock_guard<std::mutex> lock(b.mutex);
+  return b.warm_bytes;
 }
 
 void* allocate_huge(size_t bytes) {
@@ -151,7 +207,7 @@ void* allocate_huge(size_t bytes) {
   if (adoption.offered != nullptr && !adoption.taken) {
     const std::lock_guard<std::mutex> lock(b.mutex);
     const auto it = b.reserved.find(reinterpret_cast<uintptr_t>(adoption.offered));
-    if (it != b.reserved.end() && it->second == rounded) {
+    if (it != b.reserved.end() && it->second.bytes == rounded) {
       adoption.taken = true;
       return adoption.offered;
     }
@@ -163,7 +219,8 @@ void* allocate_huge(size_t bytes) {
     advise_huge_pages(m, rounded);
     try {
       const std::lock_guard<std::mutex> lock(b.mutex);
-      b.reserved.emplace(reinterpret_cast<uintptr_t>(m), rounded);
+      b.reserved.emplace(reinterpret_cast<uintptr_t>(m), HugeBlocks::Reservation{rounded, reservation_purpose});
+      b.warm_up(reinterpret_cast<uintptr_t>(m), rounded, reservation_purpose);
     } catch (...) {
       munmap(m, rounded);
       throw;
@@ -206,8 +263,9 @@ void free_huge(void* p) noexcept {
     const std::lock_guard<std::mutex> lock(b.mutex);
     const auto reserved = b.reserved.find(reinterpret_cast<uintptr_t>(p));
     if (reserved != b.reserved.end()) {
-      munmap(p, reserved->second);
+      const HugeBlocks::Reservation r = reserved->second;
       b.reserved.erase(reserved);
+      b.keep_warm(reinterpret_cast<uintptr_t>(p), r);
       return;
     }
     const auto it = b.live.find(reinterpret_cast<uintptr_t>(p));
@@ -234,6 +292,8 @@ void give_back_huge_blocks(size_t keep) noexcept {
   HugeBlocks& b = huge_blocks();
   const std::lock_guard<std::mutex> lock(b.mutex);
   b.give_back(keep);
+  if (keep == 0)
+    while (!b.warm.empty()) b.give_back_warm();
 }
 
 size_t kept_huge_block_bytes() noexcept {

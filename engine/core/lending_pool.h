@@ -5,6 +5,7 @@
 // "In parallel"). A mutex, not per-thread storage: two lock operations a task, and
 // ThreadSanitizer sees them (oneTBB's thread-local storage is not instrumented,
 // engine/core/parallel.h).
+#include <cstddef>
 #include <memory>
 #include <mutex>
 #include <utility>
@@ -36,6 +37,20 @@ class LendingPool {
   void clear() {
     const std::lock_guard<std::mutex> lock(mutex_);
     free_.clear();
+  }
+  // Keeps, of the objects given back, the first whose BYTES_OF add up to at most BYTES; lets go of
+  // the rest. Returns the bytes kept.
+  template <class BytesOf>
+  size_t keep_at_most(size_t bytes, const BytesOf& bytes_of) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    size_t kept = 0, n = 0;
+    for (; n < free_.size(); ++n) {
+      const size_t b = bytes_of(*free_[n]);
+      if (b > bytes - kept) break;
+      kept += b;
+    }
+    free_.resize(n);
+    return kept;
   }
 
  private:

@@ -1,11 +1,16 @@
 #include "engine/core/volume_check.h"
 
+#include <algorithm>
+#include <atomic>
+#include <bit>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
+
+#include "engine/core/parallel.h"
 
 namespace isotope {
 namespace {
@@ -50,14 +55,34 @@ void validate_volume(const Volume& volume) {
     throw std::invalid_argument("volume holds " + std::to_string(volume.size()) + " values, its dimensions need " +
                                 std::to_string(volume.node_count()));
   const float* values = volume.data();
-  for (size_t i = 0; i < volume.size(); ++i)
-    if (!std::isfinite(values[i])) {
-      const auto n = static_cast<size_t>(volume.dims[0]), m = static_cast<size_t>(volume.dims[1]);
-      char text[160];
-      std::snprintf(text, sizeof text, "volume value %g at (x,y,z) = (%zu,%zu,%zu) is not finite", values[i], i % n,
-                    i / n % m, i / (n * m));
-      throw std::invalid_argument(text);
+  const size_t i = first_non_finite(values, volume.size());
+  if (i == volume.size()) return;
+  const auto n = static_cast<size_t>(volume.dims[0]), m = static_cast<size_t>(volume.dims[1]);
+  char text[160];
+  std::snprintf(text, sizeof text, "volume value %g at (x,y,z) = (%zu,%zu,%zu) is not finite", values[i], i % n,
+                i / n % m, i / (n * m));
+  throw std::invalid_argument(text);
+}
+
+size_t first_non_finite(const float* values, size_t count) {
+  constexpr size_t kBlock = size_t{1} << 16;  // 256 KB: a block per task, in the L2 cache
+  const auto blocks = static_cast<int64_t>((count + kBlock - 1) / kBlock);
+  std::atomic<int64_t> first_bad{blocks};
+  parallel_for(int64_t{0}, blocks, [&](int64_t b) {
+    if (b > first_bad.load(std::memory_order_relaxed)) return;  // a block before it has one
+    const size_t begin = static_cast<size_t>(b) * kBlock, end = std::min(begin + kBlock, count);
+    // A float is not finite when its exponent bits are all set: the largest magnitude's bits tell,
+    // a reduction the compiler vectorizes.
+    uint32_t largest = 0;
+    for (size_t i = begin; i < end; ++i) largest = std::max(largest, std::bit_cast<uint32_t>(values[i]) & 0x7fffffffu);
+    if (largest < 0x7f800000u) return;
+    for (int64_t seen = first_bad.load(); b < seen && !first_bad.compare_exchange_weak(seen, b);) {
     }
+  });
+  if (first_bad == blocks) return count;
+  const size_t begin = static_cast<size_t>(first_bad.load()) * kBlock;
+  return static_cast<size_t>(std::find_if(values + begin, values + count, [](float v) { return !std::isfinite(v); }) -
+                             values);
 }
 
 }  // namespace isotope

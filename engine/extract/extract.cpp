@@ -62,9 +62,10 @@ bool needs_hierarchy(const ExtractOptions& options) {
   return options.eps != 0 || options.max_triangles > 0 || options.eps_ties >= 0;
 }
 
-Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
-  options.validate();
-  validate_volume(volume);
+namespace {
+
+// An array's extraction, its options and values checked.
+Mesh extract_checked(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
   const ArraySource source(volume);
   if (needs_hierarchy(options) || !finest_extract_applies(source.lattice()))
     return extract(Hierarchy::build(volume, fields_for(options)), options, stats);
@@ -75,6 +76,19 @@ Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* 
   s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (stats) *stats = s;
   return mesh;
+}
+
+}  // namespace
+
+Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
+  options.validate();
+  validate_volume(volume);
+  return extract_checked(volume, options, stats);
+}
+
+Mesh extract_validated(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
+  options.validate();
+  return extract_checked(volume, options, stats);
 }
 
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats) {

@@ -45,6 +45,45 @@ struct SlabMemory {
   bool joined_as_marched = false;  // meshes are given back while slabs are marched
 };
 
+size_t bytes_of(const Mesh& m) {
+  return m.positions.capacity() * sizeof(m.positions[0]) + m.triangles.capacity() * sizeof(m.triangles[0]);
+}
+
+// The slab memory one extraction leaves to the next in the same process (a Python session, the
+// server, a C++ loop), up to kKeptSlabBytes: the slabs' arrays are below malloc's threshold for
+// mappings of their own, and malloc hands the heap's freed top back to the kernel, so without it
+// every extraction built its slabs in fresh pages again (docs/METHOD.md, "eps = 0 by blocks"). One
+// is kept; an extraction that finds none (another is running) makes its own.
+class SlabMemoryShelf {
+ public:
+  static constexpr size_t kKeptSlabBytes = size_t{64} << 20;
+
+  std::unique_ptr<SlabMemory> take() {
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      if (kept_) return std::move(kept_);
+    }
+    return std::make_unique<SlabMemory>();
+  }
+  // MEMORY's builders, then its meshes, as many as fit in kKeptSlabBytes.
+  void put(std::unique_ptr<SlabMemory> memory) {
+    const size_t builders =
+        memory->builders.keep_at_most(kKeptSlabBytes, [](const MeshBuilder& b) { return b.bytes(); });
+    memory->meshes.keep_at_most(kKeptSlabBytes - builders, [](const Mesh& m) { return bytes_of(m); });
+    const std::lock_guard<std::mutex> lock(mutex_);
+    if (!kept_) kept_ = std::move(memory);
+  }
+
+ private:
+  std::mutex mutex_;
+  std::unique_ptr<SlabMemory> kept_;
+};
+
+SlabMemoryShelf& slab_memory_shelf() {
+  static SlabMemoryShelf* shelf = new SlabMemoryShelf;  // never destroyed: an extraction may end at exit
+  return *shelf;
+}
+
 // Slab s's cell layers, [z_begin, z_end).
 std::pair<int64_t, int64_t> slab_range(const SlabPlan& plan, int64_t s) {
   const int64_t z_begin = s * plan.slab_layers;
@@ -56,8 +95,11 @@ std::pair<int64_t, int64_t> slab_range(const SlabPlan& plan, int64_t s) {
 // are the only ones the merge has to look up.
 Slab extract_slab(const SlabPlan& plan, const MarchSlab& march, SlabMemory& memory, int64_t z_begin, int64_t z_end,
                   bool below, bool above) {
-  std::unique_ptr<MeshBuilder> builder = memory.builders.take(
-      [&] { return std::make_unique<MeshBuilder>(plan.iso, plan.side, plan.origin, plan.spacing); });
+  std::unique_ptr<MeshBuilder> builder = memory.builders.take([] { return std::unique_ptr<MeshBuilder>(); });
+  if (builder)
+    builder->retarget(plan.iso, plan.side, plan.origin, plan.spacing);
+  else
+    builder = std::make_unique<MeshBuilder>(plan.iso, plan.side, plan.origin, plan.spacing);
   if (std::unique_ptr<Mesh> storage = memory.meshes.take([] { return nullptr; }))
     builder->build_in(std::move(*storage));
   builder->keep_plane_keys(below ? 2 * z_begin : -1, above ? 2 * z_end : -1);
@@ -169,12 +211,14 @@ Mesh join_slabs(std::vector<Slab>& slabs) {
 
 // An array's room, reserved as address space only (detail::AddressSpaceOnly), for a mesh being
 // joined whose size is not known yet: only what the slabs fill costs memory. Once the size is known
-// the room becomes the mesh's array, the address space beyond it given back.
+// the room becomes the mesh's array, the address space beyond it given back. The room starts on the
+// pages of the same array of a mesh freed before, where one was kept (detail::AddressSpaceOnly).
 template <class T>
 class Reserved {
  public:
-  explicit Reserved(size_t count) {  // throws std::bad_alloc
-    const detail::AddressSpaceOnly address_space_only;
+  // PURPOSE: detail::AddressSpaceOnly's, one per array of the mesh.
+  Reserved(size_t count, int purpose) {  // throws std::bad_alloc
+    const detail::AddressSpaceOnly address_space_only(purpose);
     data_ = static_cast<T*>(detail::allocate_huge(count * sizeof(T)));
     count_ = count;
   }
@@ -290,8 +334,8 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
   std::optional<Reserved<std::array<uint32_t, 3>>> triangles;
   try {
     if (const auto bound = mesh_bound(plan)) {
-      positions.emplace(bound->first);
-      triangles.emplace(bound->second);
+      positions.emplace(bound->first, 1);
+      triangles.emplace(bound->second, 2);
     }
   } catch (const std::bad_alloc&) {
     positions.reset();
@@ -319,7 +363,8 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
   // threads while they march.
   const int64_t window = 2 * thread_count() + 2;
   std::vector<Slab> in_flight(static_cast<size_t>(window));
-  SlabMemory memory;
+  std::unique_ptr<SlabMemory> kept = slab_memory_shelf().take();
+  SlabMemory& memory = *kept;
   memory.joined_as_marched = true;
   SlabNumbering numbering;
   struct Numbered {
@@ -368,9 +413,8 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
         }
         slab = Slab{};
       });
-  memory.builders.clear();  // their welding tables, before the copies left and the mesh
   parallel_for(int64_t{0}, static_cast<int64_t>(numbered.size()), [&](int64_t) { copy_one(); });
-  memory.meshes.clear();
+  slab_memory_shelf().put(std::move(kept));
   Mesh mesh;
   positions->hand_to(mesh.positions, numbering.vertices());
   triangles->hand_to(mesh.triangles, numbering.triangles());

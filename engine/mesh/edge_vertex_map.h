@@ -32,6 +32,9 @@ class EdgeVertexMap {
     mask_ = std::min(slots_.size(), kStartSlots) - 1;
   }
 
+  // The memory the table holds, taken or not.
+  size_t bytes() const { return (slots_.capacity() + moving_.capacity()) * sizeof(Slot); }
+
   // Returns the index stored for key, or stores `fresh` and returns kAbsent.
   uint32_t find_or_insert(uint64_t key, uint32_t fresh) {
     if (2 * (size_ + 1) > mask_ + 1) rehash(2 * (mask_ + 1));

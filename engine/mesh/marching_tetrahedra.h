@@ -111,6 +111,21 @@ class MeshBuilder {
     storage.triangles.clear();
     mesh_ = std::move(storage);
   }
+  // Ready for another mesh on another grid or at another isovalue (as the constructor's), the
+  // memory of its welding table and of its key lists kept: a builder kept from one extraction for
+  // the next.
+  void retarget(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing) {
+    reset();
+    cutter_ = TetCutter(iso, side, origin, spacing);
+  }
+  // The memory the builder holds: its mesh's arrays, its key lists and its welding table.
+  size_t bytes() const {
+    size_t b = mesh_.positions.capacity() * sizeof(mesh_.positions[0]) +
+               mesh_.triangles.capacity() * sizeof(mesh_.triangles[0]) + keys_.capacity() * sizeof(uint64_t) +
+               own_map_.bytes();
+    for (const auto& k : plane_keys_) b += k.capacity() * sizeof(PlaneVertex);
+    return b;
+  }
   // Ready for another mesh with the same isovalue and grid, its welding table kept at its size.
   void reset() {
     mesh_ = Mesh{};

@@ -200,9 +200,9 @@ void check_finite(const Volume& volume, const std::string& file) {
 void check_finite(const float* values, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
                   const std::string& file) {
   const int64_t count = size[0] * size[1] * size[2];
-  const float* bad = std::find_if(values, values + count, [](float v) { return !std::isfinite(v); });
-  if (bad == values + count) return;
-  const int64_t i = bad - values;
+  const auto i = static_cast<int64_t>(first_non_finite(values, static_cast<size_t>(count)));
+  if (i == count) return;
+  const float* bad = values + i;
   const int64_t nx = size[0], ny = size[1];
   std::ostringstream msg;
   msg << file << ": value " << *bad << " at (x,y,z) = (" << lo[0] + i % nx << "," << lo[1] + (i / nx) % ny << ","

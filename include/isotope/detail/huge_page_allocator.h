@@ -36,22 +36,33 @@ void* allocate_huge(size_t bytes);
 void free_huge(void* p) noexcept;  // P from allocate_huge
 
 // While one lives, the huge blocks this thread allocates are address space only: mapped without
-// the kernel's commit accounting (MAP_NORESERVE), never from malloc nor kept once freed. For an
-// array reserved at a bound far above what it will hold, so that it fills in place, without a copy,
-// whatever it comes to: a page costs memory only once written. An array that is then written whole
-// runs out of memory at a page fault instead of at its allocation: not for arrays sized by what
-// they will hold. A reservation the address space has no room for, or larger than an eighth of the
-// process's limit on it (`ulimit -v`, `ulimit -d`), throws std::bad_alloc.
+// the kernel's commit accounting (MAP_NORESERVE), never from malloc nor among the blocks
+// keep_freed_huge_blocks() keeps. For an array reserved at a bound far above what it will hold, so
+// that it fills in place, without a copy, whatever it comes to: a page costs memory only once
+// written. An array that is then written whole runs out of memory at a page fault instead of at its
+// allocation: not for arrays sized by what they will hold. A reservation the address space has no
+// room for, or larger than an eighth of the process's limit on it (`ulimit -v`, `ulimit -d`), throws
+// std::bad_alloc.
+//
+// A reservation of at most kWarmReservationBytes when freed (shrink_reservation() brings it down)
+// is kept, with the pages written in it (the newest ones, up to kWarmReservationBytes in all), until
+// give_back_huge_blocks(0); the next reservation of the same PURPOSE (a number of the caller's, one per kind of array)
+// starts on them, moved to its first bytes without a copy (mremap): a process that repeats an extraction writes its
+// mesh in pages already faulted in, as malloc's heap gives a repeated allocation the pages the last one freed.
 class AddressSpaceOnly {
  public:
-  AddressSpaceOnly();
+  explicit AddressSpaceOnly(int purpose = 0);
   ~AddressSpaceOnly();
   AddressSpaceOnly(const AddressSpaceOnly&) = delete;
   AddressSpaceOnly& operator=(const AddressSpaceOnly&) = delete;
 
  private:
   bool was_;
+  int was_purpose_;
 };
+inline constexpr size_t kWarmReservationBytes = size_t{64} << 20;
+// Bytes of freed reservations kept for the next ones.
+size_t warm_reservation_bytes() noexcept;
 
 // Gives back a reservation's address space beyond its first BYTES (rounded up to whole huge pages).
 // P: a block allocated under AddressSpaceOnly; anything else is left as it is.
@@ -75,7 +86,8 @@ size_t reserved_huge_block_bytes() noexcept;
 
 // Keeps up to BYTES of freed huge blocks from now on (0: none, and malloc again for new blocks).
 void keep_freed_huge_blocks(size_t bytes);
-// Gives kept blocks back to the kernel until at most KEEP bytes of them are left.
+// Gives kept blocks back to the kernel until at most KEEP bytes of them are left, and the freed
+// reservations kept for the next ones (AddressSpaceOnly) when KEEP is 0.
 void give_back_huge_blocks(size_t keep) noexcept;
 size_t kept_huge_block_bytes() noexcept;
 
