@@ -337,7 +337,11 @@ TEST_F(HugeBlocks, AReservationFreedLeavesItsPagesToTheNextOfItsPurpose) {
   for (size_t i = 0; i < kCount; i += 4099) ASSERT_EQ(second[i], value(i)) << i;
   const int64_t faults = minor_faults();
   std::memset(second, 1, kFilled);
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)  // whose shadow of the range is fresh
   EXPECT_LT(minor_faults() - faults, 8) << "16 MB written on the pages moved in";
+#else
+  static_cast<void>(faults);
+#endif
   EXPECT_EQ(second[kCount], 0u) << "after them, fresh pages";
 
   free_huge(small);  // unshrunk, but within the bound: kept
