@@ -170,7 +170,12 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
                              }};
     return extract_streamed(layers, options, stats);
   }
-  if (!needs_hierarchy(options)) return extract_validated(impl_->whole(), options, stats);  // checked when read
+  if (!needs_hierarchy(options)) {
+    // Values read from a file or copied in were checked then; a borrowed array may have changed.
+    const Volume& volume = impl_->whole();
+    return volume.borrowed.data() ? isotope::extract(volume, options, stats)
+                                  : extract_validated(volume, options, stats);
+  }
   const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(options));
   return isotope::extract(*hierarchy, options, stats, &impl_->budgets);
 }

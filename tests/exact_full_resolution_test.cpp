@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -360,19 +361,29 @@ TEST(FullResolutionSlabs, AnExtractionAfterOneOfAnotherGridGivesTheOneWalkMesh) 
   noise.spacing = {0.5, 2.0, 1.25};
   const Mesh algebraic_reference = one_walk(algebraic, 0.0f), noise_reference = one_walk(noise, 0.2f);
   const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+  // While a mesh lives, the kept pages are those of its arrays' reservations that were copied into
+  // arrays under a huge page (malloc's) and freed: every kept block was taken by its arrays.
+  const auto copied = [](const Mesh& m) {
+    return detail::kHugePage * ((m.positions.size() * sizeof(m.positions[0]) < detail::kHugePage ? 1u : 0u) +
+                                (m.triangles.size() * sizeof(m.triangles[0]) < detail::kHugePage ? 1u : 0u));
+  };
+  detail::give_back_huge_blocks(0);
   for (int round = 0; round < 3; ++round) {
     SCOPED_TRACE(::testing::Message() << "round " << round);
-    detail::give_back_huge_blocks(0);
     {
       const Mesh m = extract_full_resolution(algebraic, 0.0f);
       EXPECT_TRUE(m.positions == algebraic_reference.positions);
       EXPECT_TRUE(m.triangles == algebraic_reference.triangles);
+      EXPECT_EQ(detail::warm_reservation_bytes(), copied(m)) << "the last mesh's pages taken by this one's arrays";
     }
     EXPECT_GE(detail::warm_reservation_bytes(), algebraic_reference.triangles.size() * 12)
         << "the freed mesh's pages kept for the next";
-    const Mesh m = extract_full_resolution(noise, 0.2f);
-    EXPECT_TRUE(m.positions == noise_reference.positions);
-    EXPECT_TRUE(m.triangles == noise_reference.triangles);
+    {
+      const Mesh m = extract_full_resolution(noise, 0.2f);
+      EXPECT_TRUE(m.positions == noise_reference.positions);
+      EXPECT_TRUE(m.triangles == noise_reference.triangles);
+      EXPECT_EQ(detail::warm_reservation_bytes(), copied(m));
+    }
   }
 }
 
@@ -668,6 +679,26 @@ TEST(FiniteValues, TheFirstValueThatIsNotFiniteIsFoundInAnyBlock) {
       EXPECT_EQ(first_non_finite(bad.data(), kCount), at) << threads << " threads";
     }
   }
+}
+
+// An array handed over is checked when opened; a borrowed one, which its owner may change between
+// extractions, again at each eps-0 extraction.
+TEST(FiniteValues, ABorrowedArrayIsCheckedAgainAtEachExtraction) {
+  std::vector<float> values = generate_sphere(33).values;
+  Volume borrowed;
+  borrowed.dims = {33, 33, 33};
+  borrowed.borrowed = std::span<const float>(values);
+  const Source source = open_volume(std::move(borrowed));
+  ExtractOptions o;
+  EXPECT_GT(source.extract(o).triangles.size(), 0u);
+  values[(7 * 33 + 5) * 33 + 3] = std::numeric_limits<float>::quiet_NaN();
+  std::string error;
+  try {
+    source.extract(o);
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+  EXPECT_CONTAINS(error, "(x,y,z) = (3,5,7) is not finite");
 }
 
 // A slab that throws stops the slabs after it from starting, and the failure hook runs (a march

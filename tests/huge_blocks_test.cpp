@@ -354,10 +354,27 @@ TEST_F(HugeBlocks, AReservationFreedLeavesItsPagesToTheNextOfItsPurpose) {
   shrink_reservation(third, 48 * kMB);
   free_huge(third);
   EXPECT_EQ(warm_reservation_bytes(), kFilled + 48 * kMB) << "the oldest, the small one, given back to make room";
-  give_back_huge_blocks(8 * kMB);
-  EXPECT_EQ(warm_reservation_bytes(), kFilled + 48 * kMB) << "given back only with all kept blocks";
+  give_back_huge_blocks(kFilled + 48 * kMB);
+  EXPECT_EQ(warm_reservation_bytes(), kFilled + 48 * kMB);
+  give_back_huge_blocks(48 * kMB);
+  EXPECT_EQ(warm_reservation_bytes(), 48 * kMB) << "the oldest given back first";
   give_back_huge_blocks(0);
   EXPECT_EQ(warm_reservation_bytes(), 0u);
+
+  // A mesh that grows: its reservation's first pages moved in from the last one, the rest its own
+  // (two mappings), all kept when it is freed, and moved to the next one whole.
+  uint32_t* grown = reserve(kLarge, 4);
+  std::memset(grown, 4, 8 * kMB);
+  shrink_reservation(grown, 8 * kMB);
+  free_huge(grown);
+  grown = reserve(kLarge, 4);
+  for (size_t i = 0; i < 2 * kCount; ++i) grown[i] = value(i);
+  shrink_reservation(grown, 2 * kFilled);
+  free_huge(grown);
+  grown = reserve(kLarge, 4);
+  for (size_t i = 0; i < 2 * kCount; i += 4099) ASSERT_EQ(grown[i], value(i)) << i;
+  free_huge(grown);
+  give_back_huge_blocks(0);
 
   uint32_t* too_large = reserve(kLarge, 1);
   std::memset(too_large, 3, kWarmReservationBytes + kMB);

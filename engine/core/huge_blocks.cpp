@@ -73,18 +73,38 @@ struct HugeBlocks {
   }
 
   // Moves the newest warm reservation of PURPOSE that fits in [at, at + bytes) to AT, replacing
-  // the fresh mapping there: the pages are moved, not copied, and the warm range is left unmapped.
-  void warm_up(uintptr_t at, size_t bytes, int purpose) noexcept {
+  // the fresh pages there; the warm range is left unmapped. A huge page at a time: a warm range may
+  // be several mappings (its first pages moved in from an earlier one), which one mremap moves only
+  // on recent kernels, and every boundary between them lies on a huge page. False when a move
+  // failed and the fresh pages it had unmapped at AT (mremap unmaps its target first) could not be
+  // mapped again: [at, at + bytes) is then not whole, and the caller must give it up.
+  bool warm_up(uintptr_t at, size_t bytes, int purpose) noexcept {
     for (auto it = warm.rbegin(); it != warm.rend(); ++it) {
       if (it->second.purpose != purpose || it->second.bytes > bytes) continue;
       const auto [from, r] = *it;
       warm.erase(std::next(it).base());
       warm_bytes -= r.bytes;
-      if (mremap(reinterpret_cast<void*>(from), r.bytes, r.bytes, MREMAP_MAYMOVE | MREMAP_FIXED,
-                 reinterpret_cast<void*>(at)) == MAP_FAILED)
-        munmap(reinterpret_cast<void*>(from), r.bytes);  // AT keeps its fresh pages
-      return;
+      for (size_t done = 0; done < r.bytes; done += kHugePage) {
+        void* target = reinterpret_cast<void*>(at + done);
+        if (mremap(reinterpret_cast<void*>(from + done), kHugePage, kHugePage, MREMAP_MAYMOVE | MREMAP_FIXED, target) !=
+            MAP_FAILED)
+          continue;
+        munmap(reinterpret_cast<void*>(from + done), r.bytes - done);  // the rest stays warm no longer
+        void* again = mmap(target, kHugePage, PROT_READ | PROT_WRITE,
+                           MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE | MAP_FIXED_NOREPLACE, -1, 0);
+        if (again == target) {
+          advise_huge_pages(target, kHugePage);
+          return true;
+        }
+        if (again != MAP_FAILED) munmap(again, kHugePage);  // a kernel that ignores NOREPLACE
+        // Another thread mapped the hole: give back the rest, around it.
+        munmap(reinterpret_cast<void*>(at), done);
+        munmap(reinterpret_cast<void*>(at + done + kHugePage), bytes - done - kHugePage);
+        return false;
+      }
+      return true;
     }
+    return true;
   }
 
   // The smallest kept range that holds BYTES, its rest kept; 0 if none does.
@@ -217,13 +237,16 @@ void* allocate_huge(size_t bytes) {
     void* m = map_aligned(rounded, MAP_NORESERVE);
     if (!m) throw std::bad_alloc();
     advise_huge_pages(m, rounded);
+    const std::lock_guard<std::mutex> lock(b.mutex);
     try {
-      const std::lock_guard<std::mutex> lock(b.mutex);
       b.reserved.emplace(reinterpret_cast<uintptr_t>(m), HugeBlocks::Reservation{rounded, reservation_purpose});
-      b.warm_up(reinterpret_cast<uintptr_t>(m), rounded, reservation_purpose);
     } catch (...) {
       munmap(m, rounded);
       throw;
+    }
+    if (!b.warm_up(reinterpret_cast<uintptr_t>(m), rounded, reservation_purpose)) {
+      b.reserved.erase(reinterpret_cast<uintptr_t>(m));  // given back by warm_up, around another's mapping
+      throw std::bad_alloc();
     }
     return m;
   }
@@ -291,9 +314,8 @@ void keep_freed_huge_blocks(size_t bytes) {
 void give_back_huge_blocks(size_t keep) noexcept {
   HugeBlocks& b = huge_blocks();
   const std::lock_guard<std::mutex> lock(b.mutex);
+  while (!b.warm.empty() && b.warm_bytes + b.kept_bytes > keep) b.give_back_warm();
   b.give_back(keep);
-  if (keep == 0)
-    while (!b.warm.empty()) b.give_back_warm();
 }
 
 size_t kept_huge_block_bytes() noexcept {

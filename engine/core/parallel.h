@@ -79,6 +79,17 @@ void parallel_for_in_order(int64_t begin, int64_t end, const Body& body) {
   });
 }
 
+// Runs F so that while it waits for parallel work of its own, its thread runs only that work, not
+// a task of the caller's, which could wait for what F's caller holds (a lock, a commit).
+template <class F>
+void isolated(const F& f) {
+#ifdef ISOTOPE_STD_THREADS
+  f();  // a plain thread waits for its own threads only
+#else
+  tbb::this_task_arena::isolate(f);
+#endif
+}
+
 // Calls build(i) for every i in [begin, end), possibly concurrently, handed out in increasing
 // order, and commit(i) for every i in increasing order, one at a time, as soon as build(i) and
 // every commit before it are done: on the thread whose build completed the run, which goes on
@@ -105,13 +116,9 @@ void parallel_in_order_committed(int64_t begin, int64_t end, int64_t window, con
     }
     bool commits = false;  // this thread is the one committing
     try {
-#ifdef ISOTOPE_STD_THREADS
-      build(i);
-#else
-      // While a build waits for parallel work of its own, its thread runs only that work: a
-      // build taken up there would wait for a commit that waits for this build.
-      tbb::this_task_arena::isolate([&] { build(i); });
-#endif
+      // A build taken up while this one waits for parallel work of its own would wait for a
+      // commit that waits for this build.
+      isolated([&] { build(i); });
       std::unique_lock<std::mutex> lock(mutex);
       built[slot] = 1;
       if (committing) return;

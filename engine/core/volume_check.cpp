@@ -68,16 +68,21 @@ size_t first_non_finite(const float* values, size_t count) {
   constexpr size_t kBlock = size_t{1} << 16;  // 256 KB: a block per task, in the L2 cache
   const auto blocks = static_cast<int64_t>((count + kBlock - 1) / kBlock);
   std::atomic<int64_t> first_bad{blocks};
-  parallel_for(int64_t{0}, blocks, [&](int64_t b) {
-    if (b > first_bad.load(std::memory_order_relaxed)) return;  // a block before it has one
-    const size_t begin = static_cast<size_t>(b) * kBlock, end = std::min(begin + kBlock, count);
-    // A float is not finite when its exponent bits are all set: the largest magnitude's bits tell,
-    // a reduction the compiler vectorizes.
-    uint32_t largest = 0;
-    for (size_t i = begin; i < end; ++i) largest = std::max(largest, std::bit_cast<uint32_t>(values[i]) & 0x7fffffffu);
-    if (largest < 0x7f800000u) return;
-    for (int64_t seen = first_bad.load(); b < seen && !first_bad.compare_exchange_weak(seen, b);) {
-    }
+  // Isolated: a caller may hold a lock (a Source reading its file once), and a thread waiting here
+  // must not take up a task of the caller's that wants it.
+  isolated([&] {
+    parallel_for(int64_t{0}, blocks, [&](int64_t b) {
+      if (b > first_bad.load(std::memory_order_relaxed)) return;  // a block before it has one
+      const size_t begin = static_cast<size_t>(b) * kBlock, end = std::min(begin + kBlock, count);
+      // A float is not finite when its exponent bits are all set: the largest magnitude's bits tell,
+      // a reduction the compiler vectorizes.
+      uint32_t largest = 0;
+      for (size_t i = begin; i < end; ++i)
+        largest = std::max(largest, std::bit_cast<uint32_t>(values[i]) & 0x7fffffffu);
+      if (largest < 0x7f800000u) return;
+      for (int64_t seen = first_bad.load(); b < seen && !first_bad.compare_exchange_weak(seen, b);) {
+      }
+    });
   });
   if (first_bad == blocks) return count;
   const size_t begin = static_cast<size_t>(first_bad.load()) * kBlock;

@@ -17,8 +17,8 @@ namespace isotope {
 // Throws as extract(const Volume&, ...) does (isotope/extract.h).
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
-// extract(volume, options, stats) for a volume validate_volume() accepted before (a Source holds no
-// other): its values are not scanned again.
+// extract(volume, options, stats) for a volume validate_volume() accepted before, whose values
+// cannot have changed since (not a borrowed array): they are not scanned again.
 Mesh extract_validated(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
 // Whether extract(volume, options) needs a hierarchy (eps > 0, tie classes at eps 0, or a

@@ -65,13 +65,22 @@ class SlabMemoryShelf {
     }
     return std::make_unique<SlabMemory>();
   }
-  // MEMORY's builders, then its meshes, as many as fit in kKeptSlabBytes.
+  // MEMORY's builders, as many as fit in kKeptSlabBytes: before the last slabs are copied, so that
+  // the others are gone before the mesh's last pages are touched. Returns their bytes.
+  static size_t trim_builders(SlabMemory& memory) {
+    return memory.builders.keep_at_most(kKeptSlabBytes, [](const MeshBuilder& b) { return b.bytes(); });
+  }
+  // MEMORY's builders (trimmed), then its meshes, as many as fit in kKeptSlabBytes.
   void put(std::unique_ptr<SlabMemory> memory) {
-    const size_t builders =
-        memory->builders.keep_at_most(kKeptSlabBytes, [](const MeshBuilder& b) { return b.bytes(); });
+    const size_t builders = trim_builders(*memory);
     memory->meshes.keep_at_most(kKeptSlabBytes - builders, [](const Mesh& m) { return bytes_of(m); });
     const std::lock_guard<std::mutex> lock(mutex_);
     if (!kept_) kept_ = std::move(memory);
+  }
+  void clear() {
+    std::unique_ptr<SlabMemory> given_back;
+    const std::lock_guard<std::mutex> lock(mutex_);
+    given_back = std::move(kept_);
   }
 
  private:
@@ -268,6 +277,8 @@ std::optional<std::pair<size_t, size_t>> mesh_bound(const SlabPlan& plan) {
 
 }  // namespace
 
+void give_back_slab_memory() { slab_memory_shelf().clear(); }
+
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribution& group, int64_t first,
                     int64_t last, double* seconds, bool keep_share, const std::function<void()>& on_failure) {
   const int64_t count = slab_count(plan);
@@ -413,6 +424,7 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::fun
         }
         slab = Slab{};
       });
+  SlabMemoryShelf::trim_builders(memory);
   parallel_for(int64_t{0}, static_cast<int64_t>(numbered.size()), [&](int64_t) { copy_one(); });
   slab_memory_shelf().put(std::move(kept));
   Mesh mesh;

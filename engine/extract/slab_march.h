@@ -37,6 +37,10 @@ using MarchSlab = std::function<void(int64_t z_begin, int64_t z_end, MeshBuilder
 // march functions that wait on one another.
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure = {});
 
+// An extraction leaves its slabs' builders and arrays, up to 64 MB, to the next one in the process;
+// this lets them go (a server gone idle).
+void give_back_slab_memory();
+
 inline int64_t slab_count(const SlabPlan& plan) {
   return std::max<int64_t>(0, (plan.cell_layers + plan.slab_layers - 1) / plan.slab_layers);
 }

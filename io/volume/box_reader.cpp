@@ -152,13 +152,14 @@ class RawBoxReader final : public BoxReader {
     const auto& d = info_.dims;
     const int64_t rows = rows_a_call(size);
     if (rows > 1) {
-      std::vector<unsigned char> stage(static_cast<size_t>(((rows - 1) * d[0] + size[0])) * elem);
+      Stage stage(static_cast<size_t>(((rows - 1) * d[0] + size[0])) * elem);
       for (int64_t z = 0; z < size[2]; ++z)
         for (int64_t y = 0; y < size[1]; y += rows) read_rows(lo, size, y, std::min(rows, size[1] - y), z, out, stage);
       if (!info_.is_integer) check_finite(out, lo, size, data_.name);
       return;
     }
-    std::vector<unsigned char> stage(std::min(static_cast<size_t>(run) * elem, kStageBytes));
+    // Floats stored as this machine holds them are read straight into OUT: no stage, no copy.
+    Stage stage(stored_as_floats() ? 0 : std::min(static_cast<size_t>(run) * elem, kStageBytes));
     for (int64_t done = 0; done < total; done += run) {
       const int64_t y = lo[1] + done / size[0] % size[1];
       const int64_t z = lo[2] + done / (size[0] * size[1]);
@@ -187,27 +188,44 @@ class RawBoxReader final : public BoxReader {
     return std::min(size[1], (static_cast<int64_t>(kStageBytes) - size[0] * elem) / row + 1);
   }
   // ROWS rows of the box from its row Y of plane Z in one read through STAGE.
+  // Bytes read before they are decoded: not zero-filled, since each read writes them first.
+  struct Stage {
+    explicit Stage(size_t bytes) : data(bytes > 0 ? new unsigned char[bytes] : nullptr), size(bytes) {}
+    std::unique_ptr<unsigned char[]> data;
+    size_t size;
+  };
+
+  bool stored_as_floats() const {
+    return data_.type == ScalarType::float32 && data_.big_endian == (std::endian::native == std::endian::big);
+  }
+
   void read_rows(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, int64_t y, int64_t rows,
-                 int64_t z, float* out, std::vector<unsigned char>& stage) const {
+                 int64_t z, float* out, const Stage& stage) const {
     const int64_t elem = info_.element_bytes;
     const auto& d = info_.dims;
     const int64_t first = ((lo[2] + z) * d[1] + lo[1] + y) * d[0] + lo[0];
-    pread_fully(fd_.get(), stage.data(), static_cast<size_t>(((rows - 1) * d[0] + size[0]) * elem),
+    pread_fully(fd_.get(), stage.data.get(), static_cast<size_t>(((rows - 1) * d[0] + size[0]) * elem),
                 data_.offset + first * elem, data_.read_name);
     for (int64_t r = 0; r < rows; ++r)
-      decode_scalars(data_.type, data_.big_endian, stage.data() + r * d[0] * elem, static_cast<size_t>(size[0]),
+      decode_scalars(data_.type, data_.big_endian, stage.data.get() + r * d[0] * elem, static_cast<size_t>(size[0]),
                      out + (z * size[1] + y + r) * size[0]);
   }
 
-  // COUNT nodes from node index FIRST, through STAGE in pieces when they do not fit.
-  void read_run(int64_t first, int64_t count, float* out, std::vector<unsigned char>& stage) const {
+  // COUNT nodes from node index FIRST, through STAGE in pieces when they do not fit, or straight
+  // into OUT without one.
+  void read_run(int64_t first, int64_t count, float* out, const Stage& stage) const {
     const int64_t elem = info_.element_bytes;
-    const int64_t piece = static_cast<int64_t>(stage.size()) / elem;
+    if (stage.size == 0) {
+      pread_fully(fd_.get(), reinterpret_cast<unsigned char*>(out), static_cast<size_t>(count * elem),
+                  data_.offset + first * elem, data_.read_name);
+      return;
+    }
+    const int64_t piece = static_cast<int64_t>(stage.size) / elem;
     for (int64_t i = 0; i < count; i += piece) {
       const int64_t n = std::min(piece, count - i);
-      pread_fully(fd_.get(), stage.data(), static_cast<size_t>(n * elem), data_.offset + (first + i) * elem,
+      pread_fully(fd_.get(), stage.data.get(), static_cast<size_t>(n * elem), data_.offset + (first + i) * elem,
                   data_.read_name);
-      decode_scalars(data_.type, data_.big_endian, stage.data(), static_cast<size_t>(n), out + i);
+      decode_scalars(data_.type, data_.big_endian, stage.data.get(), static_cast<size_t>(n), out + i);
     }
   }
 

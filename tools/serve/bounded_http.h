@@ -64,11 +64,11 @@ class ResponseBudget {
 // Gives freed memory back to the system from a thread of its own, every quarter second: once more
 // than 256 MB of it is kept, or 64 MB after ten seconds without an extraction. glibc keeps freed
 // memory in its arenas (up to the trim threshold, which isotope::open_volume raises for the brick
-// cache), and the huge-block store keeps freed large arrays (detail::keep_freed_huge_blocks, turned
-// on by the returner): a server would otherwise keep a crowd's meshes in its RSS long after their
-// clients left. Not after every request: the next extraction reuses what the last one freed, and
-// giving it back would have it fault every page in again (20 ms of a 120 ms extraction of 117 k
-// triangles).
+// cache), the huge-block store keeps freed large arrays (detail::keep_freed_huge_blocks, turned
+// on by the returner) and reservations (counted with them), and an eps-0 extraction leaves its
+// slabs' memory to the next (given back once idle): a server would otherwise keep a crowd's meshes in its RSS long
+// after their clients left. Not after every request: the next extraction reuses what the last one freed, and giving it
+// back would have it fault every page in again (20 ms of a 120 ms extraction of 117 k triangles).
 class MemoryReturner {
  public:
   MemoryReturner();

@@ -45,10 +45,11 @@ void free_huge(void* p) noexcept;  // P from allocate_huge
 // std::bad_alloc.
 //
 // A reservation of at most kWarmReservationBytes when freed (shrink_reservation() brings it down)
-// is kept, with the pages written in it (the newest ones, up to kWarmReservationBytes in all), until
-// give_back_huge_blocks(0); the next reservation of the same PURPOSE (a number of the caller's, one per kind of array)
-// starts on them, moved to its first bytes without a copy (mremap): a process that repeats an extraction writes its
-// mesh in pages already faulted in, as malloc's heap gives a repeated allocation the pages the last one freed.
+// is kept, with the pages written in it (the newest ones, up to kWarmReservationBytes in all, until
+// give_back_huge_blocks() gives them back); the next reservation of the same PURPOSE (a number of the caller's, one per
+// kind of array) starts on them, moved to its first bytes without a copy (mremap): a process that repeats an extraction
+// writes its mesh in pages already faulted in, as malloc's heap gives a repeated allocation the pages the last one
+// freed.
 class AddressSpaceOnly {
  public:
   explicit AddressSpaceOnly(int purpose = 0);
@@ -86,8 +87,8 @@ size_t reserved_huge_block_bytes() noexcept;
 
 // Keeps up to BYTES of freed huge blocks from now on (0: none, and malloc again for new blocks).
 void keep_freed_huge_blocks(size_t bytes);
-// Gives kept blocks back to the kernel until at most KEEP bytes of them are left, and the freed
-// reservations kept for the next ones (AddressSpaceOnly) when KEEP is 0.
+// Gives kept blocks, and the freed reservations kept for the next ones (AddressSpaceOnly), back to
+// the kernel until at most KEEP bytes of both are left, the reservations first.
 void give_back_huge_blocks(size_t keep) noexcept;
 size_t kept_huge_block_bytes() noexcept;
 
