@@ -66,6 +66,11 @@ struct HugeBlocks {
       munmap(reinterpret_cast<void*>(p), r.bytes);
     }
   }
+  // Whether the huge page at P is mapped (mincore fails with ENOMEM on a hole).
+  static bool still_mapped(void* p) noexcept {
+    unsigned char resident[kHugePage / 4096];
+    return mincore(p, kHugePage, resident) == 0;
+  }
   void give_back_warm() noexcept {
     munmap(reinterpret_cast<void*>(warm.front().first), warm.front().second.bytes);
     warm_bytes -= warm.front().second.bytes;
@@ -75,9 +80,10 @@ struct HugeBlocks {
   // Moves the newest warm reservation of PURPOSE that fits in [at, at + bytes) to AT, replacing
   // the fresh pages there; the warm range is left unmapped. A huge page at a time: a warm range may
   // be several mappings (its first pages moved in from an earlier one), which one mremap moves only
-  // on recent kernels, and every boundary between them lies on a huge page. False when a move
-  // failed and the fresh pages it had unmapped at AT (mremap unmaps its target first) could not be
-  // mapped again: [at, at + bytes) is then not whole, and the caller must give it up.
+  // on recent kernels, and every boundary between them lies on a huge page. A move that fails
+  // leaves the rest fresh. It may have unmapped its target first (mremap does, before it looks at
+  // the source); the hole is then mapped again. False when it cannot be (another thread mapped
+  // it): the rest of [at, at + bytes) is given back around the hole, and the caller gives it up.
   bool warm_up(uintptr_t at, size_t bytes, int purpose) noexcept {
     for (auto it = warm.rbegin(); it != warm.rend(); ++it) {
       if (it->second.purpose != purpose || it->second.bytes > bytes) continue;
@@ -90,6 +96,7 @@ struct HugeBlocks {
             MAP_FAILED)
           continue;
         munmap(reinterpret_cast<void*>(from + done), r.bytes - done);  // the rest stays warm no longer
+        if (still_mapped(target)) return true;                         // failed before it unmapped the target
         void* again = mmap(target, kHugePage, PROT_READ | PROT_WRITE,
                            MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE | MAP_FIXED_NOREPLACE, -1, 0);
         if (again == target) {

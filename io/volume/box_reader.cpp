@@ -5,9 +5,11 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <bit>
 #include <cerrno>
 #include <cstddef>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <system_error>
@@ -187,7 +189,6 @@ class RawBoxReader final : public BoxReader {
     const int64_t row = info_.dims[0] * elem;
     return std::min(size[1], (static_cast<int64_t>(kStageBytes) - size[0] * elem) / row + 1);
   }
-  // ROWS rows of the box from its row Y of plane Z in one read through STAGE.
   // Bytes read before they are decoded: not zero-filled, since each read writes them first.
   struct Stage {
     explicit Stage(size_t bytes) : data(bytes > 0 ? new unsigned char[bytes] : nullptr), size(bytes) {}
@@ -198,6 +199,8 @@ class RawBoxReader final : public BoxReader {
   bool stored_as_floats() const {
     return data_.type == ScalarType::float32 && data_.big_endian == (std::endian::native == std::endian::big);
   }
+
+  // ROWS rows of the box from its row Y of plane Z in one read through STAGE.
 
   void read_rows(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, int64_t y, int64_t rows,
                  int64_t z, float* out, const Stage& stage) const {

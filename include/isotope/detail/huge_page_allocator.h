@@ -45,11 +45,12 @@ void free_huge(void* p) noexcept;  // P from allocate_huge
 // std::bad_alloc.
 //
 // A reservation of at most kWarmReservationBytes when freed (shrink_reservation() brings it down)
-// is kept, with the pages written in it (the newest ones, up to kWarmReservationBytes in all, until
-// give_back_huge_blocks() gives them back); the next reservation of the same PURPOSE (a number of the caller's, one per
-// kind of array) starts on them, moved to its first bytes without a copy (mremap): a process that repeats an extraction
-// writes its mesh in pages already faulted in, as malloc's heap gives a repeated allocation the pages the last one
-// freed.
+// is kept, with the pages written in it (the newest ones, up to kWarmReservationBytes in all,
+// until give_back_huge_blocks() gives them back). The next reservation of the same PURPOSE (a
+// number of the caller's, one per kind of array) starts on them, moved to its first bytes without
+// a copy (mremap): a process that repeats an extraction writes its mesh in pages already faulted
+// in, as malloc's heap gives a repeated allocation the pages the last one freed. A move that fails
+// leaves fresh pages; one that leaves a hole another thread maps first throws std::bad_alloc.
 class AddressSpaceOnly {
  public:
   explicit AddressSpaceOnly(int purpose = 0);
