@@ -4,15 +4,20 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <optional>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
+#include "engine/hierarchy/diamond.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/hierarchy/record_builder.h"
 #include "engine/topology/component_report.h"
 #include "isotope/mesh.h"
 #include "test_support.h"
@@ -144,6 +149,97 @@ void for_each_setting(F f) {
 }
 
 // delta = 0 keeps every critical point: the preserve mesh, bit for bit, for every weight.
+// The gradient weight as docs/METHOD.md defines it, computed the plain way: per tetrahedron
+// (end, v, r_i, r_i+1), Cramer's rule with a division per component and a root per tetrahedron.
+LocalWeights plain_local_weights(const DiamondValues& dv, const DiamondShape& s, IsoInterval x) {
+  LocalWeights w;
+  for (int e = 0; e < 2; ++e) {
+    const double fe = e == 0 ? dv.fa : dv.fb;
+    const auto& pe = s.offset[static_cast<size_t>(e)];
+    for (int i = 0; i < s.ring_count; ++i) {
+      const int i1 = (i + 1) % s.ring_count;
+      if ((s.real_ring >> i & 1u) == 0 || (s.real_ring >> i1 & 1u) == 0) continue;
+      const auto& p1 = s.offset[static_cast<size_t>(2 + i)];
+      const auto& p2 = s.offset[static_cast<size_t>(2 + i1)];
+      const double f1 = dv.ring[i], f2 = dv.ring[i1], fv = dv.fv;
+      const double m[3][3] = {{double(pe[0]), double(pe[1]), double(pe[2])},
+                              {double(p1[0]), double(p1[1]), double(p1[2])},
+                              {double(p2[0]), double(p2[1]), double(p2[2])}};
+      const double r[3] = {fe - fv, f1 - fv, f2 - fv};
+      auto det3 = [](const double(&a)[3][3]) {
+        return a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+               a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+      };
+      const double det = det3(m);
+      if (det == 0) continue;
+      double g2 = 0;
+      for (int c = 0; c < 3; ++c) {
+        double mc[3][3];
+        for (int row = 0; row < 3; ++row)
+          for (int col = 0; col < 3; ++col) mc[row][col] = col == c ? r[row] : m[row][col];
+        const double gc = det3(mc) / det;
+        g2 += gc * gc;
+      }
+      w.gradient = std::max(w.gradient, std::sqrt(g2));
+      const double lo = std::min({fe, fv, f1, f2}), hi = std::max({fe, fv, f1, f2});
+      if (std::max(lo, double(x.lo)) < std::min(hi, double(x.hi))) w.size += s.child_tets;
+    }
+  }
+  return w;
+}
+
+// local_weights takes the gradient from each shape's exact inverse where the values are small
+// integers, Cramer's quotients by an exact reciprocal otherwise: both must give the plain
+// computation's bits, on every shape of every class and scale (cut diamonds at the faces
+// included), for 8-bit, 24-bit, fractional and wide-ranging values.
+TEST(LocalWeights, EveryShapeGivesThePlainComputationsBits) {
+  const Lattice l = Lattice::enclosing({65, 65, 65});
+  std::mt19937 rng(11);
+  int compared = 0, shapes = 0, inverse_shapes = 0;
+  for (int64_t z = 0; z <= l.n; ++z)
+    for (int64_t y = 0; y <= l.n; ++y)
+      for (int64_t x = 0; x <= l.n; ++x) {
+        const Coord v{x, y, z};
+        // A sample of the lattice's vertices: every scale, every class, the faces.
+        if (scale_of(v, l) >= l.k || (x + 3 * y + 7 * z) % 29 != 0) continue;
+        const Diamond d = diamond_of(v, l);
+        const DiamondShape shape = shape_of(d, l);
+        const ShapeGradients gradients = gradients_of(shape);
+        ++shapes;
+        inverse_shapes += gradients.inverse ? 1 : 0;
+        for (int kind = 0; kind < 4; ++kind) {
+          DiamondValues dv;
+          dv.type = d.type;
+          auto value = [&]() -> float {
+            switch (kind) {
+              case 0: return static_cast<float>(rng() % 256);
+              case 1: return static_cast<float>(static_cast<int32_t>(rng() % (1u << 25)) - (1 << 24));
+              case 2: return std::uniform_real_distribution<float>(-1, 1)(rng);
+              default:
+                return std::ldexp(std::uniform_real_distribution<float>(-1, 1)(rng), static_cast<int>(rng() % 80) - 40);
+            }
+          };
+          dv.fa = value();
+          dv.fb = value();
+          dv.fv = value();
+          for (int i = 0; i < d.ring_count; ++i) dv.ring[i] = value();
+          const IsoInterval x_all{-std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
+          for (const IsoInterval& iv : {x_all, IsoInterval{dv.fv, dv.fv + 1}}) {
+            const LocalWeights want = plain_local_weights(dv, shape, iv);
+            for (const LocalWeights& got : {local_weights(dv, shape, iv), local_weights(dv, shape, iv, &gradients)}) {
+              ASSERT_EQ(std::bit_cast<uint64_t>(got.gradient), std::bit_cast<uint64_t>(want.gradient))
+                  << "vertex " << x << " " << y << " " << z << " values of kind " << kind;
+              ASSERT_EQ(std::bit_cast<uint64_t>(got.size), std::bit_cast<uint64_t>(want.size));
+            }
+            ++compared;
+          }
+        }
+      }
+  EXPECT_GT(compared, 500);
+  // Every shape of this lattice has power-of-two determinants: the exact inverse is what runs.
+  EXPECT_EQ(inverse_shapes, shapes);
+}
+
 TEST(Simplify, DeltaZeroIsPreserve) {
   int compared = 0;
   for_each_setting(

@@ -138,6 +138,7 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
   auto value_offset = [&](const Coord& p) { return index({p[0] >> j_, p[1] >> j_, p[2] >> j_}, size_) - base; };
   t.type = d.type;
   t.shape = shape_of(d, l);
+  t.gradients = gradients_of(t.shape);
   t.ring_count = d.ring_count;
   t.a = value_offset(d.a);
   t.b = value_offset(d.b);
@@ -176,7 +177,7 @@ void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCount
   const int64_t cell_base = index(g, cells_);
   for (int i = 0; i < t.cube_count; ++i)
     sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range, topology);
-  records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology);
+  records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology, &t.gradients);
 }
 
 void BandTile::find_constant_blocks() {

@@ -104,6 +104,7 @@ class BandTile {
     bool ready = false;
     PolyhedronType type = PolyhedronType::cube;
     DiamondShape shape;
+    ShapeGradients gradients;
     int ring_count = 0, same_count = 0, cube_count = 0;
     int64_t a = 0, b = 0, ring[8] = {};  // into values_
     int64_t same[8] = {};                // into records_: children of scale j

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 
 #include "engine/hierarchy/critical_table.h"
 
@@ -24,6 +25,13 @@ bool exact_rule_fires(const DiamondValues& d, float t) {
   return sa == sb && sv != sa && is_critical_pattern(d.type, sign_pattern(d, t));
 }
 
+// Ring vertices (bit i) whose value is above t.
+static inline uint32_t ring_above(const DiamondValues& d, int r, float t) {
+  uint32_t p = 0;
+  for (int i = 0; i < r; ++i) p |= (d.ring[i] > t ? 1u : 0u) << i;
+  return p;
+}
+
 IsoInterval exact_interval(const DiamondValues& d) {
   // It can only fire where v lies strictly beyond both a and b: t in [fv, min(fa, fb)) or
   // [max(fa, fb), fv). Most vertices of smooth data lie between their edge's ends.
@@ -34,28 +42,30 @@ IsoInterval exact_interval(const DiamondValues& d) {
   // On each elementary interval between the polyhedron's values the signs are those at its first
   // value (value > t). In [from, to) those intervals start at `from` (a value) and at the ring
   // values strictly inside; each ends at the next start or at `to` (a value too): the intervals
-  // of all the values that lie in [from, to), the rest cannot fire.
-  std::array<float, 9> w{};
-  int n = 0;
-  w[static_cast<size_t>(n++)] = from;
+  // of all the values that lie in [from, to), the rest cannot fire. Throughout, a and b lie on
+  // one side of t (above it when v is below) and v on the other: the table decides. The hull of
+  // the intervals where it fires runs from the least such start to the end of the greatest,
+  // the next start above it; of equal ring values the first in ring order stands for them all.
   const int r = ring_size(d.type);
-  for (int i = 0; i < r; ++i)
-    if (d.ring[i] > from && d.ring[i] < to) {
-      // Insertion into the sorted starts, equal values once.
-      int k = n;
-      while (k > 0 && w[static_cast<size_t>(k - 1)] > d.ring[i]) --k;
-      if (w[static_cast<size_t>(k - 1)] == d.ring[i]) continue;  // k >= 1: w[0] = from < ring[i]
-      for (int m = n; m > k; --m) w[static_cast<size_t>(m)] = w[static_cast<size_t>(m - 1)];
-      w[static_cast<size_t>(k)] = d.ring[i];
-      ++n;
-    }
-  IsoInterval x;
-  for (int i = 0; i < n; ++i) {
-    // a and b on one side of t, v on the other, throughout [from, to): the table decides.
-    const float t = w[static_cast<size_t>(i)];
-    if (is_critical_pattern(d.type, sign_pattern(d, t))) x.hull({t, i + 1 < n ? w[static_cast<size_t>(i + 1)] : to});
+  const uint32_t ab = v_below ? 3u : 0u;
+  uint32_t inside = 0;
+  for (int i = 0; i < r; ++i) inside |= (d.ring[i] > from && d.ring[i] < to ? 1u : 0u) << i;
+  bool fired = is_critical_pattern(d.type, ab | ring_above(d, r, from) << 2);
+  float lo = from, last = from;  // the least and the greatest start where the rule fires
+  for (uint32_t rest = inside; rest != 0; rest &= rest - 1) {
+    const float t = d.ring[std::countr_zero(rest)];
+    if (!is_critical_pattern(d.type, ab | ring_above(d, r, t) << 2)) continue;
+    if (!fired || t < lo) lo = t;
+    if (!fired || t > last) last = t;
+    fired = true;
   }
-  return x;
+  if (!fired) return {};
+  float hi = to;
+  for (uint32_t rest = inside; rest != 0; rest &= rest - 1) {
+    const float t = d.ring[std::countr_zero(rest)];
+    if (t > last && t < hi) hi = t;
+  }
+  return {lo, hi};
 }
 
 }  // namespace isotope
