@@ -287,8 +287,11 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
     work += b.nodes[0] * b.nodes[1] * b.nodes[2] / static_cast<int64_t>(tiles) * mine;
   }
   ProgressReporter progress(options.progress, work);
-  // Band 0 has the largest windows; sized once for them, a slot's arrays never grow again (growing
-  // would copy them and fault in fresh pages for every larger tile at the volume's edges).
+  // Band 0 has the largest windows; reserved once for them, a slot's arrays never move again
+  // (growing would copy them and fault in fresh pages for every larger tile at the volume's edges).
+  // Reserved, not filled: a page is faulted in by the first tile that uses it, and band 0, which
+  // has no children, leaves the children's pages untouched (most of a small volume's slots never
+  // hold a tile of a higher band).
   auto sized = [](const Box3& core, const Box3& grid) {
     size_t nodes = 1, cells = 1;
     for (int a = 0; a < 3; ++a) {
@@ -297,9 +300,9 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       cells *= w - 1;
     }
     BandTile::Buffers b;
-    b.values.resize(nodes);
-    b.records.resize(nodes);
-    b.children.resize(cells);
+    b.values.reserve(nodes);
+    b.records.reserve(nodes);
+    b.children.reserve(cells);
     return b;
   };
   const int64_t side = c * width, widened = side + (can_fuse ? kFuseBelow + kFuseAbove : 0);
