@@ -2,6 +2,7 @@
 // with the bands chained through nothing but each tile's next-band output, as the store writer
 // chains them through its scratch files.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <atomic>
 #include <cstring>
@@ -269,6 +270,27 @@ TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
   EXPECT_TRUE(budgeted.bricks == build_staged(v, layout, false, 0, 1).sink.bricks);
   EXPECT_GE(stage_tiles_for(layout, 0, 1, o.memory_bytes), 16);
   EXPECT_EQ(stage_tiles_for(layout, 0, 1, 1 << 10), 0);  // not even 2^3 tiles fit: no stage
+}
+
+// Tiles of 128^3 nodes where band 0 has at least 64 of them a thread (fewer halo records computed
+// twice), of 64^3 otherwise (the last tiles would leave threads idle), smaller still where the
+// budget asks it; fused, an even number of bricks of at least 64 nodes.
+TEST(BandBuild, LargeVolumesTakeLargerTilesWhereEveryThreadHasManyOfThem) {
+  const uint64_t gib = uint64_t{1} << 30;
+  const StoreLayout large({1025, 1025, 1025}, 4), small({513, 513, 513}, 4);
+  {
+    const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+    EXPECT_EQ(tile_bricks_for(large, 4096, gib), 8);  // 9^3 tiles of 128^3 nodes: 364 a thread
+    EXPECT_EQ(fused_tile_bricks_for(large, 4096, gib), 8);
+    EXPECT_EQ(tile_bricks_for(small, 4096, gib), 4);  // 5^3 tiles of 128^3: 62 a thread
+    EXPECT_EQ(fused_tile_bricks_for(small, 4096, gib), 4);
+    EXPECT_LT(tile_bricks_for(large, 4096, 256 << 20), 8);  // a 128^3 tile's window would not fit
+  }
+  {
+    // (global_control keeps the least of the values set: one at a time.)
+    const tbb::global_control many(tbb::global_control::max_allowed_parallelism, 16);
+    EXPECT_EQ(tile_bricks_for(large, 4096, 16 * gib), 4);  // 45 a thread
+  }
 }
 
 // ---- A fused pass: band j+1 built beside band j, each of its tiles from a widened tile of band j,
