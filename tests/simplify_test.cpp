@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <optional>
 #include <random>
@@ -148,7 +147,6 @@ void for_each_setting(F f) {
   }
 }
 
-// delta = 0 keeps every critical point: the preserve mesh, bit for bit, for every weight.
 // The gradient weight as docs/METHOD.md defines it, computed the plain way: per tetrahedron
 // (end, v, r_i, r_i+1), Cramer's rule with a division per component and a root per tetrahedron.
 LocalWeights plain_local_weights(const DiamondValues& dv, const DiamondShape& s, IsoInterval x) {
@@ -240,6 +238,43 @@ TEST(LocalWeights, EveryShapeGivesThePlainComputationsBits) {
   EXPECT_EQ(inverse_shapes, shapes);
 }
 
+// At the exact inverse's limits: offsets of 2^12 lattice steps (scale 12, an 8193^3 lattice) with
+// values of magnitude 2^24, where every sum is still exact; and beyond them (scale 13 of a
+// 16385^3 lattice), where the shape has no exact inverse and Cramer's quotients run.
+TEST(LocalWeights, TheLargestShapesGiveThePlainComputationsBits) {
+  std::mt19937 rng(5);
+  for (int k : {13, 14}) {
+    const int64_t n = int64_t{1} << k;
+    const Lattice l = Lattice::enclosing({n + 1, n + 1, n + 1});
+    const int64_t s = n / 2;  // scale k - 1: the largest with records
+    for (const Coord& v : std::vector<Coord>{{s, 0, 0}, {s, s, 0}, {s, s, s}, {0, s, n}, {n, s, s}, {s, 0, s}}) {
+      ASSERT_EQ(scale_of(v, l), k - 1);
+      const Diamond d = diamond_of(v, l);
+      const DiamondShape shape = shape_of(d, l);
+      const ShapeGradients gradients = gradients_of(shape);
+      EXPECT_EQ(gradients.inverse, k == 13) << "scale " << k - 1;
+      for (int trial = 0; trial < 200; ++trial) {
+        DiamondValues dv;
+        dv.type = d.type;
+        auto value = [&]() -> float {
+          const int32_t extreme = trial % 3 == 0 ? (1 << 24) : trial % 3 == 1 ? -(1 << 24) : 0;
+          return static_cast<float>(extreme != 0 && rng() % 2 ? extreme
+                                                              : static_cast<int32_t>(rng() % (1u << 25)) - (1 << 24));
+        };
+        dv.fa = value();
+        dv.fb = value();
+        dv.fv = value();
+        for (int i = 0; i < d.ring_count; ++i) dv.ring[i] = value();
+        const IsoInterval all{-std::numeric_limits<float>::max(), std::numeric_limits<float>::max()};
+        const LocalWeights want = plain_local_weights(dv, shape, all), got = local_weights(dv, shape, all, &gradients);
+        ASSERT_EQ(std::bit_cast<uint64_t>(got.gradient), std::bit_cast<uint64_t>(want.gradient)) << "scale " << k - 1;
+        ASSERT_EQ(std::bit_cast<uint64_t>(got.size), std::bit_cast<uint64_t>(want.size));
+      }
+    }
+  }
+}
+
+// delta = 0 keeps every critical point: the preserve mesh, bit for bit, for every weight.
 TEST(Simplify, DeltaZeroIsPreserve) {
   int compared = 0;
   for_each_setting(

@@ -289,7 +289,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   ProgressReporter progress(options.progress, work);
   // Band 0 has the largest windows; reserved once for them, a slot's arrays never move again
   // (growing would copy them and fault in fresh pages for every larger tile at the volume's edges).
-  // Reserved, not filled: a page is faulted in by the first tile that uses it, and band 0, which
+  // Reserved, not filled: a page is faulted in (its entries set) by the first tile that uses it, and band 0, which
   // has no children, leaves the children's pages untouched (most of a small volume's slots never
   // hold a tile of a higher band).
   auto sized = [](const Box3& core, const Box3& grid) {

@@ -1,7 +1,6 @@
 #include "engine/hierarchy/critical_rule.h"
 
 #include <algorithm>
-#include <array>
 #include <bit>
 
 #include "engine/hierarchy/critical_table.h"
@@ -47,7 +46,7 @@ IsoInterval exact_interval(const DiamondValues& d) {
   // the intervals where it fires runs from the least such start to the end of the greatest,
   // the next start above it; of equal ring values the first in ring order stands for them all.
   const int r = ring_size(d.type);
-  const uint32_t ab = v_below ? 3u : 0u;
+  const uint32_t ab = (d.fa > from ? 1u : 0u) | (d.fb > from ? 2u : 0u);  // the same for every t in [from, to)
   uint32_t inside = 0;
   for (int i = 0; i < r; ++i) inside |= (d.ring[i] > from && d.ring[i] < to ? 1u : 0u) << i;
   bool fired = is_critical_pattern(d.type, ab | ring_above(d, r, from) << 2);
@@ -59,7 +58,7 @@ IsoInterval exact_interval(const DiamondValues& d) {
     if (!fired || t > last) last = t;
     fired = true;
   }
-  if (!fired) return {};
+  if (!fired || !(lo < to)) return {};
   float hi = to;
   for (uint32_t rest = inside; rest != 0; rest &= rest - 1) {
     const float t = d.ring[std::countr_zero(rest)];

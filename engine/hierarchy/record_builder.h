@@ -109,11 +109,22 @@ inline double exact_reciprocal(double d) {
 // gradients_of fills it: a band tile holds one for each of its 64 shapes, and tiles of one
 // brick are many.
 struct ShapeGradients {
-  bool inverse;       // inv holds M^-1 for every tetrahedron (above)
+  bool inverse;       // inv holds the exact inverse for every tetrahedron (above)
   double det[16];     // of tetrahedron e * ring_count + i
-  double m[16][9];    // row-major
-  double inv[16][9];  // g_c = sum over rows of (f(row) - f(v)) * inv[row * 3 + c]
+  double inv[16][9];  // M^-1 transposed: g_c = sum over rows of (f(row) - f(v)) * inv[row * 3 + c]
 };
+
+// Tetrahedron (e, i)'s matrix M, row-major.
+inline void edge_matrix(const DiamondShape& s, int e, int i, double m[9]) {
+  const auto& pe = s.offset[static_cast<size_t>(e)];
+  const auto& p1 = s.offset[static_cast<size_t>(2 + i)];
+  const auto& p2 = s.offset[static_cast<size_t>(2 + (i + 1) % s.ring_count)];
+  for (size_t c = 0; c < 3; ++c) {
+    m[c] = double(pe[c]);
+    m[3 + c] = double(p1[c]);
+    m[6 + c] = double(p2[c]);
+  }
+}
 
 inline ShapeGradients gradients_of(const DiamondShape& s) {
   ShapeGradients g;
@@ -123,16 +134,9 @@ inline ShapeGradients gradients_of(const DiamondShape& s) {
       const int t = e * s.ring_count + i, i1 = (i + 1) % s.ring_count;
       g.det[t] = 0;
       if ((s.real_ring >> i & 1u) == 0 || (s.real_ring >> i1 & 1u) == 0) continue;
-      const auto& pe = s.offset[static_cast<size_t>(e)];
-      const auto& p1 = s.offset[static_cast<size_t>(2 + i)];
-      const auto& p2 = s.offset[static_cast<size_t>(2 + i1)];
-      double* m = g.m[t];
-      for (int c = 0; c < 3; ++c) {
-        m[c] = double(pe[static_cast<size_t>(c)]);
-        m[3 + c] = double(p1[static_cast<size_t>(c)]);
-        m[6 + c] = double(p2[static_cast<size_t>(c)]);
-      }
-      for (double x : g.m[t]) g.inverse = g.inverse && std::fabs(x) <= 4096;
+      double m[9];
+      edge_matrix(s, e, i, m);
+      for (double x : m) g.inverse = g.inverse && std::fabs(x) <= 4096;
       g.det[t] =
           m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
       if (g.det[t] == 0) continue;
@@ -183,7 +187,8 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
         }
       } else {
         // Cramer's rule, each quotient correctly rounded.
-        const double* m = g.m[t];
+        double m[9];
+        edge_matrix(s, e, i, m);
         const double reciprocal = exact_reciprocal(g.det[t]);
         for (int c = 0; c < 3; ++c) {
           double mc[9];
