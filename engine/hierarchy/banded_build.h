@@ -289,10 +289,9 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   ProgressReporter progress(options.progress, work);
   // Band 0 has the largest windows; reserved once for them, a slot's arrays never move again
   // (growing would copy them and fault in fresh pages for every larger tile at the volume's edges).
-  // Reserved, not filled: a page is faulted in (its entries set) by the first tile that uses it, and band 0, which
-  // has no children, leaves the children's pages untouched (most of a small volume's slots never
-  // hold a tile of a higher band).
-  auto sized = [](const Box3& core, const Box3& grid) {
+  // Reserved, not filled: a page is faulted in by the first tile that uses it, and band 0, which has
+  // no children, leaves the children's untouched (a small volume's slots seldom hold a higher band).
+  auto reserved = [](const Box3& core, const Box3& grid) {
     size_t nodes = 1, cells = 1;
     for (int a = 0; a < 3; ++a) {
       const auto w = static_cast<size_t>(std::min(core[a], grid[a]) + 4);
@@ -309,9 +308,9 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   std::vector<BandTile::Buffers> buffers, upper_buffers;
   std::vector<StagedBox> handed(can_fuse ? static_cast<size_t>(in_flight) : 0);  // band j to j+1, in a fused pass
   for (int i = 0; i < in_flight; ++i) {
-    buffers.push_back(sized({widened, widened, widened}, layout.band(0).nodes));
+    buffers.push_back(reserved({widened, widened, widened}, layout.band(0).nodes));
     if (can_fuse && k > 0)
-      upper_buffers.push_back(sized({side / 2 + 1, side / 2 + 1, side / 2 + 1}, layout.band(1).nodes));
+      upper_buffers.push_back(reserved({side / 2 + 1, side / 2 + 1, side / 2 + 1}, layout.band(1).nodes));
   }
   // What the tiles in flight leave of the budget goes to the stage.
   const int64_t tiles_held = in_flight * tile_bytes(layout, c, sink_brick_bytes, can_fuse);

@@ -24,13 +24,6 @@ bool exact_rule_fires(const DiamondValues& d, float t) {
   return sa == sb && sv != sa && is_critical_pattern(d.type, sign_pattern(d, t));
 }
 
-// Ring vertices (bit i) whose value is above t.
-static inline uint32_t ring_above(const DiamondValues& d, int r, float t) {
-  uint32_t p = 0;
-  for (int i = 0; i < r; ++i) p |= (d.ring[i] > t ? 1u : 0u) << i;
-  return p;
-}
-
 IsoInterval exact_interval(const DiamondValues& d) {
   // It can only fire where v lies strictly beyond both a and b: t in [fv, min(fa, fb)) or
   // [max(fa, fb), fv). Most vertices of smooth data lie between their edge's ends.
@@ -46,14 +39,13 @@ IsoInterval exact_interval(const DiamondValues& d) {
   // the intervals where it fires runs from the least such start to the end of the greatest,
   // the next start above it; of equal ring values the first in ring order stands for them all.
   const int r = ring_size(d.type);
-  const uint32_t ab = (d.fa > from ? 1u : 0u) | (d.fb > from ? 2u : 0u);  // the same for every t in [from, to)
   uint32_t inside = 0;
   for (int i = 0; i < r; ++i) inside |= (d.ring[i] > from && d.ring[i] < to ? 1u : 0u) << i;
-  bool fired = is_critical_pattern(d.type, ab | ring_above(d, r, from) << 2);
+  bool fired = is_critical_pattern(d.type, sign_pattern(d, from));
   float lo = from, last = from;  // the least and the greatest start where the rule fires
   for (uint32_t rest = inside; rest != 0; rest &= rest - 1) {
     const float t = d.ring[std::countr_zero(rest)];
-    if (!is_critical_pattern(d.type, ab | ring_above(d, r, t) << 2)) continue;
+    if (!is_critical_pattern(d.type, sign_pattern(d, t))) continue;
     if (!fired || t < lo) lo = t;
     if (!fired || t > last) last = t;
     fired = true;

@@ -114,6 +114,11 @@ struct ShapeGradients {
   double inv[16][9];  // M^-1 transposed: g_c = sum over rows of (f(row) - f(v)) * inv[row * 3 + c]
 };
 
+// The determinant of a row-major 3x3 matrix, by the first row's cofactors.
+inline double det3(const double m[9]) {
+  return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+}
+
 // Tetrahedron (e, i)'s matrix M, row-major.
 inline void edge_matrix(const DiamondShape& s, int e, int i, double m[9]) {
   const auto& pe = s.offset[static_cast<size_t>(e)];
@@ -137,8 +142,7 @@ inline ShapeGradients gradients_of(const DiamondShape& s) {
       double m[9];
       edge_matrix(s, e, i, m);
       for (double x : m) g.inverse = g.inverse && std::fabs(x) <= 4096;
-      g.det[t] =
-          m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) + m[2] * (m[3] * m[7] - m[4] * m[6]);
+      g.det[t] = det3(m);
       if (g.det[t] == 0) continue;
       const double r = exact_reciprocal(g.det[t]);
       g.inverse = g.inverse && r != 0;
@@ -193,8 +197,7 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
         for (int c = 0; c < 3; ++c) {
           double mc[9];
           for (int k = 0; k < 9; ++k) mc[k] = k % 3 == c ? r[k / 3] : m[k];
-          const double minor = mc[0] * (mc[4] * mc[8] - mc[5] * mc[7]) - mc[1] * (mc[3] * mc[8] - mc[5] * mc[6]) +
-                               mc[2] * (mc[3] * mc[7] - mc[4] * mc[6]);
+          const double minor = det3(mc);
           // A product by an exact reciprocal is the quotient's bits for a third of a division's time.
           const double gc = reciprocal != 0 ? minor * reciprocal : minor / g.det[t];
           g2 += gc * gc;
@@ -208,43 +211,6 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
   }
   w.gradient = std::sqrt(steepest);
   return w;
-}
-
-// v's own critical intervals and weights folded into its children's saturation, for a diamond
-// whose real polyhedron lies in the data box.
-inline void add_own_topology(const DiamondValues& dv, const DiamondShape& shape, Saturation& sat,
-                             CriticalCounts& counts, const ShapeGradients* gradients = nullptr) {
-  // Where one of a and b lies above v and the other not, neither rule can fire (docs/METHOD.md,
-  // "The exact rule"; the paper's rule asks for equal signs at a and b too): most vertices of smooth
-  // data, settled here without a call.
-  if ((dv.fa > dv.fv) != (dv.fb > dv.fv)) return;
-  const IsoInterval exact = exact_interval(dv), paper = paper_interval(dv);
-  counts[0][static_cast<int>(dv.type)] += paper.empty() ? 0 : 1;
-  counts[1][static_cast<int>(dv.type)] += exact.empty() ? 0 : 1;
-  sat.exact.hull(exact);
-  sat.paper.hull(paper);
-  if (!exact.empty()) {
-    const LocalWeights w = local_weights(dv, shape, exact, gradients);
-    sat.weight[0] = std::max(sat.weight[0], exact.length());
-    sat.weight[1] = std::max(sat.weight[1], round_up(exact.length() * w.gradient));
-    sat.weight[2] = std::max(sat.weight[2], round_up(w.size));
-  }
-}
-
-// A record's topology from its saturation: the intervals as hulled (left empty where they are),
-// the weights.
-inline DiamondTopology topology_of(const Saturation& sat) {
-  DiamondTopology t;
-  if (!sat.exact.empty()) {
-    t.exact_lo = sat.exact.lo;
-    t.exact_hi = sat.exact.hi;
-  }
-  if (!sat.paper.empty()) {
-    t.paper_lo = sat.paper.lo;
-    t.paper_hi = sat.paper.hi;
-  }
-  t.weight = sat.weight;
-  return t;
 }
 
 // The record from what was gathered: the polyhedron's values, shape and range, whether every real
@@ -270,9 +236,34 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     sat.exact.hull({-kInf, kInf});
     sat.paper.hull({-kInf, kInf});
   } else {
-    add_own_topology(dv, shape, sat, counts, gradients);
+    // Where one of a and b lies above v and the other not, neither rule can fire (docs/METHOD.md,
+    // "The exact rule"; the paper's rule asks for equal signs at a and b too): most vertices of smooth
+    // data, settled here without a call.
+    IsoInterval exact, paper;
+    if ((dv.fa > dv.fv) == (dv.fb > dv.fv)) {
+      exact = exact_interval(dv);
+      paper = paper_interval(dv);
+    }
+    counts[0][static_cast<int>(dv.type)] += paper.empty() ? 0 : 1;
+    counts[1][static_cast<int>(dv.type)] += exact.empty() ? 0 : 1;
+    sat.exact.hull(exact);
+    sat.paper.hull(paper);
+    if (!exact.empty()) {
+      const LocalWeights w = local_weights(dv, shape, exact, gradients);
+      sat.weight[0] = std::max(sat.weight[0], exact.length());
+      sat.weight[1] = std::max(sat.weight[1], round_up(exact.length() * w.gradient));
+      sat.weight[2] = std::max(sat.weight[2], round_up(w.size));
+    }
   }
-  r.topology = topology_of(sat);
+  if (!sat.exact.empty()) {
+    r.topology.exact_lo = sat.exact.lo;
+    r.topology.exact_hi = sat.exact.hi;
+  }
+  if (!sat.paper.empty()) {
+    r.topology.paper_lo = sat.paper.lo;
+    r.topology.paper_hi = sat.paper.hi;
+  }
+  r.topology.weight = sat.weight;
   return r;
 }
 

@@ -201,7 +201,6 @@ class RawBoxReader final : public BoxReader {
   }
 
   // ROWS rows of the box from its row Y of plane Z in one read through STAGE.
-
   void read_rows(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, int64_t y, int64_t rows,
                  int64_t z, float* out, const Stage& stage) const {
     const int64_t elem = info_.element_bytes;
