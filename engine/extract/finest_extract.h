@@ -156,17 +156,36 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
                          std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells) {
   const int64_t side = plan.slab_layers;
   const int64_t stride = side + 1;
+  // Whether the isovalue may cut the block at (x0, y0, z0): its cube diamond's range record.
+  auto in_range = [&](int64_t x0, int64_t y0, int64_t zb) {
+    if constexpr (RecordReader<Reader>) {
+      const Coord centre{x0 + side / 2, y0 + side / 2, zb + side / 2};
+      return rule.in_range(
+          reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false}));
+    }
+    return true;
+  };
+  // A source that reads its values from a file on demand (a store) is asked, a few slabs ahead, for
+  // the blocks the isovalue may cut there, so that their reads are in flight while this slab is
+  // marched instead of each waiting in turn for the disk when its block is reached (docs/METHOD.md,
+  // "Out of core"). The first slab asks for the slabs up to that distance.
+  if constexpr (requires(const Coord& lo, const std::array<int64_t, 3>& n) { reader.prefetch_block(lo, n); }) {
+    constexpr int64_t kSlabsAhead = 4;
+    const int64_t from = z0 == 0 ? z0 + side : z0 + kSlabsAhead * side;
+    for (int64_t zb = from; zb <= z0 + kSlabsAhead * side && zb < plan.cell_layers; zb += side)
+      for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
+        for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side)
+          if (in_range(x0, y0, zb))
+            reader.prefetch_block({x0, y0, zb}, {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0),
+                                                 std::min(side, plan.cell_layers - zb)});
+  }
   std::vector<float> f(static_cast<size_t>(stride * stride * stride));
   EdgeMemo memo(side);
   int64_t seen = 0, marched = 0;
   for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
     for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
       ++seen;
-      const Coord centre{x0 + side / 2, y0 + side / 2, z0 + side / 2};
-      if constexpr (RecordReader<Reader>)
-        if (!rule.in_range(
-                reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
-          continue;
+      if (!in_range(x0, y0, z0)) continue;
       const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
       const Coord lo{x0, y0, z0};
       constexpr bool kCutsInPlace = requires { reader.block_cut(lo, n, plan.iso); };

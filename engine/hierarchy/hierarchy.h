@@ -245,6 +245,19 @@ class CompactLookup {
         }
     return true;
   }
+  // A hint that block_values(lo, n, ...) will be asked for soon: the bricks it spans are asked
+  // to start loading (a paged source's reads then run while other blocks are marched).
+  void prefetch_block(const Coord& lo, const std::array<int64_t, 3>& n) {
+    if constexpr (requires(Bricks & b) { b.prefetch_brick(int64_t{}); }) {
+      const int bits = layout_.brick_bits();
+      for (int64_t bz = lo[2] >> bits; bz <= (lo[2] + n[2]) >> bits; ++bz)
+        for (int64_t by = lo[1] >> bits; by <= (lo[1] + n[1]) >> bits; ++by)
+          for (int64_t bx = lo[0] >> bits; bx <= (lo[0] + n[0]) >> bits; ++bx) {
+            uint32_t unused = 0;
+            bricks_.prefetch_brick(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused));
+          }
+    }
+  }
   Bricks& bricks() { return bricks_; }
 
  private:

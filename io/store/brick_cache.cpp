@@ -271,6 +271,8 @@ BrickCacheStats BrickCache::stats() const {
   s.bricks_read = bricks_read_.load();
   s.bytes_read = bytes_read_.load();
   s.hits = hits_.load();
+  s.read_waits = store_.read_waits();
+  s.read_hints = store_.read_hints();
   {
     const std::lock_guard<std::mutex> lock(slots_mutex_);
     s.slots = static_cast<int64_t>(slots_.size());

@@ -121,6 +121,8 @@ struct BrickCacheStats {
   uint64_t peak_bytes = 0;     // most decoded bytes held at once
   int64_t slots = 0;           // bricks asked for or prefetched at least once: each has a slot
   uint64_t working_bytes = 0;  // what the cache keeps now: a quarter of the budget, or all of it
+  int64_t read_waits = 0;      // of the store's reads, those that waited for the disk (StoreReader::read_waits)
+  int64_t read_hints = 0;      // read-ahead hints passed to the kernel (StoreReader::read_hints)
 };
 
 class BrickCache {

@@ -57,6 +57,10 @@ class PagedVolume {
     }
     Bf16 surplus(int64_t index, uint32_t m);
     DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read);
+    // Brick `index`, whole, will be read soon: unless held, the cache starts the kernel reading it.
+    void prefetch_brick(int64_t index) {
+      if (pinned_[static_cast<size_t>(index) % pinned_.size()].index != index) volume_->cache_.prefetch(index);
+    }
     void prefetch(int64_t index, uint32_t m) {
       const Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
       if (p.index == index)

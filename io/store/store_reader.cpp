@@ -138,16 +138,21 @@ void StoreReader::read_range(uint8_t* data, uint64_t begin, uint64_t stop, int64
   // RWF_NOWAIT reads only what the page cache holds: a warm store pays one call, as with pread.
   // Any shortfall (or a kernel or file system without it) goes the slow way, whole.
   if (::preadv2(fd_, &v, 1, static_cast<off_t>(begin), RWF_NOWAIT) == static_cast<ssize_t>(bytes)) return;
+  waits_.fetch_add(1, std::memory_order_relaxed);
   advise_window(begin, stop);
   read_span(fd_, data, bytes, begin, describe_brick(index));
 }
 
 void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& which) const {
+  if (waits_.load(std::memory_order_relaxed) == 0) return;
   const BrickEntry& e = entry(index);
   for_each_run(which, [&](int s, int end) {
     const uint64_t begin = e.section_offset(static_cast<Section>(s));
     const uint64_t stop = e.section_offset(static_cast<Section>(end));
-    if (stop > begin) advise_window(begin, stop);
+    if (stop > begin) {
+      advise_window(begin, stop);
+      hints_.fetch_add(1, std::memory_order_relaxed);
+    }
   });
 }
 

@@ -3,6 +3,7 @@
 // its bricks is asked for (a coarse extraction never loads band 0's, nine tenths of them), bricks
 // on demand by pread, section by section (thread-safe), and a full verification.
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cstdint>
 #include <memory>
@@ -45,8 +46,15 @@ class StoreReader {
   uint64_t read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out, float* values,
                       const NarrowBrick* narrow = nullptr) const;
   // Asks the kernel to start reading those sections in the background, with their read window:
-  // a hint that costs no thread and pays when the file is not in the page cache.
+  // a hint that costs no thread and pays when the file is not in the page cache. Until a read
+  // has found the page cache without its bytes, nothing: a store wholly cached would pay a system
+  // call per hint for nothing (thousands in an extraction).
   void prefetch(int64_t index, const std::array<bool, kSections>& which) const;
+  // Reads that found bytes missing from the page cache and waited for the disk (on a file system
+  // without RWF_NOWAIT, every read: it cannot tell), and the hints passed to the kernel, so far.
+  // Thread-safe.
+  int64_t read_waits() const { return waits_.load(std::memory_order_relaxed); }
+  int64_t read_hints() const { return hints_.load(std::memory_order_relaxed); }
   // What the kernel reads of the file when a brick is not in the page cache: the aligned window
   // of this many bytes that holds it. Bricks lie in traversal order (docs/FORMAT.md, "File
   // order"), so the window mostly holds the next bricks a subtree reads: one read where there
@@ -79,6 +87,7 @@ class StoreReader {
     std::shared_ptr<const Directory> entries;
   };
   std::unique_ptr<LazyDirectory[]> directories_;
+  mutable std::atomic<int64_t> waits_{0}, hints_{0};  // read_waits(), read_hints()
 };
 
 // True when PATH is a readable file that starts with the store's magic number.
