@@ -2,11 +2,8 @@
 // in-memory hierarchy bit for bit (and that is the exact records conservatively rounded); the same
 // meshes; the file does not depend on threads or the memory budget; every corruption is caught,
 // named, and never crashes, by verify and by the reads an extraction makes.
-#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <hdf5.h>
-#include <sys/uio.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -185,15 +182,9 @@ TEST_F(Store, RoundTripIsExactFromAStoreNotInThePageCache) {
   ConvertOptions o;
   o.brick_bits = kMinBrickBits;  // many bricks: read in windows of several
   const std::string store = convert(v, "cold", o);
-  const int fd = ::open(store.c_str(), O_RDONLY);
-  ASSERT_GE(fd, 0);
-  const bool dropped = ::fdatasync(fd) == 0 && ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED) == 0;
-  uint8_t first = 0;
-  iovec byte{&first, 1};
-  const ssize_t resident = ::preadv2(fd, &byte, 1, static_cast<off_t>(kHeaderBytes), RWF_NOWAIT);
-  ::close(fd);
-  ASSERT_TRUE(dropped) << store << ": fdatasync or posix_fadvise failed";
-  if (resident == 1) GTEST_SKIP() << "the page cache keeps " << store << " (a file system in memory?)";
+  ASSERT_TRUE(testing::drop_from_page_cache(store)) << store << ": fdatasync or posix_fadvise failed";
+  if (testing::page_cached(store, kHeaderBytes) == 1)
+    GTEST_SKIP() << "the page cache keeps " << store << " (a file system in memory?)";
   expect_round_trip(v, store, kMinBrickBits);
 }
 

@@ -1,6 +1,11 @@
 #include "tests/test_support.h"
 
+#include <fcntl.h>
+#include <sys/uio.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -110,6 +115,25 @@ std::string write_store(const Volume& v, const std::string& dir, const std::stri
   convert_to_store(*input, store, options);
   std::filesystem::remove(raw);
   return store;
+}
+
+int page_cached(const std::string& file, uint64_t offset) {
+  const int fd = ::open(file.c_str(), O_RDONLY);
+  if (fd < 0) return -1;
+  char byte = 0;
+  iovec v{&byte, 1};
+  const ssize_t got = ::preadv2(fd, &v, 1, static_cast<off_t>(offset), RWF_NOWAIT);
+  const int error = errno;
+  ::close(fd);
+  return got == 1 ? 1 : (got < 0 && error == EAGAIN) ? 0 : -1;
+}
+
+bool drop_from_page_cache(const std::string& file) {
+  const int fd = ::open(file.c_str(), O_RDONLY);
+  if (fd < 0) return false;
+  const bool dropped = ::fdatasync(fd) == 0 && ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED) == 0;
+  ::close(fd);
+  return dropped;
 }
 
 }  // namespace isotope::testing

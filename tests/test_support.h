@@ -1,6 +1,7 @@
 #pragma once
 // Shared fixtures of the engine tests: volumes, sweeps, and mesh comparisons.
 #include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -47,5 +48,12 @@ std::string write_store(const Volume& v, const std::string& dir, const std::stri
 
 // Cuts a sub-box out of a volume (for dimensions that are not 2^k + 1).
 Volume crop(const Volume& v, std::array<int64_t, 3> dims);
+
+// Whether the page cache holds the byte at `offset` of `file`: 1 it does, 0 it does not, -1 this
+// cannot be told (the file does not open, or its file system refuses RWF_NOWAIT reads).
+int page_cached(const std::string& file, uint64_t offset);
+// Writes the file's dirty pages and asks the kernel to drop the file from the page cache. False
+// when either fails; a file system in memory may keep the pages all the same (page_cached tells).
+bool drop_from_page_cache(const std::string& file);
 
 }  // namespace isotope::testing

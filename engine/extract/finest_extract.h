@@ -14,6 +14,7 @@
 #include <functional>
 #include <vector>
 
+#include "engine/core/parallel.h"
 #include "engine/extract/block_march.h"
 #include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract.h"
@@ -148,6 +149,10 @@ inline SlabPlan finest_plan(const Lattice& lattice, const std::array<int64_t, 3>
   return plan;
 }
 
+// How many slabs beyond its own the finest march asks a store for: four beyond those that the
+// threads march at once (eight ahead measured as four on two threads).
+inline int64_t finest_slabs_ahead() { return 3 + thread_count(); }
+
 // The blocks of cell layers [z0, z1) (one slab of PLAN) that the isovalue cuts, marched, their
 // values read through READER (global coordinates). Counts the blocks looked at and the cells marched.
 template <class Reader>
@@ -156,29 +161,42 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
                          std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells) {
   const int64_t side = plan.slab_layers;
   const int64_t stride = side + 1;
-  // Whether the isovalue may cut the block at (x0, y0, z0): its cube diamond's range record.
+  // Whether the isovalue may cut the block at (x0, y0, zb): its cube diamond's range record.
   auto in_range = [&](int64_t x0, int64_t y0, int64_t zb) {
     if constexpr (RecordReader<Reader>) {
       const Coord centre{x0 + side / 2, y0 + side / 2, zb + side / 2};
       return rule.in_range(
           reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false}));
+    } else {
+      return true;
     }
-    return true;
   };
-  // A source that reads its values from a file on demand (a store) is asked, a few slabs ahead, for
-  // the blocks the isovalue may cut there, so that their reads are in flight while this slab is
-  // marched instead of each waiting in turn for the disk when its block is reached (docs/METHOD.md,
-  // "Out of core"). The first slab asks for the slabs up to that distance.
-  if constexpr (requires(const Coord& lo, const std::array<int64_t, 3>& n) { reader.prefetch_block(lo, n); }) {
-    constexpr int64_t kSlabsAhead = 4;
-    const int64_t from = z0 == 0 ? z0 + side : z0 + kSlabsAhead * side;
-    for (int64_t zb = from; zb <= z0 + kSlabsAhead * side && zb < plan.cell_layers; zb += side)
-      for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
-        for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side)
-          if (in_range(x0, y0, zb))
-            reader.prefetch_block({x0, y0, zb}, {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0),
-                                                 std::min(side, plan.cell_layers - zb)});
-  }
+  // A source that reads its bricks from a file on demand (a store), once it is read from the disk,
+  // is asked for the bricks of the blocks the isovalue may cut in the slabs ahead, so that their
+  // reads are in flight while this slab is marched instead of each waiting in turn for the disk
+  // when its block is reached (docs/METHOD.md, "Out of core"). Every slab asks for all the slabs of
+  // its window (the source asks the kernel once a brick), so that the first slabs of a process's
+  // share of them are asked for too; a slab that began before any read waited asks once it is
+  // marched. Returns whether it asked.
+  auto ask_ahead = [&] {
+    if constexpr (requires(const Coord& lo, const std::array<int64_t, 3>& n) {
+                    reader.hints_pay();
+                    reader.prefetch_block(lo, n);
+                  }) {
+      if (!reader.hints_pay()) return false;
+      const int64_t last = std::min(plan.cell_layers, z0 + finest_slabs_ahead() * side + 1);
+      for (int64_t zb = z0 + side; zb < last; zb += side)
+        for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
+          for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side)
+            if (in_range(x0, y0, zb))
+              reader.prefetch_block({x0, y0, zb}, {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0),
+                                                   std::min(side, plan.cell_layers - zb)});
+      return true;
+    } else {
+      return true;
+    }
+  };
+  const bool asked = ask_ahead();
   std::vector<float> f(static_cast<size_t>(stride * stride * stride));
   EdgeMemo memo(side);
   int64_t seen = 0, marched = 0;
@@ -205,6 +223,7 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
       march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, memo, builder);
       marched += n[0] * n[1] * n[2];
     }
+  if (!asked) ask_ahead();
   blocks += seen;
   cells += marched;
 }

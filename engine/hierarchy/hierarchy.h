@@ -226,41 +226,49 @@ class CompactLookup {
   bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) {
     const int bits = layout_.brick_bits();
     const int64_t t = layout_.brick_width();
-    for (int64_t bz = lo[2] >> bits; bz <= (lo[2] + n[2]) >> bits; ++bz)
-      for (int64_t by = lo[1] >> bits; by <= (lo[1] + n[1]) >> bits; ++by)
-        for (int64_t bx = lo[0] >> bits; bx <= (lo[0] + n[0]) >> bits; ++bx) {
-          uint32_t unused = 0;
-          const int64_t x0 = std::max(lo[0], bx * t), x1 = std::min(lo[0] + n[0], bx * t + t - 1);
-          const int64_t y0 = std::max(lo[1], by * t), y1 = std::min(lo[1] + n[1], by * t + t - 1);
-          const int64_t z0 = std::max(lo[2], bz * t), z1 = std::min(lo[2] + n[2], bz * t + t - 1);
-          with_values(bricks_.values(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused)),
-                      [&](const auto* values) {
-                        for (int64_t z = z0; z <= z1; ++z)
-                          for (int64_t y = y0; y <= y1; ++y) {
-                            float* row = f + ((z - lo[2]) * stride + (y - lo[1])) * stride - lo[0];
-                            const uint32_t yz = spread_bits_3(y & (t - 1)) << 1 | spread_bits_3(z & (t - 1)) << 2;
-                            for (int64_t x = x0; x <= x1; ++x) row[x] = values[yz | spread_bits_3(x & (t - 1))];
-                          }
-                      });
-        }
+    for_each_brick_of(lo, n, [&](int64_t bx, int64_t by, int64_t bz) {
+      uint32_t unused = 0;
+      const int64_t x0 = std::max(lo[0], bx * t), x1 = std::min(lo[0] + n[0], bx * t + t - 1);
+      const int64_t y0 = std::max(lo[1], by * t), y1 = std::min(lo[1] + n[1], by * t + t - 1);
+      const int64_t z0 = std::max(lo[2], bz * t), z1 = std::min(lo[2] + n[2], bz * t + t - 1);
+      with_values(bricks_.values(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused)),
+                  [&](const auto* values) {
+                    for (int64_t z = z0; z <= z1; ++z)
+                      for (int64_t y = y0; y <= y1; ++y) {
+                        float* row = f + ((z - lo[2]) * stride + (y - lo[1])) * stride - lo[0];
+                        const uint32_t yz = spread_bits_3(y & (t - 1)) << 1 | spread_bits_3(z & (t - 1)) << 2;
+                        for (int64_t x = x0; x <= x1; ++x) row[x] = values[yz | spread_bits_3(x & (t - 1))];
+                      }
+                  });
+    });
     return true;
   }
-  // A hint that block_values(lo, n, ...) will be asked for soon: the bricks it spans are asked
-  // to start loading (a paged source's reads then run while other blocks are marched).
-  void prefetch_block(const Coord& lo, const std::array<int64_t, 3>& n) {
-    if constexpr (requires(Bricks & b) { b.prefetch_brick(int64_t{}); }) {
-      const int bits = layout_.brick_bits();
-      for (int64_t bz = lo[2] >> bits; bz <= (lo[2] + n[2]) >> bits; ++bz)
-        for (int64_t by = lo[1] >> bits; by <= (lo[1] + n[1]) >> bits; ++by)
-          for (int64_t bx = lo[0] >> bits; bx <= (lo[0] + n[0]) >> bits; ++bx) {
-            uint32_t unused = 0;
-            bricks_.prefetch_brick(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused));
-          }
-    }
+  // For a source that reads its bricks on demand (a store): whether hints pay now (the source is
+  // read from the disk, not all from memory), and a hint that block_values(lo, n, ...) will be
+  // asked for soon, so that the reads of the bricks it spans run while other blocks are marched.
+  bool hints_pay() const requires requires(const Bricks& b) { b.hints_pay(); }
+  { return bricks_.hints_pay(); }
+  void prefetch_block(const Coord& lo, const std::array<int64_t, 3>& n) requires requires(Bricks& b) {
+    b.prefetch_brick(int64_t{});
+  }
+  {
+    const int bits = layout_.brick_bits();
+    for_each_brick_of(lo, n, [&](int64_t bx, int64_t by, int64_t bz) {
+      uint32_t unused = 0;
+      bricks_.prefetch_brick(indexer_.locate(0, bx << bits, by << bits, bz << bits, &unused));
+    });
   }
   Bricks& bricks() { return bricks_; }
 
  private:
+  // f(bx, by, bz) for each band-0 brick (brick coordinates) that nodes lo .. lo + n span.
+  template <class F>
+  void for_each_brick_of(const Coord& lo, const std::array<int64_t, 3>& n, F f) const {
+    const int bits = layout_.brick_bits();
+    for (int64_t bz = lo[2] >> bits; bz <= (lo[2] + n[2]) >> bits; ++bz)
+      for (int64_t by = lo[1] >> bits; by <= (lo[1] + n[1]) >> bits; ++by)
+        for (int64_t bx = lo[0] >> bits; bx <= (lo[0] + n[0]) >> bits; ++bx) f(bx, by, bz);
+  }
   const StoreLayout& layout_;
   const BrickIndexer& indexer_;
   Bricks bricks_;

@@ -156,6 +156,7 @@ void BrickCache::require(CachedBrick& brick, int64_t index, const RecordFields& 
 }
 
 void BrickCache::prefetch(int64_t index) {
+  if (!hints_pay()) return;
   Slot& s = slot(index);
   if (s.prefetched.load(std::memory_order_relaxed)) return;
   s.prefetched.store(true, std::memory_order_relaxed);

@@ -121,8 +121,10 @@ struct BrickCacheStats {
   uint64_t peak_bytes = 0;     // most decoded bytes held at once
   int64_t slots = 0;           // bricks asked for or prefetched at least once: each has a slot
   uint64_t working_bytes = 0;  // what the cache keeps now: a quarter of the budget, or all of it
-  int64_t read_waits = 0;      // of the store's reads, those that waited for the disk (StoreReader::read_waits)
-  int64_t read_hints = 0;      // read-ahead hints passed to the kernel (StoreReader::read_hints)
+  // The store reader's, since it was opened (shared by every cache over it): reads that waited for
+  // the disk, and read-ahead hints passed to the kernel (StoreReader::read_waits, read_hints).
+  int64_t read_waits = 0;
+  int64_t read_hints = 0;
 };
 
 class BrickCache {
@@ -148,8 +150,11 @@ class BrickCache {
   // every brick. A brick whose values do not fit is corrupt: get() throws IoError naming it.
   int value_bytes() const { return value_bytes_; }
   // A hint: brick `index` will be asked for soon. Starts the kernel reading it if it is not
-  // resident (and was not asked for before).
+  // resident (and was not asked for before), once hints pay.
   void prefetch(int64_t index);
+  // Whether read-ahead hints pay: some read of the store has waited for the disk
+  // (StoreReader::hints_pay). Until then prefetch() does nothing, not even make the brick's slot.
+  bool hints_pay() const { return store_.hints_pay(); }
 
   const StoreReader& store() const { return store_; }
   uint64_t budget_bytes() const { return budget_; }  // as given, raised to kMinBricks bricks

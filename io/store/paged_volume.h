@@ -57,10 +57,10 @@ class PagedVolume {
     }
     Bf16 surplus(int64_t index, uint32_t m);
     DiamondTopology topology(int64_t index, uint32_t m, const RecordFields& read);
-    // Brick `index`, whole, will be read soon: unless held, the cache starts the kernel reading it.
-    void prefetch_brick(int64_t index) {
-      if (pinned_[static_cast<size_t>(index) % pinned_.size()].index != index) volume_->cache_.prefetch(index);
-    }
+    // Whether read-ahead hints pay (BrickCache::hints_pay), and brick `index`'s core will be read
+    // soon: the cache starts the kernel reading it.
+    bool hints_pay() const { return volume_->cache_.hints_pay(); }
+    void prefetch_brick(int64_t index) { volume_->cache_.prefetch(index); }
     void prefetch(int64_t index, uint32_t m) {
       const Pinned& p = pinned_[static_cast<size_t>(index) % pinned_.size()];
       if (p.index == index)

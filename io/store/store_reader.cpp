@@ -144,7 +144,7 @@ void StoreReader::read_range(uint8_t* data, uint64_t begin, uint64_t stop, int64
 }
 
 void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& which) const {
-  if (waits_.load(std::memory_order_relaxed) == 0) return;
+  if (!hints_pay()) return;
   const BrickEntry& e = entry(index);
   for_each_run(which, [&](int s, int end) {
     const uint64_t begin = e.section_offset(static_cast<Section>(s));

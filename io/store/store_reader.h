@@ -46,10 +46,14 @@ class StoreReader {
   uint64_t read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out, float* values,
                       const NarrowBrick* narrow = nullptr) const;
   // Asks the kernel to start reading those sections in the background, with their read window:
-  // a hint that costs no thread and pays when the file is not in the page cache. Until a read
-  // has found the page cache without its bytes, nothing: a store wholly cached would pay a system
-  // call per hint for nothing (thousands in an extraction).
+  // a hint that costs no thread and pays when the file is not in the page cache. Nothing until
+  // hints_pay().
   void prefetch(int64_t index, const std::array<bool, kSections>& which) const;
+  // Whether hints pay: some read has found the page cache without its bytes. A store read wholly
+  // from the page cache would pay a system call per hint for nothing (thousands in an
+  // extraction). Once true, true for the reader's life: a store kept open (a server) that was read
+  // cold once keeps hinting the bricks it has not decoded, which the cache then holds.
+  bool hints_pay() const { return read_waits() > 0; }
   // Reads that found bytes missing from the page cache and waited for the disk (on a file system
   // without RWF_NOWAIT, every read: it cannot tell), and the hints passed to the kernel, so far.
   // Thread-safe.
