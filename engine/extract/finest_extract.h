@@ -149,8 +149,8 @@ inline SlabPlan finest_plan(const Lattice& lattice, const std::array<int64_t, 3>
   return plan;
 }
 
-// How many slabs beyond its own the finest march asks a store for: four beyond those that the
-// threads march at once (eight ahead measured as four on two threads).
+// How many slabs beyond its own the finest march asks a store for: four beyond those the threads
+// march at once (on two threads, five; with the threads left out, eight measured as four).
 inline int64_t finest_slabs_ahead() { return 3 + thread_count(); }
 
 // The blocks of cell layers [z0, z1) (one slab of PLAN) that the isovalue cuts, marched, their

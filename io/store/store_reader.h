@@ -52,7 +52,8 @@ class StoreReader {
   // Whether hints pay: some read has found the page cache without its bytes. A store read wholly
   // from the page cache would pay a system call per hint for nothing (thousands in an
   // extraction). Once true, true for the reader's life: a store kept open (a server) that was read
-  // cold once keeps hinting the bricks it has not decoded, which the cache then holds.
+  // cold once goes on hinting a brick each time its cache decodes it anew, even when the file is
+  // back in the page cache.
   bool hints_pay() const { return read_waits() > 0; }
   // Reads that found bytes missing from the page cache and waited for the disk (on a file system
   // without RWF_NOWAIT, every read: it cannot tell), and the hints passed to the kernel, so far.
