@@ -17,6 +17,7 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <set>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -828,9 +829,10 @@ TEST_F(PagedExtract, CacheReadsEachBrickOnceAndStaysNearItsBudget) {
 }
 
 // The finest march asks ahead for the bricks it will read: a brick first read by slab r > 0 is
-// first asked for by slab max(0, r - finest_slabs_ahead()), and nothing is asked for that no slab
-// reads (the blocks the range records cull are not asked for). Over an in-memory hierarchy whose
-// bricks note what they are asked for and what is read of them, a slab at a time in order.
+// first asked for by slab max(0, r - finest_slabs_ahead()), nothing is asked for that no slab
+// reads (the blocks the range records cull are not asked for), and no block is asked for twice.
+// Over an in-memory hierarchy whose bricks note what they are asked for and what is read of them,
+// a slab at a time in order.
 struct NotingBricks : hierarchy_internal::MemoryBricks {
   std::vector<int64_t>* asked;
   std::vector<int64_t>* read;
@@ -839,6 +841,16 @@ struct NotingBricks : hierarchy_internal::MemoryBricks {
   const float* values(int64_t index) const {
     read->push_back(index);
     return MemoryBricks::values(index);
+  }
+};
+
+// The blocks asked for, by their lowest corner, besides their bricks.
+struct NotingLookup : CompactLookup<NotingBricks> {
+  using CompactLookup<NotingBricks>::CompactLookup;
+  std::vector<Coord>* blocks;
+  void prefetch_block(const Coord& lo, const std::array<int64_t, 3>& n) {
+    blocks->push_back(lo);
+    CompactLookup<NotingBricks>::prefetch_block(lo, n);
   }
 };
 
@@ -856,8 +868,9 @@ TEST(FinestMarch, AsksForEachBrickTheSlabsAheadOfItsFirstReadAndNoOther) {
       const std::string what = c.name + " bits " + std::to_string(bits);
       const Hierarchy h = Hierarchy::build(c.volume, {}, bits);
       std::vector<int64_t> asked, read;
-      CompactLookup<NotingBricks> reader(h.layout(), h.indexer(),
-                                         NotingBricks{{&h, h.layout().brick_nodes()}, &asked, &read});
+      std::vector<Coord> asked_blocks;
+      NotingLookup reader(h.layout(), h.indexer(), NotingBricks{{&h, h.layout().brick_nodes()}, &asked, &read});
+      reader.blocks = &asked_blocks;
       ExtractOptions o;
       o.iso = c.iso;
       o.topology = TopologyMode::none;
@@ -865,12 +878,13 @@ TEST(FinestMarch, AsksForEachBrickTheSlabsAheadOfItsFirstReadAndNoOther) {
       const SlabPlan plan = finest_plan(h.lattice(), h.data_dims(), o.iso, h.origin(), h.spacing());
       MeshBuilder builder(o.iso, h.lattice().side, h.origin(), h.spacing());
       std::atomic<int64_t> blocks{0}, cells{0};
+      SlabsAsked slabs_asked;
       std::map<int64_t, int64_t> first_asked, first_read;  // brick -> slab
       int64_t slab = 0;
       for (int64_t z0 = 0; z0 < plan.cell_layers; z0 += plan.slab_layers, ++slab) {
         asked.clear(), read.clear();
-        march_finest_layers(reader, rule, plan, h.data_dims(), z0, std::min(z0 + plan.slab_layers, plan.cell_layers),
-                            builder, blocks, cells);
+        march_finest_slab(reader, rule, plan, h.data_dims(), z0, std::min(z0 + plan.slab_layers, plan.cell_layers),
+                          builder, blocks, cells, slabs_asked);
         for (int64_t b : asked) first_asked.try_emplace(b, slab);
         for (int64_t b : read) first_read.try_emplace(b, slab);
       }
@@ -890,6 +904,11 @@ TEST(FinestMarch, AsksForEachBrickTheSlabsAheadOfItsFirstReadAndNoOther) {
       EXPECT_GT(checked, 20) << what;
       for (const auto& [b, a] : first_asked)
         EXPECT_TRUE(first_read.count(b)) << what << ": brick " << b << " asked for by slab " << a << ", never read";
+      std::set<Coord> once;
+      for (const Coord& lo : asked_blocks)
+        EXPECT_TRUE(once.insert(lo).second)
+            << what << ": block at " << lo[0] << " " << lo[1] << " " << lo[2] << " asked for twice";
+      EXPECT_GT(once.size(), 20u) << what;
     }
 }
 

@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "engine/core/parallel.h"
@@ -153,6 +154,20 @@ inline SlabPlan finest_plan(const Lattice& lattice, const std::array<int64_t, 3>
 // march at once (on two threads, five; with the threads left out, eight measured as four).
 inline int64_t finest_slabs_ahead() { return 3 + thread_count(); }
 
+// Whether the isovalue may cut the block of `side` cells a side at (x0, y0, zb): its cube
+// diamond's range record. A source without records: always.
+template <class Reader>
+bool finest_block_in_range(Reader& reader, const traversal::SplitRule& rule, int64_t side, int64_t x0, int64_t y0,
+                           int64_t zb) {
+  if constexpr (RecordReader<Reader>) {
+    const Coord centre{x0 + side / 2, y0 + side / 2, zb + side / 2};
+    return rule.in_range(
+        reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false}));
+  } else {
+    return true;
+  }
+}
+
 // The blocks of cell layers [z0, z1) (one slab of PLAN) that the isovalue cuts, marched, their
 // values read through READER (global coordinates). Counts the blocks looked at and the cells marched.
 template <class Reader>
@@ -161,49 +176,13 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
                          std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells) {
   const int64_t side = plan.slab_layers;
   const int64_t stride = side + 1;
-  // Whether the isovalue may cut the block at (x0, y0, zb): its cube diamond's range record.
-  auto in_range = [&](int64_t x0, int64_t y0, int64_t zb) {
-    if constexpr (RecordReader<Reader>) {
-      const Coord centre{x0 + side / 2, y0 + side / 2, zb + side / 2};
-      return rule.in_range(
-          reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false}));
-    } else {
-      return true;
-    }
-  };
-  // A source that reads its bricks from a file on demand (a store), once it is read from the disk,
-  // is asked for the bricks of the blocks the isovalue may cut in the slabs ahead, so that their
-  // reads are in flight while this slab is marched instead of each waiting in turn for the disk
-  // when its block is reached (docs/METHOD.md, "Out of core"). Every slab asks for all the slabs of
-  // its window (the source asks the kernel once a brick), so that the first slabs of a process's
-  // share of them are asked for too; a slab that began before any read waited asks once it is
-  // marched. Returns whether it asked.
-  auto ask_ahead = [&] {
-    if constexpr (requires(const Coord& lo, const std::array<int64_t, 3>& n) {
-                    reader.hints_pay();
-                    reader.prefetch_block(lo, n);
-                  }) {
-      if (!reader.hints_pay()) return false;
-      const int64_t last = std::min(plan.cell_layers, z0 + finest_slabs_ahead() * side + 1);
-      for (int64_t zb = z0 + side; zb < last; zb += side)
-        for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
-          for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side)
-            if (in_range(x0, y0, zb))
-              reader.prefetch_block({x0, y0, zb}, {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0),
-                                                   std::min(side, plan.cell_layers - zb)});
-      return true;
-    } else {
-      return true;
-    }
-  };
-  const bool asked = ask_ahead();
   std::vector<float> f(static_cast<size_t>(stride * stride * stride));
   EdgeMemo memo(side);
   int64_t seen = 0, marched = 0;
   for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
     for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
       ++seen;
-      if (!in_range(x0, y0, z0)) continue;
+      if (!finest_block_in_range(reader, rule, side, x0, y0, z0)) continue;
       const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
       const Coord lo{x0, y0, z0};
       constexpr bool kCutsInPlace = requires { reader.block_cut(lo, n, plan.iso); };
@@ -223,9 +202,61 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
       march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, memo, builder);
       marched += n[0] * n[1] * n[2];
     }
-  if (!asked) ask_ahead();
   blocks += seen;
   cells += marched;
+}
+
+// How far in z one process's finest march has asked its source for the slabs ahead, shared by
+// its slabs: each slab claims the slabs of its window that no slab claimed before it, so that
+// every range record is read once to ask and once to march, whatever the window.
+class SlabsAsked {
+ public:
+  // The slabs [first, last) of those after `slab`, up to `slab + ahead`, that no earlier claim
+  // took (none when first >= last).
+  std::pair<int64_t, int64_t> claim(int64_t slab, int64_t ahead) {
+    const int64_t through = slab + ahead;
+    int64_t before = through_.load(std::memory_order_relaxed);
+    while (before < through && !through_.compare_exchange_weak(before, through, std::memory_order_relaxed)) {
+    }
+    return {std::max(before, slab) + 1, before < through ? through + 1 : 0};
+  }
+
+ private:
+  std::atomic<int64_t> through_{-1};  // the last slab claimed
+};
+
+// One slab of the finest march, [z0, z1), over a source that reads its bricks from a file on
+// demand (a store): once a read has waited for the disk, the slab asks for the bricks of the
+// blocks the isovalue may cut in the slabs of its window ahead not yet asked for (ASKED), so that
+// their reads are in flight while it is marched instead of each waiting in turn for the disk when
+// its block is reached (docs/METHOD.md, "Out of core"). The source asks the kernel once a brick. A
+// slab that began before any read waited asks once it is marched. A source that does not read
+// from a file on demand: march_finest_layers alone.
+template <class Reader>
+void march_finest_slab(Reader& reader, const traversal::SplitRule& rule, const SlabPlan& plan,
+                       const std::array<int64_t, 3>& dims, int64_t z0, int64_t z1, MeshBuilder& builder,
+                       std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells, SlabsAsked& asked) {
+  constexpr bool kAsks = requires(const Coord& lo, const std::array<int64_t, 3>& n) {
+    reader.hints_pay();
+    reader.prefetch_block(lo, n);
+  };
+  const int64_t side = plan.slab_layers;
+  auto ask_ahead = [&] {
+    if constexpr (kAsks) {
+      if (!reader.hints_pay()) return false;
+      const auto [first, last] = asked.claim(z0 / side, finest_slabs_ahead());
+      for (int64_t zb = first * side; zb < std::min(last * side, plan.cell_layers); zb += side)
+        for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
+          for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side)
+            if (finest_block_in_range(reader, rule, side, x0, y0, zb))
+              reader.prefetch_block({x0, y0, zb}, {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0),
+                                                   std::min(side, plan.cell_layers - zb)});
+    }
+    return true;
+  };
+  const bool asked_before = ask_ahead();
+  march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+  if (!asked_before) ask_ahead();
 }
 
 // The mesh is the same bit for bit on any number of threads, paged or not.
@@ -234,10 +265,11 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
   const std::array<int64_t, 3>& dims = source.data_dims();
   const SlabPlan plan = finest_plan(source.lattice(), dims, rule.options().iso, source.origin(), source.spacing());
   std::atomic<int64_t> blocks{0}, cells{0};
+  SlabsAsked asked;
   const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
     throw_if_cancelled(rule.options());
     auto reader = source.reader();
-    march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+    march_finest_slab(reader, rule, plan, dims, z0, z1, builder, blocks, cells, asked);
   };
   const Distribution* group = rule.options().distribution;
   if (group) return extract_finest_shared(source, rule, plan, march, *group, blocks, cells, stats);
