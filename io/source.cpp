@@ -249,6 +249,8 @@ SourceInfo Source::info() const {
   info.bricks_read = c.bricks_read;
   info.cache_hits = c.hits;
   info.cache_peak_bytes = c.peak_bytes;
+  info.read_waits = c.read_waits;
+  info.read_hints = c.read_hints;
   return info;
 }
 

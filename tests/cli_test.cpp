@@ -19,6 +19,8 @@
 #include <string>
 #include <vector>
 
+#include "tests/test_support.h"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -679,6 +681,35 @@ TEST_F(Cli, StoreExtractIsTheSameFileForAnyThreadsAndCache) {
       EXPECT_GT(bytes_read[0], bytes_read[1]) << what << ": --cache-mb 1 read no more than --cache-mb 4096";
     }
   }
+}
+
+// The report says whether a store's reads waited for the disk: none for a store the page cache
+// holds whole (and no read-ahead hint, each a system call for nothing), some once it is dropped
+// from the page cache (and hints ahead of the eps-0 march). Each half needs what it says of the
+// page cache, and is skipped, saying so, where the file system does not do it.
+TEST_F(Cli, ReportSaysWhetherAStoresReadsWaitedForTheDisk) {
+  const std::string raw = in_work("noise_65x65x65_float32.raw"), store = in_work("noise.isotope");
+  ASSERT_EQ(run("generate noise --seed 21 -q -o " + quote(raw)).code, 0);
+  ASSERT_EQ(run("convert -q --brick-bits 3 " + quote(raw) + " " + quote(store)).code, 0);
+  {
+    std::ifstream whole(store, std::ios::binary);
+    std::vector<char> bytes(fs::file_size(store));
+    whole.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  }
+  if (isotope::testing::page_cached(store, 1024) != 1)
+    GTEST_SKIP() << "the file system refuses RWF_NOWAIT, or does not keep " << store << " in the page cache";
+  const nlohmann::json warm = extract_report(quote(store) + " --iso 0");
+  ASSERT_TRUE(warm.contains("cache")) << warm;
+  EXPECT_GT(warm["bricks_read"].get<int64_t>(), 0);
+  EXPECT_EQ(warm["cache"]["read_waits"].get<int64_t>(), 0) << warm["cache"];
+  EXPECT_EQ(warm["cache"]["read_hints"].get<int64_t>(), 0) << warm["cache"];
+  ASSERT_TRUE(isotope::testing::drop_from_page_cache(store)) << store << ": fdatasync or posix_fadvise failed";
+  if (isotope::testing::page_cached(store, 1024) != 0)
+    GTEST_SKIP() << "the page cache keeps " << store << " when asked to drop it (a file system in memory?)";
+  const nlohmann::json cold = extract_report(quote(store) + " --iso 0");
+  ASSERT_TRUE(cold.contains("cache")) << cold;
+  EXPECT_GT(cold["cache"]["read_waits"].get<int64_t>(), 0) << cold["cache"];
+  EXPECT_GT(cold["cache"]["read_hints"].get<int64_t>(), 0) << cold["cache"];
 }
 
 TEST_F(Cli, TriangleBudgetPicksTheFinestEpsWithinIt) {

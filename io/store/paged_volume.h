@@ -66,7 +66,7 @@ class PagedVolume {
       if (p.index == index)
         __builtin_prefetch(p.brick->bounds_at(m));
       else
-        volume_->cache_.prefetch(index);
+        prefetch_brick(index);
     }
 
    private:

@@ -286,6 +286,8 @@ py::dict info_dict(const SourceInfo& i) {
   d["bytes_read"] = i.bytes_read;
   d["bricks_read"] = i.bricks_read;
   d["cache_hits"] = i.cache_hits;
+  d["read_waits"] = i.read_waits;
+  d["read_hints"] = i.read_hints;
   return d;
 }
 

@@ -98,6 +98,8 @@ void describe(const SourceInfo& info, ExtractionRun& run) {
   run.preprocess.seconds = info.preprocess_seconds;
   if (!info.store) return;
   run.cache = {info.bricks_read, info.bytes_read, info.cache_hits, info.cache_peak_bytes};
+  run.cache.read_waits = info.read_waits;
+  run.cache.read_hints = info.read_hints;
   run.cache_mb = info.cache_mb;
   run.cache_budget_bytes = info.cache_budget_bytes;
   run.cache_brick_bytes = info.cache_brick_bytes;
@@ -225,7 +227,9 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
                   {"effective_budget_mb", static_cast<double>(run.cache_budget_bytes) / (1 << 20)},
                   {"brick_mb", static_cast<double>(run.cache_brick_bytes) / (1 << 20)},
                   {"peak_decoded_mb", static_cast<double>(run.cache.peak_bytes) / (1 << 20)},
-                  {"store_bytes", run.store_bytes}};
+                  {"store_bytes", run.store_bytes},
+                  {"read_waits", run.cache.read_waits},
+                  {"read_hints", run.cache.read_hints}};
   return j;
 }
 
