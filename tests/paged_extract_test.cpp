@@ -828,18 +828,46 @@ TEST_F(PagedExtract, CacheReadsEachBrickOnceAndStaysNearItsBudget) {
   }
 }
 
+// The claims of the slabs ahead: each slab is handed out once, beyond the furthest claimed, from
+// wherever the first claim starts (a process's share of the slabs).
+TEST(FinestMarch, SlabClaimsHandOutEachSlabOnceBeyondTheFurthest) {
+  using Range = std::pair<int64_t, int64_t>;
+  {
+    SlabClaims claims;
+    EXPECT_EQ(claims.claim(0, 5), Range(1, 6));
+    EXPECT_EQ(claims.claim(1, 5), Range(6, 7));
+    EXPECT_EQ(claims.claim(2, 5), Range(7, 8));
+  }
+  {
+    SlabClaims claims;  // a later slab first: the earlier one's window is claimed already
+    EXPECT_EQ(claims.claim(5, 5), Range(6, 11));
+    const Range r = claims.claim(4, 5);
+    EXPECT_GE(r.first, r.second) << r.first << " " << r.second;
+    EXPECT_EQ(claims.claim(6, 5), Range(11, 12));
+  }
+  {
+    SlabClaims claims;  // a share that starts at slab 7
+    EXPECT_EQ(claims.claim(7, 5), Range(8, 13));
+    const Range r = claims.claim(8, 4);  // its window ends at the furthest claimed
+    EXPECT_GE(r.first, r.second) << r.first << " " << r.second;
+  }
+}
+
 // The finest march asks ahead for the bricks it will read: a brick first read by slab r > 0 is
 // first asked for by slab max(0, r - finest_slabs_ahead()), nothing is asked for that no slab
-// reads (the blocks the range records cull are not asked for), and no block is asked for twice.
+// reads (the blocks the range records cull are not asked for), and no block is asked for twice;
+// also where hints pay only once a brick was read, so that the first slab asks after its march.
 // Over an in-memory hierarchy whose bricks note what they are asked for and what is read of them,
 // a slab at a time in order.
 struct NotingBricks : hierarchy_internal::MemoryBricks {
   std::vector<int64_t>* asked;
   std::vector<int64_t>* read;
-  bool hints_pay() const { return true; }
+  bool* read_once = nullptr;  // where hints pay once a brick was read; else always
+  bool hints_pay() const { return !read_once || *read_once; }
   void prefetch_brick(int64_t index) { asked->push_back(index); }
   const float* values(int64_t index) const {
     read->push_back(index);
+    if (read_once) *read_once = true;
     return MemoryBricks::values(index);
   }
 };
@@ -862,54 +890,59 @@ TEST(FinestMarch, AsksForEachBrickTheSlabsAheadOfItsFirstReadAndNoOther) {
   };
   const Case cases[] = {{"noise", as_raw(testing::crop(generate_noise(70, 5), {69, 61, 67})), 0.1f},
                         {"sphere", as_raw(generate_sphere(65)), 0.0f}};
+  // The window counts the threads: two, so that the volumes have slabs beyond it on any machine.
+  const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
   const int64_t ahead = finest_slabs_ahead();
   for (const Case& c : cases)
-    for (const int bits : {2, 3, 4}) {
-      const std::string what = c.name + " bits " + std::to_string(bits);
-      const Hierarchy h = Hierarchy::build(c.volume, {}, bits);
-      std::vector<int64_t> asked, read;
-      std::vector<Coord> asked_blocks;
-      NotingLookup reader(h.layout(), h.indexer(), NotingBricks{{&h, h.layout().brick_nodes()}, &asked, &read});
-      reader.blocks = &asked_blocks;
-      ExtractOptions o;
-      o.iso = c.iso;
-      o.topology = TopologyMode::none;
-      const traversal::SplitRule rule(o, h.lattice(), h.origin(), h.spacing(), h.error_fold());
-      const SlabPlan plan = finest_plan(h.lattice(), h.data_dims(), o.iso, h.origin(), h.spacing());
-      MeshBuilder builder(o.iso, h.lattice().side, h.origin(), h.spacing());
-      std::atomic<int64_t> blocks{0}, cells{0};
-      SlabsAsked slabs_asked;
-      std::map<int64_t, int64_t> first_asked, first_read;  // brick -> slab
-      int64_t slab = 0;
-      for (int64_t z0 = 0; z0 < plan.cell_layers; z0 += plan.slab_layers, ++slab) {
-        asked.clear(), read.clear();
-        march_finest_slab(reader, rule, plan, h.data_dims(), z0, std::min(z0 + plan.slab_layers, plan.cell_layers),
-                          builder, blocks, cells, slabs_asked);
-        for (int64_t b : asked) first_asked.try_emplace(b, slab);
-        for (int64_t b : read) first_read.try_emplace(b, slab);
+    for (const int bits : {2, 3, 4})
+      for (const bool late : {false, true}) {
+        const std::string what = c.name + " bits " + std::to_string(bits) + (late ? ", hints once read" : "");
+        const Hierarchy h = Hierarchy::build(c.volume, {}, bits);
+        std::vector<int64_t> asked, read;
+        std::vector<Coord> asked_blocks;
+        bool read_once = false;
+        NotingLookup reader(h.layout(), h.indexer(),
+                            NotingBricks{{&h, h.layout().brick_nodes()}, &asked, &read, late ? &read_once : nullptr});
+        reader.blocks = &asked_blocks;
+        ExtractOptions o;
+        o.iso = c.iso;
+        o.topology = TopologyMode::none;
+        const traversal::SplitRule rule(o, h.lattice(), h.origin(), h.spacing(), h.error_fold());
+        const SlabPlan plan = finest_plan(h.lattice(), h.data_dims(), o.iso, h.origin(), h.spacing());
+        MeshBuilder builder(o.iso, h.lattice().side, h.origin(), h.spacing());
+        std::atomic<int64_t> blocks{0}, cells{0};
+        SlabClaims claims;
+        std::map<int64_t, int64_t> first_asked, first_read;  // brick -> slab
+        int64_t slab = 0;
+        for (int64_t z0 = 0; z0 < plan.cell_layers; z0 += plan.slab_layers, ++slab) {
+          asked.clear(), read.clear();
+          march_finest_slab(reader, rule, plan, h.data_dims(), z0, std::min(z0 + plan.slab_layers, plan.cell_layers),
+                            builder, blocks, cells, claims);
+          for (int64_t b : asked) first_asked.try_emplace(b, slab);
+          for (int64_t b : read) first_read.try_emplace(b, slab);
+        }
+        ASSERT_GT(slab, ahead + 2) << what;
+        // Some bricks are never read (the range records cull their blocks), so that "no other" means something.
+        EXPECT_LT(static_cast<int64_t>(first_read.size()), h.layout().band(0).brick_count()) << what;
+        int64_t checked = 0;
+        for (const auto& [b, r] : first_read) {
+          if (r == 0) continue;
+          const auto a = first_asked.find(b);
+          ASSERT_NE(a, first_asked.end())
+              << what << ": brick " << b << ", first read by slab " << r << ", never asked for";
+          EXPECT_EQ(a->second, std::max<int64_t>(0, r - ahead))
+              << what << ": brick " << b << ", first read by slab " << r;
+          ++checked;
+        }
+        EXPECT_GT(checked, 20) << what;
+        for (const auto& [b, a] : first_asked)
+          EXPECT_TRUE(first_read.count(b)) << what << ": brick " << b << " asked for by slab " << a << ", never read";
+        std::set<Coord> once;
+        for (const Coord& lo : asked_blocks)
+          EXPECT_TRUE(once.insert(lo).second)
+              << what << ": block at " << lo[0] << " " << lo[1] << " " << lo[2] << " asked for twice";
+        EXPECT_GT(once.size(), 20u) << what;
       }
-      ASSERT_GT(slab, ahead + 2) << what;
-      // Some bricks are never read (the range records cull their blocks), so that "no other" means something.
-      EXPECT_LT(static_cast<int64_t>(first_read.size()), h.layout().band(0).brick_count()) << what;
-      int64_t checked = 0;
-      for (const auto& [b, r] : first_read) {
-        if (r == 0) continue;
-        const auto a = first_asked.find(b);
-        ASSERT_NE(a, first_asked.end()) << what << ": brick " << b << ", first read by slab " << r
-                                        << ", never asked for";
-        EXPECT_EQ(a->second, std::max<int64_t>(0, r - ahead))
-            << what << ": brick " << b << ", first read by slab " << r;
-        ++checked;
-      }
-      EXPECT_GT(checked, 20) << what;
-      for (const auto& [b, a] : first_asked)
-        EXPECT_TRUE(first_read.count(b)) << what << ": brick " << b << " asked for by slab " << a << ", never read";
-      std::set<Coord> once;
-      for (const Coord& lo : asked_blocks)
-        EXPECT_TRUE(once.insert(lo).second)
-            << what << ": block at " << lo[0] << " " << lo[1] << " " << lo[2] << " asked for twice";
-      EXPECT_GT(once.size(), 20u) << what;
-    }
 }
 
 // A store wholly in the page cache is read without a single read-ahead hint (each would be a

@@ -207,56 +207,66 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
 }
 
 // How far in z one process's finest march has asked its source for the slabs ahead, shared by
-// its slabs: each slab claims the slabs of its window that no slab claimed before it, so that
-// every range record is read once to ask and once to march, whatever the window.
-class SlabsAsked {
+// its slabs. Each slab claims the slabs of its window beyond the furthest one claimed so far, so
+// that every range record is read once to ask and once to march, whatever the window. A slab left
+// below that mark unclaimed is one a slab after it claimed past first; slabs are handed out in
+// increasing order (parallel_for_in_order), so such a slab is being marched already, where a hint
+// would come too late.
+class SlabClaims {
  public:
-  // The slabs [first, last) of those after `slab`, up to `slab + ahead`, that no earlier claim
-  // took (none when first >= last).
+  // The slabs [first, last) after `slab`, up to `slab + ahead`, beyond the furthest claimed so far
+  // (empty when first >= last).
   std::pair<int64_t, int64_t> claim(int64_t slab, int64_t ahead) {
     const int64_t through = slab + ahead;
-    int64_t before = through_.load(std::memory_order_relaxed);
-    while (before < through && !through_.compare_exchange_weak(before, through, std::memory_order_relaxed)) {
+    int64_t before = furthest_.load(std::memory_order_relaxed);
+    while (before < through && !furthest_.compare_exchange_weak(before, through, std::memory_order_relaxed)) {
     }
-    return {std::max(before, slab) + 1, before < through ? through + 1 : 0};
+    return {std::max(before, slab) + 1, std::max(before, through) + 1};
   }
 
  private:
-  std::atomic<int64_t> through_{-1};  // the last slab claimed
+  std::atomic<int64_t> furthest_{-1};  // the furthest slab claimed
 };
 
-// One slab of the finest march, [z0, z1), over a source that reads its bricks from a file on
-// demand (a store): once a read has waited for the disk, the slab asks for the bricks of the
-// blocks the isovalue may cut in the slabs of its window ahead not yet asked for (ASKED), so that
-// their reads are in flight while it is marched instead of each waiting in turn for the disk when
-// its block is reached (docs/METHOD.md, "Out of core"). The source asks the kernel once a brick. A
-// slab that began before any read waited asks once it is marched. A source that does not read
-// from a file on demand: march_finest_layers alone.
+// The cells of the block of PLAN whose lowest corner is (x0, y0, zb), per axis.
+inline std::array<int64_t, 3> finest_block_cells(const SlabPlan& plan, const std::array<int64_t, 3>& dims, int64_t x0,
+                                                 int64_t y0, int64_t zb) {
+  const int64_t side = plan.slab_layers;
+  return {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), std::min(side, plan.cell_layers - zb)};
+}
+
+// One slab of the finest march, [z0, z1) (z0 a multiple of the slab's layers, as slab_range
+// makes it). Over a source that reads its bricks from a file on demand (a store), once a read has
+// waited for the disk, the slab first asks for the bricks of the blocks the isovalue may cut in
+// the slabs it claims of its window ahead (CLAIMS), so that their reads are in flight while it is
+// marched instead of each waiting in turn for the disk when its block is reached (docs/METHOD.md,
+// "Out of core"); the source asks the kernel once a brick. A slab that began before any read
+// waited claims once it is marched. Any other source: march_finest_layers alone.
 template <class Reader>
 void march_finest_slab(Reader& reader, const traversal::SplitRule& rule, const SlabPlan& plan,
                        const std::array<int64_t, 3>& dims, int64_t z0, int64_t z1, MeshBuilder& builder,
-                       std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells, SlabsAsked& asked) {
+                       std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells, SlabClaims& claims) {
   constexpr bool kAsks = requires(const Coord& lo, const std::array<int64_t, 3>& n) {
     reader.hints_pay();
     reader.prefetch_block(lo, n);
   };
-  const int64_t side = plan.slab_layers;
-  auto ask_ahead = [&] {
-    if constexpr (kAsks) {
-      if (!reader.hints_pay()) return false;
-      const auto [first, last] = asked.claim(z0 / side, finest_slabs_ahead());
+  if constexpr (!kAsks) {
+    march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+  } else {
+    const int64_t side = plan.slab_layers;
+    auto ask_ahead = [&] {
+      const auto [first, last] = claims.claim(z0 / side, finest_slabs_ahead());
       for (int64_t zb = first * side; zb < std::min(last * side, plan.cell_layers); zb += side)
         for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
           for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side)
             if (finest_block_in_range(reader, rule, side, x0, y0, zb))
-              reader.prefetch_block({x0, y0, zb}, {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0),
-                                                   std::min(side, plan.cell_layers - zb)});
-    }
-    return true;
-  };
-  const bool asked_before = ask_ahead();
-  march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
-  if (!asked_before) ask_ahead();
+              reader.prefetch_block({x0, y0, zb}, finest_block_cells(plan, dims, x0, y0, zb));
+    };
+    const bool hints_paid = reader.hints_pay();
+    if (hints_paid) ask_ahead();
+    march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+    if (!hints_paid && reader.hints_pay()) ask_ahead();
+  }
 }
 
 // The mesh is the same bit for bit on any number of threads, paged or not.
@@ -265,11 +275,11 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
   const std::array<int64_t, 3>& dims = source.data_dims();
   const SlabPlan plan = finest_plan(source.lattice(), dims, rule.options().iso, source.origin(), source.spacing());
   std::atomic<int64_t> blocks{0}, cells{0};
-  SlabsAsked asked;
+  SlabClaims claims;
   const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
     throw_if_cancelled(rule.options());
     auto reader = source.reader();
-    march_finest_slab(reader, rule, plan, dims, z0, z1, builder, blocks, cells, asked);
+    march_finest_slab(reader, rule, plan, dims, z0, z1, builder, blocks, cells, claims);
   };
   const Distribution* group = rule.options().distribution;
   if (group) return extract_finest_shared(source, rule, plan, march, *group, blocks, cells, stats);

@@ -74,8 +74,9 @@ struct SourceInfo {
   uint64_t bytes_read = 0;
   int64_t bricks_read = 0, cache_hits = 0;
   uint64_t cache_peak_bytes = 0;
-  // A store: its reads that found their bytes missing from the page cache and waited for the
-  // disk, and the read-ahead hints passed to the kernel since (none while no read has waited).
+  // A store, since it was opened: its reads that found their bytes missing from the page cache and
+  // waited for the disk (every read on a file system that cannot tell), and the read-ahead hints
+  // passed to the kernel (none while no read has waited).
   int64_t read_waits = 0, read_hints = 0;
 };
 

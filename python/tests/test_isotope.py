@@ -125,6 +125,7 @@ def test_a_store_is_opened_once_and_extracted_from_repeatedly(data, tmp_path):
     assert store.info["bytes_read"] > 0
     # reads that waited for the disk, and read-ahead hints only once one has
     waits, hints = store.info["read_waits"], store.info["read_hints"]
+    assert isinstance(waits, int) and isinstance(hints, int)
     assert waits >= 0 and (hints == 0 or waits > 0)
     # a budget asked for again of the same Store is the first choice, remembered
     first, again = (store.extract(iso=64.5, topology="none", max_triangles=5000) for _ in range(2))

@@ -97,9 +97,12 @@ void describe(const SourceInfo& info, ExtractionRun& run) {
   }
   run.preprocess.seconds = info.preprocess_seconds;
   if (!info.store) return;
-  run.cache = {info.bricks_read, info.bytes_read, info.cache_hits, info.cache_peak_bytes};
-  run.cache.read_waits = info.read_waits;
-  run.cache.read_hints = info.read_hints;
+  run.cache = {.bricks_read = info.bricks_read,
+               .bytes_read = info.bytes_read,
+               .hits = info.cache_hits,
+               .peak_bytes = info.cache_peak_bytes,
+               .read_waits = info.read_waits,
+               .read_hints = info.read_hints};
   run.cache_mb = info.cache_mb;
   run.cache_budget_bytes = info.cache_budget_bytes;
   run.cache_brick_bytes = info.cache_brick_bytes;
