@@ -829,7 +829,7 @@ TEST_F(PagedExtract, CacheReadsEachBrickOnceAndStaysNearItsBudget) {
 }
 
 // The claims of the slabs ahead: each slab is handed out once, beyond the furthest claimed, from
-// wherever the first claim starts (a process's share of the slabs).
+// wherever the first claim starts and up to the last slab of the process's share.
 TEST(FinestMarch, SlabClaimsHandOutEachSlabOnceBeyondTheFurthest) {
   using Range = std::pair<int64_t, int64_t>;
   {
@@ -849,6 +849,14 @@ TEST(FinestMarch, SlabClaimsHandOutEachSlabOnceBeyondTheFurthest) {
     SlabClaims claims;  // a share that starts at slab 7
     EXPECT_EQ(claims.claim(7, 5), Range(8, 13));
     const Range r = claims.claim(8, 4);  // its window ends at the furthest claimed
+    EXPECT_GE(r.first, r.second) << r.first << " " << r.second;
+  }
+  {
+    SlabClaims claims;  // a share of slabs 3 to 9: nothing past 9
+    claims.end_at(9);
+    EXPECT_EQ(claims.claim(3, 5), Range(4, 9));
+    EXPECT_EQ(claims.claim(4, 5), Range(9, 10));
+    const Range r = claims.claim(5, 5);
     EXPECT_GE(r.first, r.second) << r.first << " " << r.second;
   }
 }

@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <utility>
 #include <vector>
 
@@ -121,17 +122,45 @@ inline Mesh march_finest_share(const SlabPlan& plan, const MarchSlab& march, con
   return mesh;
 }
 
+// How far in z one process's finest march has asked its source for the slabs ahead, shared by
+// its slabs. Each slab claims the slabs of its window beyond the furthest one claimed so far, so
+// that every range record is read once to ask and once to march, whatever the window. A slab left
+// below that mark unclaimed is one a slab after it claimed past first; slabs are handed out in
+// increasing order (parallel_for_in_order), so such a slab is being marched already, where a hint
+// would come too late. No claim reaches past the last slab the process marches (its share of
+// them, among several processes), whose bricks another process reads.
+class SlabClaims {
+ public:
+  // The slabs [first, last) after `slab`, up to `slab + ahead` and the process's last, beyond the
+  // furthest claimed so far (empty when first >= last).
+  std::pair<int64_t, int64_t> claim(int64_t slab, int64_t ahead) {
+    const int64_t through = std::min(slab + ahead, last_);
+    int64_t before = furthest_.load(std::memory_order_relaxed);
+    while (before < through && !furthest_.compare_exchange_weak(before, through, std::memory_order_relaxed)) {
+    }
+    return {std::max(before, slab) + 1, std::max(before, through) + 1};
+  }
+  // The process marches no slab after `last`; before any claim.
+  void end_at(int64_t last) { last_ = last; }
+
+ private:
+  std::atomic<int64_t> furthest_{-1};                   // the furthest slab claimed
+  int64_t last_ = std::numeric_limits<int64_t>::max();  // the last slab the process marches
+};
+
 // extract_finest's slabs shared among processes (include/isotope/distribution.h), by their cost
 // estimated from the source's records (slab_costs).
 template <ValueSource Source>
 Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,
                            const MarchSlab& march, const Distribution& group, std::atomic<int64_t>& blocks,
-                           std::atomic<int64_t>& cells, ExtractStats* stats) {
+                           std::atomic<int64_t>& cells, SlabClaims& claims, ExtractStats* stats) {
   const std::vector<double> costs = slab_costs(source, rule, plan, group);
   std::function<uint64_t()> bytes_read;
   if constexpr (requires { source.bytes_read(); }) bytes_read = [&] { return source.bytes_read(); };
-  return march_finest_share(plan, march, group, costs, share_by_cost(costs, group.ranks()), rule.options().keep_shares,
-                            blocks, cells, bytes_read, stats);
+  const std::vector<size_t> shares = share_by_cost(costs, group.ranks());
+  claims.end_at(static_cast<int64_t>(shares[static_cast<size_t>(group.rank()) + 1]) - 1);
+  return march_finest_share(plan, march, group, costs, shares, rule.options().keep_shares, blocks, cells, bytes_read,
+                            stats);
 }
 
 // Blocks are cubes of 8 cells a side (4 or 2 on lattices of side 5 or 3), whose centres are the
@@ -206,28 +235,6 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
   cells += marched;
 }
 
-// How far in z one process's finest march has asked its source for the slabs ahead, shared by
-// its slabs. Each slab claims the slabs of its window beyond the furthest one claimed so far, so
-// that every range record is read once to ask and once to march, whatever the window. A slab left
-// below that mark unclaimed is one a slab after it claimed past first; slabs are handed out in
-// increasing order (parallel_for_in_order), so such a slab is being marched already, where a hint
-// would come too late.
-class SlabClaims {
- public:
-  // The slabs [first, last) after `slab`, up to `slab + ahead`, beyond the furthest claimed so far
-  // (empty when first >= last).
-  std::pair<int64_t, int64_t> claim(int64_t slab, int64_t ahead) {
-    const int64_t through = slab + ahead;
-    int64_t before = furthest_.load(std::memory_order_relaxed);
-    while (before < through && !furthest_.compare_exchange_weak(before, through, std::memory_order_relaxed)) {
-    }
-    return {std::max(before, slab) + 1, std::max(before, through) + 1};
-  }
-
- private:
-  std::atomic<int64_t> furthest_{-1};  // the furthest slab claimed
-};
-
 // The cells of the block of PLAN whose lowest corner is (x0, y0, zb), per axis.
 inline std::array<int64_t, 3> finest_block_cells(const SlabPlan& plan, const std::array<int64_t, 3>& dims, int64_t x0,
                                                  int64_t y0, int64_t zb) {
@@ -282,7 +289,7 @@ Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, Extr
     march_finest_slab(reader, rule, plan, dims, z0, z1, builder, blocks, cells, claims);
   };
   const Distribution* group = rule.options().distribution;
-  if (group) return extract_finest_shared(source, rule, plan, march, *group, blocks, cells, stats);
+  if (group) return extract_finest_shared(source, rule, plan, march, *group, blocks, cells, claims, stats);
   Mesh mesh = march_in_slabs(plan, march);
   count_finest(blocks, cells, stats);
   return mesh;
