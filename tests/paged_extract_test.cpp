@@ -953,6 +953,39 @@ TEST(FinestMarch, AsksForEachBrickTheSlabsAheadOfItsFirstReadAndNoOther) {
       }
 }
 
+// A process that marches a share of the slabs (among several) asks for nothing past the share's
+// last slab, whose next slabs are another process's, and every brick it asks for, it reads.
+TEST(FinestMarch, AsksForNothingPastItsShare) {
+  const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+  const Hierarchy h = Hierarchy::build(as_raw(testing::crop(generate_noise(70, 5), {69, 61, 67})), {}, 3);
+  std::vector<int64_t> asked, read;
+  std::vector<Coord> asked_blocks;
+  NotingLookup reader(h.layout(), h.indexer(), NotingBricks{{&h, h.layout().brick_nodes()}, &asked, &read});
+  reader.blocks = &asked_blocks;
+  ExtractOptions o;
+  o.iso = 0.1f;
+  o.topology = TopologyMode::none;
+  const traversal::SplitRule rule(o, h.lattice(), h.origin(), h.spacing(), h.error_fold());
+  const SlabPlan plan = finest_plan(h.lattice(), h.data_dims(), o.iso, h.origin(), h.spacing());
+  MeshBuilder builder(o.iso, h.lattice().side, h.origin(), h.spacing());
+  std::atomic<int64_t> blocks{0}, cells{0};
+  const int64_t side = plan.slab_layers, count = slab_count(plan);
+  const int64_t first = 1, last = count - 3;  // the share: slabs [first, last]
+  ASSERT_GT(last - first, 2);
+  SlabClaims claims;
+  claims.end_at(last);
+  for (int64_t s = first; s <= last; ++s)
+    march_finest_slab(reader, rule, plan, h.data_dims(), s * side, std::min((s + 1) * side, plan.cell_layers), builder,
+                      blocks, cells, claims);
+  EXPECT_GT(asked_blocks.size(), 20u);
+  for (const Coord& lo : asked_blocks) {
+    EXPECT_GT(lo[2], first * side) << "a block of the share's first slab, or before it, asked for";
+    EXPECT_LE(lo[2], last * side) << "a block past the share asked for";
+  }
+  const std::set<int64_t> was_read(read.begin(), read.end());
+  for (int64_t b : asked) EXPECT_TRUE(was_read.count(b)) << "brick " << b << " asked for, never read";
+}
+
 // A store wholly in the page cache is read without a single read-ahead hint (each would be a
 // system call for nothing); once reads wait for the disk, an extraction at eps 0 passes hints
 // ahead of its march. Each half needs what it says of the page cache, and is skipped, saying so,

@@ -51,6 +51,34 @@ inline void count_finest(int64_t blocks, int64_t cells, ExtractStats* stats) {
   stats->tets_emitted = 6 * cells;
 }
 
+// How far in z one process's finest march has asked its source for the slabs ahead, shared by
+// its slabs. Each slab claims the slabs of its window beyond the furthest one claimed so far, so
+// that every range record is read once to ask and once to march, whatever the window. A slab left
+// below that mark unclaimed is one a slab after it claimed past first; slabs are handed out in
+// increasing order (parallel_for_in_order), so such a slab is being marched already, where a hint
+// would come too late. No claim reaches past the last slab of the process's share (among several
+// processes): the slabs after it are another process's, and asking for them would read their
+// range records and hint bricks this process never reads.
+class SlabClaims {
+ public:
+  // The slabs [first, last) after `slab`, up to `slab + ahead` and the process's last, beyond the
+  // furthest claimed so far (empty when first >= last).
+  std::pair<int64_t, int64_t> claim(int64_t slab, int64_t ahead) {
+    const int64_t through = std::min(slab + ahead, last_);
+    int64_t before = furthest_.load(std::memory_order_relaxed);
+    while (before < through && !furthest_.compare_exchange_weak(before, through, std::memory_order_relaxed)) {
+    }
+    return {std::max(before, slab) + 1, std::max(before, through) + 1};
+  }
+  // The process marches no slab after `last_slab` (inclusive). Set before the march starts its
+  // threads: claim() reads it unsynchronised, and starting the threads publishes it.
+  void end_at(int64_t last_slab) { last_ = last_slab; }
+
+ private:
+  std::atomic<int64_t> furthest_{-1};                   // the furthest slab claimed
+  int64_t last_ = std::numeric_limits<int64_t>::max();  // the last slab the process marches
+};
+
 // The cost of each slab of `plan`, for sharing them among processes: from the records of the
 // cube diamonds of scale 2 (the blocks' own, cubes of 8 cells a side, in band 2: 1/64 of the
 // data), the cells of the cubes the isovalue may cut. Coarser cubes (scale 3 or 4, 1/512 or
@@ -121,32 +149,6 @@ inline Mesh march_finest_share(const SlabPlan& plan, const MarchSlab& march, con
   }
   return mesh;
 }
-
-// How far in z one process's finest march has asked its source for the slabs ahead, shared by
-// its slabs. Each slab claims the slabs of its window beyond the furthest one claimed so far, so
-// that every range record is read once to ask and once to march, whatever the window. A slab left
-// below that mark unclaimed is one a slab after it claimed past first; slabs are handed out in
-// increasing order (parallel_for_in_order), so such a slab is being marched already, where a hint
-// would come too late. No claim reaches past the last slab the process marches (its share of
-// them, among several processes), whose bricks another process reads.
-class SlabClaims {
- public:
-  // The slabs [first, last) after `slab`, up to `slab + ahead` and the process's last, beyond the
-  // furthest claimed so far (empty when first >= last).
-  std::pair<int64_t, int64_t> claim(int64_t slab, int64_t ahead) {
-    const int64_t through = std::min(slab + ahead, last_);
-    int64_t before = furthest_.load(std::memory_order_relaxed);
-    while (before < through && !furthest_.compare_exchange_weak(before, through, std::memory_order_relaxed)) {
-    }
-    return {std::max(before, slab) + 1, std::max(before, through) + 1};
-  }
-  // The process marches no slab after `last`; before any claim.
-  void end_at(int64_t last) { last_ = last; }
-
- private:
-  std::atomic<int64_t> furthest_{-1};                   // the furthest slab claimed
-  int64_t last_ = std::numeric_limits<int64_t>::max();  // the last slab the process marches
-};
 
 // extract_finest's slabs shared among processes (include/isotope/distribution.h), by their cost
 // estimated from the source's records (slab_costs).
