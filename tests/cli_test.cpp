@@ -691,11 +691,7 @@ TEST_F(Cli, ReportSaysWhetherAStoresReadsWaitedForTheDisk) {
   const std::string raw = in_work("noise_65x65x65_float32.raw"), store = in_work("noise.isotope");
   ASSERT_EQ(run("generate noise --seed 21 -q -o " + quote(raw)).code, 0);
   ASSERT_EQ(run("convert -q --brick-bits 3 " + quote(raw) + " " + quote(store)).code, 0);
-  {
-    std::ifstream whole(store, std::ios::binary);
-    std::vector<char> bytes(fs::file_size(store));
-    whole.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  }
+  isotope::testing::read_into_page_cache(store);
   // Byte 1024: the first brick's, past the header (docs/FORMAT.md).
   if (isotope::testing::page_cached(store, 1024) != 1)
     GTEST_SKIP() << "the file system refuses RWF_NOWAIT, or does not keep " << store << " in the page cache";

@@ -992,11 +992,7 @@ TEST(FinestMarch, AsksForNothingPastItsShare) {
 // where the file system does not do it.
 TEST_F(PagedExtract, ReadHintsOnlyOnceReadsWaitForTheDisk) {
   const std::string file = convert(as_raw(generate_noise(65, 21)), "hints", 3);
-  {
-    std::ifstream whole(file, std::ios::binary);
-    std::vector<char> bytes(std::filesystem::file_size(file));
-    whole.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  }
+  testing::read_into_page_cache(file);
   if (testing::page_cached(file, kHeaderBytes) != 1)
     GTEST_SKIP() << "the file system refuses RWF_NOWAIT, or does not keep " << file << " in the page cache";
   ExtractOptions o;

@@ -128,6 +128,13 @@ int page_cached(const std::string& file, uint64_t offset) {
   return got == 1 ? 1 : (got < 0 && error == EAGAIN) ? 0 : -1;
 }
 
+void read_into_page_cache(const std::string& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::vector<char> chunk(size_t{1} << 20);
+  while (in.read(chunk.data(), static_cast<std::streamsize>(chunk.size())) || in.gcount() > 0) {
+  }
+}
+
 bool drop_from_page_cache(const std::string& file) {
   const int fd = ::open(file.c_str(), O_RDONLY);
   if (fd < 0) return false;

@@ -185,6 +185,14 @@ inline SlabPlan finest_plan(const Lattice& lattice, const std::array<int64_t, 3>
 // march at once (on two threads, five; with the threads left out, eight measured as four).
 inline int64_t finest_slabs_ahead() { return 3 + thread_count(); }
 
+// The cells per axis of the block of PLAN whose lowest corner is (x0, y0, z0), `layers` cell layers
+// deep: as many as the plan's blocks have, fewer at the volume's far faces.
+inline std::array<int64_t, 3> finest_block_cells(const SlabPlan& plan, const std::array<int64_t, 3>& dims, int64_t x0,
+                                                 int64_t y0, int64_t layers) {
+  const int64_t side = plan.slab_layers;
+  return {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), layers};
+}
+
 // Whether the isovalue may cut the block of `side` cells a side at (x0, y0, zb): its cube
 // diamond's range record. A source without records: always.
 template <class Reader>
@@ -214,7 +222,7 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
     for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
       ++seen;
       if (!finest_block_in_range(reader, rule, side, x0, y0, z0)) continue;
-      const std::array<int64_t, 3> n{std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), z1 - z0};
+      const std::array<int64_t, 3> n = finest_block_cells(plan, dims, x0, y0, z1 - z0);
       const Coord lo{x0, y0, z0};
       constexpr bool kCutsInPlace = requires { reader.block_cut(lo, n, plan.iso); };
       if constexpr (kCutsInPlace)
@@ -235,13 +243,6 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
     }
   blocks += seen;
   cells += marched;
-}
-
-// The cells of the block of PLAN whose lowest corner is (x0, y0, zb), per axis.
-inline std::array<int64_t, 3> finest_block_cells(const SlabPlan& plan, const std::array<int64_t, 3>& dims, int64_t x0,
-                                                 int64_t y0, int64_t zb) {
-  const int64_t side = plan.slab_layers;
-  return {std::min(side, dims[0] - 1 - x0), std::min(side, dims[1] - 1 - y0), std::min(side, plan.cell_layers - zb)};
 }
 
 // One slab of the finest march, [z0, z1) (z0 a multiple of the slab's layers, as slab_range
@@ -269,7 +270,8 @@ void march_finest_slab(Reader& reader, const traversal::SplitRule& rule, const S
         for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
           for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side)
             if (finest_block_in_range(reader, rule, side, x0, y0, zb))
-              reader.prefetch_block({x0, y0, zb}, finest_block_cells(plan, dims, x0, y0, zb));
+              reader.prefetch_block({x0, y0, zb},
+                                    finest_block_cells(plan, dims, x0, y0, std::min(side, plan.cell_layers - zb)));
     };
     const bool hints_paid = reader.hints_pay();
     if (hints_paid) ask_ahead();
