@@ -54,7 +54,8 @@ TEST(MeshTopology, UnusedVerticesAreNotCountedAndDisjointPiecesAreComponents) {
 }
 
 TEST(MeshTopology, AnyThreadCountGivesTheSameCounts) {
-  // Two linked tori at full resolution: over a hundred thousand triangles, many tasks.
+  // Two linked tori at full resolution: over a hundred thousand triangles, many tasks, and on more
+  // than one thread the vertices split into parts, each counted by its own thread.
   ExtractOptions o;
   const Mesh m = extract(generate_linked_tori(129), o);
   ASSERT_GT(m.triangles.size(), 100000u);
@@ -67,13 +68,34 @@ TEST(MeshTopology, AnyThreadCountGivesTheSameCounts) {
   EXPECT_EQ(one.boundary_edges, 0);
   EXPECT_EQ(one.nonmanifold_edges, 0);
   EXPECT_EQ(one.edges * 2, one.triangles * 3) << "closed: every edge has two triangles";
-  for (size_t threads : {2, 5}) {
+  // The same mesh with holes and fins: every 10th triangle dropped (boundary edges), every 13th
+  // given twice (three or four triangles on its edges), so that every count means something.
+  Mesh torn;
+  torn.positions = m.positions;
+  for (size_t i = 0; i < m.triangles.size(); ++i) {
+    if (i % 10 == 0) continue;
+    torn.triangles.push_back(m.triangles[i]);
+    if (i % 13 == 0) torn.triangles.push_back(m.triangles[i]);
+  }
+  const MeshTopology torn_one = [&] {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    return measure_topology(torn);
+  }();
+  EXPECT_GT(torn_one.boundary_edges, 0);
+  EXPECT_GT(torn_one.nonmanifold_edges, 0);
+  auto expect_same = [](const MeshTopology& t, const MeshTopology& o, size_t threads) {
+    EXPECT_EQ(t.vertices, o.vertices) << threads << " threads";
+    EXPECT_EQ(t.triangles, o.triangles) << threads << " threads";
+    EXPECT_EQ(t.edges, o.edges) << threads << " threads";
+    EXPECT_EQ(t.components, o.components) << threads << " threads";
+    EXPECT_EQ(t.euler_characteristic, o.euler_characteristic) << threads << " threads";
+    EXPECT_EQ(t.boundary_edges, o.boundary_edges) << threads << " threads";
+    EXPECT_EQ(t.nonmanifold_edges, o.nonmanifold_edges) << threads << " threads";
+  };
+  for (size_t threads : {2, 3, 5}) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
-    const MeshTopology t = measure_topology(m);
-    EXPECT_EQ(t.vertices, one.vertices);
-    EXPECT_EQ(t.edges, one.edges);
-    EXPECT_EQ(t.components, one.components);
-    EXPECT_EQ(t.euler_characteristic, one.euler_characteristic);
+    expect_same(measure_topology(m), one, threads);
+    expect_same(measure_topology(torn), torn_one, threads);
   }
 }
 

@@ -50,57 +50,61 @@ class ConcurrentForest {
   std::vector<std::atomic<uint32_t>> parent_;
 };
 
-// Adds one to `c`, returning what it held. A locked add costs about 20 cycles even when no other
-// thread touches the counter, and filing the edges makes two for every edge end: on one thread
-// (kConcurrent false) a plain load and store, which nothing else can interleave with.
-template <bool kConcurrent>
-uint32_t bump(std::atomic<uint32_t>& c) {
-  if constexpr (kConcurrent) return c.fetch_add(1, std::memory_order_relaxed);
-  const uint32_t v = c.load(std::memory_order_relaxed);
-  c.store(v + 1, std::memory_order_relaxed);
-  return v;
+// The vertex range [begin, end) of one part of the filing passes below. Each part reads every
+// triangle and counts or files only the edge ends and corners whose vertex is its own, so no two
+// threads write one counter and no add is locked (a locked add costs about 20 cycles even when no
+// other thread touches the counter, and the passes make two for every edge end). Against locked
+// adds over tasks of triangles, best of 7 on two threads: 57 -> 43 ms for a 956 k-triangle coarse
+// mesh (1024^3 algebraic store, 1 M budget), 132 -> 98 ms for embryo's 2.5 M-triangle eps-0 mesh.
+// Reading all triangles once per part costs little beside the scattered writes (12 bytes a
+// triangle, in order), but a part per thread on many cores would read them many times over:
+// kMostParts bounds that.
+constexpr int64_t kMostParts = 8;
+struct VertexPart {
+  uint32_t begin, end;
+  bool holds(uint32_t v) const { return v - begin < end - begin; }
+};
+
+template <class Body>
+void for_each_part(size_t n, size_t triangles, const Body& body) {
+  const int64_t parts = runs_serially(0, tasks_for(triangles)) ? 1 : std::min(thread_count(), kMostParts);
+  parallel_for(int64_t{0}, parts, [&](int64_t p) {
+    const auto at = [&](int64_t q) {
+      return static_cast<uint32_t>(n * static_cast<size_t>(q) / static_cast<size_t>(parts));
+    };
+    body(VertexPart{at(p), at(p + 1)});
+  });
 }
 
-template <bool kConcurrent>
-MeshTopology measure(const Mesh& mesh) {
+}  // namespace
+
+MeshTopology measure_topology(const Mesh& mesh) {
   MeshTopology t;
   t.triangles = static_cast<int64_t>(mesh.triangles.size());
   const size_t n = mesh.positions.size();
-  const int64_t tasks = tasks_for(mesh.triangles.size());
   // Each undirected edge is filed under its lower vertex (counting pass, then filling): a vertex's
   // few entries are then sorted in place, where one sort of all 3F edges took most of the time
-  // (20 ms of a 100k-triangle mesh that `isotope serve` answers interactively). Both passes run on
-  // all threads; a 2.5 M-triangle mesh took 126 ms on one. Algebraic 257^3's eps 0 mesh (939 k
-  // triangles, the bench's BM_MeshTopology): 23 ms on one thread, 29 ms with locked adds there.
-  std::vector<std::atomic<uint32_t>> count(n + 1);
-  std::vector<std::atomic<uint8_t>> used(n);
-  parallel_for(int64_t{0}, tasks, [&](int64_t task) {
-    const size_t end = std::min(mesh.triangles.size(), static_cast<size_t>(task + 1) * kTrianglesPerTask);
-    for (size_t i = static_cast<size_t>(task) * kTrianglesPerTask; i < end; ++i) {
-      const auto& tri = mesh.triangles[i];
+  // (20 ms of a 100k-triangle mesh that `isotope serve` answers interactively).
+  std::vector<uint32_t> count(n + 1, 0);
+  std::vector<uint8_t> used(n, 0);
+  for_each_part(n, mesh.triangles.size(), [&](VertexPart part) {
+    for (const auto& tri : mesh.triangles)
       for (int k = 0; k < 3; ++k) {
-        bump<kConcurrent>(count[std::min(tri[k], tri[(k + 1) % 3]) + 1]);
-        used[tri[k]].store(1, std::memory_order_relaxed);
+        const uint32_t a = tri[static_cast<size_t>(k)], lo = std::min(a, tri[static_cast<size_t>((k + 1) % 3)]);
+        if (part.holds(lo)) ++count[lo + 1];
+        if (part.holds(a)) used[a] = 1;
       }
-    }
   });
   std::vector<uint32_t> first(n + 1, 0);
-  for (size_t v = 1; v <= n; ++v) first[v] = first[v - 1] + count[v].load(std::memory_order_relaxed);
-  parallel_for(int64_t{0}, tasks_for(n), [&](int64_t task) {  // count[v] becomes v's fill position
-    const size_t end = std::min(n, static_cast<size_t>(task + 1) * kTrianglesPerTask);
-    for (size_t v = static_cast<size_t>(task) * kTrianglesPerTask; v < end; ++v)
-      count[v].store(first[v], std::memory_order_relaxed);
-  });
+  for (size_t v = 1; v <= n; ++v) first[v] = first[v - 1] + count[v];
+  std::copy(first.begin(), first.end() - 1, count.begin());  // count[v] becomes v's fill position
   std::vector<uint32_t> upper(first.back());
-  parallel_for(int64_t{0}, tasks, [&](int64_t task) {
-    const size_t end = std::min(mesh.triangles.size(), static_cast<size_t>(task + 1) * kTrianglesPerTask);
-    for (size_t i = static_cast<size_t>(task) * kTrianglesPerTask; i < end; ++i) {
-      const auto& tri = mesh.triangles[i];
+  for_each_part(n, mesh.triangles.size(), [&](VertexPart part) {
+    for (const auto& tri : mesh.triangles)
       for (int k = 0; k < 3; ++k) {
-        const uint32_t a = tri[k], b = tri[(k + 1) % 3];
-        upper[bump<kConcurrent>(count[std::min(a, b)])] = std::max(a, b);
+        const uint32_t a = tri[static_cast<size_t>(k)], b = tri[static_cast<size_t>((k + 1) % 3)];
+        if (part.holds(std::min(a, b))) upper[count[std::min(a, b)]++] = std::max(a, b);
       }
-    }
   });
   // Per vertex: its distinct upper neighbours are its edges; each joins two vertices' components.
   ConcurrentForest forest(n);
@@ -128,7 +132,7 @@ MeshTopology measure(const Mesh& mesh) {
     Counts& c = per_task[static_cast<size_t>(task)];
     const size_t end = std::min(n, static_cast<size_t>(task + 1) * kTrianglesPerTask);
     for (size_t v = static_cast<size_t>(task) * kTrianglesPerTask; v < end; ++v) {
-      if (!used[v].load(std::memory_order_relaxed)) continue;
+      if (!used[v]) continue;
       ++c.vertices;
       if (forest.find(static_cast<uint32_t>(v)) == v) ++c.components;
     }
@@ -142,13 +146,6 @@ MeshTopology measure(const Mesh& mesh) {
   }
   t.euler_characteristic = t.vertices - t.edges + t.triangles;
   return t;
-}
-
-}  // namespace
-
-MeshTopology measure_topology(const Mesh& mesh) {
-  // The adds run in the passes over the triangles' tasks.
-  return runs_serially(0, tasks_for(mesh.triangles.size())) ? measure<false>(mesh) : measure<true>(mesh);
 }
 
 }  // namespace isotope
