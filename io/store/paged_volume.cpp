@@ -50,6 +50,8 @@ PagedVolume::PagedVolume(BrickCache& cache)
     for (int i = 0; i < d.ring_count; ++i) t.value[static_cast<size_t>(3 + i)] = offset(d.ring[i]);
     t.values = 3 + d.ring_count;
     for_each_child(d, reference, [&](const Coord& u) { t.child[static_cast<size_t>(t.children++)] = offset(u); });
+    t.type = d.type;
+    t.shape = shape_of(d, reference);
     // band0_bounds_inside reads them as nodes of the data box for any vertex inside it by one node.
     for (const auto& o : t.value)
       for (const int8_t x : o)
@@ -104,33 +106,99 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
     sat.add(c, range, topology);
   });
   CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
-  const Record r = finish_record(dv, shape_of(d, lattice), inside, range, sat, unused, topology);
-  const PackedTopology t = pack_topology(r.topology, r.bounds.error_surplus);
-  if (surplus) store(home->surplus() + m, t.surplus);
-  if (topology) {
-    if (home->exact()) store(home->exact() + m, interval_word(t.exact_lo, t.exact_hi));
-    if (home->paper()) store(home->paper() + m, interval_word(t.paper_lo, t.paper_hi));
-    if (home->weights()) store(home->weights() + m, weights_word(t.weight));
-  }
-  store_bounds(*home, m, pack_bounds(r.bounds));  // last: the word others check first
+  // Weights only where the brick holds them: an extraction that reads none (mode paper or
+  // preserve) leaves them unset, and one that reads them later computes the record again.
+  const Record r = finish_record(dv, shape_of(d, lattice), inside, range, sat, unused, topology, nullptr,
+                                 home->weights() != nullptr);
+  store_band0_record(*home, m, r, topology);
   return r;
 }
 
-void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint32_t m) {
-  const PagedVolume& pv = *volume_;
-  const Band0Template& t = pv.band0_templates_[static_cast<size_t>((v[0] & 3) | (v[1] & 3) << 2 | (v[2] & 3) << 4)];
-  const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
-  const int64_t mask = pv.layout_.brick_width() - 1;
-  const Near near{v[0] & mask, v[1] & mask, v[2] & mask, mask};
-  if (home->narrow() && home->surplus() == nullptr) return band0_narrow_inside(v, t, index, *home, m, near);
-  float f[11];
-  home->values().visit([&](const auto* values) {
+void PagedVolume::Pager::store_band0_record(CachedBrick& home, uint32_t m, const Record& r, bool topology) {
+  const PackedTopology t = pack_topology(r.topology, r.bounds.error_surplus);
+  if (home.surplus()) store(home.surplus() + m, t.surplus);
+  if (topology) {
+    if (home.exact()) store(home.exact() + m, interval_word(t.exact_lo, t.exact_hi));
+    if (home.paper()) store(home.paper() + m, interval_word(t.paper_lo, t.paper_hi));
+    if (home.weights()) store(home.weights() + m, weights_word(t.weight));
+  }
+  store_bounds(home, m, pack_bounds(r.bounds));  // last: the word others check first
+}
+
+bool PagedVolume::Pager::inside_by_one(const Coord& v) const {
+  const auto& dims = volume_->layout_.dims();
+  return v[0] >= 1 && v[1] >= 1 && v[2] >= 1 && v[0] + 1 < dims[0] && v[1] + 1 < dims[1] && v[2] + 1 < dims[2];
+}
+
+const PagedVolume::Band0Template& PagedVolume::Pager::template_of(const Coord& v) const {
+  return volume_->band0_templates_[static_cast<size_t>((v[0] & 3) | (v[1] & 3) << 2 | (v[2] & 3) << 4)];
+}
+
+PagedVolume::Pager::Near PagedVolume::Pager::near_of(const Coord& v) const {
+  const int64_t mask = volume_->layout_.brick_width() - 1;
+  return {v[0] & mask, v[1] & mask, v[2] & mask, mask};
+}
+
+void PagedVolume::Pager::polyhedron_values(const Coord& v, const Band0Template& t, const CachedBrick& home,
+                                           const Near& near, float* f) {
+  home.values().visit([&](const auto* values) {
     for (int i = 0; i < t.values; ++i) {
       const auto& o = t.value[static_cast<size_t>(i)];
       f[i] = near.in_brick(o) ? static_cast<float>(values[near.index(o)])
                               : value_at({v[0] + o[0], v[1] + o[1], v[2] + o[2]});
     }
   });
+}
+
+Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, uint32_t m) {
+  const Band0Template& t = template_of(v);
+  const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
+  const Near near = near_of(v);
+  float f[11];
+  polyhedron_values(v, t, *home, near, f);
+  // As read_polyhedron with every polyhedron vertex real and in the box.
+  DiamondValues dv;
+  dv.type = t.type;
+  dv.fa = f[0], dv.fb = f[1], dv.fv = f[2];
+  DiamondBounds range;
+  range.lo = std::min({f[0], f[1], f[2]});
+  range.hi = std::max({f[0], f[1], f[2]});
+  for (int i = 3; i < t.values; ++i) {
+    dv.ring[i - 3] = f[i];
+    range.lo = std::min(range.lo, f[i]), range.hi = std::max(range.hi, f[i]);
+  }
+  const bool surplus = home->surplus() != nullptr;
+  const RecordFields held{home->exact() != nullptr, home->paper() != nullptr, home->weights() != nullptr, false};
+  Saturation sat;
+  for (int i = 0; i < t.children; ++i) {
+    const auto& o = t.child[static_cast<size_t>(i)];
+    int64_t ci = index;
+    uint32_t cm = 0;
+    if (near.in_brick(o))
+      cm = near.index(o);
+    else
+      ci = volume_->indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
+    const PackedBounds p = bounds_of(bounds_word(ci, cm));
+    Record c;
+    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
+                surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
+    c.topology = this->topology(ci, cm, held);
+    sat.add(c, range, true);
+  }
+  CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
+  const Record r = finish_record(dv, t.shape, true, range, sat, unused, true, nullptr, held.weights);
+  store_band0_record(*home, m, r, true);
+  return r;
+}
+
+void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint32_t m) {
+  const PagedVolume& pv = *volume_;
+  const Band0Template& t = template_of(v);
+  const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
+  const Near near = near_of(v);
+  if (home->narrow() && home->surplus() == nullptr) return band0_narrow_inside(v, t, index, *home, m, near);
+  float f[11];
+  polyhedron_values(v, t, *home, near, f);
   // As read_polyhedron and finish_record (engine/hierarchy/record_builder.h) with every vertex in the box.
   DiamondBounds range{std::min({f[0], f[1], f[2]}), std::max({f[0], f[1], f[2]}), 0, 0};
   for (int i = 3; i < t.values; ++i) range.lo = std::min(range.lo, f[i]), range.hi = std::max(range.hi, f[i]);
@@ -161,8 +229,7 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint
   store_bounds(*home, m, pack_bounds(range));
 }
 
-template <class Template>
-void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Template& t, int64_t index, CachedBrick& home,
+void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Band0Template& t, int64_t index, CachedBrick& home,
                                              uint32_t m, const Near& near) {
   // band0_bounds_inside's record in the narrow word's own integers (io/store/held_words.h): the
   // values and the range are bytes, a bound a count of halves, and min, max, |2 c - a - b| and a
@@ -218,8 +285,7 @@ uint64_t PagedVolume::Pager::computed_bounds_word(int64_t index, uint32_t m) {
   // (the record just computed would read as none). Held, a lookup gets this very brick back.
   const std::shared_ptr<CachedBrick> home = hold(index);
   const Coord v = band0_node(*home, m);
-  const auto& dims = volume_->layout_.dims();
-  if (v[0] >= 1 && v[1] >= 1 && v[2] >= 1 && v[0] + 1 < dims[0] && v[1] + 1 < dims[1] && v[2] + 1 < dims[2])
+  if (inside_by_one(v))
     band0_bounds_inside(v, index, m);
   else
     band0_record(v, false);
@@ -257,7 +323,11 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
   if (b->band() == 0 && ((read.exact && w[0] == kUnsetInterval) || (read.paper && w[1] == kUnsetInterval) ||
                          (read.weights && w[2] == kUnsetWeights))) {
     const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
-    band0_record(band0_node(*home, m), true);
+    const Coord v = band0_node(*home, m);
+    if (inside_by_one(v))
+      band0_record_inside(v, index, m);
+    else
+      band0_record(v, true);
     b = home.get();
     w = words();
   }

@@ -15,6 +15,7 @@
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"
+#include "engine/hierarchy/record_builder.h"
 #include "io/store/brick_cache.h"
 
 namespace isotope {
@@ -36,6 +37,22 @@ class PagedVolume {
   uint64_t bytes_read() const { return cache_.stats().bytes_read; }  // a distributed rank's load
   void will_read_again() const { cache_.keep_whole_budget(); }       // RereadHint
 
+ private:
+  // A scale-0 diamond's shape relative to its vertex, for one class of coordinates mod 4 (the
+  // geometry of a vertex depends only on them: engine/hierarchy/band_tile.h): its polyhedron and the
+  // refinement vertices of its children, as offsets.
+  struct Band0Template {
+    bool valid = false;
+    int values = 0, children = 0;  // polyhedron: a, b, v, then the ring
+    std::array<std::array<int8_t, 3>, 11> value{};
+    std::array<std::array<int8_t, 3>, 12> child{};
+    // What the topology of its record reads beyond the values: the polyhedron's type and shape
+    // (the shape's tetrahedra per child depend on the levels below, the same for every lattice).
+    PolyhedronType type = PolyhedronType::cube;
+    DiamondShape shape;
+  };
+
+ public:
   // One per task: pins the bricks it used last (direct-mapped by brick index), so most lookups
   // touch no shared state at all.
   class Pager {
@@ -85,6 +102,12 @@ class PagedVolume {
     // Band 0, computed on first read: v's record, its range and errors (and with `topology` its
     // intervals and weights), stored into v's brick.
     Record band0_record(const Coord& v, bool topology);
+    // band0_record with `topology` of a vertex whose polyhedron lies in the data box, from its
+    // class's template (no diamond built, the values within its brick read from it): the same
+    // record, bit for bit. (index, m): where v's record lives.
+    Record band0_record_inside(const Coord& v, int64_t index, uint32_t m);
+    // Whether v's polyhedron and its children lie in the data box (all but its outer layer of nodes).
+    bool inside_by_one(const Coord& v) const;
     // The same for the range and errors of a vertex whose polyhedron lies in the data box (all but
     // the box's outer layer of nodes), without building its diamond: a template of its class.
     // (index, m): where v's record lives.
@@ -103,9 +126,13 @@ class PagedVolume {
                kSpreadBits3[static_cast<size_t>(lz + o[2])] << 2;
       }
     };
+    // v's template (v of scale 0), where v lies in its brick, and the values of its polyhedron in
+    // the template's order (a, b, v, the ring), those in the brick read from it.
+    const Band0Template& template_of(const Coord& v) const;
+    Near near_of(const Coord& v) const;
+    void polyhedron_values(const Coord& v, const Band0Template& t, const CachedBrick& home, const Near& near, float* f);
     // band0_bounds_inside where the brick's words are narrow and it holds no surplus: in integers.
-    template <class Template>
-    void band0_narrow_inside(const Coord& v, const Template& t, int64_t index, CachedBrick& home, uint32_t m,
+    void band0_narrow_inside(const Coord& v, const Band0Template& t, int64_t index, CachedBrick& home, uint32_t m,
                              const Near& near);
     float value_at(const Coord& c);  // as MultiresVolume::value: any lattice node, clamped into the data box
     // A record's range-and-bound word as engine/hierarchy/compact_record.h's, whatever width the
@@ -121,6 +148,8 @@ class PagedVolume {
     // bounds_word's narrow word, for a brick whose words are narrow (CachedBrick::narrow).
     uint32_t narrow_word(int64_t index, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
+    // A band-0 record computed into its brick: the fields the brick holds, the bounds last.
+    void store_band0_record(CachedBrick& home, uint32_t m, const Record& r, bool topology);
     static Coord band0_node(const CachedBrick& brick, uint32_t m);  // band 0: the node of m in the brick
 
     struct Pinned {
@@ -138,15 +167,6 @@ class PagedVolume {
   Reader reader() const { return Reader(*this); }
 
  private:
-  // A scale-0 diamond's shape relative to its vertex, for one class of coordinates mod 4 (the
-  // geometry of a vertex depends only on them: engine/hierarchy/band_tile.h): its polyhedron and the
-  // refinement vertices of its children, as offsets.
-  struct Band0Template {
-    bool valid = false;
-    int values = 0, children = 0;  // polyhedron: a, b, v, then the ring
-    std::array<std::array<int8_t, 3>, 11> value{};
-    std::array<std::array<int8_t, 3>, 12> child{};
-  };
   BrickCache& cache_;
   const StoreLayout& layout_;
   const StoreHeader& header_;
