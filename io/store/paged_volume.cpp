@@ -274,8 +274,9 @@ void PagedVolume::Pager::store_bounds(CachedBrick& home, uint32_t m, const Packe
   const uint64_t word = isotope::bounds_word(p);
   if (!home.narrow()) return store(home.bounds() + m, word);
   // Computed from values the cache checked to be integers of 0..255: always narrow.
-  uint32_t narrow = 0;
-  if (!narrow_bounds(&word, 1, &narrow)) throw std::logic_error("a band-0 record of one-byte values is not narrow");
+  uint32_t bad = 0;
+  const uint32_t narrow = narrow_of(static_cast<uint32_t>(word), static_cast<uint32_t>(word >> 32), bad);
+  if (bad != 0) throw std::logic_error("a band-0 record of one-byte values is not narrow");
   store(home.narrow_bounds() + m, narrow);
 }
 
