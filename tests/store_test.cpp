@@ -202,9 +202,9 @@ TEST_F(Store, BandZeroRangesAndBoundsOfAUint8StoreAreTheBuildsWithNoOtherField) 
                                       dir_.string()),
                      own, {});
     ASSERT_EQ(BrickCache(StoreReader(own), 1).value_bytes(), 1);
-    const Hierarchy loaded = load(own, RecordFields{});
-    const Hierarchy built =
-        Hierarchy::build(testing::load_shared(shared), RecordFields{}, StoreLayout::kDefaultBrickBits);
+    const RecordFields none{false, false, false, false};  // ranges and bounds alone
+    const Hierarchy loaded = load(own, none);
+    const Hierarchy built = Hierarchy::build(testing::load_shared(shared), none, StoreLayout::kDefaultBrickBits);
     ASSERT_EQ(loaded.layout().brick_count(), built.layout().brick_count());
     const int64_t nodes = built.layout().brick_nodes();
     const Band& band0 = built.layout().band(0);
@@ -222,6 +222,33 @@ TEST_F(Store, BandZeroRangesAndBoundsOfAUint8StoreAreTheBuildsWithNoOtherField) 
     EXPECT_GT(bounded, 1000);
   }
   EXPECT_GE(volumes, 3);
+}
+
+// An extraction that reads no simplification weights (mode preserve) computes band 0's topology
+// without them and leaves them unset; one that reads them later (simplify), through the same
+// cache, computes them then. Each time, every record as a cache that had those fields from the
+// start reads it, on a float store and on one of 8-bit codes (values and records held narrow).
+TEST_F(Store, BandZeroWeightsLeftOutAreComputedWhenAskedForLater) {
+  const Volume v = testing::crop(generate_noise(40, 6), {37, 33, 29});
+  ConvertOptions codes;
+  codes.quantize_bits = 8;
+  for (const auto& [name, options] : {std::pair<std::string, ConvertOptions>{"float", {}}, {"codes", codes}}) {
+    SCOPED_TRACE(name);
+    const std::string store = convert(v, name, options);
+    const StoreReader reader(store);
+    BrickCache cache(reader, uint64_t{1} << 34);
+    EXPECT_EQ(cache.value_bytes(), name == "codes" ? 1 : 4);
+    const PagedVolume volume(cache);
+    for (const RecordFields& fields : {RecordFields{true, true, false, true}, kAll}) {
+      const Hierarchy loaded = load_hierarchy(volume, fields);
+      const Hierarchy fresh = load(store, fields);
+      int64_t mismatches = 0;
+      for (int64_t i = 0; i < fresh.layout().brick_count(); ++i)
+        if (!same_words(loaded, fresh, i, fresh.layout().brick_nodes()) && ++mismatches < 5)
+          ADD_FAILURE() << (fields.weights ? "with" : "without") << " weights: brick " << i << " differs";
+      EXPECT_EQ(mismatches, 0);
+    }
+  }
 }
 
 // Band 0's records are computed on first read into the brick that holds them, and reading one
@@ -248,7 +275,7 @@ TEST_F(Store, BandZeroRecordsAreTheBuildsWhenTheCacheKeepsOnlyWhatReadersHold) {
   const StoreReader reader(store);
   ASSERT_EQ(reader.layout().band(0).bricks[0], 32);
   const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-  for (const RecordFields& fields : {RecordFields{}, kAll}) {
+  for (const RecordFields& fields : {RecordFields{false, false, false, false}, kAll}) {
     SCOPED_TRACE(fields.topology() ? "every field" : "ranges and bounds");
     BrickCache cache(reader, 1);
     ASSERT_EQ(cache.value_bytes(), 1);

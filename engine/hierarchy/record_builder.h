@@ -216,9 +216,10 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
 // The record from what was gathered: the polyhedron's values, shape and range, whether every real
 // polyhedron vertex lies in the data box, and the children's saturation. Without `topology`, the
 // range and errors alone (the topology left empty), the same bits as with it. Without `weights`,
-// the topology without its simplification weights (left 0), the rest the same bits as with them:
-// a store's band 0 computed for an extraction that reads no weights (io/store/paged_volume.h), where
-// the weights' gradients and sizes took a sixth of its first extraction's time.
+// the topology without its simplification weights (0), the rest the same bits as with them: a
+// store's band 0 computed for an extraction that reads no weights (docs/FORMAT.md, "Band 0's
+// records"), where the weights' gradients and sizes were a tenth of the CPU time of embryo's
+// first `preserve` extraction at eps 120 (profiled).
 inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, bool inside_box,
                             const DiamondBounds& range, Saturation sat, CriticalCounts& counts, bool topology = true,
                             const ShapeGradients* gradients = nullptr, bool weights = true) {
@@ -266,7 +267,7 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     r.topology.paper_lo = sat.paper.lo;
     r.topology.paper_hi = sat.paper.hi;
   }
-  r.topology.weight = sat.weight;
+  r.topology.weight = weights ? sat.weight : std::array<float, 3>{0, 0, 0};
   return r;
 }
 

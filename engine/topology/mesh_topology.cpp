@@ -52,14 +52,15 @@ class ConcurrentForest {
 
 // The vertex range [begin, end) of one part of the filing passes below. Each part reads every
 // triangle and counts or files only the edge ends and corners whose vertex is its own, so no two
-// threads write one counter and no add is locked (a locked add costs about 20 cycles even when no
-// other thread touches the counter, and the passes make two for every edge end). Against locked
+// threads write one counter and no add is locked (the passes made two locked adds for every edge
+// end, each one a full memory barrier even when no other thread touches the counter). Against locked
 // adds over tasks of triangles, best of 7 on two threads: 57 -> 43 ms for a 956 k-triangle coarse
 // mesh (1024^3 algebraic store, 1 M budget), 132 -> 98 ms for embryo's 2.5 M-triangle eps-0 mesh.
-// Reading all triangles once per part costs little beside the scattered writes (12 bytes a
-// triangle, in order), but a part per thread on many cores would read them many times over:
-// kMostParts bounds that.
-constexpr int64_t kMostParts = 8;
+// Each part reads all triangles (12 bytes a triangle, in order), so a part per thread on many
+// cores would read them many times over, and where the parts run one after another (nested in a
+// busy parallel loop, as the server measures beside the normals) one thread reads them that many
+// times: kMostParts bounds both. Measured on two threads only.
+constexpr int64_t kMostParts = 4;
 struct VertexPart {
   uint32_t begin, end;
   bool holds(uint32_t v) const { return v - begin < end - begin; }

@@ -49,7 +49,7 @@ bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow) {
     uint32_t half[2 * kBlock];  // little-endian: the low half (lo, hi), then the bound's bits
     std::memcpy(half, words + first, count * sizeof(uint64_t));
     uint32_t* out = narrow + first;
-    for (size_t i = 0; i < count; ++i) out[i] = narrow_of(half[2 * i], half[2 * i + 1], bad);
+    for (size_t i = 0; i < count; ++i) out[i] = narrow_word_of(half[2 * i], half[2 * i + 1], bad);
   }
   return bad == 0;
 }

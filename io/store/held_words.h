@@ -65,8 +65,8 @@ inline uint32_t narrow_bound(uint32_t bits, uint32_t& bad) {
   return static_cast<uint32_t>(halves) << 16 | (infinite & 0xffff0000u);
 }
 // The narrow word of one 64-bit word given as its halves (`low`: lo and hi as bfloat16 codes,
-// `high`: the bound's float bits); `bad` gains nonzero bits where it has none.
-inline uint32_t narrow_of(uint32_t low, uint32_t high, uint32_t& bad) {
+// `high`: the bound's float bits); `bad` gains nonzero bits where the word has no narrow form.
+inline uint32_t narrow_word_of(uint32_t low, uint32_t high, uint32_t& bad) {
   const uint32_t lo = narrow_code(low << 16, bad), hi = narrow_code(low & 0xffff0000u, bad);
   bad |= (hi - lo) >> 31;  // hi below lo
   return lo | hi << 8 | narrow_bound(high, bad);

@@ -87,7 +87,7 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
   DiamondBounds range;
   const bool inside = read_polyhedron(
       d, lattice, layout.dims(), [&](const Coord& c) { return value_at(c); }, dv, range);
-  const bool surplus = home->surplus() != nullptr;
+  const RecordFields held = fields_held(*home);
   Saturation sat;
   for_each_child(d, lattice, [&](const Coord& u) {
     // Without a record, u's whole diamond lies beyond a face of the data box (as RecordBuilder).
@@ -95,32 +95,35 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
       if (u[a] > record_extent(lattice, layout.dims(), a, 0)) return;
     uint32_t cm = 0;
     const int64_t ci = volume_->indexer_.locate(0, u[0], u[1], u[2], &cm);
-    const PackedBounds p = bounds_of(bounds_word(ci, cm));
-    Record c;
-    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
-                surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
-    if (topology) {
-      RecordFields held{home->exact() != nullptr, home->paper() != nullptr, home->weights() != nullptr, false};
-      c.topology = this->topology(ci, cm, held);
-    }
-    sat.add(c, range, topology);
+    sat.add(child_record(ci, cm, topology, held), range, topology);
   });
   CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
-  // Weights only where the brick holds them: an extraction that reads none (mode paper or
-  // preserve) leaves them unset, and one that reads them later computes the record again.
-  const Record r = finish_record(dv, shape_of(d, lattice), inside, range, sat, unused, topology, nullptr,
-                                 home->weights() != nullptr);
-  store_band0_record(*home, m, r, topology);
+  const Record r = finish_record(dv, shape_of(d, lattice), inside, range, sat, unused, topology, nullptr, held.weights);
+  store_band0_record(*home, m, r, topology, held);
   return r;
 }
 
-void PagedVolume::Pager::store_band0_record(CachedBrick& home, uint32_t m, const Record& r, bool topology) {
+RecordFields PagedVolume::Pager::fields_held(const CachedBrick& home) {
+  return {home.exact() != nullptr, home.paper() != nullptr, home.weights() != nullptr, home.surplus() != nullptr};
+}
+
+Record PagedVolume::Pager::child_record(int64_t index, uint32_t m, bool topology, const RecordFields& held) {
+  const PackedBounds p = bounds_of(bounds_word(index, m));
+  Record c;
+  c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
+              held.surplus ? bf16_to_float(this->surplus(index, m)) : 0.0f};
+  if (topology) c.topology = this->topology(index, m, {held.exact, held.paper, held.weights, false});
+  return c;
+}
+
+void PagedVolume::Pager::store_band0_record(CachedBrick& home, uint32_t m, const Record& r, bool topology,
+                                            const RecordFields& held) {
   const PackedTopology t = pack_topology(r.topology, r.bounds.error_surplus);
-  if (home.surplus()) store(home.surplus() + m, t.surplus);
+  if (held.surplus) store(home.surplus() + m, t.surplus);
   if (topology) {
-    if (home.exact()) store(home.exact() + m, interval_word(t.exact_lo, t.exact_hi));
-    if (home.paper()) store(home.paper() + m, interval_word(t.paper_lo, t.paper_hi));
-    if (home.weights()) store(home.weights() + m, weights_word(t.weight));
+    if (held.exact) store(home.exact() + m, interval_word(t.exact_lo, t.exact_hi));
+    if (held.paper) store(home.paper() + m, interval_word(t.paper_lo, t.paper_hi));
+    if (held.weights) store(home.weights() + m, weights_word(t.weight));
   }
   store_bounds(home, m, pack_bounds(r.bounds));  // last: the word others check first
 }
@@ -167,8 +170,7 @@ Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, ui
     dv.ring[i - 3] = f[i];
     range.lo = std::min(range.lo, f[i]), range.hi = std::max(range.hi, f[i]);
   }
-  const bool surplus = home->surplus() != nullptr;
-  const RecordFields held{home->exact() != nullptr, home->paper() != nullptr, home->weights() != nullptr, false};
+  const RecordFields held = fields_held(*home);
   Saturation sat;
   for (int i = 0; i < t.children; ++i) {
     const auto& o = t.child[static_cast<size_t>(i)];
@@ -178,16 +180,11 @@ Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, ui
       cm = near.index(o);
     else
       ci = volume_->indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
-    const PackedBounds p = bounds_of(bounds_word(ci, cm));
-    Record c;
-    c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
-                surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
-    c.topology = this->topology(ci, cm, held);
-    sat.add(c, range, true);
+    sat.add(child_record(ci, cm, true, held), range, true);
   }
   CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
   const Record r = finish_record(dv, t.shape, true, range, sat, unused, true, nullptr, held.weights);
-  store_band0_record(*home, m, r, true);
+  store_band0_record(*home, m, r, true, held);
   return r;
 }
 
@@ -275,7 +272,7 @@ void PagedVolume::Pager::store_bounds(CachedBrick& home, uint32_t m, const Packe
   if (!home.narrow()) return store(home.bounds() + m, word);
   // Computed from values the cache checked to be integers of 0..255: always narrow.
   uint32_t bad = 0;
-  const uint32_t narrow = narrow_of(static_cast<uint32_t>(word), static_cast<uint32_t>(word >> 32), bad);
+  const uint32_t narrow = narrow_word_of(static_cast<uint32_t>(word), static_cast<uint32_t>(word >> 32), bad);
   if (bad != 0) throw std::logic_error("a band-0 record of one-byte values is not narrow");
   store(home.narrow_bounds() + m, narrow);
 }

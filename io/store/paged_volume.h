@@ -100,17 +100,16 @@ class PagedVolume {
       return pinned_[static_cast<size_t>(index) % pinned_.size()].brick;
     }
     // Band 0, computed on first read: v's record, its range and errors (and with `topology` its
-    // intervals and weights), stored into v's brick.
+    // intervals, and its weights where the brick holds them), stored into v's brick.
     Record band0_record(const Coord& v, bool topology);
-    // band0_record with `topology` of a vertex whose polyhedron lies in the data box, from its
-    // class's template (no diamond built, the values within its brick read from it): the same
-    // record, bit for bit. (index, m): where v's record lives.
-    Record band0_record_inside(const Coord& v, int64_t index, uint32_t m);
-    // Whether v's polyhedron and its children lie in the data box (all but its outer layer of nodes).
+    // Whether v's polyhedron and its children lie in the data box (all but the box's outer layer
+    // of nodes).
     bool inside_by_one(const Coord& v) const;
-    // The same for the range and errors of a vertex whose polyhedron lies in the data box (all but
-    // the box's outer layer of nodes), without building its diamond: a template of its class.
-    // (index, m): where v's record lives.
+    // band0_record with `topology` of such a vertex, from its class's template (no diamond built,
+    // the values within its brick read from it): the same record, bit for bit. (index, m): where
+    // v's record lives.
+    Record band0_record_inside(const Coord& v, int64_t index, uint32_t m);
+    // band0_record without `topology` of such a vertex, the same way: its range and errors.
     void band0_bounds_inside(const Coord& v, int64_t index, uint32_t m);
     // The nodes within one node of such a vertex, by their offset from it: whether they lie in its
     // brick, and where there. (Within the data box: the vertex lies inside it by one node.)
@@ -148,8 +147,17 @@ class PagedVolume {
     // bounds_word's narrow word, for a brick whose words are narrow (CachedBrick::narrow).
     uint32_t narrow_word(int64_t index, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
-    // A band-0 record computed into its brick: the fields the brick holds, the bounds last.
-    void store_band0_record(CachedBrick& home, uint32_t m, const Record& r, bool topology);
+    // The record fields a brick holds arrays for, taken once per band-0 record computed: the
+    // children are read, the record computed and stored with those alone. An array another
+    // thread's extraction adds meanwhile (BrickCache::require) stays unset for this record, and
+    // that extraction computes it again, where a field computed without its children's would be
+    // stored as if it were right.
+    static RecordFields fields_held(const CachedBrick& home);
+    // A child's record as a band-0 record reads it: range, bound, the surplus and (with
+    // `topology`) the topology fields `held` names.
+    Record child_record(int64_t index, uint32_t m, bool topology, const RecordFields& held);
+    // A band-0 record computed into its brick: the fields `held` names, the bounds last.
+    void store_band0_record(CachedBrick& home, uint32_t m, const Record& r, bool topology, const RecordFields& held);
     static Coord band0_node(const CachedBrick& brick, uint32_t m);  // band 0: the node of m in the brick
 
     struct Pinned {
