@@ -165,8 +165,12 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
   if (impl_->streams(options)) {
     const BoxReader& file = *impl_->file;
     const VolumeInfo& i = file.info();
-    const LayerSource layers{i.dims, i.spacing, i.origin, [&](int64_t z, int64_t count, float* out) {
+    const LayerSource layers{i.dims, i.spacing, i.origin,
+                             [&](int64_t z, int64_t count, float* out) {
                                file.read_box({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
+                             },
+                             [&](int64_t z, int64_t count, float* out) {
+                               file.read_box_unchecked({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
                              }};
     return extract_streamed(layers, options, stats);
   }

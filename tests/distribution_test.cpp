@@ -264,12 +264,14 @@ TEST(DistributedExtract, EpsZeroStreamedReadsEachRanksShareOnly) {
   ASSERT_GT(single.triangles.size(), 1000u);
   std::array<std::vector<std::array<int64_t, 2>>, 2> reads;  // per rank: (first layer, layers) per call
   const auto source_for = [&](int rank, int64_t unreadable) {
-    return LayerSource{
-        volume.dims, volume.spacing, volume.origin, [&, rank, unreadable](int64_t z, int64_t n, float* out) {
-          if (z <= unreadable && unreadable < z + n) throw IoError("layer 30 unreadable");
-          reads[static_cast<size_t>(rank)].push_back({z, n});
-          std::copy(volume.data() + volume.index(0, 0, z), volume.data() + volume.index(0, 0, z + n), out);
-        }};
+    return LayerSource{volume.dims, volume.spacing, volume.origin,
+                       [&, rank, unreadable](int64_t z, int64_t n, float* out) {
+                         if (z <= unreadable && unreadable < z + n) throw IoError("layer 30 unreadable");
+                         reads[static_cast<size_t>(rank)].push_back({z, n});
+                         std::copy(volume.data() + volume.index(0, 0, z), volume.data() + volume.index(0, 0, z + n),
+                                   out);
+                       },
+                       nullptr};
   };
   const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(2, [&](const Distribution& g) {
     ExtractOptions mine = o;
@@ -317,11 +319,13 @@ TEST(DistributedExtract, EpsZeroStreamedSharesAreTheInMemoryOnes) {
     const auto out = on_ranks<std::pair<Mesh, Mesh>>(ranks, [&](const Distribution& g) {
       ExtractOptions mine = o;
       mine.distribution = &g;
-      const LayerSource source{volume.dims, volume.spacing, volume.origin, [&](int64_t z, int64_t n, float* to) {
+      const LayerSource source{volume.dims, volume.spacing, volume.origin,
+                               [&](int64_t z, int64_t n, float* to) {
                                  reads[static_cast<size_t>(g.rank())].push_back({z, n});
                                  std::copy(volume.data() + volume.index(0, 0, z),
                                            volume.data() + volume.index(0, 0, z + n), to);
-                               }};
+                               },
+                               nullptr};
       Mesh streamed = extract_streamed(source, mine);
       return std::pair{std::move(streamed), extract(volume, mine)};
     });

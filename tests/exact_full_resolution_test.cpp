@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <span>
 #include <stdexcept>
@@ -28,6 +29,7 @@
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/mesh/marching_tetrahedra.h"
+#include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
@@ -424,14 +426,17 @@ TEST(FullResolutionSlabs, SurfaceInTheSharedPlaneGivesTheOneWalkMesh) {
 // eps = 0 from a volume streamed a window of z-layers at a time (docs/METHOD.md, "eps = 0 from a file"):
 // the array's mesh bit for bit, each layer read once in order (the top layer of a window again as
 // the first of the next), whatever the threads.
+// UNCHECKED: the source also reads without the check that values are finite, which the march
+// then makes.
 struct RecordedLayers {
   const Volume& volume;
   std::vector<std::array<int64_t, 2>> reads;  // (first layer, layers) per call
-  LayerSource source() {
-    return {volume.dims, volume.spacing, volume.origin, [this](int64_t z, int64_t count, float* out) {
-              reads.push_back({z, count});
-              std::copy(volume.data() + volume.index(0, 0, z), volume.data() + volume.index(0, 0, z + count), out);
-            }};
+  LayerSource source(bool unchecked = false) {
+    const std::function<void(int64_t, int64_t, float*)> read = [this](int64_t z, int64_t count, float* out) {
+      reads.push_back({z, count});
+      std::copy(volume.data() + volume.index(0, 0, z), volume.data() + volume.index(0, 0, z + count), out);
+    };
+    return {volume.dims, volume.spacing, volume.origin, read, unchecked ? read : nullptr};
   }
 };
 
@@ -441,23 +446,24 @@ void expect_streamed_is_the_arrays_mesh(const Volume& volume, float iso, const s
   o.iso = iso;
   const Mesh reference = extract(volume, o);
   ASSERT_GT(reference.triangles.size(), 0u) << what;
-  for (int threads : {1, 2}) {
-    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
-    RecordedLayers layers{volume, {}};
-    ExtractStats stats;
-    const Mesh m = extract_streamed(layers.source(), o, &stats);
-    EXPECT_TRUE(m.positions == reference.positions && m.triangles == reference.triangles)
-        << what << " iso " << iso << ", " << threads << " threads";
-    EXPECT_GT(stats.tets_emitted, 0) << what;
-    ASSERT_GE(static_cast<int64_t>(layers.reads.size()), min_windows) << what;
-    int64_t next = 0;
-    for (const auto& [z, count] : layers.reads) {
-      EXPECT_EQ(z, next) << what << ": layers read out of order or twice";
-      EXPECT_GE(count, 2) << what;
-      next = z + count - 1;
+  for (int threads : {1, 2})
+    for (bool unchecked : {false, true}) {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+      RecordedLayers layers{volume, {}};
+      ExtractStats stats;
+      const Mesh m = extract_streamed(layers.source(unchecked), o, &stats);
+      EXPECT_TRUE(m.positions == reference.positions && m.triangles == reference.triangles)
+          << what << " iso " << iso << ", " << threads << " threads" << (unchecked ? ", read unchecked" : "");
+      EXPECT_GT(stats.tets_emitted, 0) << what;
+      ASSERT_GE(static_cast<int64_t>(layers.reads.size()), min_windows) << what;
+      int64_t next = 0;
+      for (const auto& [z, count] : layers.reads) {
+        EXPECT_EQ(z, next) << what << ": layers read out of order or twice";
+        EXPECT_GE(count, 2) << what;
+        next = z + count - 1;
+      }
+      EXPECT_EQ(next, volume.dims[2] - 1) << what << ": not every layer read";
     }
-    EXPECT_EQ(next, volume.dims[2] - 1) << what << ": not every layer read";
-  }
 }
 
 TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
@@ -502,6 +508,64 @@ TEST(Streamed, AFailedReadStopsTheExtractionWithItsError) {
         EXPECT_EQ(std::string(error.what()), "layer " + std::to_string(bad) + " unreadable");
       }
     }
+}
+
+// Read unchecked, a value that is not finite anywhere (a corner, a face, a block's edge, a
+// window's last layer) is found by the march, and named in the words a checked read gives, the
+// first in the file when there are several, whatever slab met one first; read errors still stop it.
+TEST(Streamed, AValueNotFiniteReadUncheckedIsNamedAsACheckedReadNamesIt) {
+  const Volume wide = testing::make_volume({700, 650, 40}, [](int64_t x, int64_t y, int64_t z) {
+    return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
+           0.1 * static_cast<double>(z % 13);
+  });
+  ExtractOptions o;
+  o.iso = 0.5f;
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  using Bad = std::vector<std::pair<std::array<int64_t, 3>, float>>;
+  for (const Bad& bad :
+       {Bad{{{0, 0, 0}, nan}}, Bad{{{699, 649, 39}, inf}}, Bad{{{699, 0, 17}, -inf}}, Bad{{{350, 8, 8}, nan}},
+        Bad{{{3, 400, 8}, nan}, {{600, 2, 36}, inf}}, Bad{{{10, 10, 35}, nan}, {{5, 5, 2}, -inf}}}) {
+    Volume v = wide;
+    for (const auto& [at, value] : bad) v.values[v.index(at[0], at[1], at[2])] = value;
+    const auto checked = [&](int64_t z, int64_t count, float* out) {
+      std::copy(v.data() + v.index(0, 0, z), v.data() + v.index(0, 0, z + count), out);
+      check_finite(out, {0, 0, z}, {v.dims[0], v.dims[1], count}, "layers");
+    };
+    const auto unchecked = [&](int64_t z, int64_t count, float* out) {
+      std::copy(v.data() + v.index(0, 0, z), v.data() + v.index(0, 0, z + count), out);
+    };
+    const std::string expected = testing::io_error_of([&] { check_finite(v, "layers"); });
+    ASSERT_TRUE(testing::contains_text(expected, "is not finite"));
+    for (int threads : {1, 2}) {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+      const LayerSource source{v.dims, v.spacing, v.origin, checked, unchecked};
+      EXPECT_EQ(testing::io_error_of([&] { extract_streamed(source, o); }), expected) << threads << " threads";
+    }
+  }
+  // Not finite when read unchecked, finite when read again: the file changed meanwhile.
+  Volume changed = wide;
+  changed.values[changed.index(100, 100, 20)] = nan;
+  const LayerSource source{
+      wide.dims, wide.spacing, wide.origin,
+      [&](int64_t z, int64_t count, float* out) {
+        std::copy(wide.data() + wide.index(0, 0, z), wide.data() + wide.index(0, 0, z + count), out);
+      },
+      [&](int64_t z, int64_t count, float* out) {
+        std::copy(changed.data() + changed.index(0, 0, z), changed.data() + changed.index(0, 0, z + count), out);
+      }};
+  try {
+    extract_streamed(source, o);
+    ADD_FAILURE() << "a value that is not finite went unnoticed";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "changed meanwhile");
+  }
+  // A failed unchecked read stops the extraction with its error.
+  RecordedLayers layers{wide, {}};
+  LayerSource failing = layers.source(true);
+  failing.read_unchecked = [](int64_t z, int64_t, float*) {
+    throw IoError("layer " + std::to_string(z) + " unreadable");
+  };
+  EXPECT_EQ(testing::io_error_of([&] { extract_streamed(failing, o); }), "layer 0 unreadable");
 }
 
 TEST(Streamed, CancelledWhileItReadsItStops) {

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <tiffio.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -285,6 +286,12 @@ TEST_F(TiffStack, TruncatedAndNonFiniteDataAreIoErrors) {
              {.bits = 32, .format = SAMPLEFORMAT_IEEEFP});
   EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("nan.tif"))); }), "nan.tif");
   EXPECT_CONTAINS(io_error_of([&] { read_volume(spec(path("nan.tif"))); }), "at (x,y,z) = (1,2,1) is not finite");
+  // Unchecked, the NaN is read as it is.
+  const auto reader = open_box_reader(spec(path("nan.tif")), "");
+  std::vector<float> values(32, 7.0f);
+  reader->read_box_unchecked({0, 0, 0}, {4, 4, 2}, values.data());
+  EXPECT_TRUE(std::isnan(values[16 + 2 * 4 + 1]));
+  EXPECT_EQ(std::count_if(values.begin(), values.end(), [](float v) { return v == 0.0f; }), 31);
 }
 
 // The value of TAG in every directory of a classic little-endian TIFF, set to VALUE (SHORT or LONG),

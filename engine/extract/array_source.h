@@ -5,12 +5,19 @@
 #include <array>
 #include <cstdint>
 #include <limits>
+#include <stdexcept>
 #include <vector>
 
 #include "engine/hierarchy/lattice.h"
 #include "isotope/volume.h"
 
 namespace isotope {
+
+// What ArrayReader::block_cut throws, asked to check, on a block holding a value that is not
+// finite: the caller names the value (where it is, in which file) by reading it again.
+struct NonFiniteValue : std::runtime_error {
+  NonFiniteValue() : std::runtime_error("a value of the volume is not finite (NaN or infinite)") {}
+};
 
 // Reads node values by their global coordinates from an array of whole z-layers: layer z of the
 // volume is layer z - z_first of the array. value() clamps coordinates beyond the volume to its
@@ -19,8 +26,9 @@ namespace isotope {
 // block_values, and never calls value() on an array that holds only some layers.
 class ArrayReader {
  public:
-  ArrayReader(const float* values, const std::array<int64_t, 3>& dims, int64_t z_first)
-      : values_(values), dims_(dims), z_first_(z_first) {}
+  // CHECKS: the values were not checked for being finite when read; block_cut then checks them.
+  ArrayReader(const float* values, const std::array<int64_t, 3>& dims, int64_t z_first, bool checks = false)
+      : values_(values), dims_(dims), z_first_(z_first), checks_(checks) {}
   float value(const Coord& c, int /*band*/) const {
     return values_[index(std::min(c[0], dims_[0] - 1), std::min(c[1], dims_[1] - 1), std::min(c[2], dims_[2] - 1))];
   }
@@ -29,23 +37,33 @@ class ArrayReader {
   // z extent, x increasing): the first block of a row takes the least and greatest value of each
   // x column over the row's nodes, a whole array row at a time, which vectorizes, and each block
   // then looks at its own columns only. Scanning each block's rows of nine values was 8% of the
-  // one-shot eps 0 process. Values are finite (the volume is checked when read).
+  // one-shot eps 0 process. Values are finite, checked when read, or here when the reader was
+  // made to check: the same pass looks for a NaN, and the columns' extremes for an infinity, so
+  // that a streamed volume is not read twice, once to check and once to march. The rows of the
+  // blocks of a slab are every node of its layers, when each axis has two nodes at least.
   bool block_cut(const Coord& lo, const std::array<int64_t, 3>& n, float iso) {
     if (lo[1] != row_[0] || lo[2] != row_[1] || n[1] != row_[2] || n[2] != row_[3]) {
       row_ = {lo[1], lo[2], n[1], n[2]};
       const auto width = static_cast<size_t>(dims_[0]);
-      low_.assign(width, std::numeric_limits<float>::infinity());
-      high_.assign(width, -std::numeric_limits<float>::infinity());
+      low_.assign(width, kInf);
+      high_.assign(width, -kInf);
       float* low = low_.data();
       float* high = high_.data();
+      int nan = 0;
       for (int64_t z = 0; z <= n[2]; ++z)
         for (int64_t y = 0; y <= n[1]; ++y) {
           const float* row = values_ + index(0, lo[1] + y, lo[2] + z);
           for (size_t x = 0; x < width; ++x) {
             low[x] = row[x] < low[x] ? row[x] : low[x];
             high[x] = row[x] > high[x] ? row[x] : high[x];
+            nan |= row[x] != row[x];
           }
         }
+      if (checks_) {
+        // An infinity is a column's least or greatest value; a NaN is neither (no comparison holds).
+        for (size_t x = 0; x < width; ++x) nan |= low[x] == -kInf || high[x] == kInf;
+        if (nan) throw NonFiniteValue();
+      }
     }
     bool below = false, above = false;
     for (int64_t x = lo[0]; x <= lo[0] + n[0]; ++x) {
@@ -65,12 +83,14 @@ class ArrayReader {
   }
 
  private:
+  static constexpr float kInf = std::numeric_limits<float>::infinity();
   size_t index(int64_t x, int64_t y, int64_t z) const {
     return static_cast<size_t>(((z - z_first_) * dims_[1] + y) * dims_[0] + x);
   }
   const float* values_;
   std::array<int64_t, 3> dims_;
   int64_t z_first_;
+  bool checks_;
   // block_cut's row of blocks (its y, z, and node extents) and its columns' least and greatest values.
   std::array<int64_t, 4> row_{-1, -1, -1, -1};
   std::vector<float> low_, high_;

@@ -57,9 +57,10 @@ int64_t window_bytes(const std::array<int64_t, 3>& dims, int64_t layers) {
 class LayerRing {
  public:
   // `first` and `layers`: whole slabs.
-  LayerRing(const LayerSource& source, const ExtractOptions& options, int64_t first, int64_t end, int64_t layers,
-            int64_t slab_layers, int64_t held)
-      : source_(source), options_(options), first_(first), end_(end), layers_(layers), slab_layers_(slab_layers) {
+  LayerRing(const std::function<void(int64_t, int64_t, float*)>& read, const LayerSource& source,
+            const ExtractOptions& options, int64_t first, int64_t end, int64_t layers, int64_t slab_layers,
+            int64_t held)
+      : read_(read), options_(options), first_(first), end_(end), layers_(layers), slab_layers_(slab_layers) {
     const int64_t windows = std::max<int64_t>(0, (end - first + layers - 1) / layers);
     marched_.assign(static_cast<size_t>(windows), 0);
     const auto values = static_cast<size_t>(source.dims[0] * source.dims[1] * window_nodes(source.dims, layers));
@@ -127,7 +128,7 @@ class LayerRing {
       }
       try {
         throw_if_cancelled(options_);
-        source_.read_layers(first_layer(w), cells_in(w) + 1, buffers_[static_cast<size_t>(w % held)].get());
+        read_(first_layer(w), cells_in(w) + 1, buffers_[static_cast<size_t>(w % held)].get());
       } catch (...) {
         fail(std::current_exception());
         return;
@@ -140,7 +141,7 @@ class LayerRing {
     }
   }
 
-  const LayerSource& source_;
+  const std::function<void(int64_t, int64_t, float*)>& read_;
   const ExtractOptions& options_;
   const int64_t first_, end_, layers_, slab_layers_;
   std::vector<std::unique_ptr<float[]>> buffers_;
@@ -151,6 +152,18 @@ class LayerRing {
   std::exception_ptr error_;      // what stopped the extraction
   std::thread reader_;            // last: started once the rest is ready
 };
+
+// A march that met a value that is not finite in values read unchecked: the layers read again,
+// checked, in order, so that the error names the first such value as reading them checked would
+// have. Throws always.
+[[noreturn]] void refuse_non_finite(const LayerSource& source, int64_t layers) {
+  const std::array<int64_t, 3>& dims = source.dims;
+  std::vector<float> window(static_cast<size_t>(dims[0] * dims[1] * layers));
+  for (int64_t z = 0; z < dims[2]; z += layers) source.read_layers(z, std::min(layers, dims[2] - z), window.data());
+  throw std::invalid_argument(
+      "the volume held a value that is not finite (NaN or infinite) when read, and none "
+      "when read again: it changed meanwhile");
+}
 
 }  // namespace
 
@@ -195,10 +208,18 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   const int64_t layers =
       std::min(window_layers(dims, plan.slab_layers), plan.slab_layers * std::max<int64_t>(share_slabs, 1));
   const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes(dims, layers)));
+  // One process reads unchecked when it can, its march checking every value as it looks at it:
+  // every node lies in a block's rows when each axis has two nodes (ArrayReader::block_cut). Under
+  // several processes each reads checked, as one that met a bad value could not name it alone.
+  const bool march_checks =
+      source.read_unchecked && !group && std::ranges::all_of(dims, [](int64_t d) { return d >= 2; });
   // The ring's buffers may be more than one process has memory for: under several processes made
   // where a failure on one stops them all, as reading the volume whole was.
   std::optional<LayerRing> ring;
-  const auto make_ring = [&] { ring.emplace(source, options, first, end, layers, plan.slab_layers, held); };
+  const auto make_ring = [&] {
+    ring.emplace(march_checks ? source.read_unchecked : source.read_layers, source, options, first, end, layers,
+                 plan.slab_layers, held);
+  };
   if (group)
     settle_together(*group, make_ring);
   else
@@ -211,14 +232,20 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
     const int64_t w = ring->window_of(z0);
     const float* values = ring->acquire(w);
     throw_if_cancelled(options);
-    ArrayReader reader(values, dims, ring->first_layer(w));
+    ArrayReader reader(values, dims, ring->first_layer(w), march_checks);
     march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
     ring->release(w);
   };
   if (stats) *stats = ExtractStats{};
-  Mesh mesh = group ? march_finest_share(plan, march, *group, costs, shares, options.keep_shares, blocks, cells, {},
-                                         stats, on_failure)
-                    : march_in_slabs(plan, march, on_failure);
+  Mesh mesh;
+  try {
+    mesh = group ? march_finest_share(plan, march, *group, costs, shares, options.keep_shares, blocks, cells, {}, stats,
+                                      on_failure)
+                 : march_in_slabs(plan, march, on_failure);
+  } catch (const NonFiniteValue&) {
+    ring.reset();  // its reader stopped: the layers are read again from this thread alone
+    refuse_non_finite(source, window_nodes(dims, layers));
+  }
   if (stats) {
     if (!group) count_finest(blocks, cells, stats);  // march_finest_share counts every rank's
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

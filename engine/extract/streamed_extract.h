@@ -18,9 +18,13 @@ struct LayerSource {
   std::array<double, 3> spacing{1, 1, 1};
   std::array<double, 3> origin{0, 0, 0};
   // Fills `out` with the nodes of layers [z, z + count) as float, x fastest, then y, then z. Called
-  // from one thread, in increasing z. Throws what the read throws (a short read, a value that is
-  // not finite): the extraction throws it.
+  // from one thread at a time, in increasing z within a pass. Throws what the read throws (a short
+  // read, a value that is not finite): the extraction throws it.
   std::function<void(int64_t z, int64_t count, float* out)> read_layers;
+  // Optional: the same values without the check that they are finite. The march then checks each
+  // value as it looks at it, and on one that is not reads the layers again through read_layers,
+  // from the first, for its error: a volume read once, not once to check and once to march.
+  std::function<void(int64_t z, int64_t count, float* out)> read_unchecked;
 };
 
 // Whether extract_streamed makes what these options ask for: full resolution with no tie classes

@@ -146,6 +146,12 @@ class RawBoxReader final : public BoxReader {
   }
 
   void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override {
+    read_box_unchecked(lo, size, out);
+    if (!info_.is_integer) check_finite(out, lo, size, data_.name);  // an integer is finite as float
+  }
+
+  void read_box_unchecked(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                          float* out) const override {
     check_box(lo, size, info_, data_.name);
     const int64_t total = size[0] * size[1] * size[2];
     if (total == 0) return;
@@ -157,7 +163,6 @@ class RawBoxReader final : public BoxReader {
       Stage stage(static_cast<size_t>(((rows - 1) * d[0] + size[0])) * elem);
       for (int64_t z = 0; z < size[2]; ++z)
         for (int64_t y = 0; y < size[1]; y += rows) read_rows(lo, size, y, std::min(rows, size[1] - y), z, out, stage);
-      if (!info_.is_integer) check_finite(out, lo, size, data_.name);
       return;
     }
     // Floats stored as this machine holds them are read straight into OUT: no stage, no copy.
@@ -167,7 +172,6 @@ class RawBoxReader final : public BoxReader {
       const int64_t z = lo[2] + done / (size[0] * size[1]);
       read_run((z * d[1] + y) * d[0] + lo[0], run, out + done, stage);
     }
-    if (!info_.is_integer) check_finite(out, lo, size, data_.name);  // an integer is finite as float
   }
 
  private:
@@ -282,10 +286,15 @@ class Hdf5BoxReader final : public BoxReader {
   Hdf5BoxReader& operator=(const Hdf5BoxReader&) = delete;
 
   void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override {
+    read_box_unchecked(lo, size, out);
+    if (!info_.is_integer) check_finite(out, lo, size, where_);  // an integer is finite as float
+  }
+
+  void read_box_unchecked(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                          float* out) const override {
     check_box(lo, size, info_, where_);
     if (size[0] * size[1] * size[2] == 0) return;
     read_hyperslab(lo, size, out);
-    if (!info_.is_integer) check_finite(out, lo, size, where_);  // an integer is finite as float
   }
 
  private:

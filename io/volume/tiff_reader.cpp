@@ -376,6 +376,12 @@ class TiffBoxReader final : public BoxReader {
   }
 
   void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override {
+    read_box_unchecked(lo, size, out);
+    if (!info_.is_integer) check_finite(out, lo, size, stack_.where);  // an integer is finite as float
+  }
+
+  void read_box_unchecked(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                          float* out) const override {
     check_box(lo, size, info_, stack_.where);
     if (size[0] * size[1] * size[2] == 0) return;
     std::optional<TiffFile> multipage;  // one handle per call: concurrent boxes share nothing
@@ -399,7 +405,6 @@ class TiffBoxReader final : public BoxReader {
         file.refuse_guessed_data("slice");
       }
     }
-    if (!info_.is_integer) check_finite(out, lo, size, stack_.where);  // an integer is finite as float
   }
 
  private:
