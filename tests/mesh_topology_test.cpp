@@ -1,10 +1,12 @@
 // measure_topology (isotope/mesh.h), what every topology claim is checked with: counts on
-// small meshes worked out by hand, and the same counts on any number of threads.
+// small meshes worked out by hand, and the same counts on any number of threads, also as the
+// component report's totals.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
+#include "engine/topology/component_report.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
@@ -92,10 +94,18 @@ TEST(MeshTopology, AnyThreadCountGivesTheSameCounts) {
     EXPECT_EQ(got.boundary_edges, want.boundary_edges) << threads << " threads";
     EXPECT_EQ(got.nonmanifold_edges, want.nonmanifold_edges) << threads << " threads";
   };
+  // The component report finds the edges the same way: its components' totals are the same
+  // counts, and its labels the same on any number of threads.
+  const MeshComponents torn_components = [&] {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    return label_components(torn);
+  }();
+  expect_same(total_topology(torn_components.components), torn_one, 1);
   for (size_t threads : {2, 3, 5}) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
     expect_same(measure_topology(m), one, threads);
     expect_same(measure_topology(torn), torn_one, threads);
+    EXPECT_TRUE(label_components(torn) == torn_components) << threads << " threads";
   }
 }
 

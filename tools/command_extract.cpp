@@ -256,8 +256,12 @@ int write_outputs(const ExtractArgs& a, ExtractionRun& run, Mesh& mesh, const Me
     const auto start = std::chrono::steady_clock::now();
     // The topology is measured for the summary line and the report only: with --quiet and no
     // report nobody reads it (embryo eps 0, 2 threads: 249 -> 183 ms for the whole process).
-    if (!a.quiet || !a.report.empty()) run.topology = measure_topology(mesh);
+    // With a report, the totals of its components: the mesh's edges found once.
     const MeshComponents components = a.report.empty() ? MeshComponents{} : label_components(mesh);
+    if (!a.report.empty())
+      run.topology = total_topology(components.components);
+    else if (!a.quiet)
+      run.topology = measure_topology(mesh);
     run.components = components.components;
     run.measure_seconds = seconds_since(start);
     if (a.compare_full) {

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "engine/core/mix_hash.h"
+#include "engine/topology/filed_edges.h"
 
 namespace isotope {
 namespace {
@@ -24,7 +25,7 @@ Vec cross(const Vec& a, const Vec& b) {
 double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 double length(const Vec& a) { return std::sqrt(dot(a, a)); }
 
-// Union-find with path halving, as in measure_topology.
+// Union-find with path halving, for the comparison's groups.
 class DisjointSets {
  public:
   explicit DisjointSets(size_t n) : parent_(n) { std::iota(parent_.begin(), parent_.end(), 0u); }
@@ -51,24 +52,13 @@ void check_mesh(const Mesh& mesh) {
                                     std::to_string(mesh.positions.size()));
 }
 
-// The component of each vertex, numbered in order of the component's lowest vertex; -1 for
-// vertices no triangle uses.
-std::vector<int32_t> provisional_labels(const Mesh& mesh, int32_t& count) {
-  DisjointSets sets(mesh.positions.size());
-  std::vector<uint8_t> used(mesh.positions.size(), 0);
-  for (const auto& t : mesh.triangles) {
-    used[t[0]] = used[t[1]] = used[t[2]] = 1;
-    sets.unite(t[0], t[1]);
-    sets.unite(t[1], t[2]);
-  }
-  std::vector<int32_t> label(mesh.positions.size(), -1);
+// The component of each vertex, numbered in order of the component's lowest vertex (its root,
+// so numbered before any other of its vertices); -1 for vertices no triangle uses.
+std::vector<int32_t> provisional_labels(const FiledEdges& e, int32_t& count) {
+  std::vector<int32_t> label(e.used.size(), -1);
   count = 0;
-  for (uint32_t v = 0; v < label.size(); ++v) {
-    if (!used[v]) continue;
-    const uint32_t root = sets.find(v);
-    if (label[root] < 0) label[root] = count++;  // the root may come later; it keeps this label
-    label[v] = label[root];
-  }
+  for (size_t v = 0; v < label.size(); ++v)
+    if (e.used[v]) label[v] = e.root[v] == v ? count++ : label[e.root[v]];
   return label;
 }
 
@@ -104,24 +94,16 @@ std::vector<double> add_triangles(const Mesh& mesh, const std::vector<int32_t>& 
   return signed_volume;
 }
 
-// Distinct, boundary and non-manifold edges per component, by sorting the edge keys.
-void add_edges(const Mesh& mesh, const std::vector<int32_t>& label, std::vector<ComponentStats>& s) {
-  std::vector<uint64_t> edges;
-  edges.reserve(mesh.triangles.size() * 3);
-  for (const auto& t : mesh.triangles)
-    for (int i = 0; i < 3; ++i) {
-      const uint32_t a = t[i], b = t[(i + 1) % 3];
-      edges.push_back(uint64_t{std::min(a, b)} << 32 | std::max(a, b));
-    }
-  std::sort(edges.begin(), edges.end());
-  for (size_t i = 0; i < edges.size();) {
-    size_t j = i;
-    while (j < edges.size() && edges[j] == edges[i]) ++j;
-    ComponentStats& c = s[static_cast<size_t>(label[edges[i] >> 32])];
-    ++c.edges;
-    if (j - i == 1) ++c.boundary_edges;
-    if (j - i > 2) ++c.nonmanifold_edges;
-    i = j;
+// Distinct, boundary and non-manifold edges per component, from the edges filed under each vertex.
+void add_edges(const FiledEdges& e, const std::vector<int32_t>& label, std::vector<ComponentStats>& s) {
+  for (size_t v = 0; v < label.size(); ++v) {
+    if (label[v] < 0) continue;
+    ComponentStats& c = s[static_cast<size_t>(label[v])];
+    for_each_edge_of(e, v, [&](uint32_t, int64_t triangles) {
+      ++c.edges;
+      if (triangles == 1) ++c.boundary_edges;
+      if (triangles > 2) ++c.nonmanifold_edges;
+    });
   }
 }
 
@@ -548,12 +530,13 @@ void classify_groups(ComponentComparison& r, const std::vector<std::pair<int32_t
 
 MeshComponents label_components(const Mesh& mesh) {
   check_mesh(mesh);
+  const FiledEdges edges = file_edges(mesh);
   int32_t count = 0;
-  std::vector<int32_t> label = provisional_labels(mesh, count);
+  std::vector<int32_t> label = provisional_labels(edges, count);
   std::vector<ComponentStats> stats(static_cast<size_t>(count));
   add_vertices(mesh, label, stats);
   const std::vector<double> signed_volume = add_triangles(mesh, label, stats);
-  add_edges(mesh, label, stats);
+  add_edges(edges, label, stats);
   for (size_t c = 0; c < stats.size(); ++c) finish(stats[c], signed_volume[c]);
   // Provisional numbers follow the lowest vertex, so they are the final tie-break.
   std::vector<int32_t> order(stats.size());
@@ -578,6 +561,20 @@ MeshComponents label_components(const Mesh& mesh) {
 }
 
 std::vector<ComponentStats> measure_components(const Mesh& mesh) { return label_components(mesh).components; }
+
+MeshTopology total_topology(const std::vector<ComponentStats>& components) {
+  MeshTopology t;
+  t.components = static_cast<int64_t>(components.size());
+  for (const ComponentStats& c : components) {
+    t.vertices += c.vertices;
+    t.triangles += c.triangles;
+    t.edges += c.edges;
+    t.boundary_edges += c.boundary_edges;
+    t.nonmanifold_edges += c.nonmanifold_edges;
+  }
+  t.euler_characteristic = t.vertices - t.edges + t.triangles;
+  return t;
+}
 
 std::string_view to_string(ChangeKind kind) {
   switch (kind) {

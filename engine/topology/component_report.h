@@ -87,8 +87,11 @@ struct MeshComponents {
 };
 
 // Throws std::invalid_argument when a triangle refers to a missing vertex or the mesh has 2^31
-// or more vertices. O(T log T).
+// or more vertices. The edges are found on all threads, as measure_topology finds them.
 MeshComponents label_components(const Mesh& mesh);
+// What measure_topology gives, from the mesh's components: their sums, with no second pass over
+// the mesh.
+MeshTopology total_topology(const std::vector<ComponentStats>& components);
 // label_components(mesh).components.
 std::vector<ComponentStats> measure_components(const Mesh& mesh);
 

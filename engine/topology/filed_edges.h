@@ -1,0 +1,40 @@
+#pragma once
+// A mesh's undirected edges filed under their lower vertex, and its components through shared
+// edges, built on all threads: what the topology measure (the summary line) and the component
+// report count from, each edge found once.
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "isotope/mesh.h"
+
+namespace isotope {
+
+struct FiledEdges {
+  // Vertex v's edges (v, w), w > v, are the distinct values w of upper[first[v] .. first[v + 1]),
+  // sorted, each held by as many triangles as it appears times there.
+  std::vector<uint32_t> first, upper;
+  std::vector<uint8_t> used;   // per vertex: 1 when a triangle holds it
+  std::vector<uint32_t> root;  // per vertex: the lowest vertex of its component (itself when lowest)
+  // Distinct edges, and of them those one triangle holds and those three or more hold: counted
+  // as they are filed.
+  int64_t edges = 0, boundary_edges = 0, nonmanifold_edges = 0;
+};
+
+// Triangles must refer to vertices of MESH (the caller checks, or made the mesh).
+FiledEdges file_edges(const Mesh& mesh);
+
+// Calls f(w, triangles) for each edge (v, w) of vertex v.
+template <class F>
+void for_each_edge_of(const FiledEdges& e, size_t v, F&& f) {
+  const uint32_t* i = e.upper.data() + e.first[v];
+  const uint32_t* const stop = e.upper.data() + e.first[v + 1];
+  while (i != stop) {
+    const uint32_t* j = i + 1;
+    while (j != stop && *j == *i) ++j;
+    f(*i, j - i);
+    i = j;
+  }
+}
+
+}  // namespace isotope
