@@ -142,8 +142,8 @@ PagedVolume::Pager::Near PagedVolume::Pager::near_of(const Coord& v) const {
   return {v[0] & mask, v[1] & mask, v[2] & mask, mask};
 }
 
-void PagedVolume::Pager::polyhedron_values(const Coord& v, const Band0Template& t, const CachedBrick& home,
-                                           const Near& near, float* f) {
+DiamondBounds PagedVolume::Pager::polyhedron_values(const Coord& v, const Band0Template& t, const CachedBrick& home,
+                                                    const Near& near, float* f) {
   home.values().visit([&](const auto* values) {
     for (int i = 0; i < t.values; ++i) {
       const auto& o = t.value[static_cast<size_t>(i)];
@@ -151,6 +151,17 @@ void PagedVolume::Pager::polyhedron_values(const Coord& v, const Band0Template& 
                               : value_at({v[0] + o[0], v[1] + o[1], v[2] + o[2]});
     }
   });
+  DiamondBounds range{f[0], f[0], 0, 0};
+  for (int i = 1; i < t.values; ++i) range.lo = std::min(range.lo, f[i]), range.hi = std::max(range.hi, f[i]);
+  return range;
+}
+
+PagedVolume::Pager::Slot PagedVolume::Pager::slot_near(const Coord& v, const std::array<int8_t, 3>& o, int64_t index,
+                                                       const Near& near) const {
+  if (near.in_brick(o)) return {index, near.index(o), true};
+  Slot s{0, 0, false};
+  s.index = volume_->indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &s.m);
+  return s;
 }
 
 Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, uint32_t m) {
@@ -158,29 +169,17 @@ Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, ui
   const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
   const Near near = near_of(v);
   float f[11];
-  polyhedron_values(v, t, *home, near, f);
+  DiamondBounds range = polyhedron_values(v, t, *home, near, f);
   // As read_polyhedron with every polyhedron vertex real and in the box.
   DiamondValues dv;
   dv.type = t.type;
   dv.fa = f[0], dv.fb = f[1], dv.fv = f[2];
-  DiamondBounds range;
-  range.lo = std::min({f[0], f[1], f[2]});
-  range.hi = std::max({f[0], f[1], f[2]});
-  for (int i = 3; i < t.values; ++i) {
-    dv.ring[i - 3] = f[i];
-    range.lo = std::min(range.lo, f[i]), range.hi = std::max(range.hi, f[i]);
-  }
+  std::copy(f + 3, f + t.values, dv.ring);
   const RecordFields held = fields_held(*home);
   Saturation sat;
   for (int i = 0; i < t.children; ++i) {
-    const auto& o = t.child[static_cast<size_t>(i)];
-    int64_t ci = index;
-    uint32_t cm = 0;
-    if (near.in_brick(o))
-      cm = near.index(o);
-    else
-      ci = volume_->indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
-    sat.add(child_record(ci, cm, true, held), range, true);
+    const Slot c = slot_near(v, t.child[static_cast<size_t>(i)], index, near);
+    sat.add(child_record(c.index, c.m, true, held), range, true);
   }
   CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
   const Record r = finish_record(dv, t.shape, true, range, sat, unused, true, nullptr, held.weights);
@@ -189,34 +188,23 @@ Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, ui
 }
 
 void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint32_t m) {
-  const PagedVolume& pv = *volume_;
   const Band0Template& t = template_of(v);
   const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
   const Near near = near_of(v);
   if (home->narrow() && home->surplus() == nullptr) return band0_narrow_inside(v, t, index, *home, m, near);
   float f[11];
-  polyhedron_values(v, t, *home, near, f);
   // As read_polyhedron and finish_record (engine/hierarchy/record_builder.h) with every vertex in the box.
-  DiamondBounds range{std::min({f[0], f[1], f[2]}), std::max({f[0], f[1], f[2]}), 0, 0};
-  for (int i = 3; i < t.values; ++i) range.lo = std::min(range.lo, f[i]), range.hi = std::max(range.hi, f[i]);
+  DiamondBounds range = polyhedron_values(v, t, *home, near, f);
   const bool surplus = home->surplus() != nullptr;
   Saturation sat;
   for (int i = 0; i < t.children; ++i) {
-    const auto& o = t.child[static_cast<size_t>(i)];
-    int64_t ci = index;
-    uint32_t cm = 0;
-    uint64_t word = kUnsetBounds;
-    if (near.in_brick(o)) {
-      cm = near.index(o);
-      word = word_of(*home, cm);
-    } else {
-      ci = pv.indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
-    }
-    if (word == kUnsetBounds) word = bounds_word(ci, cm);
+    const Slot s = slot_near(v, t.child[static_cast<size_t>(i)], index, near);
+    uint64_t word = s.home ? word_of(*home, s.m) : kUnsetBounds;
+    if (word == kUnsetBounds) word = bounds_word(s.index, s.m);
     const PackedBounds p = bounds_of(word);
     Record c;
     c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
-                surplus ? bf16_to_float(this->surplus(ci, cm)) : 0.0f};
+                surplus ? bf16_to_float(this->surplus(s.index, s.m)) : 0.0f};
     sat.add(c, range, false);
   }
   const double eta = std::fabs(static_cast<double>(f[2]) - 0.5 * (static_cast<double>(f[0]) + f[1]));
@@ -244,17 +232,9 @@ void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Band0Template
   uint32_t* words = home.narrow_bounds();
   uint32_t halves = 0;  // the children's largest bound
   for (int i = 0; i < t.children; ++i) {
-    const auto& o = t.child[static_cast<size_t>(i)];
-    uint32_t w = 0;
-    if (near.in_brick(o)) {
-      const uint32_t cm = near.index(o);
-      w = load(words + cm);
-      if (w == kUnsetNarrowBounds) w = narrow_word(index, cm);
-    } else {
-      uint32_t cm = 0;
-      const int64_t ci = volume_->indexer_.locate(0, v[0] + o[0], v[1] + o[1], v[2] + o[2], &cm);
-      w = narrow_word(ci, cm);
-    }
+    const Slot s = slot_near(v, t.child[static_cast<size_t>(i)], index, near);
+    uint32_t w = s.home ? load(words + s.m) : kUnsetNarrowBounds;
+    if (w == kUnsetNarrowBounds) w = narrow_word(s.index, s.m);
     lo = std::min(lo, w & 0xffu), hi = std::max(hi, w >> 8 & 0xffu), halves = std::max(halves, w >> 16);
   }
   const auto eta = static_cast<uint32_t>(
@@ -277,16 +257,22 @@ void PagedVolume::Pager::store_bounds(CachedBrick& home, uint32_t m, const Packe
   store(home.narrow_bounds() + m, narrow);
 }
 
+void PagedVolume::Pager::compute_band0(const CachedBrick& home, int64_t index, uint32_t m, bool topology) {
+  const Coord v = band0_node(home, m);
+  if (!inside_by_one(v))
+    band0_record(v, topology);
+  else if (topology)
+    band0_record_inside(v, index, m);
+  else
+    band0_bounds_inside(v, index, m);
+}
+
 uint64_t PagedVolume::Pager::computed_bounds_word(int64_t index, uint32_t m) {
   // Held until the record is read back: computing it reads other bricks, which may take this one's
   // pin, and the cache may then evict it, and a brick decoded again has band 0's records unset
   // (the record just computed would read as none). Held, a lookup gets this very brick back.
   const std::shared_ptr<CachedBrick> home = hold(index);
-  const Coord v = band0_node(*home, m);
-  if (inside_by_one(v))
-    band0_bounds_inside(v, index, m);
-  else
-    band0_record(v, false);
+  compute_band0(*home, index, m, false);
   return word_of(*home, m);
 }
 
@@ -304,7 +290,7 @@ Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {
   const Bf16 s = load(b.surplus() + m);
   if (s != kUnsetSurplus || b.band() != 0) return s;
   const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
-  band0_record(band0_node(*home, m), false);
+  compute_band0(*home, index, m, false);
   return load(home->surplus() + m);
 }
 
@@ -321,11 +307,7 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
   if (b->band() == 0 && ((read.exact && w[0] == kUnsetInterval) || (read.paper && w[1] == kUnsetInterval) ||
                          (read.weights && w[2] == kUnsetWeights))) {
     const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
-    const Coord v = band0_node(*home, m);
-    if (inside_by_one(v))
-      band0_record_inside(v, index, m);
-    else
-      band0_record(v, true);
+    compute_band0(*home, index, m, true);
     b = home.get();
     w = words();
   }

@@ -99,8 +99,13 @@ class PagedVolume {
       brick(index);
       return pinned_[static_cast<size_t>(index) % pinned_.size()].brick;
     }
-    // Band 0, computed on first read: v's record, its range and errors (and with `topology` its
-    // intervals, and its weights where the brick holds them), stored into v's brick.
+    // Band 0's record of node m of brick `index` (HOME, held by the caller), computed on first
+    // read and stored there: its range and errors, its surplus where the brick holds it, and with
+    // `topology` its intervals and its weights where the brick holds them. From the node's class
+    // template when it lies inside the box by one node (band0_record_inside, band0_bounds_inside),
+    // else from its diamond (band0_record).
+    void compute_band0(const CachedBrick& home, int64_t index, uint32_t m, bool topology);
+    // compute_band0 of the node v through its diamond: any band-0 node.
     Record band0_record(const Coord& v, bool topology);
     // Whether v's polyhedron and its children lie in the data box (all but the box's outer layer
     // of nodes).
@@ -126,10 +131,19 @@ class PagedVolume {
       }
     };
     // v's template (v of scale 0), where v lies in its brick, and the values of its polyhedron in
-    // the template's order (a, b, v, the ring), those in the brick read from it.
+    // the template's order (a, b, v, the ring), those in the brick read from it, with their range.
     const Band0Template& template_of(const Coord& v) const;
     Near near_of(const Coord& v) const;
-    void polyhedron_values(const Coord& v, const Band0Template& t, const CachedBrick& home, const Near& near, float* f);
+    DiamondBounds polyhedron_values(const Coord& v, const Band0Template& t, const CachedBrick& home, const Near& near,
+                                    float* f);
+    // Where the record of the node at offset o from such a vertex lives: in the vertex's own
+    // brick `index` (home) or another.
+    struct Slot {
+      int64_t index;
+      uint32_t m;
+      bool home;
+    };
+    Slot slot_near(const Coord& v, const std::array<int8_t, 3>& o, int64_t index, const Near& near) const;
     // band0_bounds_inside where the brick's words are narrow and it holds no surplus: in integers.
     void band0_narrow_inside(const Coord& v, const Band0Template& t, int64_t index, CachedBrick& home, uint32_t m,
                              const Near& near);
