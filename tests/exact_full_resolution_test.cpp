@@ -512,7 +512,8 @@ TEST(Streamed, AFailedReadStopsTheExtractionWithItsError) {
 
 // Read unchecked, a value that is not finite anywhere (a corner, a face, a block's edge, a
 // window's last layer) is found by the march, and named in the words a checked read gives, the
-// first in the file when there are several, whatever slab met one first; read errors still stop it.
+// first in the file when there are several, whatever slab met one first, also beside a failed
+// read; read errors still stop it.
 TEST(Streamed, AValueNotFiniteReadUncheckedIsNamedAsACheckedReadNamesIt) {
   const Volume wide = testing::make_volume({700, 650, 40}, [](int64_t x, int64_t y, int64_t z) {
     return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
@@ -553,11 +554,39 @@ TEST(Streamed, AValueNotFiniteReadUncheckedIsNamedAsACheckedReadNamesIt) {
       [&](int64_t z, int64_t count, float* out) {
         std::copy(changed.data() + changed.index(0, 0, z), changed.data() + changed.index(0, 0, z + count), out);
       }};
-  try {
-    extract_streamed(source, o);
-    ADD_FAILURE() << "a value that is not finite went unnoticed";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_CONTAINS(std::string(e.what()), "changed meanwhile");
+  EXPECT_CONTAINS(testing::io_error_of([&] { extract_streamed(source, o); }), "changed meanwhile");
+  // A value that is not finite and a failed read in another window: the first in the file is
+  // named, as a checked read names it, whichever the reader or a worker met first.
+  // Windows here are one slab, 8 cell layers: the value lies in the last rows of the first window
+  // while the reader fails the second, or the other way round, or three windows apart.
+  for (const auto& [nan_layer, unreadable] : {std::pair<int64_t, int64_t>{5, 10}, {3, 30}, {12, 3}, {30, 3}}) {
+    Volume v = wide;
+    v.values[v.index(600, 645, nan_layer)] = nan;
+    const auto fails = [&, unreadable](int64_t z, int64_t count) {
+      if (z <= unreadable && unreadable < z + count)
+        throw IoError("layer " + std::to_string(unreadable) + " unreadable");
+    };
+    const std::function<void(int64_t, int64_t, float*)> checked = [&](int64_t z, int64_t count, float* out) {
+      fails(z, count);
+      std::copy(v.data() + v.index(0, 0, z), v.data() + v.index(0, 0, z + count), out);
+      check_finite(out, {0, 0, z}, {v.dims[0], v.dims[1], count}, "layers");
+    };
+    const std::function<void(int64_t, int64_t, float*)> unchecked = [&](int64_t z, int64_t count, float* out) {
+      fails(z, count);
+      std::copy(v.data() + v.index(0, 0, z), v.data() + v.index(0, 0, z + count), out);
+    };
+    const std::string expected = testing::io_error_of([&] {
+      extract_streamed(LayerSource{v.dims, v.spacing, v.origin, checked, nullptr}, o);
+    });
+    EXPECT_CONTAINS(expected, nan_layer < unreadable ? "is not finite" : "unreadable");
+    for (int threads : {1, 2}) {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+      EXPECT_EQ(testing::io_error_of([&] {
+                  extract_streamed(LayerSource{v.dims, v.spacing, v.origin, checked, unchecked}, o);
+                }),
+                expected)
+          << threads << " threads, value at layer " << nan_layer << ", read failing at " << unreadable;
+    }
   }
   // A failed unchecked read stops the extraction with its error.
   RecordedLayers layers{wide, {}};

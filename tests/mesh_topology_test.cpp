@@ -4,9 +4,13 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
+#include <tuple>
+
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
 #include "engine/topology/component_report.h"
+#include "engine/topology/filed_edges.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
@@ -101,6 +105,14 @@ TEST(MeshTopology, AnyThreadCountGivesTheSameCounts) {
     return label_components(torn);
   }();
   expect_same(total_topology(torn_components.components), torn_one, 1);
+  // 64-bit offsets, which a mesh of 1.4 G triangles or more takes, file the same edges as 32-bit.
+  const FiledEdges<uint32_t> narrow = file_edges<uint32_t>(torn);
+  const FiledEdges<uint64_t> wide = file_edges<uint64_t>(torn);
+  EXPECT_TRUE(std::equal(narrow.first.begin(), narrow.first.end(), wide.first.begin(), wide.first.end()));
+  EXPECT_TRUE(narrow.upper == wide.upper && narrow.used == wide.used && narrow.root == wide.root);
+  EXPECT_EQ(std::tie(narrow.edges, narrow.boundary_edges, narrow.nonmanifold_edges),
+            std::tie(wide.edges, wide.boundary_edges, wide.nonmanifold_edges));
+  EXPECT_EQ(wide.edges, torn_one.edges);
   for (size_t threads : {2, 3, 5}) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
     expect_same(measure_topology(m), one, threads);

@@ -17,6 +17,7 @@
 #include "engine/extract/array_source.h"
 #include "engine/extract/extract.h"
 #include "engine/extract/finest_extract.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -103,6 +104,8 @@ class LayerRing {
     }
     changed_.notify_all();
   }
+  // Whether a read failed (not a cancellation). Once the ring is gone or failed.
+  bool read_failed() const { return read_failed_; }
   // A slab failed: the reader stops, and every wait rethrows the failure.
   void fail(std::exception_ptr e) {
     {
@@ -129,7 +132,11 @@ class LayerRing {
       try {
         throw_if_cancelled(options_);
         read_(first_layer(w), cells_in(w) + 1, buffers_[static_cast<size_t>(w % held)].get());
+      } catch (const ExtractionCancelled&) {
+        fail(std::current_exception());
+        return;
       } catch (...) {
+        read_failed_ = true;
         fail(std::current_exception());
         return;
       }
@@ -150,19 +157,19 @@ class LayerRing {
   int64_t filled_ = 0;            // windows [0, filled_) are in their buffers
   std::vector<int64_t> marched_;  // per window: its slabs marched
   std::exception_ptr error_;      // what stopped the extraction
-  std::thread reader_;            // last: started once the rest is ready
+  std::atomic<bool> read_failed_{false};
+  std::thread reader_;  // last: started once the rest is ready
 };
 
-// A march that met a value that is not finite in values read unchecked: the layers read again,
-// checked, in order, so that the error names the first such value as reading them checked would
-// have. Throws always.
-[[noreturn]] void refuse_non_finite(const LayerSource& source, int64_t layers) {
+// The layers read again, checked, in order, `layers` at a time: throws what a checked read throws
+// first (a value that is not finite, a failed read), or returns when they all read.
+void read_checked(const LayerSource& source, const ExtractOptions& options, int64_t layers) {
   const std::array<int64_t, 3>& dims = source.dims;
   std::vector<float> window(static_cast<size_t>(dims[0] * dims[1] * layers));
-  for (int64_t z = 0; z < dims[2]; z += layers) source.read_layers(z, std::min(layers, dims[2] - z), window.data());
-  throw std::invalid_argument(
-      "the volume held a value that is not finite (NaN or infinite) when read, and none "
-      "when read again: it changed meanwhile");
+  for (int64_t z = 0; z < dims[2]; z += layers) {
+    throw_if_cancelled(options);
+    source.read_layers(z, std::min(layers, dims[2] - z), window.data());
+  }
 }
 
 }  // namespace
@@ -225,6 +232,7 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   else
     make_ring();
   std::atomic<int64_t> blocks{0}, cells{0};
+  std::atomic<bool> met_non_finite{false};
   // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
   // worker and not the reader wait for a window that slab will never release.
   const auto on_failure = [&] { ring->fail(std::current_exception()); };
@@ -233,7 +241,12 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
     const float* values = ring->acquire(w);
     throw_if_cancelled(options);
     ArrayReader reader(values, dims, ring->first_layer(w), march_checks);
-    march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+    try {
+      march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
+    } catch (const NonFiniteValue&) {
+      met_non_finite = true;
+      throw;
+    }
     ring->release(w);
   };
   if (stats) *stats = ExtractStats{};
@@ -242,9 +255,20 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
     mesh = group ? march_finest_share(plan, march, *group, costs, shares, options.keep_shares, blocks, cells, {}, stats,
                                       on_failure)
                  : march_in_slabs(plan, march, on_failure);
-  } catch (const NonFiniteValue&) {
+  } catch (...) {
+    // Read unchecked, the failure that stopped the march may not be the first a checked read
+    // meets: a value that is not finite only the march sees, and the reader, windows ahead, may
+    // fail a later read first, or a worker meet a later value first. The layers read again,
+    // checked, in order, throw the first; if they all read, the file changed meanwhile (a value
+    // met) or the read failed once (the failure stands).
+    if (!met_non_finite && !(march_checks && ring->read_failed())) throw;
+    const bool non_finite = met_non_finite;
     ring.reset();  // its reader stopped: the layers are read again from this thread alone
-    refuse_non_finite(source, window_nodes(dims, layers));
+    read_checked(source, options, window_nodes(dims, layers));
+    if (!non_finite) throw;
+    throw IoError(
+        "the volume held a value that is not finite (NaN or infinite) when read, and none when read again: it "
+        "changed meanwhile");
   }
   if (stats) {
     if (!group) count_finest(blocks, cells, stats);  // march_finest_share counts every rank's

@@ -54,7 +54,8 @@ void check_mesh(const Mesh& mesh) {
 
 // The component of each vertex, numbered in order of the component's lowest vertex (its root,
 // so numbered before any other of its vertices); -1 for vertices no triangle uses.
-std::vector<int32_t> provisional_labels(const FiledEdges& e, int32_t& count) {
+template <class Offset>
+std::vector<int32_t> provisional_labels(const FiledEdges<Offset>& e, int32_t& count) {
   std::vector<int32_t> label(e.used.size(), -1);
   count = 0;
   for (size_t v = 0; v < label.size(); ++v)
@@ -95,7 +96,8 @@ std::vector<double> add_triangles(const Mesh& mesh, const std::vector<int32_t>& 
 }
 
 // Distinct, boundary and non-manifold edges per component, from the edges filed under each vertex.
-void add_edges(const FiledEdges& e, const std::vector<int32_t>& label, std::vector<ComponentStats>& s) {
+template <class Offset>
+void add_edges(const FiledEdges<Offset>& e, const std::vector<int32_t>& label, std::vector<ComponentStats>& s) {
   for (size_t v = 0; v < label.size(); ++v) {
     if (label[v] < 0) continue;
     ComponentStats& c = s[static_cast<size_t>(label[v])];
@@ -530,13 +532,17 @@ void classify_groups(ComponentComparison& r, const std::vector<std::pair<int32_t
 
 MeshComponents label_components(const Mesh& mesh) {
   check_mesh(mesh);
-  const FiledEdges edges = file_edges(mesh);
   int32_t count = 0;
-  std::vector<int32_t> label = provisional_labels(edges, count);
-  std::vector<ComponentStats> stats(static_cast<size_t>(count));
-  add_vertices(mesh, label, stats);
-  const std::vector<double> signed_volume = add_triangles(mesh, label, stats);
-  add_edges(edges, label, stats);
+  std::vector<int32_t> label;
+  std::vector<ComponentStats> stats;
+  std::vector<double> signed_volume;
+  with_filed_edges(mesh, [&](const auto& edges) {
+    label = provisional_labels(edges, count);
+    stats.resize(static_cast<size_t>(count));
+    add_vertices(mesh, label, stats);
+    signed_volume = add_triangles(mesh, label, stats);
+    add_edges(edges, label, stats);
+  });
   for (size_t c = 0; c < stats.size(); ++c) finish(stats[c], signed_volume[c]);
   // Provisional numbers follow the lowest vertex, so they are the final tie-break.
   std::vector<int32_t> order(stats.size());

@@ -79,13 +79,14 @@ void for_each_part(size_t n, size_t triangles, const Body& body) {
 
 }  // namespace
 
-FiledEdges file_edges(const Mesh& mesh) {
+template <class Offset>
+FiledEdges<Offset> file_edges(const Mesh& mesh) {
   const size_t n = mesh.positions.size();
-  FiledEdges e;
+  FiledEdges<Offset> e;
   // Each undirected edge is filed under its lower vertex (counting pass, then filling): a vertex's
   // few entries are then sorted in place, where one sort of all 3F edges took most of the time
   // (20 ms of a 100k-triangle mesh that `isotope serve` answers interactively).
-  std::vector<uint32_t> count(n + 1, 0);
+  std::vector<Offset> count(n + 1, 0);
   e.used.assign(n, 0);
   for_each_part(n, mesh.triangles.size(), [&](VertexPart part) {
     for (const auto& tri : mesh.triangles)
@@ -138,5 +139,8 @@ FiledEdges file_edges(const Mesh& mesh) {
   });
   return e;
 }
+
+template FiledEdges<uint32_t> file_edges<uint32_t>(const Mesh& mesh);
+template FiledEdges<uint64_t> file_edges<uint64_t>(const Mesh& mesh);
 
 }  // namespace isotope
