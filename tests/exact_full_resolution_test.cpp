@@ -446,24 +446,24 @@ void expect_streamed_is_the_arrays_mesh(const Volume& volume, float iso, const s
   o.iso = iso;
   const Mesh reference = extract(volume, o);
   ASSERT_GT(reference.triangles.size(), 0u) << what;
-  for (int threads : {1, 2})
-    for (bool unchecked : {false, true}) {
-      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
-      RecordedLayers layers{volume, {}};
-      ExtractStats stats;
-      const Mesh m = extract_streamed(layers.source(unchecked), o, &stats);
-      EXPECT_TRUE(m.positions == reference.positions && m.triangles == reference.triangles)
-          << what << " iso " << iso << ", " << threads << " threads" << (unchecked ? ", read unchecked" : "");
-      EXPECT_GT(stats.tets_emitted, 0) << what;
-      ASSERT_GE(static_cast<int64_t>(layers.reads.size()), min_windows) << what;
-      int64_t next = 0;
-      for (const auto& [z, count] : layers.reads) {
-        EXPECT_EQ(z, next) << what << ": layers read out of order or twice";
-        EXPECT_GE(count, 2) << what;
-        next = z + count - 1;
-      }
-      EXPECT_EQ(next, volume.dims[2] - 1) << what << ": not every layer read";
+  // Read unchecked on one thread and on two (one process's way), checked on one (a process group's).
+  for (const auto& [threads, unchecked] : {std::pair{1, true}, {2, true}, {1, false}}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    RecordedLayers layers{volume, {}};
+    ExtractStats stats;
+    const Mesh m = extract_streamed(layers.source(unchecked), o, &stats);
+    EXPECT_TRUE(m.positions == reference.positions && m.triangles == reference.triangles)
+        << what << " iso " << iso << ", " << threads << " threads" << (unchecked ? ", read unchecked" : "");
+    EXPECT_GT(stats.tets_emitted, 0) << what;
+    ASSERT_GE(static_cast<int64_t>(layers.reads.size()), min_windows) << what;
+    int64_t next = 0;
+    for (const auto& [z, count] : layers.reads) {
+      EXPECT_EQ(z, next) << what << ": layers read out of order or twice";
+      EXPECT_GE(count, 2) << what;
+      next = z + count - 1;
     }
+    EXPECT_EQ(next, volume.dims[2] - 1) << what << ": not every layer read";
+  }
 }
 
 TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
@@ -515,17 +515,19 @@ TEST(Streamed, AFailedReadStopsTheExtractionWithItsError) {
 // first in the file when there are several, whatever slab met one first, also beside a failed
 // read; read errors still stop it.
 TEST(Streamed, AValueNotFiniteReadUncheckedIsNamedAsACheckedReadNamesIt) {
-  const Volume wide = testing::make_volume({700, 650, 40}, [](int64_t x, int64_t y, int64_t z) {
+  // Planes of 312 KB: a window is one layer of blocks, five windows (small, for the sanitizers).
+  const Volume wide = testing::make_volume({300, 260, 40}, [](int64_t x, int64_t y, int64_t z) {
     return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
            0.1 * static_cast<double>(z % 13);
   });
+  ASSERT_EQ(streamed_window_bytes(wide.dims), 300 * 260 * 9 * 4);
   ExtractOptions o;
   o.iso = 0.5f;
   const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
   using Bad = std::vector<std::pair<std::array<int64_t, 3>, float>>;
   for (const Bad& bad :
-       {Bad{{{0, 0, 0}, nan}}, Bad{{{699, 649, 39}, inf}}, Bad{{{699, 0, 17}, -inf}}, Bad{{{350, 8, 8}, nan}},
-        Bad{{{3, 400, 8}, nan}, {{600, 2, 36}, inf}}, Bad{{{10, 10, 35}, nan}, {{5, 5, 2}, -inf}}}) {
+       {Bad{{{0, 0, 0}, nan}}, Bad{{{299, 259, 39}, inf}}, Bad{{{299, 0, 17}, -inf}}, Bad{{{150, 8, 8}, nan}},
+        Bad{{{3, 200, 8}, nan}, {{250, 2, 36}, inf}}, Bad{{{10, 10, 35}, nan}, {{5, 5, 2}, -inf}}}) {
     Volume v = wide;
     for (const auto& [at, value] : bad) v.values[v.index(at[0], at[1], at[2])] = value;
     const auto checked = [&](int64_t z, int64_t count, float* out) {
@@ -561,7 +563,7 @@ TEST(Streamed, AValueNotFiniteReadUncheckedIsNamedAsACheckedReadNamesIt) {
   // while the reader fails the second, or the other way round, or three windows apart.
   for (const auto& [nan_layer, unreadable] : {std::pair<int64_t, int64_t>{5, 10}, {3, 30}, {12, 3}, {30, 3}}) {
     Volume v = wide;
-    v.values[v.index(600, 645, nan_layer)] = nan;
+    v.values[v.index(250, 255, nan_layer)] = nan;
     const auto fails = [&, unreadable](int64_t z, int64_t count) {
       if (z <= unreadable && unreadable < z + count)
         throw IoError("layer " + std::to_string(unreadable) + " unreadable");
