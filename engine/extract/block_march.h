@@ -12,14 +12,18 @@
 
 namespace isotope {
 
-// The vertices already made for the cut edges of one box of cells, in an array slot per edge (by
-// p + q in doubled coordinates from the box's lowest corner): in front of the welding table while
-// a box is marched, since most cut edges are shared by several tetrahedra of a box and a slot is
-// cheaper than a hash probe. Forgets everything at the next start(), in O(1).
+// A thread's scratch for marching boxes of cells: the vertices already made for the cut edges of
+// one box, in an array slot per edge (by p + q in doubled coordinates from the box's lowest
+// corner), in front of the welding table while a box is marched, since most cut edges are shared
+// by several tetrahedra of a box and a slot is cheaper than a hash probe; and the sign of each
+// node of the box, a row of nodes to a word. Forgets the vertices at the next start(), in O(1).
 class EdgeMemo {
  public:
-  // A box of at most `cells` cells per axis.
-  explicit EdgeMemo(int64_t cells) : width_(2 * cells + 1), slots_(static_cast<size_t>(width_ * width_ * width_), 0) {}
+  // A box of at most `cells` cells per axis, fewer than 32.
+  explicit EdgeMemo(int64_t cells)
+      : width_(2 * cells + 1),
+        slots_(static_cast<size_t>(width_ * width_ * width_), 0),
+        rows_(static_cast<size_t>((cells + 1) * (cells + 1))) {}
   // A new box.
   void start() {
     if (++stamp_ == 0) {  // the stamps wrapped: no slot may look current
@@ -33,11 +37,14 @@ class EdgeMemo {
   // stamp() << 32 | vertex once filled in this box.
   uint64_t* slots() { return slots_.data(); }
   uint64_t stamp() const { return stamp_; }
+  // A word per row of the box's nodes: bit x of row z * (cells + 1) + y is node (x, y, z)'s sign.
+  uint32_t* rows() { return rows_.data(); }
 
  private:
   int64_t width_;
   uint64_t stamp_ = 0;
   std::vector<uint64_t> slots_;
+  std::vector<uint32_t> rows_;
 };
 
 // The box's cells have their lowest corner at base + (x, y, z), 0 <= x < cells[0] and so on;

@@ -57,29 +57,10 @@ const std::array<Case, 16>& table() {
   return t;
 }
 
-bool before(const Coord& p, const Coord& q) {
-  return p[2] != q[2] ? p[2] < q[2] : p[1] != q[1] ? p[1] < q[1] : p[0] < q[0];
-}
-
 }  // namespace
 
 TetCutter::TetCutter(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing)
     : iso_(iso), key_bricks_((2 * side - 1 + 15) / 16), origin_(origin), spacing_(spacing) {}
-
-std::array<float, 3> TetCutter::point(const Coord& p0, float f0, const Coord& q0, float f1) const {
-  // Interpolate from the edge's first node in grid order, so every tetrahedron sharing the
-  // edge would compute the same bits.
-  const bool swap = before(q0, p0);
-  const Coord& p = swap ? q0 : p0;
-  const Coord& q = swap ? p0 : q0;
-  const double fp = swap ? f1 : f0, fq = swap ? f0 : f1;
-  const double t = (static_cast<double>(iso_) - fp) / (fq - fp);
-  std::array<float, 3> pos;
-  for (int a = 0; a < 3; ++a)
-    pos[a] = static_cast<float>(origin_[a] +
-                                spacing_[a] * (static_cast<double>(p[a]) + t * static_cast<double>(q[a] - p[a])));
-  return pos;
-}
 
 TetCutter::Cut TetCutter::cut(const std::array<Coord, 4>& corners, const std::array<float, 4>& values,
                               bool positive) const {
@@ -128,23 +109,13 @@ Coord edge_key_sum(uint64_t key, int64_t side) {
           bz << 4 | static_cast<int64_t>(key >> 8 & 15)};
 }
 
-uint32_t MeshBuilder::vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
-  const uint32_t found = map_->find_or_insert(key, static_cast<uint32_t>(mesh_.positions.size()));
-  return found != EdgeVertexMap::kAbsent ? found : new_vertex(key, p, fp, q, fq);
-}
-
-uint32_t MeshBuilder::new_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
-  const auto fresh = static_cast<uint32_t>(mesh_.positions.size());
-  mesh_.positions.push_back(cutter_.point(p, fp, q, fq));
+void MeshBuilder::keep_key(uint32_t fresh, uint64_t key, const Coord& p, const Coord& q) {
   const int64_t z2 = p[2] + q[2];
   // The two planes differ (a slab is a cell layer thick at least), so the vertex is on one at most.
   const int plane = z2 == plane_z2_[0] ? 0 : z2 == plane_z2_[1] ? 1 : -1;
-  if (keep_keys_ || plane >= 0) {
-    if (key == 0) key = cutter_.edge_key(p, q);
-    if (keep_keys_) keys_.push_back(key);
-    if (plane >= 0) plane_keys_[static_cast<size_t>(plane)].push_back({fresh, key});
-  }
-  return fresh;
+  if (key == 0) key = cutter_.edge_key(p, q);
+  if (keep_keys_) keys_.push_back(key);
+  if (plane >= 0) plane_keys_[static_cast<size_t>(plane)].push_back({fresh, key});
 }
 
 void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive) {

@@ -44,7 +44,21 @@ class TetCutter {
     const int64_t brick = ((z >> 4) * key_bricks_ + (y >> 4)) * key_bricks_ + (x >> 4);
     return static_cast<uint64_t>(brick << 12 | (z & 15) << 8 | (y & 15) << 4 | (x & 15));
   }
-  std::array<float, 3> point(const Coord& p, float fp, const Coord& q, float fq) const;
+  // Interpolated from the edge's first node in grid order (z, then y, then x), so every
+  // tetrahedron sharing the edge computes the same bits. Inline: the finest march makes most of
+  // its vertices here.
+  std::array<float, 3> point(const Coord& p0, float f0, const Coord& q0, float f1) const {
+    const bool swap = p0[2] != q0[2] ? q0[2] < p0[2] : p0[1] != q0[1] ? q0[1] < p0[1] : q0[0] < p0[0];
+    const Coord& p = swap ? q0 : p0;
+    const Coord& q = swap ? p0 : q0;
+    const double fp = swap ? f1 : f0, fq = swap ? f0 : f1;
+    const double t = (static_cast<double>(iso_) - fp) / (fq - fp);
+    std::array<float, 3> pos;
+    for (size_t a = 0; a < 3; ++a)
+      pos[a] = static_cast<float>(origin_[a] +
+                                  spacing_[a] * (static_cast<double>(p[a]) + t * static_cast<double>(q[a] - p[a])));
+    return pos;
+  }
 
  private:
   float iso_;
@@ -136,10 +150,21 @@ class MeshBuilder {
   }
 
  private:
-  uint32_t vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
+  uint32_t vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
+    const uint32_t found = map_->find_or_insert(key, static_cast<uint32_t>(mesh_.positions.size()));
+    return found != EdgeVertexMap::kAbsent ? found : new_vertex(key, p, fp, q, fq);
+  }
   // A new vertex on edge (p, q); KEY its edge key, or 0 when not computed yet (no edge has key 0:
   // its p + q would be the origin).
-  uint32_t new_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq);
+  uint32_t new_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
+    const auto fresh = static_cast<uint32_t>(mesh_.positions.size());
+    mesh_.positions.push_back(cutter_.point(p, fp, q, fq));
+    const int64_t z2 = p[2] + q[2];
+    if (keep_keys_ || z2 == plane_z2_[0] || z2 == plane_z2_[1]) keep_key(fresh, key, p, q);
+    return fresh;
+  }
+  // The key of new vertex FRESH kept, in the list of all keys or of its plane's.
+  void keep_key(uint32_t fresh, uint64_t key, const Coord& p, const Coord& q);
 
   TetCutter cutter_;
   // Small at first: a builder of its own serves one mesh.
