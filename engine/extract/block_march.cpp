@@ -29,16 +29,22 @@ struct CellTet {
   bool positive = false;            // its orientation
   std::array<Case, 16> cases{};     // by sign case: bit i set where corner i is above the isovalue
 };
-// The tetrahedra of a cell that a sign case of its corners cuts, in their order: each as its
-// number among the cell's six, with its own sign case shifted by 3. Most of a cut cell's
-// tetrahedra are not cut; the list skips them without a branch each.
-struct CutList {
-  uint8_t count = 0;
-  std::array<uint8_t, 6> item{};
+// What a sign case of a cell's corners cuts: the cell's cut edges, each once, in the order the
+// walk of its tetrahedra first meets them (which is the order their vertices are made in), and
+// the tetrahedra cut, in their order, each as its number among the cell's six with its own sign
+// case shifted by 3, and its points as indices into the cell's edges. A cut edge is shared by
+// two of a cut cell's tetrahedra on average, so looking each up once halves the lookups; and most
+// of a cut cell's tetrahedra are not cut, which the list skips without a branch each.
+struct CellCut {
+  uint8_t edges = 0;
+  uint8_t tets = 0;
+  std::array<uint8_t, 19> edge{};  // a | b << 3 for the edge between corners a < b
+  std::array<uint8_t, 6> tet{};
+  std::array<std::array<uint8_t, 4>, 6> point{};
 };
 struct CellTables {
-  std::array<std::array<CellTet, 6>, 8> tets;         // by parity
-  std::array<std::array<CutList, 256>, 8> cut_lists;  // by parity, then the cell's sign case
+  std::array<std::array<CellTet, 6>, 8> tets;    // by parity
+  std::array<std::array<CellCut, 256>, 8> cuts;  // by parity, then the cell's sign case
 };
 
 // A corner's offset along each axis.
@@ -92,11 +98,20 @@ CellTables make_cell_tables() {
       }
     }
     for (unsigned above = 0; above < 256; ++above) {
-      CutList& list = out.cut_lists[p][above];
+      CellCut& cut_of = out.cuts[p][above];
       for (size_t t = 0; t < 6; ++t) {
         unsigned k = 0;
         for (size_t i = 0; i < 4; ++i) k |= ((above >> out.tets[p][t].corner[i]) & 1) << i;
-        if (out.tets[p][t].cases[k].points != 0) list.item[list.count++] = static_cast<uint8_t>(t | k << 3);
+        const CellTet::Case& cut = out.tets[p][t].cases[k];
+        if (cut.points == 0) continue;
+        for (size_t i = 0; i < static_cast<size_t>(cut.points); ++i) {
+          const auto pair = static_cast<uint8_t>(cut.edge[i][0] | cut.edge[i][1] << 3);
+          size_t e = 0;
+          while (e < cut_of.edges && cut_of.edge[e] != pair) ++e;
+          if (e == cut_of.edges) cut_of.edge[cut_of.edges++] = pair;
+          cut_of.point[cut_of.tets][i] = static_cast<uint8_t>(e);
+        }
+        cut_of.tet[cut_of.tets++] = static_cast<uint8_t>(t | k << 3);
       }
     }
   }
@@ -148,32 +163,34 @@ void march_block(const float* f, int64_t stride, const Coord& base, const std::a
         const Coord o{base[0] + x, base[1] + y, base[2] + z};
         const size_t parity = static_cast<size_t>((o[0] & 1) | (o[1] & 1) << 1 | (o[2] & 1) << 2);
         const std::array<CellTet, 6>& tets = kTables.tets[parity];
-        const CutList& list = kTables.cut_lists[parity][above];
+        const CellCut& cell = kTables.cuts[parity][above];
         const size_t far = static_cast<size_t>((o[0] & 7) == 7) | static_cast<size_t>((o[1] & 7) == 7) << 1 |
                            static_cast<size_t>((o[2] & 7) == 7) << 2;
         const int64_t cell_slot = ((2 * z) * w + 2 * y) * w + 2 * x;
-        for (size_t t = 0; t < list.count; ++t) {
-          const CellTet& tet = tets[list.item[t] & 7];
-          const CellTet::Case& cut = tet.cases[list.item[t] >> 3];
-          uint32_t v[4];
-          for (size_t i = 0; i < static_cast<size_t>(cut.points); ++i) {
-            const int a = cut.edge[i][0], b = cut.edge[i][1];
-            uint64_t& slot = slots[cell_slot + slot_step[a][b]];
-            if (slot >> 32 == stamp) {
-              v[i] = static_cast<uint32_t>(slot);
-              continue;
-            }
-            const Coord p{o[0] + dx(a), o[1] + dy(a), o[2] + dz(a)}, q{o[0] + dx(b), o[1] + dy(b), o[2] + dz(b)};
-            const float fp = c[offset[a]], fq = c[offset[b]];
-            // p + q from the box's doubled lowest corner: strictly inside the box, the edge belongs
-            // to the box's cells alone, so no other box will ask for its vertex.
-            const int64_t ex = 2 * x + dx(a) + dx(b), ey = 2 * y + dy(a) + dy(b), ez = 2 * z + dz(a) + dz(b);
-            if (ex > 0 && ex < 2 * cells[0] && ey > 0 && ey < 2 * cells[1] && ez > 0 && ez < 2 * cells[2])
-              v[i] = builder.unwelded_vertex(p, fp, q, fq);
-            else
-              v[i] = builder.welded_vertex(cutter.edge_key(p, q), p, fp, q, fq);
-            slot = stamp << 32 | v[i];
+        uint32_t vertex[19];  // of each of the cell's cut edges
+        for (size_t e = 0; e < cell.edges; ++e) {
+          const int a = cell.edge[e] & 7, b = cell.edge[e] >> 3;
+          uint64_t& slot = slots[cell_slot + slot_step[a][b]];
+          if (slot >> 32 == stamp) {
+            vertex[e] = static_cast<uint32_t>(slot);
+            continue;
           }
+          const Coord p{o[0] + dx(a), o[1] + dy(a), o[2] + dz(a)}, q{o[0] + dx(b), o[1] + dy(b), o[2] + dz(b)};
+          const float fp = c[offset[a]], fq = c[offset[b]];
+          // p + q from the box's doubled lowest corner: strictly inside the box, the edge belongs
+          // to the box's cells alone, so no other box will ask for its vertex.
+          const int64_t ex = 2 * x + dx(a) + dx(b), ey = 2 * y + dy(a) + dy(b), ez = 2 * z + dz(a) + dz(b);
+          if (ex > 0 && ex < 2 * cells[0] && ey > 0 && ey < 2 * cells[1] && ez > 0 && ez < 2 * cells[2])
+            vertex[e] = builder.unwelded_vertex(p, fp, q, fq);
+          else
+            vertex[e] = builder.welded_vertex(cutter.edge_key(p, q), p, fp, q, fq);
+          slot = stamp << 32 | vertex[e];
+        }
+        for (size_t t = 0; t < cell.tets; ++t) {
+          const CellTet& tet = tets[cell.tet[t] & 7];
+          const CellTet::Case& cut = tet.cases[cell.tet[t] >> 3];
+          uint32_t v[4];
+          for (size_t i = 0; i < 4; ++i) v[i] = vertex[cell.point[t][i]];
           if (cut.points == 3) {
             builder.add_triangle(v[cut.triangle[0]], v[cut.triangle[1]], v[cut.triangle[2]]);
             continue;
