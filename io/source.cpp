@@ -10,6 +10,7 @@
 #include <atomic>
 #include <chrono>
 #include <mutex>
+#include <optional>
 #include <utility>
 
 #include "engine/core/volume_check.h"
@@ -165,13 +166,19 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
   if (impl_->streams(options)) {
     const BoxReader& file = *impl_->file;
     const VolumeInfo& i = file.info();
-    const LayerSource layers{i.dims, i.spacing, i.origin,
-                             [&](int64_t z, int64_t count, float* out) {
-                               file.read_box({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
-                             },
-                             [&](int64_t z, int64_t count, float* out) {
-                               file.read_box_unchecked({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
-                             }};
+    LayerSource layers{i.dims, i.spacing, i.origin,
+                       [&](int64_t z, int64_t count, float* out) {
+                         file.read_box({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
+                       },
+                       [&](int64_t z, int64_t count, float* out) {
+                         file.read_box_unchecked({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
+                       }};
+    if (const std::optional<ScalarType> stored = file.stored_type()) {
+      layers.stored = *stored;
+      layers.read_stored = [&](int64_t z, int64_t count, unsigned char* out) {
+        file.read_box_stored({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
+      };
+    }
     return extract_streamed(layers, options, stats);
   }
   if (!needs_hierarchy(options)) {

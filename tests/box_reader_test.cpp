@@ -344,6 +344,49 @@ TEST_F(BoxReaderTest, BigEndianNrrdIsByteswapped) {
   expect_boxes_match(*ru, read_volume({pu, {}, {}}), 17);
 }
 
+// Integers of one or two bytes in this machine's byte order are read as the file stores them, any
+// box, byte for byte; floats, and integers of the other byte order, are not.
+TEST_F(BoxReaderTest, NativeIntegersOfRawFilesAreReadAsStored) {
+  std::vector<uint16_t> u16(9 * 7 * 5);
+  std::vector<int16_t> i16(u16.size());
+  for (size_t i = 0; i < u16.size(); ++i) {
+    u16[i] = static_cast<uint16_t>(i * 211 + 0x8102);
+    i16[i] = static_cast<int16_t>(static_cast<int>(i) * -97 + 300);
+  }
+  const std::string pu = path("u_9x7x5_uint16.raw"), pi = path("i_9x7x5_int16.raw");
+  write_file(pu, "", bytes_of(u16, std::endian::native));
+  write_file(pi, "", bytes_of(i16, std::endian::native));
+  const auto expect_stored = [](const BoxReader& r, const Bytes& file, ScalarType type, const std::string& what) {
+    ASSERT_EQ(r.stored_type(), type) << what;
+    const auto& d = r.info().dims;
+    const auto elem = static_cast<size_t>(r.info().element_bytes);
+    for (const auto& [lo, size] : {std::pair{Xyz{0, 0, 0}, d},
+                                   {Xyz{0, 0, 2}, Xyz{d[0], d[1], 2}},
+                                   {Xyz{1, 2, 1}, Xyz{d[0] - 3, d[1] - 2, d[2] - 1}}}) {
+      Bytes got(static_cast<size_t>(size[0] * size[1] * size[2]) * elem);
+      r.read_box_stored(lo, size, got.data());
+      Bytes want;
+      for (int64_t z = lo[2]; z < lo[2] + size[2]; ++z)
+        for (int64_t y = lo[1]; y < lo[1] + size[1]; ++y) {
+          const auto at = static_cast<size_t>((z * d[1] + y) * d[0] + lo[0]) * elem;
+          want.insert(want.end(), file.begin() + static_cast<std::ptrdiff_t>(at),
+                      file.begin() + static_cast<std::ptrdiff_t>(at + static_cast<size_t>(size[0]) * elem));
+        }
+      EXPECT_EQ(got, want) << what << " box at " << lo[0] << "," << lo[1] << "," << lo[2];
+    }
+  };
+  expect_stored(*open_reader(pu, dir_.string()), read_bytes(pu), ScalarType::uint16, "uint16");
+  expect_stored(*open_reader(pi, dir_.string()), read_bytes(pi), ScalarType::int16, "int16");
+  expect_stored(*open_reader(kNeghip, dir_.string()), read_bytes(kNeghip), ScalarType::uint8, "neghip");
+  EXPECT_EQ(open_reader(kHydrogen, dir_.string())->stored_type(), std::nullopt) << "float32";
+  const std::string other = path("u16_other.nrrd");
+  const std::endian foreign = std::endian::native == std::endian::little ? std::endian::big : std::endian::little;
+  write_file(other,
+             nrrd_header("9 7 5", "ushort", "raw", {foreign == std::endian::big ? "endian: big" : "endian: little"}),
+             bytes_of(u16, foreign));
+  EXPECT_EQ(open_reader(other, dir_.string())->stored_type(), std::nullopt) << "the other byte order";
+}
+
 TEST_F(BoxReaderTest, GzipNrrdIsInflatedIntoScratchAndRemovedWithTheReader) {
   fs::create_directories(dir_ / "scratch");
   const std::string scratch = path("scratch");

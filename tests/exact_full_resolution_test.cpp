@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -486,6 +487,64 @@ TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
   EXPECT_EQ(streamed_window_bytes({9, 9, 9}), 9 * 9 * 9 * 4) << "a window holds no more than the volume";
 }
 
+// Integers streamed as the file stores them (LayerSource::read_stored), converted in the blocks
+// marched only: the array's mesh bit for bit, on one thread and on two, each layer read once in
+// order, none read as floats. VOLUME's values are integers in T's range.
+template <class T>
+void expect_stored_is_the_arrays_mesh(const Volume& volume, ScalarType type, float iso, const std::string& what) {
+  ExtractOptions o;
+  o.iso = iso;
+  const Mesh reference = extract(volume, o);
+  ASSERT_GT(reference.triangles.size(), 0u) << what;
+  const std::vector<T> stored(volume.values.begin(), volume.values.end());
+  const auto layer = static_cast<size_t>(volume.dims[0] * volume.dims[1]);
+  for (int threads : {1, 2}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    int64_t next = 0;
+    bool in_order = true;
+    LayerSource source{volume.dims, volume.spacing, volume.origin,
+                       [&](int64_t, int64_t, float*) { ADD_FAILURE() << what << ": read as floats"; }, nullptr};
+    source.stored = type;
+    source.read_stored = [&](int64_t z, int64_t count, unsigned char* out) {
+      in_order = in_order && z == next;
+      next = z + count - 1;
+      std::memcpy(out, stored.data() + static_cast<size_t>(z) * layer, static_cast<size_t>(count) * layer * sizeof(T));
+    };
+    const Mesh m = extract_streamed(source, o);
+    EXPECT_TRUE(m.positions == reference.positions && m.triangles == reference.triangles)
+        << what << ", " << threads << " threads";
+    EXPECT_TRUE(in_order) << what << ": layers read out of order or twice";
+    EXPECT_EQ(next, volume.dims[2] - 1) << what << ": not every layer read";
+  }
+}
+
+// VOLUME with each value v as a * v + b.
+Volume scaled(Volume volume, float a, float b) {
+  for (float& v : volume.values) v = a * v + b;
+  return volume;
+}
+
+TEST(Streamed, IntegersAreMarchedAsTheFileStoresThem) {
+  for (const auto& s : testing::shared_volumes()) {
+    const Volume v = testing::load_shared(s);
+    if (!std::ranges::all_of(v.values, [](float x) { return x >= 0 && x <= 255 && x == std::floor(x); })) continue;
+    for (float iso : s.isovalues) {
+      expect_stored_is_the_arrays_mesh<uint8_t>(v, ScalarType::uint8, iso, s.name + " as uint8");
+      // Above 32767 as uint16, below 0 as int16: every value a distinct float.
+      expect_stored_is_the_arrays_mesh<uint16_t>(scaled(v, 250, 7), ScalarType::uint16, iso * 250 + 7,
+                                                 s.name + " as uint16");
+      expect_stored_is_the_arrays_mesh<int16_t>(scaled(v, 250, -32000), ScalarType::int16, iso * 250 - 32000,
+                                                s.name + " as int16");
+    }
+  }
+  // The types' extremes side by side, every cell cut.
+  const Volume checker = testing::make_volume(
+      {19, 17, 18}, [](int64_t x, int64_t y, int64_t z) { return static_cast<double>((x + y + z) % 2); });
+  expect_stored_is_the_arrays_mesh<uint16_t>(scaled(checker, 65535, 0), ScalarType::uint16, 65534.5f, "0 and 65535");
+  expect_stored_is_the_arrays_mesh<int16_t>(scaled(checker, 65535, -32768), ScalarType::int16, -32767.5f,
+                                            "-32768 and 32767");
+}
+
 TEST(Streamed, AFailedReadStopsTheExtractionWithItsError) {
   const std::string embryo = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
   const Volume e = read_raw(embryo, *parse_raw_name(embryo));
@@ -701,6 +760,23 @@ TEST_F(SourceOfAFile, AnHdf5DatasetIsStreamedToTheSameMesh) {
     EXPECT_TRUE(same_mesh(source.extract(o), extract(v, o))) << name;
     EXPECT_FALSE(source.info().values_in_memory) << name;
   }
+}
+
+// A raw file of 16-bit integers is streamed as it stores them, to the mesh of the volume read whole.
+TEST_F(SourceOfAFile, ARawFileOf16BitIntegersIsStreamedToTheSameMesh) {
+  const Volume neghip = read_volume(spec_of(copy_of("neghip_66x66x66_uint8.raw")));
+  std::vector<uint16_t> values(neghip.values.size());
+  for (size_t i = 0; i < values.size(); ++i) values[i] = static_cast<uint16_t>(neghip.values[i] * 250 + 7);
+  const std::string file = path("n_66x66x66_uint16.raw");
+  std::ofstream(file, std::ios::binary)
+      .write(reinterpret_cast<const char*>(values.data()), static_cast<std::streamsize>(values.size() * 2));
+  ExtractOptions o;
+  o.iso = 128.5f * 250 + 7;
+  const Source source = open_volume(spec_of(file));
+  const Mesh m = source.extract(o);
+  EXPECT_GT(m.triangles.size(), 0u);
+  EXPECT_TRUE(same_mesh(m, extract(read_volume(spec_of(file)), o)));
+  EXPECT_FALSE(source.info().values_in_memory);
 }
 
 // Extractions from one Source on several threads at once (as Source promises): some stream the file

@@ -55,10 +55,11 @@ int64_t window_bytes(const std::array<int64_t, 3>& dims, int64_t layers) {
 // next window reads it again). A buffer is filled again once every slab of its window was marched.
 // Progress: slabs are handed out in increasing order (parallel_for_in_order), so the lowest slab
 // not yet marched is in a window already filled, or the next to fill, whose buffer is free.
+template <class T>
 class LayerRing {
  public:
   // `first` and `layers`: whole slabs.
-  LayerRing(const std::function<void(int64_t, int64_t, float*)>& read, const LayerSource& source,
+  LayerRing(const std::function<void(int64_t, int64_t, T*)>& read, const LayerSource& source,
             const ExtractOptions& options, int64_t first, int64_t end, int64_t layers, int64_t slab_layers,
             int64_t held)
       : read_(read), options_(options), first_(first), end_(end), layers_(layers), slab_layers_(slab_layers) {
@@ -66,7 +67,7 @@ class LayerRing {
     marched_.assign(static_cast<size_t>(windows), 0);
     const auto values = static_cast<size_t>(source.dims[0] * source.dims[1] * window_nodes(source.dims, layers));
     // Written whole by each read before any of it is used: not zero-filled first.
-    for (int64_t b = 0; b < std::min(held, windows); ++b) buffers_.emplace_back(new float[values]);
+    for (int64_t b = 0; b < std::min(held, windows); ++b) buffers_.emplace_back(new T[values]);
     reader_ = std::thread([this] { fill(); });
   }
   ~LayerRing() {
@@ -86,7 +87,7 @@ class LayerRing {
 
   // Window w's values, once filled. Rethrows what stopped the extraction (a read, a march, a
   // cancellation).
-  const float* acquire(int64_t w) {
+  const T* acquire(int64_t w) {
     std::unique_lock<std::mutex> lock(mutex_);
     while (!changed_.wait_for(lock, kCancelPoll, [&] { return filled_ > w || error_; }))
       if (cancelled()) error_ = std::make_exception_ptr(ExtractionCancelled{});
@@ -148,10 +149,10 @@ class LayerRing {
     }
   }
 
-  const std::function<void(int64_t, int64_t, float*)>& read_;
+  const std::function<void(int64_t, int64_t, T*)>& read_;
   const ExtractOptions& options_;
   const int64_t first_, end_, layers_, slab_layers_;
-  std::vector<std::unique_ptr<float[]>> buffers_;
+  std::vector<std::unique_ptr<T[]>> buffers_;
   std::mutex mutex_;
   std::condition_variable changed_;
   int64_t filled_ = 0;            // windows [0, filled_) are in their buffers
@@ -170,6 +171,87 @@ void read_checked(const LayerSource& source, const ExtractOptions& options, int6
     throw_if_cancelled(options);
     source.read_layers(z, std::min(layers, dims[2] - z), window.data());
   }
+}
+
+// Where the layers go and who reads which: one process's share of the slabs, its windows, and
+// how many are held at once.
+struct StreamPlan {
+  traversal::SplitRule rule;
+  SlabPlan plan;
+  const Distribution* group;
+  std::vector<double> costs;
+  std::vector<size_t> shares;
+  int64_t first, end, layers, held;
+};
+
+// The march over windows of values of type T that READ fills. MARCH_CHECKS: the values were
+// read unchecked, and the march checks them (ArrayReader).
+template <class T>
+Mesh march_windows(const LayerSource& source, const ExtractOptions& options, const StreamPlan& s,
+                   const std::function<void(int64_t, int64_t, T*)>& read, bool march_checks, ExtractStats* stats) {
+  const std::array<int64_t, 3>& dims = source.dims;
+  const SlabPlan& plan = s.plan;
+  const Distribution* group = s.group;
+  // The ring's buffers may be more than one process has memory for: under several processes made
+  // where a failure on one stops them all, as reading the volume whole was.
+  std::optional<LayerRing<T>> ring;
+  const auto make_ring = [&] {
+    ring.emplace(read, source, options, s.first, s.end, s.layers, plan.slab_layers, s.held);
+  };
+  if (group)
+    settle_together(*group, make_ring);
+  else
+    make_ring();
+  std::atomic<int64_t> blocks{0}, cells{0};
+  std::atomic<bool> met_non_finite{false};
+  // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
+  // worker and not the reader wait for a window that slab will never release.
+  const auto on_failure = [&] { ring->fail(std::current_exception()); };
+  const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
+    const int64_t w = ring->window_of(z0);
+    const T* values = ring->acquire(w);
+    throw_if_cancelled(options);
+    ArrayReader<T> reader(values, dims, ring->first_layer(w), march_checks);
+    try {
+      march_finest_layers(reader, s.rule, plan, dims, z0, z1, builder, blocks, cells);
+    } catch (const NonFiniteValue&) {
+      met_non_finite = true;
+      throw;
+    }
+    ring->release(w);
+  };
+  if (stats) *stats = ExtractStats{};
+  Mesh mesh;
+  try {
+    mesh = group ? march_finest_share(plan, march, *group, s.costs, s.shares, options.keep_shares, blocks, cells, {},
+                                      stats, on_failure)
+                 : march_in_slabs(plan, march, on_failure);
+  } catch (...) {
+    // Read unchecked, the failure that stopped the march may not be the first a checked read
+    // meets: a value that is not finite only the march sees, and the reader, windows ahead, may
+    // fail a later read first, or a worker meet a later value first. The layers read again,
+    // checked, in order, throw the first; if they all read, the file changed meanwhile (a value
+    // met) or the read failed once (the failure stands).
+    if (!met_non_finite && !(march_checks && ring->read_failed())) throw;
+    const bool non_finite = met_non_finite;
+    ring.reset();  // its reader stopped: the layers are read again from this thread alone
+    read_checked(source, options, window_nodes(dims, s.layers));
+    if (!non_finite) throw;
+    throw IoError(
+        "the volume held a value that is not finite (NaN or infinite) when read, and none when read again: it "
+        "changed meanwhile");
+  }
+  if (stats && !group) count_finest(blocks, cells, stats);  // march_finest_share counts every rank's
+  return mesh;
+}
+
+// The march over the values as the file stores them, of type T.
+template <class T>
+Mesh march_stored(const LayerSource& source, const ExtractOptions& options, const StreamPlan& s, ExtractStats* stats) {
+  const std::function<void(int64_t, int64_t, T*)> read = [&](int64_t z, int64_t count, T* out) {
+    source.read_stored(z, count, reinterpret_cast<unsigned char*>(out));
+  };
+  return march_windows<T>(source, options, s, read, false, stats);
 }
 
 }  // namespace
@@ -220,60 +302,19 @@ Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, 
   // several processes each reads checked, as one that met a bad value could not name it alone.
   const bool march_checks =
       source.read_unchecked && !group && std::ranges::all_of(dims, [](int64_t d) { return d >= 2; });
-  // The ring's buffers may be more than one process has memory for: under several processes made
-  // where a failure on one stops them all, as reading the volume whole was.
-  std::optional<LayerRing> ring;
-  const auto make_ring = [&] {
-    ring.emplace(march_checks ? source.read_unchecked : source.read_layers, source, options, first, end, layers,
-                 plan.slab_layers, held);
-  };
-  if (group)
-    settle_together(*group, make_ring);
-  else
-    make_ring();
-  std::atomic<int64_t> blocks{0}, cells{0};
-  std::atomic<bool> met_non_finite{false};
-  // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
-  // worker and not the reader wait for a window that slab will never release.
-  const auto on_failure = [&] { ring->fail(std::current_exception()); };
-  const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
-    const int64_t w = ring->window_of(z0);
-    const float* values = ring->acquire(w);
-    throw_if_cancelled(options);
-    ArrayReader reader(values, dims, ring->first_layer(w), march_checks);
-    try {
-      march_finest_layers(reader, rule, plan, dims, z0, z1, builder, blocks, cells);
-    } catch (const NonFiniteValue&) {
-      met_non_finite = true;
-      throw;
-    }
-    ring->release(w);
-  };
-  if (stats) *stats = ExtractStats{};
+  const StreamPlan s{rule, plan, group, std::move(costs), std::move(shares), first, end, layers, held};
   Mesh mesh;
-  try {
-    mesh = group ? march_finest_share(plan, march, *group, costs, shares, options.keep_shares, blocks, cells, {}, stats,
-                                      on_failure)
-                 : march_in_slabs(plan, march, on_failure);
-  } catch (...) {
-    // Read unchecked, the failure that stopped the march may not be the first a checked read
-    // meets: a value that is not finite only the march sees, and the reader, windows ahead, may
-    // fail a later read first, or a worker meet a later value first. The layers read again,
-    // checked, in order, throw the first; if they all read, the file changed meanwhile (a value
-    // met) or the read failed once (the failure stands).
-    if (!met_non_finite && !(march_checks && ring->read_failed())) throw;
-    const bool non_finite = met_non_finite;
-    ring.reset();  // its reader stopped: the layers are read again from this thread alone
-    read_checked(source, options, window_nodes(dims, layers));
-    if (!non_finite) throw;
-    throw IoError(
-        "the volume held a value that is not finite (NaN or infinite) when read, and none when read again: it "
-        "changed meanwhile");
+  // Integers as the file stores them, converted in the blocks marched only: a quarter of the
+  // bytes of floats for uint8, and no pass converting every value on the reader's thread.
+  switch (source.read_stored ? source.stored : ScalarType::float32) {
+    case ScalarType::uint8: mesh = march_stored<uint8_t>(source, options, s, stats); break;
+    case ScalarType::uint16: mesh = march_stored<uint16_t>(source, options, s, stats); break;
+    case ScalarType::int16: mesh = march_stored<int16_t>(source, options, s, stats); break;
+    default:
+      mesh = march_windows<float>(source, options, s, march_checks ? source.read_unchecked : source.read_layers,
+                                  march_checks, stats);
   }
-  if (stats) {
-    if (!group) count_finest(blocks, cells, stats);  // march_finest_share counts every rank's
-    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  }
+  if (stats) stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return mesh;
 }
 

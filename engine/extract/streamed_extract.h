@@ -9,6 +9,7 @@
 
 #include "isotope/extract.h"
 #include "isotope/mesh.h"
+#include "isotope/volume.h"
 
 namespace isotope {
 
@@ -25,6 +26,11 @@ struct LayerSource {
   // value as it looks at it, and on one that is not reads the layers again through read_layers,
   // from the first, for its error: a volume read once, not once to check and once to march.
   std::function<void(int64_t z, int64_t count, float* out)> read_unchecked;
+  // Optional: for a volume of uint8, uint16 or int16 values (`stored`), the layers as they are
+  // stored, in this machine's byte order, stored-type bytes per node: what the march reads instead
+  // of read_layers, converting only the values of the blocks it marches. An integer is finite.
+  ScalarType stored = ScalarType::float32;
+  std::function<void(int64_t z, int64_t count, unsigned char* out)> read_stored{};
 };
 
 // Whether extract_streamed makes what these options ask for: full resolution with no tie classes

@@ -174,6 +174,28 @@ class RawBoxReader final : public BoxReader {
     }
   }
 
+  std::optional<ScalarType> stored_type() const override {
+    const bool native = info_.element_bytes == 1 || data_.big_endian == (std::endian::native == std::endian::big);
+    if (!native || !info_.is_integer || info_.element_bytes > 2) return std::nullopt;
+    return data_.type;
+  }
+
+  void read_box_stored(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                       unsigned char* out) const override {
+    if (!stored_type()) throw std::logic_error(data_.name + ": values cannot be read as stored");
+    check_box(lo, size, info_, data_.name);
+    const int64_t total = size[0] * size[1] * size[2];
+    const int64_t run = run_length(size);
+    const int64_t elem = info_.element_bytes;
+    const auto& d = info_.dims;
+    for (int64_t done = 0; done < total; done += run) {
+      const int64_t y = lo[1] + done / size[0] % size[1];
+      const int64_t z = lo[2] + done / (size[0] * size[1]);
+      pread_fully(fd_.get(), out + done * elem, static_cast<size_t>(run * elem),
+                  data_.offset + ((z * d[1] + y) * d[0] + lo[0]) * elem, data_.read_name);
+    }
+  }
+
  private:
   // Nodes of the box that are contiguous in the file: a row, or whole planes when the box spans
   // whole rows, or the whole box when it also spans whole planes.

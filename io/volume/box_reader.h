@@ -4,6 +4,8 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
+#include <stdexcept>
 #include <string>
 
 #include "io/volume/volume_reader.h"
@@ -35,6 +37,16 @@ class BoxReader {
   virtual void read_box_unchecked(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
                                   float* out) const {
     read_box(lo, size, out);
+  }
+  // The type read_box_stored reads values as, for a reader that can read them as the file stores
+  // them, not converted: integers of one or two bytes in this machine's byte order (a raw file's).
+  // None for any other.
+  virtual std::optional<ScalarType> stored_type() const { return std::nullopt; }
+  // The box's values as stored, element_bytes each, into out (only where stored_type() is not
+  // none): for a caller that converts the few it needs to float. An integer is finite.
+  virtual void read_box_stored(const std::array<int64_t, 3>& /*lo*/, const std::array<int64_t, 3>& /*size*/,
+                               unsigned char* /*out*/) const {
+    throw std::logic_error("this reader cannot read values as stored");
   }
 
  protected:
