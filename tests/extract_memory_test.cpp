@@ -258,8 +258,9 @@ TEST_F(ExtractMemory, StoreSixTimesTheBudgetExtractsWithinItAndTheMeshIgnoresThe
 
 // eps 0 from a volume file streams it (docs/METHOD.md, "eps = 0 from a file"): the process holds at
 // most threads + 1 windows of layers and the mesh, never the volume as float. A 385^3 uint8 sphere
-// field: 57 MB of file, 228 MB as float, 5 MB windows; read whole it peaked at 253-256 MB, streamed
-// at 47 MB on one thread and 51 MB on two, against limits of 81 and 86 MB (2026-11-30).
+// field: 57 MB of file, 228 MB as float, 5 MB windows of floats then (now 1.3 MB of bytes); read
+// whole it peaked at 253-256 MB, streamed at 47 MB on one thread and 51 MB on two, against limits
+// of 81 and 86 MB (2026-11-30).
 TEST_F(ExtractMemory, EpsZeroFromAVolumeFileHoldsWindowsAndTheMeshNotTheVolume) {
   const std::string side = std::to_string(kSize);
   const std::string raw = path("sphere_" + side + "x" + side + "x" + side + "_uint8.raw");

@@ -31,7 +31,10 @@ class ArrayReader {
  public:
   // CHECKS: the values were not checked for being finite when read; block_cut then checks them.
   ArrayReader(const T* values, const std::array<int64_t, 3>& dims, int64_t z_first, bool checks = false)
-      : values_(values), dims_(dims), z_first_(z_first), checks_(checks) {}
+      : values_(values),
+        dims_(dims),
+        z_first_(z_first),
+        checks_(checks && !std::is_integral_v<T>) {}  // an integer is finite
   float value(const Coord& c, int /*band*/) const {
     return static_cast<float>(
         values_[index(std::min(c[0], dims_[0] - 1), std::min(c[1], dims_[1] - 1), std::min(c[2], dims_[2] - 1))]);

@@ -38,13 +38,13 @@ struct LayerSource {
 // processes (ExtractOptions::distribution) each streams the layers of its share of the slabs.
 bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractOptions& options);
 
-// The bytes of one window's values: one layer of blocks at least, more when the layers are small.
-// At most max(2, threads + 1) windows are held, and never more than 1 GB of them unless two
-// windows are larger.
+// The bytes of one window's values as float (a quarter of them for uint8 read as stored): one layer of blocks at least,
+// more when the layers are small. At most max(2, threads + 1) windows are held, and never more than 1 GB of them unless
+// two windows are larger.
 int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims);
 
 // Throws as extract(const Volume&, ...) does, std::invalid_argument when the options need more
-// than full resolution (streamed_extract_applies), and what read_layers throws.
+// than full resolution (streamed_extract_applies), and what the source's reads throw.
 Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
 }  // namespace isotope
