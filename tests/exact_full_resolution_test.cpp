@@ -16,6 +16,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <random>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -23,6 +24,7 @@
 #include <vector>
 
 #include "engine/core/fields.h"
+#include "engine/extract/column_extremes.h"
 #include "engine/extract/extract.h"
 #include "engine/extract/slab_march.h"
 #include "engine/extract/streamed_extract.h"
@@ -422,6 +424,42 @@ TEST(FullResolutionSlabs, SurfaceInTheSharedPlaneGivesTheOneWalkMesh) {
     return z == z0 ? ((x * 7 + y * 3) % 5 == 0 ? 1.0 : 0.0) : std::abs(z - z0) == 1 ? -1.0 : 0.5;
   });
   expect_same_mesh_on_any_threads(ties, 0.0f, "ties in the plane");
+}
+
+// The column pass that culls blocks (ArrayReader::block_cut), as the processor runs it (AVX2 where
+// it has it) and as the baseline x86-64 runs it: the same extremes bit for bit, and the same NaN
+// found, over rows of every width up to a few vectors, with NaN, infinities and signed zeros.
+template <class T>
+void expect_fold_agrees(std::mt19937& random, const std::vector<T>& pool, bool find_nan, const std::string& what) {
+  for (size_t width = 1; width < 80; ++width)
+    for (int round = 0; round < 4; ++round) {
+      std::vector<T> row(width), low(width), high(width);
+      for (size_t x = 0; x < width; ++x) {
+        row[x] = pool[random() % pool.size()];
+        low[x] = pool[random() % pool.size()];
+        high[x] = pool[random() % pool.size()];
+      }
+      std::vector<T> low2 = low, high2 = high;
+      const bool nan = fold_row_extremes(row.data(), width, low.data(), high.data(), find_nan);
+      const bool nan2 = fold_row_extremes_baseline(row.data(), width, low2.data(), high2.data(), find_nan);
+      EXPECT_EQ(nan, nan2) << what << ", width " << width;
+      EXPECT_EQ(std::memcmp(low.data(), low2.data(), width * sizeof(T)), 0) << what << ", width " << width;
+      EXPECT_EQ(std::memcmp(high.data(), high2.data(), width * sizeof(T)), 0) << what << ", width " << width;
+      bool any_nan = false;
+      for (const T v : row) any_nan = any_nan || v != v;
+      EXPECT_EQ(nan, find_nan && any_nan) << what << ", width " << width;
+    }
+}
+
+TEST(ColumnExtremes, TheProcessorsPassAndTheBaselinesAgree) {
+  std::mt19937 random(7);
+  const float inf = std::numeric_limits<float>::infinity();
+  const std::vector<float> floats{0.0f, -0.0f, 1.5f, -2.25f, 3e38f, -3e38f, inf, -inf, std::nanf(""), 7.0f, 64.5f};
+  expect_fold_agrees(random, floats, true, "float, finding NaN");
+  expect_fold_agrees(random, floats, false, "float");
+  expect_fold_agrees<uint8_t>(random, {0, 1, 127, 128, 200, 255}, false, "uint8");
+  expect_fold_agrees<uint16_t>(random, {0, 1, 32767, 32768, 40000, 65535}, false, "uint16");
+  expect_fold_agrees<int16_t>(random, {-32768, -1, 0, 1, 255, 32767}, false, "int16");
 }
 
 // eps = 0 from a volume streamed a window of z-layers at a time (docs/METHOD.md, "eps = 0 from a file"):

@@ -9,6 +9,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "engine/extract/column_extremes.h"
 #include "engine/hierarchy/lattice.h"
 #include "isotope/volume.h"
 
@@ -47,7 +48,8 @@ class ArrayReader {
   // one-shot eps 0 process. Values are finite, checked when read, or here when the reader was
   // made to check: the same pass looks for a NaN, and the columns' extremes for an infinity, so
   // that a streamed volume is not read twice, once to check and once to march. The rows of the
-  // blocks of a slab are every node of its layers, when each axis has two nodes at least.
+  // blocks of a slab are every node of its layers, when each axis has two nodes at least. The pass
+  // over a row runs with AVX2 where the processor has it (fold_row_extremes).
   bool block_cut(const Coord& lo, const std::array<int64_t, 3>& n, float iso) {
     if (lo[1] != row_[0] || lo[2] != row_[1] || n[1] != row_[2] || n[2] != row_[3]) {
       row_ = {lo[1], lo[2], n[1], n[2]};
@@ -56,16 +58,10 @@ class ArrayReader {
       high_.assign(width, kLowest);
       T* low = low_.data();
       T* high = high_.data();
-      int nan = 0;
+      bool nan = false;
       for (int64_t z = 0; z <= n[2]; ++z)
-        for (int64_t y = 0; y <= n[1]; ++y) {
-          const T* row = values_ + index(0, lo[1] + y, lo[2] + z);
-          for (size_t x = 0; x < width; ++x) {
-            low[x] = row[x] < low[x] ? row[x] : low[x];
-            high[x] = row[x] > high[x] ? row[x] : high[x];
-            if constexpr (!std::is_integral_v<T>) nan |= row[x] != row[x];
-          }
-        }
+        for (int64_t y = 0; y <= n[1]; ++y)
+          nan |= fold_row_extremes(values_ + index(0, lo[1] + y, lo[2] + z), width, low, high, checks_);
       if (checks_) {
         // An infinity is a column's least or greatest value; a NaN is neither (no comparison holds).
         for (size_t x = 0; x < width; ++x) nan |= low[x] == kLowest || high[x] == kHighest;
