@@ -54,8 +54,8 @@ bool fold_row_extremes_baseline(const T* row, size_t width, T* low, T* high, boo
   return fold_baseline<T, false>(row, width, low, high);
 }
 
-#define ISOTOPE_FOLD_ROW_EXTREMES(T)                                                          \
-  template bool fold_row_extremes<T>(const T*, size_t, T*, T*, bool);                         \
+#define ISOTOPE_FOLD_ROW_EXTREMES(T)                                  \
+  template bool fold_row_extremes<T>(const T*, size_t, T*, T*, bool); \
   template bool fold_row_extremes_baseline<T>(const T*, size_t, T*, T*, bool);
 ISOTOPE_FOLD_ROW_EXTREMES(float)
 ISOTOPE_FOLD_ROW_EXTREMES(uint8_t)

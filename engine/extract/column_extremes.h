@@ -1,7 +1,8 @@
 #pragma once
 // The pass that culls the blocks of eps 0 by their columns' extremes (ArrayReader::block_cut):
 // every value of a streamed volume goes through it once, so it is compiled twice, for the
-// baseline x86-64 and for AVX2 (twice the values an instruction), and the processor's picks.
+// baseline x86-64 and for AVX2 (twice the values an instruction), and the build the processor
+// can run is picked at run time.
 #include <cstddef>
 #include <cstdint>
 
