@@ -5,6 +5,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <numeric>
 #include <tuple>
 
 #include "engine/core/fields.h"
@@ -113,10 +114,19 @@ TEST(MeshTopology, AnyThreadCountGivesTheSameCounts) {
   EXPECT_EQ(std::tie(narrow.edges, narrow.boundary_edges, narrow.nonmanifold_edges),
             std::tie(wide.edges, wide.boundary_edges, wide.nonmanifold_edges));
   EXPECT_EQ(wide.edges, torn_one.edges);
+  // The same triangles in a scattered order: each run of triangles then uses vertices from all over
+  // the mesh, and every part reads every run (in the engine's order, a part reads only the runs
+  // whose vertices meet its own).
+  Mesh scattered;
+  scattered.positions = torn.positions;
+  const size_t count = torn.triangles.size();
+  for (size_t i = 0; i < count; ++i) scattered.triangles.push_back(torn.triangles[(i * 7919) % count]);
+  ASSERT_EQ(std::gcd(size_t{7919}, count), 1u) << "a permutation needs 7919 prime to the count";
   for (size_t threads : {2, 3, 5}) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
     expect_same(measure_topology(m), one, threads);
     expect_same(measure_topology(torn), torn_one, threads);
+    expect_same(measure_topology(scattered), torn_one, threads);
     EXPECT_TRUE(label_components(torn) == torn_components) << threads << " threads";
   }
 }

@@ -1,7 +1,9 @@
 #include "engine/topology/filed_edges.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
+#include <cstdint>
 #include <vector>
 
 #include "engine/core/parallel.h"
@@ -19,12 +21,10 @@ int64_t tasks_for(size_t items) { return static_cast<int64_t>((items + kTriangle
 // below a smaller index, by compare-and-swap, so concurrent unions of the same sets agree.
 class ConcurrentForest {
  public:
-  explicit ConcurrentForest(size_t n) : parent_(n) {
-    parallel_for(int64_t{0}, tasks_for(n), [&](int64_t t) {
-      const size_t end = std::min(n, static_cast<size_t>(t + 1) * kTrianglesPerTask);
-      for (size_t v = static_cast<size_t>(t) * kTrianglesPerTask; v < end; ++v)
-        parent_[v].store(static_cast<uint32_t>(v), std::memory_order_relaxed);
-    });
+  explicit ConcurrentForest(size_t n) : parent_(n) {}
+  // Makes each vertex of [begin, end) a set of its own; the parts do it for their vertices.
+  void reset(uint32_t begin, uint32_t end) {
+    for (uint32_t v = begin; v < end; ++v) parent_[v].store(v, std::memory_order_relaxed);
   }
   uint32_t find(uint32_t x) {
     for (;;) {
@@ -35,14 +35,16 @@ class ConcurrentForest {
       x = g;
     }
   }
-  void unite(uint32_t a, uint32_t b) {
+  // Joins the sets of a and b and returns the root of the joined set. A caller that keeps the
+  // root of one vertex's set passes it as a: from a root, find is one load.
+  uint32_t unite(uint32_t a, uint32_t b) {
     for (;;) {
       a = find(a);
       b = find(b);
-      if (a == b) return;
+      if (a == b) return a;
       if (a < b) std::swap(a, b);  // link the larger root below the smaller
       uint32_t expected = a;
-      if (parent_[a].compare_exchange_strong(expected, b, std::memory_order_relaxed)) return;
+      if (parent_[a].compare_exchange_strong(expected, b, std::memory_order_relaxed)) return b;
     }
   }
 
@@ -50,31 +52,169 @@ class ConcurrentForest {
   std::vector<std::atomic<uint32_t>> parent_;
 };
 
-// The vertex range [begin, end) of one part of the filing passes below. Each part reads every
-// triangle and counts or files only the edge ends and corners whose vertex is its own, so no two
-// threads write one counter and no add is locked (the passes made two locked adds for every edge
-// end, each one a full memory barrier even when no other thread touches the counter). Against locked
-// adds over tasks of triangles, best of 7 on two threads: 57 -> 43 ms for a 956 k-triangle coarse
-// mesh (1024^3 algebraic store, 1 M budget), 132 -> 98 ms for embryo's 2.5 M-triangle eps-0 mesh.
-// Each part reads all triangles (12 bytes a triangle, in order), so a part per thread on many
-// cores would read them many times over, and where the parts run one after another (nested in a
-// busy parallel loop, as the server measures beside the normals) one thread reads them that many
-// times: kMostParts bounds both. Measured on two threads only.
-constexpr int64_t kMostParts = 4;
+// The order of a vertex's entries, and which of two vertices is lower, are data a branch cannot
+// predict: half its guesses are wrong, some 15 cycles each, and they were much of the filing's cost
+// (embryo's eps 0 mesh, 2.5 M triangles, simulated on one thread: 13 M mispredicted branches, 7 M
+// with the masks below).
+
+// The lower and the higher of a and b.
+inline std::array<uint32_t, 2> ordered(uint32_t a, uint32_t b) {
+  const uint32_t lo = a ^ ((a ^ b) & (0u - static_cast<uint32_t>(b < a)));
+  return {lo, a ^ b ^ lo};
+}
+
+inline void exchange(uint32_t& a, uint32_t& b) {
+  const uint32_t swap = (a ^ b) & (0u - static_cast<uint32_t>(b < a));
+  a ^= swap;
+  b ^= swap;
+}
+
+// Sorts x[0 .. 8): Knuth's network of 19 compare-exchanges.
+inline void sort8(uint32_t* x) {
+  exchange(x[0], x[2]), exchange(x[1], x[3]), exchange(x[4], x[6]), exchange(x[5], x[7]);
+  exchange(x[0], x[4]), exchange(x[1], x[5]), exchange(x[2], x[6]), exchange(x[3], x[7]);
+  exchange(x[0], x[1]), exchange(x[2], x[3]), exchange(x[4], x[5]), exchange(x[6], x[7]);
+  exchange(x[2], x[4]), exchange(x[3], x[5]);
+  exchange(x[1], x[4]), exchange(x[3], x[6]);
+  exchange(x[1], x[2]), exchange(x[3], x[4]), exchange(x[5], x[6]);
+}
+
+struct EdgeCounts {
+  int64_t edges = 0, boundary = 0, nonmanifold = 0;
+};
+
+// Sorts [begin, end) in place, counts its distinct values as edges (held by one triangle:
+// boundary, by three or more: non-manifold) and calls unite(w) for each. A surface's vertex has 0
+// to 24 entries (its upper neighbours, each edge twice), six on average, three quarters at most
+// eight: those are sorted by the network, padded with UINT32_MAX, which no vertex index reaches.
+template <class Unite>
+void count_entries(uint32_t* begin, uint32_t* end, EdgeCounts& c, const Unite& unite) {
+  const ptrdiff_t k = end - begin;
+  if (k <= 8) {
+    uint32_t x[8];
+    for (ptrdiff_t i = 0; i < 8; ++i) x[i] = i < k ? begin[i] : UINT32_MAX;
+    sort8(x);
+    for (ptrdiff_t i = 0; i < k; ++i) begin[i] = x[i];
+  } else {
+    std::sort(begin, end);
+  }
+  for (const uint32_t* i = begin; i != end;) {
+    const uint32_t* j = i + 1;
+    while (j != end && *j == *i) ++j;
+    ++c.edges;
+    c.boundary += j - i == 1;
+    c.nonmanifold += j - i > 2;
+    unite(*i);
+    i = j;
+  }
+}
+
+// The vertex range [begin, end) of one part of the filing passes below. A part counts and files
+// only the edge ends and corners whose vertex is its own, so no two threads write one counter and
+// no add is locked (locked adds over tasks of triangles took a full memory barrier for every edge
+// end: 132 -> 98 ms on two threads for embryo's 2.5 M-triangle eps 0 mesh when they went).
 struct VertexPart {
   uint32_t begin, end;
   bool holds(uint32_t v) const { return v - begin < end - begin; }
 };
 
-template <class Body>
-void for_each_part(size_t n, size_t triangles, const Body& body) {
-  const int64_t parts = runs_serially(0, tasks_for(triangles)) ? 1 : std::min(thread_count(), kMostParts);
-  parallel_for(int64_t{0}, parts, [&](int64_t p) {
-    const auto at = [&](int64_t q) {
-      return static_cast<uint32_t>(n * static_cast<size_t>(q) / static_cast<size_t>(parts));
-    };
-    body(VertexPart{at(p), at(p + 1)});
+// The parts, and the triangles each reads: those of the chunks of kTrianglesPerTask triangles
+// whose vertex range meets the part's. The meshes the engine makes number their vertices as the
+// march makes them, so a chunk's triangles use a narrow range of vertices and a part reads little
+// more than its share of the triangles (embryo's eps 0 mesh: 1.06 reads per triangle in 2 parts,
+// 1.5 in 8, where each part read every triangle). A mesh in another order gets a few parts that
+// each read everything.
+constexpr int64_t kMostParts = 64;
+constexpr int64_t kMostFullReadParts = 4;  // parts that each read all triangles, at most
+struct PartPlan {
+  std::vector<VertexPart> parts;
+  bool every_triangle = true;                 // one part: it reads all triangles
+  std::vector<uint32_t> first_chunk, chunks;  // else part p's chunks: chunks[first_chunk[p] ..)
+
+  template <class F>
+  void for_each_triangle(size_t p, const Mesh::Array<std::array<uint32_t, 3>>& triangles, const F& f) const {
+    if (every_triangle) {
+      for (const auto& tri : triangles) f(tri);
+      return;
+    }
+    for (uint32_t k = first_chunk[p]; k < first_chunk[p + 1]; ++k) {
+      const size_t begin = static_cast<size_t>(chunks[k]) * kTrianglesPerTask;
+      const size_t end = std::min(triangles.size(), begin + kTrianglesPerTask);
+      for (size_t t = begin; t < end; ++t) f(triangles[t]);
+    }
+  }
+  // The same triangles, last first.
+  template <class F>
+  void for_each_triangle_backwards(size_t p, const Mesh::Array<std::array<uint32_t, 3>>& triangles, const F& f) const {
+    if (every_triangle) {
+      for (size_t t = triangles.size(); t-- > 0;) f(triangles[t]);
+      return;
+    }
+    for (uint32_t k = first_chunk[p + 1]; k-- > first_chunk[p];) {
+      const size_t begin = static_cast<size_t>(chunks[k]) * kTrianglesPerTask;
+      const size_t end = std::min(triangles.size(), begin + kTrianglesPerTask);
+      for (size_t t = end; t-- > begin;) f(triangles[t]);
+    }
+  }
+};
+
+PartPlan plan_parts(size_t n, const Mesh::Array<std::array<uint32_t, 3>>& triangles) {
+  PartPlan plan;
+  const int64_t chunk_count = tasks_for(triangles.size());
+  const auto equal_parts = [&](int64_t count) {
+    plan.parts.resize(static_cast<size_t>(count));
+    for (int64_t q = 0; q < count; ++q)
+      plan.parts[static_cast<size_t>(q)] = {
+          static_cast<uint32_t>(n * static_cast<size_t>(q) / static_cast<size_t>(count)),
+          static_cast<uint32_t>(n * static_cast<size_t>(q + 1) / static_cast<size_t>(count))};
+  };
+  if (runs_serially(0, chunk_count) || n < 2) {
+    equal_parts(1);
+    return plan;
+  }
+  std::vector<std::array<uint32_t, 2>> range(static_cast<size_t>(chunk_count));  // lowest, highest vertex
+  parallel_for(int64_t{0}, chunk_count, [&](int64_t k) {
+    const size_t begin = static_cast<size_t>(k) * kTrianglesPerTask;
+    const size_t end = std::min(triangles.size(), begin + kTrianglesPerTask);
+    uint32_t lo = UINT32_MAX, hi = 0;
+    for (size_t t = begin; t < end; ++t)
+      for (const uint32_t v : triangles[t]) {
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+      }
+    range[static_cast<size_t>(k)] = {lo, hi};
   });
+  // The part of vertex v among `count` equal parts (part q begins at n q / count).
+  const auto part_of = [&](uint32_t v, int64_t count) {
+    const size_t c = static_cast<size_t>(count);
+    size_t q = static_cast<size_t>(v) * c / n;
+    while (q + 1 < c && n * (q + 1) / c <= v) ++q;
+    while (q > 0 && n * q / c > v) --q;
+    return static_cast<int64_t>(q);
+  };
+  const auto reads = [&](int64_t count) {
+    int64_t sum = 0;
+    for (const auto& r : range) sum += part_of(r[1], count) - part_of(r[0], count) + 1;
+    return sum;
+  };
+  // As many parts as balance the threads, halved while they would read more than twice the
+  // triangles between them; down to the few parts that may each read all of them.
+  const int64_t full_read_parts = std::min(thread_count(), kMostFullReadParts);
+  int64_t count = std::min<int64_t>({4 * thread_count(), kMostParts, static_cast<int64_t>(n)});
+  while (count > full_read_parts && reads(count) > 2 * chunk_count) count /= 2;
+  equal_parts(count);
+  plan.every_triangle = false;
+  plan.first_chunk.assign(static_cast<size_t>(count) + 1, 0);
+  for (const auto& r : range)
+    for (int64_t q = part_of(r[0], count); q <= part_of(r[1], count); ++q)
+      ++plan.first_chunk[static_cast<size_t>(q) + 1];
+  for (size_t q = 0; q < static_cast<size_t>(count); ++q) plan.first_chunk[q + 1] += plan.first_chunk[q];
+  plan.chunks.resize(plan.first_chunk.back());
+  std::vector<uint32_t> at(plan.first_chunk.begin(), plan.first_chunk.end() - 1);
+  for (size_t k = 0; k < range.size(); ++k)
+    for (int64_t q = part_of(range[k][0], count); q <= part_of(range[k][1], count); ++q)
+      plan.chunks[at[static_cast<size_t>(q)]++] = static_cast<uint32_t>(k);
+  return plan;
 }
 
 }  // namespace
@@ -82,60 +222,69 @@ void for_each_part(size_t n, size_t triangles, const Body& body) {
 template <class Offset>
 FiledEdges<Offset> file_edges(const Mesh& mesh) {
   const size_t n = mesh.positions.size();
+  const Mesh::Array<std::array<uint32_t, 3>>& triangles = mesh.triangles;
   FiledEdges<Offset> e;
-  // Each undirected edge is filed under its lower vertex (counting pass, then filling): a vertex's
-  // few entries are then sorted in place, where one sort of all 3F edges took most of the time
-  // (20 ms of a 100k-triangle mesh that `isotope serve` answers interactively).
-  std::vector<Offset> count(n + 1, 0);
-  e.used.assign(n, 0);
-  for_each_part(n, mesh.triangles.size(), [&](VertexPart part) {
-    for (const auto& tri : mesh.triangles)
+  const PartPlan plan = plan_parts(n, triangles);
+  const size_t parts = plan.parts.size();
+  // Each undirected edge is filed under its lower vertex: a part counts its vertices' edges (into
+  // first[v], which is then turned into v's end), fills them in backwards, and then sorts and counts
+  // each vertex's few entries while they are in cache (one sort of all 3F edges took most of the
+  // time: 20 ms of a 100k-triangle mesh that `isotope serve` answers interactively).
+  e.first.resize(n + 1);
+  e.used.resize(n);
+  ConcurrentForest forest(n);
+  std::vector<Offset> total(parts + 1, 0);
+  parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
+    const VertexPart part = plan.parts[static_cast<size_t>(p)];
+    std::fill(e.first.begin() + part.begin, e.first.begin() + part.end, Offset{0});
+    std::fill(e.used.begin() + part.begin, e.used.begin() + part.end, uint8_t{0});
+    forest.reset(part.begin, part.end);
+    plan.for_each_triangle(static_cast<size_t>(p), triangles, [&](const std::array<uint32_t, 3>& tri) {
       for (int k = 0; k < 3; ++k) {
-        const uint32_t a = tri[static_cast<size_t>(k)], lo = std::min(a, tri[static_cast<size_t>((k + 1) % 3)]);
-        if (part.holds(lo)) ++count[lo + 1];
+        const uint32_t a = tri[static_cast<size_t>(k)], lo = ordered(a, tri[static_cast<size_t>((k + 1) % 3)])[0];
+        if (part.holds(lo)) ++e.first[lo];
         if (part.holds(a)) e.used[a] = 1;
       }
+    });
+    Offset sum = 0;
+    for (uint32_t v = part.begin; v < part.end; ++v) sum += e.first[v];
+    total[static_cast<size_t>(p) + 1] = sum;
   });
-  e.first.assign(n + 1, 0);
-  for (size_t v = 1; v <= n; ++v) e.first[v] = e.first[v - 1] + count[v];
-  std::copy(e.first.begin(), e.first.end() - 1, count.begin());  // count[v] becomes v's fill position
-  e.upper.resize(e.first.back());
-  for_each_part(n, mesh.triangles.size(), [&](VertexPart part) {
-    for (const auto& tri : mesh.triangles)
-      for (int k = 0; k < 3; ++k) {
-        const uint32_t a = tri[static_cast<size_t>(k)], b = tri[static_cast<size_t>((k + 1) % 3)];
-        if (part.holds(std::min(a, b))) e.upper[count[std::min(a, b)]++] = std::max(a, b);
+  for (size_t p = 0; p < parts; ++p) total[p + 1] += total[p];
+  e.first[n] = total[parts];
+  e.upper.resize(static_cast<size_t>(total[parts]));
+  std::vector<EdgeCounts> counts(parts);
+  parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
+    const VertexPart part = plan.parts[static_cast<size_t>(p)];
+    Offset end = total[static_cast<size_t>(p)];
+    for (uint32_t v = part.begin; v < part.end; ++v) e.first[v] = end += e.first[v];  // v's end, for now
+    // Filled from the back, triangles last first: a vertex's entries are in the triangles' order
+    // whatever the parts.
+    plan.for_each_triangle_backwards(static_cast<size_t>(p), triangles, [&](const std::array<uint32_t, 3>& tri) {
+      for (int k = 3; k-- > 0;) {
+        const auto [lo, hi] = ordered(tri[static_cast<size_t>(k)], tri[static_cast<size_t>((k + 1) % 3)]);
+        if (part.holds(lo)) e.upper[--e.first[lo]] = hi;  // first[lo] ends at lo's start
       }
-  });
-  // Per vertex: its upper ends sorted; each edge joins two vertices' components.
-  ConcurrentForest forest(n);
-  struct Counts {
-    int64_t edges = 0, boundary = 0, nonmanifold = 0;
-  };
-  std::vector<Counts> per_task(static_cast<size_t>(tasks_for(n)));
-  parallel_for(int64_t{0}, tasks_for(n), [&](int64_t task) {
-    Counts& c = per_task[static_cast<size_t>(task)];
-    const size_t end = std::min(n, static_cast<size_t>(task + 1) * kTrianglesPerTask);
-    for (size_t v = static_cast<size_t>(task) * kTrianglesPerTask; v < end; ++v) {
-      std::sort(e.upper.begin() + e.first[v], e.upper.begin() + e.first[v + 1]);
-      for_each_edge_of(e, v, [&](uint32_t w, int64_t triangles) {
-        ++c.edges;
-        if (triangles == 1) ++c.boundary;
-        if (triangles > 2) ++c.nonmanifold;
-        forest.unite(static_cast<uint32_t>(v), w);
-      });
+    });
+    // Per vertex, while its entries are in cache: its distinct upper ends; each edge joins two
+    // vertices' components.
+    EdgeCounts& c = counts[static_cast<size_t>(p)];
+    for (uint32_t v = part.begin; v < part.end; ++v) {
+      uint32_t* const from = e.upper.data() + e.first[v];
+      uint32_t* const to = e.upper.data() + (v + 1 == part.end ? total[static_cast<size_t>(p) + 1] : e.first[v + 1]);
+      uint32_t root = forest.find(v);
+      count_entries(from, to, c, [&](uint32_t w) { root = forest.unite(root, w); });
     }
   });
-  for (const Counts& c : per_task) {
+  for (const EdgeCounts& c : counts) {
     e.edges += c.edges;
     e.boundary_edges += c.boundary;
     e.nonmanifold_edges += c.nonmanifold;
   }
   e.root.resize(n);
-  parallel_for(int64_t{0}, tasks_for(n), [&](int64_t task) {
-    const size_t end = std::min(n, static_cast<size_t>(task + 1) * kTrianglesPerTask);
-    for (size_t v = static_cast<size_t>(task) * kTrianglesPerTask; v < end; ++v)
-      e.root[v] = forest.find(static_cast<uint32_t>(v));
+  parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
+    const VertexPart part = plan.parts[static_cast<size_t>(p)];
+    for (uint32_t v = part.begin; v < part.end; ++v) e.root[v] = forest.find(v);
   });
   return e;
 }
