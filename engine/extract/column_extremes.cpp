@@ -35,23 +35,21 @@ bool fold_any(const T* row, size_t width, T* low, T* high) {
   return fold<T, kFindNan>(row, width, low, high);
 }
 
-template <class T, bool kFindNan>
-bool fold_baseline(const T* row, size_t width, T* low, T* high) {
-  return fold<T, kFindNan>(row, width, low, high);
-}
-
 }  // namespace
 
+// An integer is never NaN: only floats look for one, and only when asked.
 template <class T>
 bool fold_row_extremes(const T* row, size_t width, T* low, T* high, bool find_nan) {
-  if (find_nan && !std::is_integral_v<T>) return fold_any<T, !std::is_integral_v<T>>(row, width, low, high);
+  if constexpr (!std::is_integral_v<T>)
+    if (find_nan) return fold_any<T, true>(row, width, low, high);
   return fold_any<T, false>(row, width, low, high);
 }
 
 template <class T>
 bool fold_row_extremes_baseline(const T* row, size_t width, T* low, T* high, bool find_nan) {
-  if (find_nan && !std::is_integral_v<T>) return fold_baseline<T, !std::is_integral_v<T>>(row, width, low, high);
-  return fold_baseline<T, false>(row, width, low, high);
+  if constexpr (!std::is_integral_v<T>)
+    if (find_nan) return fold<T, true>(row, width, low, high);
+  return fold<T, false>(row, width, low, high);
 }
 
 #define ISOTOPE_FOLD_ROW_EXTREMES(T)                                  \

@@ -167,11 +167,7 @@ class RawBoxReader final : public BoxReader {
     }
     // Floats stored as this machine holds them are read straight into OUT: no stage, no copy.
     Stage stage(stored_as_floats() ? 0 : std::min(static_cast<size_t>(run) * elem, kStageBytes));
-    for (int64_t done = 0; done < total; done += run) {
-      const int64_t y = lo[1] + done / size[0] % size[1];
-      const int64_t z = lo[2] + done / (size[0] * size[1]);
-      read_run((z * d[1] + y) * d[0] + lo[0], run, out + done, stage);
-    }
+    for_each_run(lo, size, run, [&](int64_t done, int64_t node) { read_run(node, run, out + done, stage); });
   }
 
   std::optional<ScalarType> stored_type() const override {
@@ -184,19 +180,29 @@ class RawBoxReader final : public BoxReader {
                        unsigned char* out) const override {
     if (!stored_type()) throw std::logic_error(data_.name + ": values cannot be read as stored");
     check_box(lo, size, info_, data_.name);
-    const int64_t total = size[0] * size[1] * size[2];
     const int64_t run = run_length(size);
     const int64_t elem = info_.element_bytes;
-    const auto& d = info_.dims;
-    for (int64_t done = 0; done < total; done += run) {
-      const int64_t y = lo[1] + done / size[0] % size[1];
-      const int64_t z = lo[2] + done / (size[0] * size[1]);
-      pread_fully(fd_.get(), out + done * elem, static_cast<size_t>(run * elem),
-                  data_.offset + ((z * d[1] + y) * d[0] + lo[0]) * elem, data_.read_name);
-    }
+    for_each_run(lo, size, run, [&](int64_t done, int64_t node) {
+      pread_fully(fd_.get(), out + done * elem, static_cast<size_t>(run * elem), data_.offset + node * elem,
+                  data_.read_name);
+    });
   }
 
  private:
+  // Calls f(done, node) for each run of RUN nodes of the box that is contiguous in the file (runs
+  // of run_length(size)): DONE, the box's nodes before it; NODE, the file's index of its first.
+  template <class F>
+  void for_each_run(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, int64_t run,
+                    const F& f) const {
+    const auto& d = info_.dims;
+    const int64_t total = size[0] * size[1] * size[2];
+    for (int64_t done = 0; done < total; done += run) {
+      const int64_t y = lo[1] + done / size[0] % size[1];
+      const int64_t z = lo[2] + done / (size[0] * size[1]);
+      f(done, (z * d[1] + y) * d[0] + lo[0]);
+    }
+  }
+
   // Nodes of the box that are contiguous in the file: a row, or whole planes when the box spans
   // whole rows, or the whole box when it also spans whole planes.
   int64_t run_length(const std::array<int64_t, 3>& size) const {

@@ -39,9 +39,8 @@ class BoxReader {
     read_box(lo, size, out);
   }
   // The type read_box_stored reads values as, for a reader that can read them as the file stores
-  // them, not converted: integers of one or two bytes in this machine's byte order (raw data: a raw file's, a raw or
-  // inflated NRRD's).
-  // None for any other.
+  // them, not converted: integers of one or two bytes in this machine's byte order in raw data (a
+  // raw file's, a raw or inflated NRRD's). None for any other.
   virtual std::optional<ScalarType> stored_type() const { return std::nullopt; }
   // The box's values as stored, element_bytes each, into out (only where stored_type() is not
   // none): for a caller that converts the few it needs to float. An integer is finite.
