@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <cstdint>
 #include <vector>
 
@@ -16,41 +15,6 @@ namespace {
 constexpr int64_t kTrianglesPerTask = int64_t{1} << 15;
 
 int64_t tasks_for(size_t items) { return static_cast<int64_t>((items + kTrianglesPerTask - 1) / kTrianglesPerTask); }
-
-// Union-find over vertex indices whose unions may run concurrently: a root is only ever linked
-// below a smaller index, by compare-and-swap, so concurrent unions of the same sets agree.
-class ConcurrentForest {
- public:
-  explicit ConcurrentForest(size_t n) : parent_(n) {}
-  // Makes each vertex of [begin, end) a set of its own; the parts do it for their vertices.
-  void reset(uint32_t begin, uint32_t end) {
-    for (uint32_t v = begin; v < end; ++v) parent_[v].store(v, std::memory_order_relaxed);
-  }
-  uint32_t find(uint32_t x) {
-    for (;;) {
-      uint32_t p = parent_[x].load(std::memory_order_relaxed);
-      if (p == x) return x;
-      const uint32_t g = parent_[p].load(std::memory_order_relaxed);
-      if (g != p) parent_[x].compare_exchange_weak(p, g, std::memory_order_relaxed);  // path halving
-      x = g;
-    }
-  }
-  // Joins the sets of a and b and returns the root of the joined set. A caller that keeps the
-  // root of one vertex's set passes it as a: from a root, find is one load.
-  uint32_t unite(uint32_t a, uint32_t b) {
-    for (;;) {
-      a = find(a);
-      b = find(b);
-      if (a == b) return a;
-      if (a < b) std::swap(a, b);  // link the larger root below the smaller
-      uint32_t expected = a;
-      if (parent_[a].compare_exchange_strong(expected, b, std::memory_order_relaxed)) return b;
-    }
-  }
-
- private:
-  std::vector<std::atomic<uint32_t>> parent_;
-};
 
 // The order of a vertex's entries, and which of two vertices is lower, are data a branch cannot
 // predict: half its guesses are wrong, some 15 cycles each, and they were much of the filing's cost
@@ -78,6 +42,43 @@ inline void sort8(uint32_t* x) {
   exchange(x[1], x[4]), exchange(x[3], x[6]);
   exchange(x[1], x[2]), exchange(x[3], x[4]), exchange(x[5], x[6]);
 }
+
+// Union-find over vertex indices. A root is only ever linked below a smaller index, so a set's root
+// is its lowest vertex, and every vertex's parent is at most itself. Not for concurrent unions:
+// the parts join the edges within their own vertex range at once (their finds stay in that range),
+// then the edges between parts are joined on one thread. Locked compare-and-swap for every union,
+// which the concurrent unions of all edges took, was a tenth of the filing's time.
+class Forest {
+ public:
+  explicit Forest(size_t n) : parent_(n) {}
+  // Makes each vertex of [begin, end) a set of its own; the parts do it for their vertices.
+  void reset(uint32_t begin, uint32_t end) {
+    for (uint32_t v = begin; v < end; ++v) parent_[v] = v;
+  }
+  uint32_t find(uint32_t x) {
+    while (parent_[x] != x) {
+      const uint32_t g = parent_[parent_[x]];
+      parent_[x] = g;  // path halving
+      x = g;
+    }
+    return x;
+  }
+  // find without path halving: for many threads at once, once the unions are done.
+  uint32_t root(uint32_t x) const {
+    while (parent_[x] != x) x = parent_[x];
+    return x;
+  }
+  // Joins the sets of a and b and returns the root of the joined set. A caller that keeps the
+  // root of one vertex's set passes it as a: from a root, find is one load.
+  uint32_t unite(uint32_t a, uint32_t b) {
+    const auto [low, high] = ordered(find(a), find(b));
+    parent_[high] = low;  // when they are one root, its own parent already
+    return low;
+  }
+
+ private:
+  std::vector<uint32_t> parent_;
+};
 
 struct EdgeCounts {
   int64_t edges = 0, boundary = 0, nonmanifold = 0;
@@ -232,7 +233,7 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
   // time: 20 ms of a 100k-triangle mesh that `isotope serve` answers interactively).
   e.first.resize(n + 1);
   e.used.resize(n);
-  ConcurrentForest forest(n);
+  Forest forest(n);
   std::vector<Offset> total(parts + 1, 0);
   parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];
@@ -254,6 +255,7 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
   e.first[n] = total[parts];
   e.upper.resize(static_cast<size_t>(total[parts]));
   std::vector<EdgeCounts> counts(parts);
+  std::vector<std::vector<std::array<uint32_t, 2>>> between(parts);  // per part: its edges to later parts
   parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];
     Offset end = total[static_cast<size_t>(p)];
@@ -267,15 +269,23 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
       }
     });
     // Per vertex, while its entries are in cache: its distinct upper ends; each edge joins two
-    // vertices' components.
+    // vertices' components, here when both are the part's, after all parts when not.
     EdgeCounts& c = counts[static_cast<size_t>(p)];
+    std::vector<std::array<uint32_t, 2>>& later = between[static_cast<size_t>(p)];
     for (uint32_t v = part.begin; v < part.end; ++v) {
       uint32_t* const from = e.upper.data() + e.first[v];
       uint32_t* const to = e.upper.data() + (v + 1 == part.end ? total[static_cast<size_t>(p) + 1] : e.first[v + 1]);
       uint32_t root = forest.find(v);
-      count_entries(from, to, c, [&](uint32_t w) { root = forest.unite(root, w); });
+      count_entries(from, to, c, [&](uint32_t w) {
+        if (w < part.end)
+          root = forest.unite(root, w);
+        else
+          later.push_back({v, w});
+      });
     }
   });
+  for (const auto& edges : between)
+    for (const auto& [v, w] : edges) forest.unite(v, w);
   for (const EdgeCounts& c : counts) {
     e.edges += c.edges;
     e.boundary_edges += c.boundary;
@@ -284,7 +294,7 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
   e.root.resize(n);
   parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];
-    for (uint32_t v = part.begin; v < part.end; ++v) e.root[v] = forest.find(v);
+    for (uint32_t v = part.begin; v < part.end; ++v) e.root[v] = forest.root(v);
   });
   return e;
 }
