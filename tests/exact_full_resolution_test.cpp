@@ -536,7 +536,7 @@ TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
 }
 
 // The real volume the speed targets name, in 16 MB windows of its 64 MB array. Its own test, so that
-// the thread sanitizer, which runs the windows of the test above, can leave its 2.5 M triangles out.
+// the race-checking build, which runs the windows of the test above, can leave its 2.5 M triangles out.
 TEST(Streamed, EmbryoInWindowsIsTheArraysMeshBitForBit) {
   const std::string embryo = std::string(ISOTOPE_TEST_DATA) + "/embryo_256x256x256_uint8.raw";
   const Volume e = read_raw(embryo, *parse_raw_name(embryo));

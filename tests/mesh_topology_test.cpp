@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <string>
 #include <tuple>
 
 #include "engine/core/fields.h"
@@ -106,24 +107,35 @@ TEST(MeshTopology, AnyThreadCountGivesTheSameCounts) {
     return label_components(torn);
   }();
   expect_same(total_topology(torn_components.components), torn_one, 1);
-  // 64-bit offsets, which a mesh of 1.4 G triangles or more takes, file the same edges as 32-bit.
-  const FiledEdges<uint32_t> narrow = file_edges<uint32_t>(torn);
-  const FiledEdges<uint64_t> wide = file_edges<uint64_t>(torn);
-  EXPECT_TRUE(std::equal(narrow.first.begin(), narrow.first.end(), wide.first.begin(), wide.first.end()));
-  EXPECT_TRUE(narrow.upper == wide.upper && narrow.used == wide.used && narrow.root == wide.root);
-  EXPECT_EQ(std::tie(narrow.edges, narrow.boundary_edges, narrow.nonmanifold_edges),
-            std::tie(wide.edges, wide.boundary_edges, wide.nonmanifold_edges));
-  EXPECT_EQ(wide.edges, torn_one.edges);
   // The same triangles in a scattered order: each run of triangles then uses vertices from all over
   // the mesh, and every part reads every run (in the engine's order, a part reads only the runs
   // whose vertices meet its own).
+  const size_t count = torn.triangles.size();
+  ASSERT_EQ(std::gcd(size_t{7919}, count), 1u) << "a permutation needs 7919 prime to the count";
   Mesh scattered;
   scattered.positions = torn.positions;
-  const size_t count = torn.triangles.size();
   for (size_t i = 0; i < count; ++i) scattered.triangles.push_back(torn.triangles[(i * 7919) % count]);
-  ASSERT_EQ(std::gcd(size_t{7919}, count), 1u) << "a permutation needs 7919 prime to the count";
-  for (size_t threads : {2, 3, 5}) {
+  // The filed edges on one thread, each vertex's entries sorted: the same for any triangle order,
+  // any thread count, and with 64-bit offsets (which a mesh of 1.4 G triangles or more takes).
+  const FiledEdges<uint32_t> filed = [&] {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    return file_edges<uint32_t>(torn);
+  }();
+  EXPECT_EQ(filed.edges, torn_one.edges);
+  const auto expect_filed = [&](const auto& got, const std::string& what) {
+    EXPECT_TRUE(std::equal(got.first.begin(), got.first.end(), filed.first.begin(), filed.first.end())) << what;
+    EXPECT_TRUE(got.upper == filed.upper && got.used == filed.used && got.root == filed.root) << what;
+    EXPECT_EQ(std::tie(got.edges, got.boundary_edges, got.nonmanifold_edges),
+              std::tie(filed.edges, filed.boundary_edges, filed.nonmanifold_edges))
+        << what;
+  };
+  for (size_t threads : {1, 2, 3, 5}) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    const std::string on = " on " + std::to_string(threads) + " threads";
+    expect_filed(file_edges<uint32_t>(torn), "torn" + on);
+    expect_filed(file_edges<uint64_t>(torn), "torn, 64-bit offsets" + on);
+    expect_filed(file_edges<uint32_t>(scattered), "scattered" + on);
+    if (threads == 1) continue;
     expect_same(measure_topology(m), one, threads);
     expect_same(measure_topology(torn), torn_one, threads);
     expect_same(measure_topology(scattered), torn_one, threads);

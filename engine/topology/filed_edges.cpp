@@ -46,8 +46,8 @@ inline void sort8(uint32_t* x) {
 // Union-find over vertex indices. A root is only ever linked below a smaller index, so a set's root
 // is its lowest vertex, and every vertex's parent is at most itself. Not for concurrent unions:
 // the parts join the edges within their own vertex range at once (their finds stay in that range),
-// then the edges between parts are joined on one thread. Locked compare-and-swap for every union,
-// which the concurrent unions of all edges took, was a tenth of the filing's time.
+// then the edges between parts are joined on one thread. Concurrent unions of all edges took a
+// locked compare-and-swap for every link and every halving step: a tenth of the filing's time.
 class Forest {
  public:
   explicit Forest(size_t n) : parent_(n) {}
@@ -202,7 +202,7 @@ PartPlan plan_parts(size_t n, const Mesh::Array<std::array<uint32_t, 3>>& triang
   // triangles between them; down to the few parts that may each read all of them.
   const int64_t full_read_parts = std::min(thread_count(), kMostFullReadParts);
   int64_t count = std::min<int64_t>({4 * thread_count(), kMostParts, static_cast<int64_t>(n)});
-  while (count > full_read_parts && reads(count) > 2 * chunk_count) count /= 2;
+  while (count > full_read_parts && reads(count) > 2 * chunk_count) count = std::max(count / 2, full_read_parts);
   equal_parts(count);
   plan.every_triangle = false;
   plan.first_chunk.assign(static_cast<size_t>(count) + 1, 0);
@@ -231,14 +231,12 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
   // first[v], which is then turned into v's end), fills them in backwards, and then sorts and counts
   // each vertex's few entries while they are in cache (one sort of all 3F edges took most of the
   // time: 20 ms of a 100k-triangle mesh that `isotope serve` answers interactively).
-  e.first.resize(n + 1);
+  e.first.resize(n + 1);  // zero: the counts start there
   e.used.resize(n);
   Forest forest(n);
   std::vector<Offset> total(parts + 1, 0);
   parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];
-    std::fill(e.first.begin() + part.begin, e.first.begin() + part.end, Offset{0});
-    std::fill(e.used.begin() + part.begin, e.used.begin() + part.end, uint8_t{0});
     forest.reset(part.begin, part.end);
     plan.for_each_triangle(static_cast<size_t>(p), triangles, [&](const std::array<uint32_t, 3>& tri) {
       for (int k = 0; k < 3; ++k) {
@@ -260,8 +258,9 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];
     Offset end = total[static_cast<size_t>(p)];
     for (uint32_t v = part.begin; v < part.end; ++v) e.first[v] = end += e.first[v];  // v's end, for now
-    // Filled from the back, triangles last first: a vertex's entries are in the triangles' order
-    // whatever the parts.
+    // Filled backwards from each vertex's end, so that first[v] ends at v's start; the triangles
+    // last first, so that a vertex's entries still come in the triangles' order (the order the
+    // sorts below were measured with).
     plan.for_each_triangle_backwards(static_cast<size_t>(p), triangles, [&](const std::array<uint32_t, 3>& tri) {
       for (int k = 3; k-- > 0;) {
         const auto [lo, hi] = ordered(tri[static_cast<size_t>(k)], tri[static_cast<size_t>((k + 1) % 3)]);
