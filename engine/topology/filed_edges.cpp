@@ -28,9 +28,9 @@ inline std::array<uint32_t, 2> ordered(uint32_t a, uint32_t b) {
 }
 
 inline void exchange(uint32_t& a, uint32_t& b) {
-  const uint32_t swap = (a ^ b) & (0u - static_cast<uint32_t>(b < a));
-  a ^= swap;
-  b ^= swap;
+  const auto [low, high] = ordered(a, b);
+  a = low;
+  b = high;
 }
 
 // Sorts x[0 .. 8): Knuth's network of 19 compare-exchanges.
@@ -99,15 +99,12 @@ void count_entries(uint32_t* begin, uint32_t* end, EdgeCounts& c, const Unite& u
   } else {
     std::sort(begin, end);
   }
-  for (const uint32_t* i = begin; i != end;) {
-    const uint32_t* j = i + 1;
-    while (j != end && *j == *i) ++j;
+  for_each_run(begin, end, [&](uint32_t w, ptrdiff_t triangles) {
     ++c.edges;
-    c.boundary += j - i == 1;
-    c.nonmanifold += j - i > 2;
-    unite(*i);
-    i = j;
-  }
+    c.boundary += triangles == 1;
+    c.nonmanifold += triangles > 2;
+    unite(w);
+  });
 }
 
 // The vertex range [begin, end) of one part of the filing passes below. A part counts and files

@@ -37,17 +37,21 @@ decltype(auto) with_filed_edges(const Mesh& mesh, F&& f) {
   return f(file_edges<uint64_t>(mesh));
 }
 
-// Calls f(w, triangles) for each edge (v, w) of vertex v.
-template <class Offset, class F>
-void for_each_edge_of(const FiledEdges<Offset>& e, size_t v, F&& f) {
-  const uint32_t* i = e.upper.data() + e.first[v];
-  const uint32_t* const stop = e.upper.data() + e.first[v + 1];
-  while (i != stop) {
+// Calls f(w, n) for each run of n equal values w of the sorted [begin, end).
+template <class F>
+void for_each_run(const uint32_t* begin, const uint32_t* end, F&& f) {
+  for (const uint32_t* i = begin; i != end;) {
     const uint32_t* j = i + 1;
-    while (j != stop && *j == *i) ++j;
+    while (j != end && *j == *i) ++j;
     f(*i, j - i);
     i = j;
   }
+}
+
+// Calls f(w, triangles) for each edge (v, w) of vertex v.
+template <class Offset, class F>
+void for_each_edge_of(const FiledEdges<Offset>& e, size_t v, F&& f) {
+  for_each_run(e.upper.data() + e.first[v], e.upper.data() + e.first[v + 1], f);
 }
 
 }  // namespace isotope
