@@ -211,7 +211,10 @@ StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& 
   if (!std::isfinite(h.value_offset) || !(h.value_scale > 0) || !std::isfinite(h.value_scale) ||
       (h.quantize_bits == 0 && (h.value_offset != 0 || h.value_scale != 1)))
     throw IoError(file + ": header holds an impossible value mapping");
-  if (!std::isfinite(h.value_min) || !std::isfinite(h.value_max) || !(h.value_min <= h.value_max))
+  // The values are floats however they are stored, so their range is within float's: beyond it no finite
+  // isovalue could be asked of the store.
+  constexpr double kFloatMax = std::numeric_limits<float>::max();
+  if (!(std::fabs(h.value_min) <= kFloatMax) || !(std::fabs(h.value_max) <= kFloatMax) || !(h.value_min <= h.value_max))
     throw IoError(file + ": header holds an impossible value range");
   const StoreLayout layout(h.dims, h.brick_bits);
   if (layout.lattice().k != h.lattice_k || layout.brick_count() != h.brick_count)

@@ -173,6 +173,7 @@ def main():
     store_case('dims-2-to-the-40', reseal(edit(good, '<q', 16, 2**40)), 'impossible dimensions')
     store_case('value-mapping-on-lossless', reseal(edit(good, '<d', 196, 2.0)), 'impossible value mapping')
     store_case('value-range-nan', reseal(edit(good, '<d', 108, nan)), 'impossible value range')
+    store_case('value-range-beyond-float', reseal(edit(good, '<d', 116, 1e300)), 'impossible value range')
     store_case('reserved-byte', reseal(edit(good, '<B', 900, 1)), "reserved bytes are not zero")
     store_case('brick-count-lie', reseal(edit(good, '<q', 124, 9)), 'header contradicts itself')
     store_case('directory-past-the-end', reseal(edit(good, '<Q', BAND_TABLE, len(good) + 24)),
