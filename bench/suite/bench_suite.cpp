@@ -127,6 +127,15 @@ struct Row {
   std::string note;
 };
 
+// The row of DATASET, INPUT and MODE on THREADS, at a coarse eps or at 0; null where none ran.
+const Row* find_row(const std::vector<Row>& rows, const std::string& dataset, const std::string& input,
+                    const std::string& mode, bool coarse, int threads) {
+  for (const Row& r : rows)
+    if (r.dataset == dataset && r.input == input && r.mode == mode && (r.eps > 0) == coarse && r.threads == threads)
+      return &r;
+  return nullptr;
+}
+
 class ThreadCap {
  public:
   explicit ThreadCap(int threads)
@@ -447,9 +456,12 @@ class Suite {
   // gets the median of the time each prints (its extraction, and its preprocessing when
   // `preprocess`) and of its whole run, its triangles and the peak RSS over the runs. BEFORE runs
   // ahead of each, untimed.
+  // QUIET: with -q, as a user who wants the mesh only runs it: the process prints no summary (and
+  // so measures no topology for it), and the row's time is the whole process's.
   void extract_processes(Row& r, std::vector<std::string> args, const fs::path& mesh, bool preprocess,
-                         const std::function<void()>& before = {}) {
+                         const std::function<void()>& before = {}, bool quiet = false) {
     args.insert(args.end(), {"-o", mesh.string()});
+    if (quiet) args.push_back("-q");
     std::vector<double> times, process;
     double total = 0;
     uint64_t peak = 0;
@@ -458,11 +470,15 @@ class Suite {
       if (before) before();
       fs::remove(mesh);  // replacing the last run's mesh would time freeing its pages too
       const ChildRun c = child(args, work_);
-      const Summary s = parse_summary(c.output);
-      times.push_back(s.extract_seconds + (preprocess ? s.preprocess_seconds : 0));
+      if (quiet) {
+        times.push_back(c.seconds);
+      } else {
+        const Summary s = parse_summary(c.output);
+        times.push_back(s.extract_seconds + (preprocess ? s.preprocess_seconds : 0));
+        r.triangles = s.triangles;
+      }
       process.push_back(c.seconds);
       total += c.seconds;
-      r.triangles = s.triangles;
       peak = std::max(peak, static_cast<uint64_t>(c.max_rss_kb) << 10);
     }
     fs::remove(mesh);
@@ -537,6 +553,22 @@ class Suite {
       finish(r);
     };
     for (const int t : thread_counts()) one_shot(TopologyMode::preserve, 0, t);
+    // The same, quiet, into PLY and GLB: what the end-to-end targets time (the mesh written, no
+    // summary line). Its triangles are the row above's, the same mesh.
+    for (const char* format : {"ply", "glb"})
+      for (const int t : thread_counts()) {
+        say(spec, "one shot from the raw file, quiet");
+        const std::string input = std::string("one-shot -q ") + format;
+        Row r = row(spec, input.c_str(), "preserve", 0, t);
+        extract_processes(r,
+                          {"extract", raw, "--iso=" + number(spec.iso), "--eps=0", "--topology=preserve", "--threads",
+                           std::to_string(t)},
+                          work_ / (std::string("quiet.") + format), true, {}, true);
+        if (const Row* loud = find_row(rows_, spec.name, "one-shot", "preserve", false, t))
+          r.triangles = loud->triangles;
+        r.note = "the whole process, quiet: raw file read, mesh written";
+        finish(r);
+      }
     one_shot(TopologyMode::none, d.coarse_eps, threads_);
     // The same coarse surface through a store: convert, then extract (its cache cold, the file in
     // the page cache as convert left it).
@@ -804,14 +836,6 @@ void print_rows(const std::vector<Row>& rows) {
   }
 }
 
-const Row* find_row(const std::vector<Row>& rows, const std::string& dataset, const std::string& input,
-                    const std::string& mode, bool coarse, int threads) {
-  for (const Row& r : rows)
-    if (r.dataset == dataset && r.input == input && r.mode == mode && (r.eps > 0) == coarse && r.threads == threads)
-      return &r;
-  return nullptr;
-}
-
 // The speed targets (and eps 0 at least the baseline's speed), each one line per dataset it applies to.
 struct Target {
   std::string what, dataset, value;
@@ -916,13 +940,33 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
       add("coarse one-shot cheaper than convert + extract", name, buf,
           coarse_shot->process_seconds < two->process_seconds);
     }
-    // End to end, 2 threads against 1 at eps 0.
-    const Row* one = find_row(rows, name, "one-shot", "preserve", false, 1);
-    if (one && shot && threads > 1) {
-      const double x = one->process_seconds / shot->process_seconds;
-      std::snprintf(buf, sizeof buf, "%s (%s ms on 1 thread, %s ms on %d)", ratio(x).c_str(),
-                    ms(one->process_seconds).c_str(), ms(shot->process_seconds).c_str(), threads);
-      add("eps 0 end to end: all threads >= 1.7x one", name, buf, x >= 1.7);
+    // eps 0 in the process, from the array in memory: all threads against one.
+    const Row* in1 = eps0_row(rows, name, 1);
+    const Row* in_all = eps0_row(rows, name, threads);
+    if (named && in1 && in_all && threads > 1) {
+      const double x = in1->seconds / in_all->seconds;
+      std::snprintf(buf, sizeof buf, "%s (%s ms on 1 thread, %s ms on %d)", ratio(x).c_str(), ms(in1->seconds).c_str(),
+                    ms(in_all->seconds).c_str(), threads);
+      add("eps 0 in process: all threads >= 1.85x one", name, buf, x >= 1.85);
+    }
+    // End to end, quiet, the mesh written: all threads against one, and against the extraction in
+    // memory (the rest is the read and the write, which should overlap it).
+    for (const char* format : {"ply", "glb"}) {
+      const std::string input = std::string("one-shot -q ") + format;
+      const Row* q1 = find_row(rows, name, input, "preserve", false, 1);
+      const Row* q_all = find_row(rows, name, input, "preserve", false, threads);
+      if (named && q1 && q_all && threads > 1) {
+        const double x = q1->process_seconds / q_all->process_seconds;
+        std::snprintf(buf, sizeof buf, "%s, %s (%s ms on 1 thread, %s ms on %d)", format, ratio(x).c_str(),
+                      ms(q1->process_seconds).c_str(), ms(q_all->process_seconds).c_str(), threads);
+        add("eps 0 end to end, quiet: all threads >= 1.75x one", name, buf, x >= 1.75);
+      }
+      if (named && q_all && in_all) {
+        const double x = q_all->process_seconds / in_all->seconds;
+        std::snprintf(buf, sizeof buf, "%s, %s (process %s ms, in memory %s ms, %d thr)", format, ratio(x).c_str(),
+                      ms(q_all->process_seconds).c_str(), ms(in_all->seconds).c_str(), threads);
+        add("one-shot eps 0, quiet, within 1.25x the extraction in memory", name, buf, x <= 1.25);
+      }
     }
     // Convert at 50% of its ceiling; the store no larger than format 2's.
     if (named) {
