@@ -49,6 +49,21 @@ TEST(VertexNormals, AnyThreadCountGivesOneWalksBitsAndUnitLength) {
     EXPECT_EQ(differ, 0u) << threads << " threads";
   }
   for (const auto& n : expected) EXPECT_NEAR(std::hypot(n[0], n[1], n[2]), 1.0, 1e-5);
+
+  // The same triangles in a scattered order: every chunk of them spans the vertices, so the parts
+  // read chunks that other parts read too, and each must still sum in triangle order.
+  Mesh scattered = m;
+  const size_t count = m.triangles.size();
+  for (size_t i = 0; i < count; ++i) scattered.triangles[i] = m.triangles[i * 7919 % count];
+  ASSERT_NE(count % 7919, 0u);
+  const std::vector<std::array<float, 3>> expected_scattered = one_walk(scattered);
+  for (size_t threads : {1, 2, 3, 7}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    const std::vector<std::array<float, 3>> normals = vertex_normals(scattered);
+    size_t differ = 0;
+    for (size_t i = 0; i < normals.size(); ++i) differ += normals[i] != expected_scattered[i];
+    EXPECT_EQ(differ, 0u) << threads << " threads, scattered";
+  }
 }
 
 TEST(VertexNormals, AVertexOfNoTriangleGetsZero) {

@@ -6,15 +6,10 @@
 #include <vector>
 
 #include "engine/core/parallel.h"
+#include "engine/mesh/vertex_parts.h"
 
 namespace isotope {
 namespace {
-
-// Triangles per parallel task: enough to pay for a task, few enough to balance two threads on a
-// mesh of a few hundred thousand triangles (what `isotope serve` measures per request).
-constexpr int64_t kTrianglesPerTask = int64_t{1} << 15;
-
-int64_t tasks_for(size_t items) { return static_cast<int64_t>((items + kTrianglesPerTask - 1) / kTrianglesPerTask); }
 
 // The order of a vertex's entries, and which of two vertices is lower, are data a branch cannot
 // predict: half its guesses are wrong, some 15 cycles each, and they were much of the filing's cost
@@ -107,114 +102,6 @@ void count_entries(uint32_t* begin, uint32_t* end, EdgeCounts& c, const Unite& u
   });
 }
 
-// The vertex range [begin, end) of one part of the filing passes below. A part counts and files
-// only the edge ends and corners whose vertex is its own, so no two threads write one counter and
-// no add is locked (locked adds over tasks of triangles took a full memory barrier for every edge
-// end: 132 -> 98 ms on two threads for embryo's 2.5 M-triangle eps 0 mesh when they went).
-struct VertexPart {
-  uint32_t begin, end;
-  bool holds(uint32_t v) const { return v - begin < end - begin; }
-};
-
-// The parts, and the triangles each reads: those of the chunks of kTrianglesPerTask triangles
-// whose vertex range meets the part's. The meshes the engine makes number their vertices as the
-// march makes them, so a chunk's triangles use a narrow range of vertices and a part reads little
-// more than its share of the triangles (embryo's eps 0 mesh: 1.06 reads per triangle in 2 parts,
-// 1.5 in 8, where each part read every triangle). A mesh in another order gets a few parts that
-// each read everything.
-constexpr int64_t kMostParts = 64;
-constexpr int64_t kMostFullReadParts = 4;  // parts that each read all triangles, at most
-struct PartPlan {
-  std::vector<VertexPart> parts;
-  bool every_triangle = true;                 // one part: it reads all triangles
-  std::vector<uint32_t> first_chunk, chunks;  // else part p's chunks: chunks[first_chunk[p] ..)
-
-  template <class F>
-  void for_each_triangle(size_t p, const Mesh::Array<std::array<uint32_t, 3>>& triangles, const F& f) const {
-    if (every_triangle) {
-      for (const auto& tri : triangles) f(tri);
-      return;
-    }
-    for (uint32_t k = first_chunk[p]; k < first_chunk[p + 1]; ++k) {
-      const size_t begin = static_cast<size_t>(chunks[k]) * kTrianglesPerTask;
-      const size_t end = std::min(triangles.size(), begin + kTrianglesPerTask);
-      for (size_t t = begin; t < end; ++t) f(triangles[t]);
-    }
-  }
-  // The same triangles, last first.
-  template <class F>
-  void for_each_triangle_backwards(size_t p, const Mesh::Array<std::array<uint32_t, 3>>& triangles, const F& f) const {
-    if (every_triangle) {
-      for (size_t t = triangles.size(); t-- > 0;) f(triangles[t]);
-      return;
-    }
-    for (uint32_t k = first_chunk[p + 1]; k-- > first_chunk[p];) {
-      const size_t begin = static_cast<size_t>(chunks[k]) * kTrianglesPerTask;
-      const size_t end = std::min(triangles.size(), begin + kTrianglesPerTask);
-      for (size_t t = end; t-- > begin;) f(triangles[t]);
-    }
-  }
-};
-
-PartPlan plan_parts(size_t n, const Mesh::Array<std::array<uint32_t, 3>>& triangles) {
-  PartPlan plan;
-  const int64_t chunk_count = tasks_for(triangles.size());
-  const auto equal_parts = [&](int64_t count) {
-    plan.parts.resize(static_cast<size_t>(count));
-    for (int64_t q = 0; q < count; ++q)
-      plan.parts[static_cast<size_t>(q)] = {
-          static_cast<uint32_t>(n * static_cast<size_t>(q) / static_cast<size_t>(count)),
-          static_cast<uint32_t>(n * static_cast<size_t>(q + 1) / static_cast<size_t>(count))};
-  };
-  if (runs_serially(0, chunk_count) || n < 2) {
-    equal_parts(1);
-    return plan;
-  }
-  std::vector<std::array<uint32_t, 2>> range(static_cast<size_t>(chunk_count));  // lowest, highest vertex
-  parallel_for(int64_t{0}, chunk_count, [&](int64_t k) {
-    const size_t begin = static_cast<size_t>(k) * kTrianglesPerTask;
-    const size_t end = std::min(triangles.size(), begin + kTrianglesPerTask);
-    uint32_t lo = UINT32_MAX, hi = 0;
-    for (size_t t = begin; t < end; ++t)
-      for (const uint32_t v : triangles[t]) {
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-      }
-    range[static_cast<size_t>(k)] = {lo, hi};
-  });
-  // The part of vertex v among `count` equal parts (part q begins at n q / count).
-  const auto part_of = [&](uint32_t v, int64_t count) {
-    const size_t c = static_cast<size_t>(count);
-    size_t q = static_cast<size_t>(v) * c / n;
-    while (q + 1 < c && n * (q + 1) / c <= v) ++q;
-    while (q > 0 && n * q / c > v) --q;
-    return static_cast<int64_t>(q);
-  };
-  const auto reads = [&](int64_t count) {
-    int64_t sum = 0;
-    for (const auto& r : range) sum += part_of(r[1], count) - part_of(r[0], count) + 1;
-    return sum;
-  };
-  // As many parts as balance the threads, halved while they would read more than twice the
-  // triangles between them; down to the few parts that may each read all of them.
-  const int64_t full_read_parts = std::min(thread_count(), kMostFullReadParts);
-  int64_t count = std::min<int64_t>({4 * thread_count(), kMostParts, static_cast<int64_t>(n)});
-  while (count > full_read_parts && reads(count) > 2 * chunk_count) count = std::max(count / 2, full_read_parts);
-  equal_parts(count);
-  plan.every_triangle = false;
-  plan.first_chunk.assign(static_cast<size_t>(count) + 1, 0);
-  for (const auto& r : range)
-    for (int64_t q = part_of(r[0], count); q <= part_of(r[1], count); ++q)
-      ++plan.first_chunk[static_cast<size_t>(q) + 1];
-  for (size_t q = 0; q < static_cast<size_t>(count); ++q) plan.first_chunk[q + 1] += plan.first_chunk[q];
-  plan.chunks.resize(plan.first_chunk.back());
-  std::vector<uint32_t> at(plan.first_chunk.begin(), plan.first_chunk.end() - 1);
-  for (size_t k = 0; k < range.size(); ++k)
-    for (int64_t q = part_of(range[k][0], count); q <= part_of(range[k][1], count); ++q)
-      plan.chunks[at[static_cast<size_t>(q)]++] = static_cast<uint32_t>(k);
-  return plan;
-}
-
 }  // namespace
 
 template <class Offset>
@@ -222,12 +109,15 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
   const size_t n = mesh.positions.size();
   const Mesh::Array<std::array<uint32_t, 3>>& triangles = mesh.triangles;
   FiledEdges<Offset> e;
-  const PartPlan plan = plan_parts(n, triangles);
+  const VertexParts plan = plan_vertex_parts(n, triangles);
   const size_t parts = plan.parts.size();
   // Each undirected edge is filed under its lower vertex: a part counts its vertices' edges (into
   // first[v], which is then turned into v's end), fills them in backwards, and then sorts and counts
   // each vertex's few entries while they are in cache (one sort of all 3F edges took most of the
-  // time: 20 ms of a 100k-triangle mesh that `isotope serve` answers interactively).
+  // time: 20 ms of a 100k-triangle mesh that `isotope serve` answers interactively). A part counts
+  // and files only the edge ends and corners whose vertex is its own, so no add is locked (locked
+  // adds over tasks of triangles took a full memory barrier for every edge end: 132 -> 98 ms on two
+  // threads for embryo's 2.5 M-triangle eps 0 mesh when they went).
   e.first.resize(n + 1);  // zero: the counts start there
   e.used.resize(n);
   Forest forest(n);

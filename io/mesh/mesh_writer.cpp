@@ -202,9 +202,30 @@ void encode_stl(const Mesh& mesh, AtomicFile& out) {
 // triangle can show.
 std::vector<std::array<float, 3>> unit_vertex_normals(const Mesh& mesh) {
   std::vector<std::array<float, 3>> normals = vertex_normals(mesh);
-  for (auto& n : normals)
-    if (n[0] == 0 && n[1] == 0 && n[2] == 0) n = {0, 0, 1};
+  parallel_for(int64_t{0}, static_cast<int64_t>((normals.size() + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
+    const size_t end = std::min(normals.size(), static_cast<size_t>(b + 1) * kBlockItems);
+    for (size_t i = static_cast<size_t>(b) * kBlockItems; i < end; ++i)
+      if (normals[i][0] == 0 && normals[i][1] == 0 && normals[i][2] == 0) normals[i] = {0, 0, 1};
+  });
   return normals;
+}
+
+// The least and greatest coordinates of the positions, on all threads (the same on any number:
+// a minimum is a minimum in any order). Not empty.
+std::array<std::array<float, 3>, 2> bounds(const Mesh::Array<std::array<float, 3>>& positions) {
+  const auto blocks = static_cast<int64_t>((positions.size() + kBlockItems - 1) / kBlockItems);
+  std::vector<std::array<std::array<float, 3>, 2>> block_bounds(static_cast<size_t>(blocks));
+  parallel_for(int64_t{0}, blocks, [&](int64_t b) {
+    const size_t begin = static_cast<size_t>(b) * kBlockItems, end = std::min(positions.size(), begin + kBlockItems);
+    std::array<float, 3> lo = positions[begin], hi = lo;
+    for (size_t i = begin; i < end; ++i)
+      for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], positions[i][k]), hi[k] = std::max(hi[k], positions[i][k]);
+    block_bounds[static_cast<size_t>(b)] = {lo, hi};
+  });
+  std::array<std::array<float, 3>, 2> all = block_bounds[0];
+  for (const auto& [lo, hi] : block_bounds)
+    for (int k = 0; k < 3; ++k) all[0][k] = std::min(all[0][k], lo[k]), all[1][k] = std::max(all[1][k], hi[k]);
+  return all;
 }
 
 // ---- glTF binary ----
@@ -231,9 +252,7 @@ void encode_glb(const Mesh& mesh, AtomicFile& out) {
   if (m == 0) {
     json += "\"scenes\":[{}]}";  // an accessor must count at least one element: no mesh at all
   } else {
-    std::array<float, 3> lo = mesh.positions[0], hi = lo;
-    for (const auto& p : mesh.positions)
-      for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], p[k]), hi[k] = std::max(hi[k], p[k]);
+    const auto [lo, hi] = bounds(mesh.positions);
     bin = 24 * n + 12 * m;
     json +=
         "\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
