@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <bit>
-#include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -43,7 +42,7 @@ void validate_layout(const std::array<int64_t, 3>& dims, const std::array<double
   std::array<double, 3> corner{};
   for (int a = 0; a < 3; ++a) corner[a] = origin[a] + spacing[a] * static_cast<double>(dims[a] - 1);
   for (int a = 0; a < 3; ++a)
-    if (!(std::fabs(corner[a]) <= FLT_MAX) || !(std::fabs(origin[a]) <= FLT_MAX))
+    if (!within_float_range(corner[a]) || !within_float_range(origin[a]))
       throw std::invalid_argument("spacing " + triple(spacing) + " and origin " + triple(origin) +
                                   " put the volume's far corner at " + triple(corner) +
                                   ", beyond the mesh's float32 coordinates (about 3.4e38)");

@@ -5,12 +5,18 @@
 // a geometry whose far corner lies beyond the mesh's float32 coordinates, values that do not fill
 // the dimensions, values that are not finite.
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 
 #include "isotope/volume.h"
 
 namespace isotope {
+
+// Whether V converts to a finite float (false for NaN): values, coordinates and value ranges are
+// float32 however a file gives them.
+inline bool within_float_range(double v) { return std::fabs(v) <= std::numeric_limits<float>::max(); }
 
 // Dimensions alone (a hierarchy's lattice, before there is a volume). Throws std::invalid_argument.
 void validate_dims(const std::array<int64_t, 3>& dims);

@@ -9,10 +9,10 @@ namespace isotope {
 
 // On all threads, the same bits on any number: the vertices are split into parts (VertexParts),
 // and each part walks its triangles in order and sums the normals of those that touch its
-// vertices. A vertex's sum thus adds its triangles' normals in triangle order,
-// as one walk does; a triangle that spans two parts is computed in both, the same way. A part
-// reads only the chunks of triangles that can touch it: where every range read every triangle,
-// embryo's eps 0 mesh (2.5 M triangles) took 35-42 ms on two threads, and 25-29 ms so.
+// vertices. A vertex's sum thus adds its triangles' normals in triangle order, as one walk does;
+// a triangle that spans two parts is computed in both, the same way. A part reads only the chunks
+// of triangles that can touch it: embryo's eps 0 mesh (2.5 M triangles) took 35-42 ms on two
+// threads when every part read every triangle, and takes 25-29 ms so.
 std::vector<std::array<float, 3>> vertex_normals(const Mesh& mesh) {
   const size_t n = mesh.positions.size();
   std::vector<std::array<float, 3>> normals(n, {0, 0, 0});

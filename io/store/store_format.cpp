@@ -16,6 +16,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "engine/core/volume_check.h"
 #include "io/file/checked_size.h"
 #include "io/store/field_codec.h"
 #include "io/store/held_words.h"
@@ -213,8 +214,7 @@ StoreHeader decode_header(const uint8_t* bytes, size_t size, const std::string& 
     throw IoError(file + ": header holds an impossible value mapping");
   // The values are floats however they are stored, so their range is within float's: beyond it no finite
   // isovalue could be asked of the store.
-  constexpr double kFloatMax = std::numeric_limits<float>::max();
-  if (!(std::fabs(h.value_min) <= kFloatMax) || !(std::fabs(h.value_max) <= kFloatMax) || !(h.value_min <= h.value_max))
+  if (!within_float_range(h.value_min) || !within_float_range(h.value_max) || !(h.value_min <= h.value_max))
     throw IoError(file + ": header holds an impossible value range");
   const StoreLayout layout(h.dims, h.brick_bits);
   if (layout.lattice().k != h.lattice_k || layout.brick_count() != h.brick_count)
