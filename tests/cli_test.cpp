@@ -935,6 +935,14 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
   EXPECT_EQ(dataset["neghip"]["raw_bytes"], 66 * 66 * 66);
   const double disk_rate = j["machine"]["disk_read_bytes_per_second"].get<double>();
   EXPECT_GT(disk_rate, 0);
+  EXPECT_GT(j["machine"]["disk_write_bytes_per_second"].get<double>(), 0);
+  // The quiet rows' mesh files: a PLY holds 12 bytes per vertex and 13 per triangle past its header.
+  // A GLB holds more: 12 bytes per vertex for the positions and as many for the normals.
+  for (const auto& row : j["rows"]) {
+    if (row["input"] == "one-shot -q ply" || row["input"] == "one-shot -q glb") {
+      EXPECT_GT(row.value("bytes_written", uint64_t{0}), 13 * row["triangles"].get<uint64_t>()) << row;
+    }
+  }
   std::map<std::pair<std::string, int>, double> baseline;
   for (const auto& row : j["rows"])
     if (row["mode"] == "baseline") baseline[{row["dataset"], row["threads"].get<int>()}] = row["seconds"];
