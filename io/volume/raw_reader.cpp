@@ -54,7 +54,7 @@ template <typename T>
 float to_float(T v) {
   // A double beyond float range has no defined conversion; infinity lets check_finite report it.
   if constexpr (std::is_same_v<T, double>) {
-    if (!std::isnan(v) && !within_float_range(v))
+    if (std::fabs(v) > std::numeric_limits<float>::max())
       return v > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
   }
   return static_cast<float>(v);
