@@ -87,8 +87,9 @@ run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "sl
 # the server: its worker threads, concurrent extractions and supersession. Convert's threads run in
 # Store.FileDoesNotDependOnThreadsOrMemoryBudget; the round trips over odd dimensions (68 s here) check
 # the format, which ASan+UBSan covers. The streamed march runs its reader and its windows here on
-# the shared volumes and a 700x650x40 field of five windows; embryo's 256^3 in four runs in Release
-# and under ASan+UBSan (with it, the streamed test took 144 s under TSan, the longest here).
+# the shared volumes and a 300x260x40 field of five windows; embryo's 256^3 in four runs in Release
+# and under ASan+UBSan (with it, the streamed test took 144 s under TSan, the longest here). So do
+# the banded builds over the larger odd volumes: the smaller ones run the same threads here.
 phase "RelWithDebInfo, thread sanitizer (build-tsan): parallel tests"
 cmake -S . -B build-tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DISOTOPE_WERROR=ON \
   -DISOTOPE_SANITIZE=thread -DISOTOPE_BUILD_BENCH=OFF

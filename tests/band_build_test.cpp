@@ -233,27 +233,29 @@ StagedRun build_staged(const Volume& v, const StoreLayout& layout, bool staged, 
   return run;
 }
 
-TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
-  // Odd sizes: groups cut by the volume's far faces, bands of a few tiles, the corners.
-  for (const Box3& dims : std::vector<Box3>{{70, 53, 61}, {33, 70, 9}}) {
-    const Volume v = testing::crop(generate_noise(70, 11), dims);
-    const StoreLayout layout(v.dims, 2);  // bricks and tiles of 4^3 nodes: 18 x 14 x 16 tiles in band 0
-    for (int ranks : {1, 3}) {
-      SCOPED_TRACE(::testing::Message() << dims[0] << "x" << dims[1] << "x" << dims[2] << ", " << ranks << " ranks");
-      const StagedRun alone = build_staged(v, layout, false, 0, ranks);
-      EXPECT_EQ(alone.sink.bricks.size(), static_cast<size_t>(layout.brick_count()));
-      for (int64_t s : {2, 4, 32}) {
-        SCOPED_TRACE(::testing::Message() << "groups of " << s << "^3 tiles");
-        const StagedRun staged = build_staged(v, layout, true, s, ranks);
-        EXPECT_TRUE(staged.sink.bricks == alone.sink.bricks);
-        EXPECT_EQ(staged.sink.order, alone.sink.order);  // file order
-        // A row of a group's box instead of a row of each tile's: s times fewer, less the halo,
-        // while the groups are smaller than the bands (the grid of band 1 is 9 tiles across).
-        EXPECT_LT(staged.handover_calls * std::min<int64_t>(s, 8), alone.handover_calls * 2)
-            << staged.handover_calls << " calls staged, " << alone.handover_calls << " alone";
-      }
+// Odd sizes: groups cut by the volume's far faces, bands of a few tiles, the corners.
+void expect_staged_groups_build_what_their_tiles_build_alone(const Box3& dims) {
+  const Volume v = testing::crop(generate_noise(70, 11), dims);
+  const StoreLayout layout(v.dims, 2);  // bricks and tiles of 4^3 nodes: 70x53x61 has 18 x 14 x 16 in band 0
+  for (int ranks : {1, 3}) {
+    SCOPED_TRACE(::testing::Message() << dims[0] << "x" << dims[1] << "x" << dims[2] << ", " << ranks << " ranks");
+    const StagedRun alone = build_staged(v, layout, false, 0, ranks);
+    EXPECT_EQ(alone.sink.bricks.size(), static_cast<size_t>(layout.brick_count()));
+    for (int64_t s : {2, 4, 32}) {
+      SCOPED_TRACE(::testing::Message() << "groups of " << s << "^3 tiles");
+      const StagedRun staged = build_staged(v, layout, true, s, ranks);
+      EXPECT_TRUE(staged.sink.bricks == alone.sink.bricks);
+      EXPECT_EQ(staged.sink.order, alone.sink.order);  // file order
+      // A row of a group's box instead of a row of each tile's: s times fewer, less the halo,
+      // while the groups are smaller than the bands (the grid of band 1 is at most 9 tiles across).
+      EXPECT_LT(staged.handover_calls * std::min<int64_t>(s, 8), alone.handover_calls * 2)
+          << staged.handover_calls << " calls staged, " << alone.handover_calls << " alone";
     }
   }
+}
+
+TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
+  expect_staged_groups_build_what_their_tiles_build_alone({33, 70, 9});
   const Volume v = testing::crop(generate_noise(70, 11), {70, 53, 61});
   const StoreLayout layout(v.dims, 2);
   BandedBuildOptions o;
@@ -270,6 +272,12 @@ TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
   EXPECT_TRUE(budgeted.bricks == build_staged(v, layout, false, 0, 1).sink.bricks);
   EXPECT_GE(stage_tiles_for(layout, 0, 1, o.memory_bytes), 16);
   EXPECT_EQ(stage_tiles_for(layout, 0, 1, 1 << 10), 0);  // not even 2^3 tiles fit: no stage
+}
+
+// The same over a larger volume, in its own test so that the race-checking build, which runs the
+// smaller one above, can leave it out.
+TEST(BandBuild, StagedGroupsOfALargerVolumeBuildWhatTheirTilesBuildAlone) {
+  expect_staged_groups_build_what_their_tiles_build_alone({70, 53, 61});
 }
 
 // Tiles of 128^3 nodes where band 0 has at least 64 of them a thread (fewer halo records computed
@@ -296,64 +304,73 @@ TEST(BandBuild, LargeVolumesTakeLargerTilesWhereEveryThreadHasManyOfThem) {
 // ---- A fused pass: band j+1 built beside band j, each of its tiles from a widened tile of band j,
 // where the hand-over between them would be a file; the output does not change.
 
-TEST(BandBuild, ABandBuiltBesideTheOneBeforeItIsTheBandBuiltFromItsHandOver) {
-  // Odd sizes, and sides one short of a multiple of the tiles' (63 data nodes: band 0 has 64, its
-  // records reaching one node beyond the data, band 1 has 33: one node beyond band 0's last tile).
-  for (const Box3& dims : std::vector<Box3>{{70, 53, 61}, {33, 70, 9}, {63, 47, 31}, {64, 40, 17}}) {
-    const Volume v = testing::crop(generate_noise(70, 13), dims);
-    const StoreLayout layout(v.dims, 2);  // bricks of 4^3 nodes
-    const StagedRun alone = build_staged(v, layout, false, 0, 1);
-    const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
-      for (int64_t z = 0; z < size[2]; ++z)
-        for (int64_t y = 0; y < size[1]; ++y)
-          for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
-    };
-    for (int64_t c : {2, 4})
-      for (bool staged : {false, true}) {
-        SCOPED_TRACE(::testing::Message() << dims[0] << "x" << dims[1] << "x" << dims[2] << ", tiles of " << c
-                                          << "^3 bricks" << (staged ? ", staged" : ""));
-        std::map<int, int64_t> calls;  // per band, the calls made to the hand-over it reads
-        struct Tallied : CountingHandover {
-          Tallied(const Box3& nodes, int64_t& total) : CountingHandover(nodes), total_(total) {}
-          ~Tallied() override { total_ += calls; }
-          int64_t& total_;
-        };
-        BandedBuildOptions o;
-        o.fuse = true;
-        o.tile_bricks = c;
-        o.staged = staged;
-        o.make_handover = [&](const Box3& nodes, uint64_t) -> std::unique_ptr<BandHandover> {
-          for (const Band& b : layout.bands())
-            if (b.nodes == nodes) return std::make_unique<Tallied>(nodes, calls[b.scale]);
-          ADD_FAILURE() << "a hand-over to no band";
-          return nullptr;
-        };
-        RecordingSink fused(&layout);
-        const BandedBuildStats stats = build_bands(layout, read, fused, 0, o);
-        EXPECT_TRUE(fused.bricks == alone.sink.bricks);
-        EXPECT_EQ(fused.order, alone.sink.order);  // file order
-        // Bands 0 and 1 in one pass, 2 and 3 in the next, ...: the hand-overs into bands 1, 3, ...
-        // are made (to learn they would be files) but never used.
-        const int k = layout.lattice().k;
-        EXPECT_EQ(stats.bands_built_beside, (k + 1) / 2);
-        for (int j = 1; j <= k; ++j)
-          if (j % 2)
-            EXPECT_EQ(calls[j], 0) << "band " << j;
-          else
-            EXPECT_GT(calls[j], 0) << "band " << j;
-      }
-    // Tiles of one brick (band j+1's would be half a brick) and hand-overs in memory: no fused pass.
-    for (int64_t c : {1, 2}) {
+// Odd sizes, and sides one short of a multiple of the tiles' (63 data nodes: band 0 has 64, its
+// records reaching one node beyond the data, band 1 has 33: one node beyond band 0's last tile).
+void expect_bands_built_beside_as_from_their_hand_over(const Box3& dims) {
+  const Volume v = testing::crop(generate_noise(70, 13), dims);
+  const StoreLayout layout(v.dims, 2);  // bricks of 4^3 nodes
+  const StagedRun alone = build_staged(v, layout, false, 0, 1);
+  const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
+    for (int64_t z = 0; z < size[2]; ++z)
+      for (int64_t y = 0; y < size[1]; ++y)
+        for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
+  };
+  for (int64_t c : {2, 4})
+    for (bool staged : {false, true}) {
+      SCOPED_TRACE(::testing::Message() << dims[0] << "x" << dims[1] << "x" << dims[2] << ", tiles of " << c
+                                        << "^3 bricks" << (staged ? ", staged" : ""));
+      std::map<int, int64_t> calls;  // per band, the calls made to the hand-over it reads
+      struct Tallied : CountingHandover {
+        Tallied(const Box3& nodes, int64_t& total) : CountingHandover(nodes), total_(total) {}
+        ~Tallied() override { total_ += calls; }
+        int64_t& total_;
+      };
       BandedBuildOptions o;
       o.fuse = true;
       o.tile_bricks = c;
-      if (c == 1)
-        o.make_handover = [](const Box3& nodes, uint64_t) { return std::make_unique<CountingHandover>(nodes); };
-      RecordingSink sink(&layout);
-      EXPECT_EQ(build_bands(layout, read, sink, 0, o).bands_built_beside, 0);
-      EXPECT_TRUE(sink.bricks == alone.sink.bricks);
+      o.staged = staged;
+      o.make_handover = [&](const Box3& nodes, uint64_t) -> std::unique_ptr<BandHandover> {
+        for (const Band& b : layout.bands())
+          if (b.nodes == nodes) return std::make_unique<Tallied>(nodes, calls[b.scale]);
+        ADD_FAILURE() << "a hand-over to no band";
+        return nullptr;
+      };
+      RecordingSink fused(&layout);
+      const BandedBuildStats stats = build_bands(layout, read, fused, 0, o);
+      EXPECT_TRUE(fused.bricks == alone.sink.bricks);
+      EXPECT_EQ(fused.order, alone.sink.order);  // file order
+      // Bands 0 and 1 in one pass, 2 and 3 in the next, ...: the hand-overs into bands 1, 3, ...
+      // are made (to learn they would be files) but never used.
+      const int k = layout.lattice().k;
+      EXPECT_EQ(stats.bands_built_beside, (k + 1) / 2);
+      for (int j = 1; j <= k; ++j)
+        if (j % 2)
+          EXPECT_EQ(calls[j], 0) << "band " << j;
+        else
+          EXPECT_GT(calls[j], 0) << "band " << j;
     }
+  // Tiles of one brick (band j+1's would be half a brick) and hand-overs in memory: no fused pass.
+  for (int64_t c : {1, 2}) {
+    BandedBuildOptions o;
+    o.fuse = true;
+    o.tile_bricks = c;
+    if (c == 1) o.make_handover = [](const Box3& nodes, uint64_t) { return std::make_unique<CountingHandover>(nodes); };
+    RecordingSink sink(&layout);
+    EXPECT_EQ(build_bands(layout, read, sink, 0, o).bands_built_beside, 0);
+    EXPECT_TRUE(sink.bricks == alone.sink.bricks);
   }
+}
+
+TEST(BandBuild, ABandBuiltBesideTheOneBeforeItIsTheBandBuiltFromItsHandOver) {
+  for (const Box3& dims : std::vector<Box3>{{33, 70, 9}, {64, 40, 17}})
+    expect_bands_built_beside_as_from_their_hand_over(dims);
+}
+
+// The same over larger volumes, in their own test so that the race-checking build, which runs the
+// smaller ones above, can leave them out.
+TEST(BandBuild, BandsOfLargerVolumesBuiltBesideAreBuiltFromTheirHandOver) {
+  for (const Box3& dims : std::vector<Box3>{{70, 53, 61}, {63, 47, 31}})
+    expect_bands_built_beside_as_from_their_hand_over(dims);
 }
 
 // A hierarchy held in memory keeps the store's 16^3 bricks for every volume of usual shape, and

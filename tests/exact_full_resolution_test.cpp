@@ -492,6 +492,15 @@ struct RecordedLayers {
   }
 };
 
+// A field whose planes (312 KB) make a window one layer of blocks: five windows, the last 7 cell
+// layers thick; small, for the sanitizers, which run the streamed march's reader and windows.
+Volume five_windows() {
+  return testing::make_volume({300, 260, 40}, [](int64_t x, int64_t y, int64_t z) {
+    return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
+           0.1 * static_cast<double>(z % 13);
+  });
+}
+
 void expect_streamed_is_the_arrays_mesh(const Volume& volume, float iso, const std::string& what,
                                         int64_t min_windows = 1) {
   ExtractOptions o;
@@ -523,13 +532,10 @@ TEST(Streamed, EveryLayerReadOnceInOrderAndTheMeshIsTheArraysBitForBit) {
     const Volume v = testing::load_shared(s);
     for (float iso : s.isovalues) expect_streamed_is_the_arrays_mesh(v, iso, s.name);
   }
-  // Planes of 1.8 MB: a window is one layer of blocks, and the last is 7 cell layers thick.
-  const Volume wide = testing::make_volume({700, 650, 40}, [](int64_t x, int64_t y, int64_t z) {
-    return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
-           0.1 * static_cast<double>(z % 13);
-  });
-  expect_streamed_is_the_arrays_mesh(wide, 0.5f, "wide 700x650x40", 5);
-  EXPECT_EQ(streamed_window_bytes(wide.dims), 700 * 650 * 9 * 4);
+  const Volume wide = five_windows();
+  expect_streamed_is_the_arrays_mesh(wide, 0.5f, "wide 300x260x40", 5);
+  EXPECT_EQ(streamed_window_bytes(wide.dims), 300 * 260 * 9 * 4);
+  EXPECT_EQ(streamed_window_bytes({700, 650, 40}), 700 * 650 * 9 * 4) << "planes of 1.8 MB: still one layer of blocks";
   expect_streamed_is_the_arrays_mesh(generate_noise(9, 3), 0.0f, "noise 9");  // one window, one slab
   expect_streamed_is_the_arrays_mesh(generate_noise(5, 3), 0.0f, "noise 5");  // blocks of 4 cells
   EXPECT_EQ(streamed_window_bytes({9, 9, 9}), 9 * 9 * 9 * 4) << "a window holds no more than the volume";
@@ -630,11 +636,7 @@ TEST(Streamed, AFailedReadStopsTheExtractionWithItsError) {
 // first in the file when there are several, whatever slab met one first, also beside a failed
 // read; read errors still stop it.
 TEST(Streamed, AValueNotFiniteReadUncheckedIsNamedAsACheckedReadNamesIt) {
-  // Planes of 312 KB: a window is one layer of blocks, five windows (small, for the sanitizers).
-  const Volume wide = testing::make_volume({300, 260, 40}, [](int64_t x, int64_t y, int64_t z) {
-    return std::sin(0.05 * static_cast<double>(x)) + std::cos(0.07 * static_cast<double>(y)) +
-           0.1 * static_cast<double>(z % 13);
-  });
+  const Volume wide = five_windows();
   ASSERT_EQ(streamed_window_bytes(wide.dims), 300 * 260 * 9 * 4);
   ExtractOptions o;
   o.iso = 0.5f;

@@ -408,13 +408,13 @@ TEST_F(Store, FileDoesNotDependOnThreadsOrMemoryBudget) {
   EXPECT_TRUE(a == c);
 }
 
-// Where band 1's hand-over would be a scratch file (at 256 MB, 129^3 x 48 bytes is beyond a
+// Where band 1's hand-over would be a scratch file (at 128 MB, 97 x 96 x 92 x 48 bytes is beyond a
 // quarter of the budget), bands 0 and 1 are built in one pass and band 1's bricks held aside
-// until band 0's last is written: the same file as band by band (at 1024 MB, in memory). 255
-// nodes along x: band 0 has 256 (records reach one node beyond the data), band 1 129, whose last
+// until band 0's last is written: the same file as band by band (at 1024 MB, in memory). 191
+// nodes along x: band 0 has 192 (records reach one node beyond the data), band 1 97, whose last
 // brick comes with band 0's last tile, out of Morton order.
 TEST_F(Store, AFileBuiltWithTwoBandsInOnePassIsTheFileBuiltBandByBand) {
-  const Volume v = testing::crop(generate_noise(257, 9), {255, 250, 243});
+  const Volume v = testing::crop(generate_noise(192, 9), {191, 190, 181});
   auto store = [&](const std::string& name, int memory_mb, int expect_beside) {
     ConvertOptions o;
     o.memory_mb = memory_mb;
@@ -423,11 +423,11 @@ TEST_F(Store, AFileBuiltWithTwoBandsInOnePassIsTheFileBuiltBandByBand) {
     return read_bytes(path);
   };
   const auto band_by_band = store("apart", 1024, 0);
-  const auto fused = store("fused", 256, 1);
+  const auto fused = store("fused", 128, 1);
   testing::Bytes one_thread;
   {
     tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-    one_thread = store("fused1", 256, 1);
+    one_thread = store("fused1", 128, 1);
   }
   EXPECT_FALSE(fused.empty());
   EXPECT_TRUE(fused == band_by_band);
