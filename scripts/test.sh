@@ -75,13 +75,17 @@ phase "ASan+UBSan tests"
 # - the crack sweeps over the shared volumes at their isovalues and at integer ties (30 s, 34 s):
 #   the same traversal runs in the closed-shape crack test and every other extraction test;
 # - the budget search against its reference on stores (25 s): TriangleBudgetParallel runs it paged;
+# - the compact records against the exact ones over every volume, eps, mode and indicator (42 s):
+#   both hierarchies' extractions run in the other tests;
+# - eps 0 against full-resolution marching tetrahedra on the real volumes (39 s): the synthetic
+#   fields of any dimensions and the blocks cut by the data box run the same march;
 # - the error bound over every volume, isovalue, eps and mode (55 s): the same extractions from
 #   memory and a store run in the paged, topology and simplify tests that stay;
 # - the viewer's browser test (label e2e, 20 s in Release): test_serve runs the server's code here;
 # - the bench command's run of its suite (37 s): it times child processes of the Release binary, and
 #   its own code (tables, JSON, targets) runs in Release.
 run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "slow|e2e" \
-  -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)|TriangleBudget\.CountsEveryCutAsTheWalkDownTheCutDoesPaged|ErrorBound\.EpsBoundsHowFarTheDataIsFromTheIsovalueAtEveryVertex|Cli\.BenchTimesTheSuiteAgainstTheBaseline'
+  -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)|TriangleBudget\.CountsEveryCutAsTheWalkDownTheCutDoesPaged|CompactRecord\.MeshesRefineOnlyMoreAndStayWithinFivePercent|ExactAtEpsZero\.RealVolumesAtTheirIsovaluesAndAtIntegerTies|ErrorBound\.EpsBoundsHowFarTheDataIsFromTheIsovalueAtEveryVertex|Cli\.BenchTimesTheSuiteAgainstTheBaseline'
 
 # The parallel paths under ThreadSanitizer (engine/core/parallel.h runs them on std::threads there), and
 # the server: its worker threads, concurrent extractions and supersession. Convert's threads run in
