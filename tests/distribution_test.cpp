@@ -31,6 +31,7 @@
 #include "isotope/error.h"
 #include "isotope/extract.h"
 #include "isotope/source.h"
+#include "tbb/global_control.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
 
@@ -394,7 +395,10 @@ TEST_F(DistributedStore, FourRanksWriteTheSingleProcessFileAndExtractFromIt) {
 // order at the grid's far faces (191 nodes: band 1's last brick row comes with band 0's last
 // tiles), are each placed where one process puts them.
 TEST_F(DistributedStore, RanksThatBuildTwoBandsAPassWriteTheSingleProcessFile) {
-  const Volume volume = testing::crop(generate_noise(200, 5), {150, 130, 191});
+  // The tiles' size follows the threads (64 nodes where band 0 has 4 a thread): two threads, so
+  // that band 0's 2 x 2 x 3 such tiles take it on any machine.
+  const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+  const Volume volume = testing::crop(generate_noise(200, 5), {100, 90, 191});
   ConvertOptions single_options;
   single_options.memory_mb = 256;  // room for two fused tiles of 64 nodes in flight
   convert(volume, (dir_ / "one.isotope").string(), single_options);
