@@ -85,6 +85,13 @@ struct Source::Impl {
   bool streams(const ExtractOptions& options) const {
     return file && !in_memory() && streamed_extract_applies(file->info().dims, options);
   }
+  // The options an extraction runs: without the triangle budget when the full-resolution mesh fits
+  // it (budget_takes_full_resolution), which a budget reads the volume whole for anyway.
+  ExtractOptions as_extracted(const ExtractOptions& options) const {
+    ExtractOptions o = options;
+    if (options.max_triangles > 0 && budget_takes_full_resolution(whole(), options)) o.max_triangles = 0;
+    return o;
+  }
   // The volume, read whole from its file the first time.
   const Volume& whole() const {
     if (const Volume* v = in_memory()) return *v;
@@ -181,14 +188,15 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
     }
     return extract_streamed(layers, options, stats);
   }
-  if (!needs_hierarchy(options)) {
+  const ExtractOptions extracted = impl_->as_extracted(options);
+  if (!needs_hierarchy(extracted)) {
     // Values read from a file or copied in were checked then; a borrowed array may have changed.
     const Volume& volume = impl_->whole();
-    return volume.borrowed.data() ? isotope::extract(volume, options, stats)
-                                  : extract_validated(volume, options, stats);
+    return volume.borrowed.data() ? isotope::extract(volume, extracted, stats)
+                                  : extract_validated(volume, extracted, stats);
   }
-  const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(options));
-  return isotope::extract(*hierarchy, options, stats, &impl_->budgets);
+  const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(extracted));
+  return isotope::extract(*hierarchy, extracted, stats, &impl_->budgets);
 }
 
 void Source::prepare(const std::vector<ExtractOptions>& planned) const {
@@ -197,7 +205,7 @@ void Source::prepare(const std::vector<ExtractOptions>& planned) const {
   bool needed = false, whole = false;
   for (const ExtractOptions& o : planned) {
     fields = fields | fields_for(o);
-    needed = needed || needs_hierarchy(o);
+    needed = needed || needs_hierarchy(impl_->as_extracted(o));
     whole = whole || !impl_->streams(o);
   }
   if (needed)

@@ -193,6 +193,81 @@ TEST(OneShot, EpsZeroWithTieClassesIsACutNotFullResolution) {
   EXPECT_EQ(extract(v, o).triangles.size(), full);
 }
 
+// The count a triangle budget asks first: the triangles of the full-resolution mesh, from the
+// signs of each cell's nodes, equal to the march's on every shared volume (at its isovalues and at
+// an integer tie), on synthetic fields cut to odd and thin shapes (every parity of cell), and on
+// one and two threads.
+TEST(FullResolutionCount, IsTheMarchsTriangleCountOnEveryVolumeIsovalueAndShape) {
+  const auto expect_count = [](const Volume& v, float iso, const std::string& what) {
+    const auto marched = static_cast<int64_t>(extract_full_resolution(v, iso).triangles.size());
+    EXPECT_EQ(count_full_resolution_triangles(v, iso), marched) << what << " iso " << iso;
+    const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    EXPECT_EQ(count_full_resolution_triangles(v, iso), marched) << what << " iso " << iso << ", one thread";
+  };
+  for (const auto& s : testing::shared_volumes()) {
+    const Volume v = testing::load_shared(s);
+    for (float iso : s.isovalues) expect_count(v, iso, s.name);
+    if (s.name != "hydrogen") expect_count(v, 128.0f, s.name + " integer tie");
+  }
+  const Volume noise = generate_noise(21, 5);
+  for (const std::array<int64_t, 3>& dims : std::vector<std::array<int64_t, 3>>{
+           {2, 2, 2}, {3, 2, 3}, {2, 9, 5}, {5, 4, 3}, {10, 17, 9}, {21, 13, 18}, {21, 21, 21}})
+    for (float iso : {-0.2f, 0.0f, 0.3f})
+      expect_count(testing::crop(noise, dims), iso,
+                   "noise " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
+  const Volume sphere = generate_sphere(33);
+  EXPECT_GT(count_full_resolution_triangles(sphere, 0.0f), 0);
+  EXPECT_EQ(count_full_resolution_triangles(sphere, 10.0f), 0) << "an isovalue above every value";
+  EXPECT_EQ(count_full_resolution_triangles(testing::crop(sphere, {33, 33, 1}), 0.0f), 0) << "no cell";
+  EXPECT_THROW(count_full_resolution_triangles(sphere, NAN), std::invalid_argument);
+}
+
+// A budget the full-resolution mesh fits takes that mesh without a hierarchy: the same bytes as
+// eps 0 and as the search over the hierarchy chooses, from an array and through a Source, which
+// then builds none. One triangle less, and the search runs as before.
+TEST(FullResolutionCount, ABudgetTheFullMeshFitsTakesItWithoutAHierarchy) {
+  const testing::SharedVolume& neghip = testing::shared_volumes()[1];
+  ASSERT_EQ(neghip.name, "neghip");
+  const Volume v = testing::load_shared(neghip);
+  const float iso = neghip.isovalues[0];
+  ExtractOptions full;
+  full.iso = iso;
+  const Mesh reference = extract(v, full);
+  const auto triangles = static_cast<int64_t>(reference.triangles.size());
+  ASSERT_EQ(count_full_resolution_triangles(v, iso), triangles);
+  const MultiresVolume mv = MultiresVolume::build(v);
+  for (const int64_t budget : {triangles, triangles + 1, 10 * triangles}) {
+    ExtractOptions o = full;
+    o.max_triangles = budget;
+    EXPECT_TRUE(budget_takes_full_resolution(v, o)) << budget;
+    ExtractStats stats;
+    const Mesh a = extract(v, o, &stats);
+    EXPECT_TRUE(a.positions == reference.positions && a.triangles == reference.triangles) << budget;
+    EXPECT_EQ(stats.chosen_eps, 0);
+    EXPECT_EQ(stats.chosen_eps_ties, -1);
+    EXPECT_EQ(stats.next_triangles, 0) << "nothing finer";
+    const Mesh searched = extract(mv, o);
+    EXPECT_TRUE(searched.positions == reference.positions && searched.triangles == reference.triangles)
+        << budget << ": the search chooses the same mesh";
+    const Source source = open_volume(Volume(v));
+    const Mesh c = source.extract(o);
+    EXPECT_TRUE(c.positions == reference.positions && c.triangles == reference.triangles) << budget;
+    EXPECT_FALSE(source.info().hierarchy_built) << budget;
+  }
+  ExtractOptions o = full;
+  o.max_triangles = triangles - 1;
+  EXPECT_FALSE(budget_takes_full_resolution(v, o));
+  const Source source = open_volume(Volume(v));
+  const Mesh below = source.extract(o);
+  EXPECT_LT(below.triangles.size(), reference.triangles.size());
+  EXPECT_TRUE(source.info().hierarchy_built);
+  const Mesh searched = extract(mv, o);
+  EXPECT_TRUE(below.positions == searched.positions && below.triangles == searched.triangles);
+  o.max_triangles = 10 * triangles;
+  o.iso = NAN;
+  EXPECT_THROW(budget_takes_full_resolution(v, o), OptionError) << "refused as extract refuses it";
+}
+
 // The blocks are marched in slabs on all threads; the mesh is the same bit for bit.
 TEST(ExactAtEpsZero, AnyThreadCountGivesTheSameMeshBitForBit) {
   const MultiresVolume mv = MultiresVolume::build(generate_algebraic(65));

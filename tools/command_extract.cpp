@@ -1,6 +1,8 @@
 // isotope extract: volume -> adaptive isosurface (PLY, OBJ, STL, glTF or VTK, by -o's extension) +
 // optional JSON report.
-// Steps: read, preprocess (MultiresVolume::build), extract, measure topology, write.
+// Steps: open the input as an isotope::Source, extract (a raw volume at eps > 0 is read and its
+// hierarchy built in memory first; eps 0 streams the file through the march), measure topology,
+// write.
 // Nothing is written before the mesh exists, and the writers are atomic, so a failure
 // leaves no output file behind.
 

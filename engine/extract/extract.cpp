@@ -62,10 +62,18 @@ bool needs_hierarchy(const ExtractOptions& options) {
   return options.eps != 0 || options.max_triangles > 0 || options.eps_ties >= 0;
 }
 
+bool budget_takes_full_resolution(const Volume& volume, const ExtractOptions& options) {
+  if (options.max_triangles <= 0 || options.auto_delta || options.distribution) return false;
+  options.validate();
+  return count_full_resolution_triangles(volume, options.iso) <= options.max_triangles;
+}
+
 namespace {
 
 // An array's extraction, its options and values checked.
-Mesh extract_checked(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract_checked(const Volume& volume, const ExtractOptions& given, ExtractStats* stats) {
+  ExtractOptions options = given;
+  if (budget_takes_full_resolution(volume, options)) options.max_triangles = 0;
   const ArraySource source(volume);
   if (needs_hierarchy(options) || !finest_extract_applies(source.lattice()))
     return extract(Hierarchy::build(volume, fields_for(options)), options, stats);

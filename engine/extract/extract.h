@@ -25,4 +25,11 @@ Mesh extract_validated(const Volume& volume, const ExtractOptions& options, Extr
 // triangle budget): all but full resolution.
 bool needs_hierarchy(const ExtractOptions& options);
 
+// Whether the options' triangle budget takes the full-resolution mesh of `volume`: it fits the
+// budget (count_full_resolution_triangles), so it is the finest mesh that does, the search's
+// choice, found without the hierarchy the search would build (docs/METHOD.md, "Focus and triangle
+// budget"). Only for a budget alone: one that chooses delta too (auto_delta), or spread over
+// processes, searches as before. Throws OptionError for options validate() refuses.
+bool budget_takes_full_resolution(const Volume& volume, const ExtractOptions& options);
+
 }  // namespace isotope

@@ -15,6 +15,14 @@ namespace isotope {
 // non-finite iso.
 Mesh extract_full_resolution(const Volume& volume, float iso);
 
+// The triangles extract_full_resolution() makes of the volume at iso, counted without making a
+// mesh: per cell, from the signs of its eight nodes, through a table of what its six Kuhn
+// tetrahedra make of each sign case (one for each parity of the cell, whose diagonal the
+// tetrahedra share runs from its all-even corner). A compare and a lookup per cell, where the march
+// builds and welds vertices: what a triangle budget asks first, whether the full-resolution mesh
+// fits it. Throws std::invalid_argument for a non-finite iso.
+int64_t count_full_resolution_triangles(const Volume& volume, float iso);
+
 // Cell layers per slab, the unit of parallel work of extract_full_resolution(): slabs start at the
 // multiples of it along z. A function of the dimensions only, so never of the thread count.
 int64_t full_resolution_slab_layers(const std::array<int64_t, 3>& dims);
