@@ -13,6 +13,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <future>
 #include <limits>
@@ -62,7 +63,17 @@ class MemoryHandover : public BandHandover {
   explicit MemoryHandover(const Box3& nodes)
       : BandHandover(nodes),
         values_(std::make_unique_for_overwrite<float[]>(count(nodes))),
-        children_(std::make_unique_for_overwrite<Record[]>(count(nodes))) {}
+        children_(static_cast<Record*>(::operator new(count(nodes) * sizeof(Record)))) {
+    // Raw storage, not constructed: Record's members have initializers, which
+    // make_unique_for_overwrite ran over the whole array on one thread before any tile started
+    // (at 513^3, band 1's 750 MB took half a second). Every entry read was written by a tile
+    // first; where assertions are on (the sanitizers' build) the storage starts as NaNs, so a
+    // read of one never written would change what the tests compare. (Record is an aggregate, an
+    // implicit-lifetime type: operator new's bytes are records.)
+#ifndef NDEBUG
+    std::memset(static_cast<void*>(children_.get()), 0xFF, count(nodes) * sizeof(Record));
+#endif
+  }
   bool in_memory() const override { return true; }
   void write_row(int64_t x0, int64_t y, int64_t z, const float* values, const Record* children, int64_t n) override {
     std::copy(values, values + n, values_.get() + at(x0, y, z));
@@ -77,7 +88,10 @@ class MemoryHandover : public BandHandover {
 
  private:
   std::unique_ptr<float[]> values_;
-  std::unique_ptr<Record[]> children_;
+  struct Free {  // what operator new gave
+    void operator()(Record* p) const { ::operator delete(p); }
+  };
+  std::unique_ptr<Record[], Free> children_;
 };
 
 struct BandedBuildOptions {
