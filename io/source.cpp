@@ -89,7 +89,9 @@ struct Source::Impl {
   // it (budget_takes_full_resolution), which a budget reads the volume whole for anyway.
   ExtractOptions as_extracted(const ExtractOptions& options) const {
     ExtractOptions o = options;
-    if (options.max_triangles > 0 && budget_takes_full_resolution(whole(), options)) o.max_triangles = 0;
+    if (options.max_triangles <= 0) return o;
+    options.validate();  // before the volume is read
+    if (budget_takes_full_resolution(whole(), options)) o.max_triangles = 0;
     return o;
   }
   // The volume, read whole from its file the first time.
@@ -200,6 +202,7 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
 }
 
 void Source::prepare(const std::vector<ExtractOptions>& planned) const {
+  for (const ExtractOptions& o : planned) o.validate();
   if (impl_->paged) return;
   RecordFields fields{false, false, false, false};
   bool needed = false, whole = false;

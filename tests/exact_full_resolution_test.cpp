@@ -250,6 +250,8 @@ TEST(FullResolutionCount, ABudgetTheFullMeshFitsTakesItWithoutAHierarchy) {
     EXPECT_TRUE(searched.positions == reference.positions && searched.triangles == reference.triangles)
         << budget << ": the search chooses the same mesh";
     const Source source = open_volume(Volume(v));
+    source.prepare({o});
+    EXPECT_FALSE(source.info().hierarchy_built) << budget << ": prepared";
     const Mesh c = source.extract(o);
     EXPECT_TRUE(c.positions == reference.positions && c.triangles == reference.triangles) << budget;
     EXPECT_FALSE(source.info().hierarchy_built) << budget;
@@ -258,6 +260,8 @@ TEST(FullResolutionCount, ABudgetTheFullMeshFitsTakesItWithoutAHierarchy) {
   o.max_triangles = triangles - 1;
   EXPECT_FALSE(budget_takes_full_resolution(v, o));
   const Source source = open_volume(Volume(v));
+  source.prepare({o});
+  EXPECT_TRUE(source.info().hierarchy_built) << "prepared for the search";
   const Mesh below = source.extract(o);
   EXPECT_LT(below.triangles.size(), reference.triangles.size());
   EXPECT_TRUE(source.info().hierarchy_built);
@@ -266,6 +270,8 @@ TEST(FullResolutionCount, ABudgetTheFullMeshFitsTakesItWithoutAHierarchy) {
   o.max_triangles = 10 * triangles;
   o.iso = NAN;
   EXPECT_THROW(budget_takes_full_resolution(v, o), OptionError) << "refused as extract refuses it";
+  EXPECT_THROW(source.prepare({o}), OptionError);
+  EXPECT_THROW(source.extract(o), OptionError);
 }
 
 // The blocks are marched in slabs on all threads; the mesh is the same bit for bit.

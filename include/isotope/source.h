@@ -90,10 +90,13 @@ class Source {
   // (isotope/extract.h), and IoError when a store's brick or a volume file cannot be read, is
   // corrupt, or holds a value that is not finite. A triangle
   // budget asked for again is the choice this Source made the first time, without the search
-  // (ExtractStats::budget_remembered).
+  // (ExtractStats::budget_remembered). A volume's budget that its full-resolution mesh fits is
+  // that mesh, found by counting, with no hierarchy built.
   Mesh extract(const ExtractOptions& options, ExtractStats* stats = nullptr) const;
   // Builds now what extractions with these options will need (a volume's hierarchy, with every
-  // record field they read), so that a series of them builds it once. A store needs nothing.
+  // record field they read), so that a series of them builds it once. A store needs nothing, nor
+  // a budget the full-resolution mesh fits (its volume is read). Throws as extract() for options
+  // out of range.
   void prepare(const std::vector<ExtractOptions>& planned) const;
   SourceInfo info() const;
   // A store's reader, for the isotope command's own views of a store (its header, a histogram);
