@@ -147,6 +147,15 @@ def test_options_reach_the_library(data):
     again = isotope.extract(volume, iso=64.5, eps=budget.stats["chosen_eps"], eps_ties=budget.stats["chosen_eps_ties"])
     assert budget.stats["chosen_eps_ties"] >= 0
     np.testing.assert_array_equal(again.faces, budget.faces)
+    # a budget the full-resolution mesh fits is that mesh, counted, with no hierarchy built
+    store = isotope.Store(volume)
+    whole = store.extract(iso=64.5, max_triangles=len(full.faces))
+    np.testing.assert_array_equal(whole.faces, full.faces)
+    np.testing.assert_array_equal(whole.vertices, full.vertices)
+    assert whole.stats["chosen_eps"] == 0 and whole.stats["next_triangles"] == 0
+    assert not store.info["hierarchy_built"]
+    store.extract(iso=64.5, max_triangles=len(full.faces) - 1)
+    assert store.info["hierarchy_built"]
     simplified = isotope.extract(volume, iso=64.5, eps=32, topology="simplify", delta=50)
     preserved = isotope.extract(volume, iso=64.5, eps=32)
     assert len(simplified.faces) <= len(preserved.faces)
