@@ -62,7 +62,7 @@ cmake --build build-asan -j "$jobs"
 phase "ASan+UBSan tests"
 # The bounded-memory tests (label "slow") measure the Release binary's RSS; under ASan they would
 # take most of the CI budget and measure the sanitizer's shadow memory instead. CI keeps under 45
-# minutes on 2 cores (these tests take about 5 of them), so the parameter sweeps that repeat code paths other tests already run under ASan stay in
+# minutes on 2 cores (these tests take 5-7 of them), so the parameter sweeps that repeat code paths other tests already run under ASan stay in
 # Release only (times under ASan):
 # - the paged = in-memory sweep over the shared volumes (2 min) and the store = in-memory sweep (70 s):
 #   the synthetic paged sweep and the round trips run the same reads and decodes;

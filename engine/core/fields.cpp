@@ -123,7 +123,7 @@ Volume generate_noise(int64_t size, uint64_t seed, int bumps) {
   // A Gaussian is the product of one per axis, so a node costs a multiply-add per bump, not an
   // exp (a 513^3 field took 17 s on two cores as 3 billion exps). The x factors are one table
   // shared by the slices, bumps x size doubles: at the most bumps the command takes, never more
-  // than the volume itself beyond 447^3, and 100 MB below. The y and z factors are taken per row
+  // than the volume itself from 448^3 on, and at most 358 MB below. The y and z factors are taken per row
   // and per slice, a 1/size share of the work. Summed in bump order on every thread: the field
   // does not depend on them.
   Volume v = grid(size);
