@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <sys/mman.h>
 #include <sys/resource.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -381,6 +382,38 @@ TEST_F(HugeBlocks, AReservationFreedLeavesItsPagesToTheNextOfItsPurpose) {
   shrink_reservation(too_large, kWarmReservationBytes + kMB);
   free_huge(too_large);
   EXPECT_EQ(warm_reservation_bytes(), 0u) << "more than the bound: given back";
+}
+
+// The pages a range touches, and only those, are in memory once it is prefaulted, on one thread
+// and on two: an array then written whole takes no page fault.
+TEST(Prefault, TheRangesPagesAndOnlyThoseAreFaultedInForWriting) {
+  constexpr size_t kPage = 4096, kBytes = 40 * kMB;
+  for (int threads : {1, 2}) {
+    SCOPED_TRACE(threads);
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    // On 4 KB pages, residency is seen page by page.
+    void* m = mmap(nullptr, kBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    ASSERT_NE(m, MAP_FAILED);
+    madvise(m, kBytes, MADV_NOHUGEPAGE);  // even where every mapping gets huge pages by default
+    auto* p = static_cast<unsigned char*>(m);
+    // From within page 3 to just past the start of the page that ends 3 MB before the mapping does.
+    const size_t from = 3 * kPage + 100, to = kBytes - 3 * kMB + 5;
+    prefault_in_parallel(p + from, to - from);
+    std::vector<unsigned char> resident(kBytes / kPage);
+    ASSERT_EQ(mincore(m, kBytes, resident.data()), 0);
+    size_t in = 0, wrong = 0;
+    for (size_t page = 0; page < resident.size(); ++page) {
+      const bool expected = page >= from / kPage && page <= (to - 1) / kPage;
+      in += (resident[page] & 1) != 0;
+      wrong += ((resident[page] & 1) != 0) != expected;
+    }
+    EXPECT_EQ(in, (to - 1) / kPage - from / kPage + 1);
+    EXPECT_EQ(wrong, 0u);
+    const int64_t before = minor_faults();
+    std::memset(p + from, 7, to - from);
+    EXPECT_LT(minor_faults() - before, 8) << "the writes found their pages there";
+    munmap(m, kBytes);
+  }
 }
 
 }  // namespace

@@ -25,6 +25,13 @@ inline void advise_huge_pages(void* p, size_t bytes) {
   if (end > first) madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
 }
 
+// Faults in the pages of [p, p + bytes) for writing, on all threads at once, a chunk a task
+// (MADV_POPULATE_WRITE): for an array about to be written whole by one thread (a std::vector's
+// resize, which zero-fills), whose first touch is the kernel zeroing every page, on one core, and
+// costs more than the write itself (docs/METHOD.md, "Per-vertex records"). A hint: where the kernel
+// refuses it, the pages fault in at the write as before.
+void prefault_in_parallel(void* p, size_t bytes) noexcept;
+
 // A block of at least BYTES, aligned to 2 MB and advised for huge pages; throws std::bad_alloc.
 // By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
 // store's own, outside malloc's heap: a freed block is kept (up to the bytes given) and handed out
