@@ -63,6 +63,11 @@ StoreReader::StoreReader(const std::string& path) : path_(path) {
   require_regular_file(path, path, "an isotope store");
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
+  // The reader asks for what it reads ahead (advise_window: a brick's 64 KB window, and the hints
+  // ahead of the traversal), so the kernel's own read-ahead is turned off: on a device whose
+  // read-ahead is 8 MB, reading the header and the directories pulled in megabytes of bricks no
+  // extraction had asked for, and whether a read found its brick there became a race.
+  ::posix_fadvise(fd_, 0, 0, POSIX_FADV_RANDOM);
   try {
     struct stat st {};
     if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) throw IoError(path + ": not a regular file");
