@@ -397,7 +397,8 @@ TEST(Prefault, TheRangesPagesAndOnlyThoseAreFaultedInForWriting) {
     ASSERT_NE(m, MAP_FAILED);
     madvise(m, kBytes, MADV_NOHUGEPAGE);  // even where every mapping gets huge pages by default
     auto* p = static_cast<unsigned char*>(m);
-    // From within page 3 to just past the start of the page that ends 3 MB before the mapping does.
+    // From 100 bytes into page 3 to 5 bytes into the page that starts 3 MB before the mapping ends:
+    // both partial pages are the range's.
     const size_t from = 3 * kPage + 100, to = kBytes - 3 * kMB + 5;
     prefault_in_parallel(p + from, to - from);
     std::vector<unsigned char> resident(kBytes / kPage);

@@ -65,8 +65,8 @@ StoreReader::StoreReader(const std::string& path) : path_(path) {
   if (fd_ < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
   // The reader asks for what it reads ahead (advise_window: a brick's 64 KB window, and the hints
   // ahead of the traversal), so the kernel's own read-ahead is turned off: on a device whose
-  // read-ahead is 8 MB, reading the header and the directories pulled in megabytes of bricks no
-  // extraction had asked for, and whether a read found its brick there became a race.
+  // read-ahead is 8 MB, reading the header and the directories can pull in megabytes of bricks no
+  // extraction asked for, and whether a read finds its brick there becomes a race.
   ::posix_fadvise(fd_, 0, 0, POSIX_FADV_RANDOM);
   try {
     struct stat st {};
