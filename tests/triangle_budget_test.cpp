@@ -199,6 +199,33 @@ class TriangleBudget : public testing::TempDirTest {
 
 using TriangleBudgetParallel = TriangleBudget;  // small enough for ThreadSanitizer
 
+// The search's sums by key and tie class: one sum per distinct pair through growth, 0 and -0 one
+// key (as they are one eps), and every sum kept.
+TEST(TieKeySums, OneSumPerKeyAndClassThroughGrowth) {
+  budget_detail::TieKeySums sums;
+  const double inf = std::numeric_limits<double>::infinity();
+  for (int round = 0; round < 3; ++round)
+    for (int k = 0; k < 1000; ++k)
+      for (int tie = 0; tie < 3; ++tie) sums[{k == 0 ? (round == 1 ? -0.0 : 0.0) : k * 0.5, tie}] += k + tie;
+  sums[{inf, 0}] += 7;
+  sums[{inf, 0}] += 1;
+  EXPECT_EQ(sums.size(), 3001u);
+  int64_t visited = 0;
+  sums.for_each([&](const budget_detail::TieKey& key, int64_t sum) {
+    ++visited;
+    if (std::isinf(key.key)) {
+      EXPECT_EQ(sum, 8);
+    } else {
+      EXPECT_EQ(sum, 3 * (static_cast<int64_t>(key.key * 2) + key.tie)) << key.key << " " << key.tie;
+    }
+  });
+  EXPECT_EQ(visited, 3001);
+  sums.clear();
+  EXPECT_EQ(sums.size(), 0u);
+  sums[{1.0, 0}] += 2;
+  EXPECT_EQ(sums.size(), 1u);
+}
+
 TEST_F(TriangleBudget, CountsEveryCutAsTheWalkDownTheCutDoesInMemory) {
   int compared = 0;
   // A clipped lattice (45 x 50 x 39 in 64^3): what reaches past the box is clipped, and counted so.

@@ -29,7 +29,6 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -128,16 +127,54 @@ struct TieKey {
   int tie;
   bool operator==(const TieKey&) const = default;
 };
-struct TieKeyHash {
-  size_t operator()(const TieKey& k) const {
-    return std::hash<double>()(k.key) ^ (static_cast<size_t>(k.tie) * 0x9E3779B97F4A7C15ull);
+
+// Sums by TieKey in one array, probed linearly: the passes add to it for every run of
+// tetrahedra that changes key or class, and a node-based map's lookups were a few percent of a
+// search. Keys compare as doubles (0 and -0 are one key, as they are one eps).
+class TieKeySums {
+ public:
+  int64_t& operator[](const TieKey& k) {
+    if (2 * (size_ + 1) > slots_.size()) grow();
+    Slot& s = find(slots_, k);
+    if (!s.used) s = {k, 0, true}, ++size_;
+    return s.sum;
   }
+  size_t size() const { return size_; }
+  void clear() { slots_.clear(), size_ = 0; }
+  // f(key, sum) for every key, in no particular order.
+  template <class F>
+  void for_each(F&& f) const {
+    for (const Slot& s : slots_)
+      if (s.used) f(s.key, s.sum);
+  }
+
+ private:
+  struct Slot {
+    TieKey key{0, 0};
+    int64_t sum = 0;
+    bool used = false;
+  };
+  static Slot& find(std::vector<Slot>& slots, const TieKey& k) {
+    const size_t mask = slots.size() - 1;
+    const double key = k.key + 0.0;  // -0 hashes as 0
+    size_t i = mix64(std::bit_cast<uint64_t>(key) ^ (static_cast<uint64_t>(static_cast<uint32_t>(k.tie)) << 1)) & mask;
+    while (slots[i].used && !(slots[i].key == k)) i = (i + 1) & mask;
+    return slots[i];
+  }
+  void grow() {
+    std::vector<Slot> bigger(std::max<size_t>(64, 2 * slots_.size()));
+    for (const Slot& s : slots_)
+      if (s.used) find(bigger, s.key) = s;
+    slots_ = std::move(bigger);
+  }
+  std::vector<Slot> slots_;  // a power of two, at most half used
+  size_t size_ = 0;
 };
 
 // D of the passes so far (see the top of this file) by key and tie class, exact for the keys >=
 // the last bound.
 struct KeyTable {
-  std::unordered_map<TieKey, int64_t, TieKeyHash> d;
+  TieKeySums d;
 
   // Consecutive tetrahedra often share a key and class (saturated errors, siblings): one pending
   // sum saves many lookups.
@@ -154,7 +191,7 @@ struct KeyTable {
   }
   void merge(KeyTable& other) {
     other.flush();
-    for (const auto& [k, v] : other.d) d[k] += v;
+    other.d.for_each([&](const TieKey& k, int64_t v) { d[k] += v; });
     other.d.clear();
   }
 
@@ -196,7 +233,7 @@ class CountPasses {
     workers_.resize(static_cast<size_t>(std::max<int64_t>(thread_count(), 1)));
   }
 
-  const std::unordered_map<TieKey, int64_t, TieKeyHash>& d() const { return table_.d; }
+  const TieKeySums& d() const { return table_.d; }
   // The largest key of the frontier: -infinity once every split is counted.
   double largest_below() const { return largest_below_; }
 
@@ -441,7 +478,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
     };
     std::vector<Step> d;
     d.reserve(passes.d().size());
-    for (const auto& [k, v] : passes.d()) d.push_back({k.key, k.tie, v});
+    passes.d().for_each([&](const budget_detail::TieKey& k, int64_t v) { d.push_back({k.key, k.tie, v}); });
     std::sort(d.begin(), d.end(),
               [](const Step& a, const Step& b) { return a.key != b.key ? a.key > b.key : a.tie < b.tie; });
     const double largest_below = passes.largest_below();

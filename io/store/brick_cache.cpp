@@ -175,7 +175,7 @@ std::shared_ptr<CachedBrick> BrickCache::get(int64_t index) {
   Slot& slot = this->slot(index);
   auto found = resident(index);
   if (!found) {
-    const std::lock_guard<std::mutex> lock(load_locks_[static_cast<size_t>(index) % kStripes]);
+    const std::lock_guard<std::mutex> lock(load_locks_[static_cast<size_t>(index) % kLoadStripes]);
     found = resident(index);  // another thread may have loaded it meanwhile
     if (!found) {
       {  // evicted, but still held by a reader?

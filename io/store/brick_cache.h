@@ -213,8 +213,12 @@ class BrickCache {
   std::deque<Slot> slots_;          // never moves a slot
   static constexpr size_t kStripes = 64;
   std::mutex slot_locks_[kStripes];  // short: a pointer copy
-  std::mutex load_locks_[kStripes];  // long: one brick's read and decode, so it is done once
-  mutable std::mutex clock_mutex_;   // the resident list and the hand; taken on misses only
+  // Long: one brick's read and decode, so that it is done once. Many stripes, since a thread that
+  // wants another brick of a busy stripe waits that whole decode: with 64, one decode in 80
+  // waited so on two threads.
+  static constexpr size_t kLoadStripes = 1024;
+  std::mutex load_locks_[kLoadStripes];
+  mutable std::mutex clock_mutex_;  // the resident list and the hand; taken on misses only
   std::vector<int64_t> resident_;
   size_t hand_ = 0;
   uint64_t resident_bytes_ = 0, peak_bytes_ = 0;
