@@ -7,6 +7,7 @@
 #include <exception>
 #include <memory>
 #include <mutex>
+#include <new>
 #include <optional>
 #include <stdexcept>
 #include <thread>
@@ -66,8 +67,12 @@ class LayerRing {
     const int64_t windows = std::max<int64_t>(0, (end - first + layers - 1) / layers);
     marched_.assign(static_cast<size_t>(windows), 0);
     const auto values = static_cast<size_t>(source.dims[0] * source.dims[1] * window_nodes(source.dims, layers));
-    // Written whole by each read before any of it is used: not zero-filled first.
-    for (int64_t b = 0; b < std::min(held, windows); ++b) buffers_.emplace_back(new T[values]);
+    // Written whole by each read before any of it is used: not zero-filled first. Page-aligned, as
+    // a window's first node is in the file whenever the values start at a page: the kernel's copy
+    // from the page cache into a buffer a few bytes past its source's place in a page runs several
+    // times slower (docs/METHOD.md, "Reading and writing files").
+    for (int64_t b = 0; b < std::min(held, windows); ++b)
+      buffers_.emplace_back(new (std::align_val_t{kPageBytes}) T[values]);
     reader_ = std::thread([this] { fill(); });
   }
   ~LayerRing() {
@@ -152,7 +157,11 @@ class LayerRing {
   const std::function<void(int64_t, int64_t, T*)>& read_;
   const ExtractOptions& options_;
   const int64_t first_, end_, layers_, slab_layers_;
-  std::vector<std::unique_ptr<T[]>> buffers_;
+  static constexpr size_t kPageBytes = 4096;
+  struct FreeAligned {
+    void operator()(T* p) const { ::operator delete[](p, std::align_val_t{kPageBytes}); }
+  };
+  std::vector<std::unique_ptr<T[], FreeAligned>> buffers_;
   std::mutex mutex_;
   std::condition_variable changed_;
   int64_t filled_ = 0;            // windows [0, filled_) are in their buffers
