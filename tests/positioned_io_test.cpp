@@ -35,7 +35,8 @@ std::vector<unsigned char> pattern(size_t n, uint64_t seed) {
 // A page-aligned buffer of BYTES and two pages more, whose usable start lies SHIFT bytes into it.
 struct Shifted {
   Shifted(size_t bytes, size_t shift)
-      : base(static_cast<unsigned char*>(std::aligned_alloc(pd::kPage, bytes + 2 * pd::kPage))), at(base.get() + shift) {}
+      : base(static_cast<unsigned char*>(std::aligned_alloc(pd::kPage, bytes + 2 * pd::kPage))),
+        at(base.get() + shift) {}
   struct Free {
     void operator()(unsigned char* p) const { std::free(p); }
   };
