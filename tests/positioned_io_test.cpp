@@ -32,10 +32,11 @@ std::vector<unsigned char> pattern(size_t n, uint64_t seed) {
   return out;
 }
 
-// A page-aligned buffer of BYTES and two pages more, whose usable start lies SHIFT bytes into it.
+// A page-aligned buffer of BYTES and two pages more (in whole pages, as aligned_alloc wants), whose
+// usable start lies SHIFT bytes into it.
 struct Shifted {
   Shifted(size_t bytes, size_t shift)
-      : base(static_cast<unsigned char*>(std::aligned_alloc(pd::kPage, bytes + 2 * pd::kPage))),
+      : base(static_cast<unsigned char*>(std::aligned_alloc(pd::kPage, (bytes / pd::kPage + 3) * pd::kPage))),
         at(base.get() + shift) {}
   struct Free {
     void operator()(unsigned char* p) const { std::free(p); }
