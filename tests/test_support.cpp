@@ -1,6 +1,7 @@
 #include "tests/test_support.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/uio.h>
 #include <unistd.h>
 
@@ -120,6 +121,24 @@ std::string write_store(const Volume& v, const std::string& dir, const std::stri
 int page_cached(const std::string& file, uint64_t offset) {
   const int fd = ::open(file.c_str(), O_RDONLY);
   if (fd < 0) return -1;
+  // Residency first, with mincore, which reads nothing: a RWF_NOWAIT read of a page the cache does
+  // not hold starts the kernel reading it (and its read-ahead window) while it answers EAGAIN, so
+  // a probe of a dropped store read much of it back, and the extraction after it found every brick
+  // in memory and never waited.
+  const uint64_t page = offset & ~uint64_t{4095};
+  void* map = ::mmap(nullptr, 4096, PROT_READ, MAP_SHARED, fd, static_cast<off_t>(page));
+  if (map == MAP_FAILED) {
+    ::close(fd);
+    return -1;
+  }
+  unsigned char resident = 0;
+  const bool known = ::mincore(map, 4096, &resident) == 0;
+  ::munmap(map, 4096);
+  if (!known || (resident & 1) == 0) {
+    ::close(fd);
+    return known ? 0 : -1;
+  }
+  // Resident: a RWF_NOWAIT read of it must then succeed (the store's reader relies on it).
   char byte = 0;
   iovec v{&byte, 1};
   const ssize_t got = ::preadv2(fd, &v, 1, static_cast<off_t>(offset), RWF_NOWAIT);

@@ -49,7 +49,7 @@ std::string write_store(const Volume& v, const std::string& dir, const std::stri
 // Cuts a sub-box out of a volume (for dimensions that are not 2^k + 1).
 Volume crop(const Volume& v, std::array<int64_t, 3> dims);
 
-// Whether the page cache holds the byte at `offset` of `file`: 1 it does, 0 it does not, -1 this
+// Whether the page cache holds the byte at `offset` of `file`, without reading it in: 1 it does, 0 it does not, -1 this
 // cannot be told (the file does not open, or its file system refuses RWF_NOWAIT reads).
 int page_cached(const std::string& file, uint64_t offset);
 // Reads the file whole, so that the page cache holds it (as far as it keeps what was read).
