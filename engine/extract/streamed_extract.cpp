@@ -7,7 +7,6 @@
 #include <exception>
 #include <memory>
 #include <mutex>
-#include <new>
 #include <optional>
 #include <stdexcept>
 #include <thread>
@@ -18,6 +17,7 @@
 #include "engine/extract/array_source.h"
 #include "engine/extract/extract.h"
 #include "engine/extract/finest_extract.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -71,8 +71,7 @@ class LayerRing {
     // a window's first node is in the file whenever the values start at a page: the kernel's copy
     // from the page cache into a buffer a few bytes past its source's place in a page runs several
     // times slower (docs/METHOD.md, "Reading and writing files").
-    for (int64_t b = 0; b < std::min(held, windows); ++b)
-      buffers_.emplace_back(new (std::align_val_t{kPageBytes}) T[values]);
+    for (int64_t b = 0; b < std::min(held, windows); ++b) buffers_.push_back(detail::make_page_aligned<T>(values));
     reader_ = std::thread([this] { fill(); });
   }
   ~LayerRing() {
@@ -157,11 +156,7 @@ class LayerRing {
   const std::function<void(int64_t, int64_t, T*)>& read_;
   const ExtractOptions& options_;
   const int64_t first_, end_, layers_, slab_layers_;
-  static constexpr size_t kPageBytes = 4096;
-  struct FreeAligned {
-    void operator()(T* p) const { ::operator delete[](p, std::align_val_t{kPageBytes}); }
-  };
-  std::vector<std::unique_ptr<T[], FreeAligned>> buffers_;
+  std::vector<detail::PageAlignedArray<T>> buffers_;
   std::mutex mutex_;
   std::condition_variable changed_;
   int64_t filled_ = 0;            // windows [0, filled_) are in their buffers

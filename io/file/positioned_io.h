@@ -13,6 +13,8 @@
 #include <memory>
 #include <new>
 
+#include "isotope/detail/huge_page_allocator.h"
+
 namespace isotope {
 
 // The kernel copies between the page cache and a buffer with `rep movsb`, which on some x86 cores
@@ -25,7 +27,7 @@ namespace isotope {
 // "Reading and writing files").
 namespace positioned_detail {
 
-inline constexpr size_t kPage = 4096;
+inline constexpr size_t kPage = detail::kPageBytes;
 inline constexpr size_t kAliasWindow = 64;       // distances of 1 to 63 bytes go through the bounce
 inline constexpr size_t kBounceMinBytes = 4096;  // below, the copy is too short to matter
 inline constexpr size_t kBounceBytes = size_t{1} << 20;

@@ -101,11 +101,8 @@ void read_values(const std::string& path, ScalarType type, std::vector<float>& v
     const size_t first = static_cast<size_t>(b) * kBlockValues, n = std::min(kBlockValues, values.size() - first);
     // Page-aligned, as the blocks' offsets are: the kernel's copy into it then needs no bounce
     // (docs/METHOD.md, "Reading and writing files"). Written whole by each read: not zero-filled.
-    struct FreeAligned {
-      void operator()(unsigned char* p) const { ::operator delete[](p, std::align_val_t{4096}); }
-    };
-    thread_local std::unique_ptr<unsigned char[], FreeAligned> buffer(
-        new (std::align_val_t{4096}) unsigned char[kBlockValues * sizeof(double)]);
+    thread_local const detail::PageAlignedArray<unsigned char> buffer =
+        detail::make_page_aligned<unsigned char>(kBlockValues * sizeof(double));
     const size_t bytes = n * elem;
     const PreadOutcome r = pread_all(file.get(), buffer.get(), bytes, first * elem);
     if (r.bytes < bytes) {

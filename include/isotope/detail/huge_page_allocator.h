@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <memory>
 #include <new>
 #include <type_traits>
 #include <utility>
@@ -159,5 +160,22 @@ struct UninitializedHugePageAllocator : HugePageAllocator<T> {
     ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
   }
 };
+
+// Arrays aligned to a page, not zero-filled (each element is written before it is read): for
+// buffers the kernel copies file pages into, where a destination a few bytes past its source's
+// place in a page makes that copy several times slower (docs/METHOD.md, "Reading and writing files").
+inline constexpr size_t kPageBytes = 4096;
+struct FreePageAligned {
+  template <class T>
+  void operator()(T* p) const {
+    ::operator delete[](p, std::align_val_t{kPageBytes});
+  }
+};
+template <class T>
+using PageAlignedArray = std::unique_ptr<T[], FreePageAligned>;
+template <class T>
+PageAlignedArray<T> make_page_aligned(size_t count) {
+  return PageAlignedArray<T>(new (std::align_val_t{kPageBytes}) T[count]);
+}
 
 }  // namespace isotope::detail
