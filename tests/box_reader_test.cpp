@@ -344,6 +344,28 @@ TEST_F(BoxReaderTest, BigEndianNrrdIsByteswapped) {
   expect_boxes_match(*ru, read_volume({pu, {}, {}}), 17);
 }
 
+// R reads TYPE as stored: any box, byte for byte the box of NATIVE, the volume's values in this
+// machine's byte order, x fastest.
+void expect_read_as_stored(const BoxReader& r, const Bytes& native, ScalarType type, const std::string& what) {
+  ASSERT_EQ(r.stored_type(), type) << what;
+  const auto& d = r.info().dims;
+  const auto elem = static_cast<size_t>(r.info().element_bytes);
+  for (const auto& [lo, size] : {std::pair{Xyz{0, 0, 0}, d},
+                                 {Xyz{0, 0, 2}, Xyz{d[0], d[1], 2}},
+                                 {Xyz{1, 2, 1}, Xyz{d[0] - 3, d[1] - 2, d[2] - 1}}}) {
+    Bytes got(static_cast<size_t>(size[0] * size[1] * size[2]) * elem);
+    r.read_box_stored(lo, size, got.data());
+    Bytes want;
+    for (int64_t z = lo[2]; z < lo[2] + size[2]; ++z)
+      for (int64_t y = lo[1]; y < lo[1] + size[1]; ++y) {
+        const auto at = static_cast<size_t>((z * d[1] + y) * d[0] + lo[0]) * elem;
+        want.insert(want.end(), native.begin() + static_cast<std::ptrdiff_t>(at),
+                    native.begin() + static_cast<std::ptrdiff_t>(at + static_cast<size_t>(size[0]) * elem));
+      }
+    EXPECT_EQ(got, want) << what << " box at " << lo[0] << "," << lo[1] << "," << lo[2];
+  }
+}
+
 // Integers of one or two bytes in this machine's byte order are read as the file stores them, any
 // box, byte for byte; floats, and integers of the other byte order, are not.
 TEST_F(BoxReaderTest, NativeIntegersOfRawFilesAreReadAsStored) {
@@ -356,28 +378,9 @@ TEST_F(BoxReaderTest, NativeIntegersOfRawFilesAreReadAsStored) {
   const std::string pu = path("u_9x7x5_uint16.raw"), pi = path("i_9x7x5_int16.raw");
   write_file(pu, "", bytes_of(u16, std::endian::native));
   write_file(pi, "", bytes_of(i16, std::endian::native));
-  const auto expect_stored = [](const BoxReader& r, const Bytes& file, ScalarType type, const std::string& what) {
-    ASSERT_EQ(r.stored_type(), type) << what;
-    const auto& d = r.info().dims;
-    const auto elem = static_cast<size_t>(r.info().element_bytes);
-    for (const auto& [lo, size] : {std::pair{Xyz{0, 0, 0}, d},
-                                   {Xyz{0, 0, 2}, Xyz{d[0], d[1], 2}},
-                                   {Xyz{1, 2, 1}, Xyz{d[0] - 3, d[1] - 2, d[2] - 1}}}) {
-      Bytes got(static_cast<size_t>(size[0] * size[1] * size[2]) * elem);
-      r.read_box_stored(lo, size, got.data());
-      Bytes want;
-      for (int64_t z = lo[2]; z < lo[2] + size[2]; ++z)
-        for (int64_t y = lo[1]; y < lo[1] + size[1]; ++y) {
-          const auto at = static_cast<size_t>((z * d[1] + y) * d[0] + lo[0]) * elem;
-          want.insert(want.end(), file.begin() + static_cast<std::ptrdiff_t>(at),
-                      file.begin() + static_cast<std::ptrdiff_t>(at + static_cast<size_t>(size[0]) * elem));
-        }
-      EXPECT_EQ(got, want) << what << " box at " << lo[0] << "," << lo[1] << "," << lo[2];
-    }
-  };
-  expect_stored(*open_reader(pu, dir_.string()), read_bytes(pu), ScalarType::uint16, "uint16");
-  expect_stored(*open_reader(pi, dir_.string()), read_bytes(pi), ScalarType::int16, "int16");
-  expect_stored(*open_reader(kNeghip, dir_.string()), read_bytes(kNeghip), ScalarType::uint8, "neghip");
+  expect_read_as_stored(*open_reader(pu, dir_.string()), read_bytes(pu), ScalarType::uint16, "uint16");
+  expect_read_as_stored(*open_reader(pi, dir_.string()), read_bytes(pi), ScalarType::int16, "int16");
+  expect_read_as_stored(*open_reader(kNeghip, dir_.string()), read_bytes(kNeghip), ScalarType::uint8, "neghip");
   EXPECT_EQ(open_reader(kHydrogen, dir_.string())->stored_type(), std::nullopt) << "float32";
   const std::string other = path("u16_other.nrrd");
   const std::endian foreign = std::endian::native == std::endian::little ? std::endian::big : std::endian::little;
@@ -385,6 +388,42 @@ TEST_F(BoxReaderTest, NativeIntegersOfRawFilesAreReadAsStored) {
              nrrd_header("9 7 5", "ushort", "raw", {foreign == std::endian::big ? "endian: big" : "endian: little"}),
              bytes_of(u16, foreign));
   EXPECT_EQ(open_reader(other, dir_.string())->stored_type(), std::nullopt) << "the other byte order";
+}
+
+// HDF5 datasets of integers of one or two bytes are read as they are, in this machine's byte order
+// whatever the file's, chunked and deflated or not; other types are not.
+TEST_F(BoxReaderTest, SmallIntegersOfHdf5DatasetsAreReadAsStoredInThisMachinesOrder) {
+  const std::array<hsize_t, 3> zyx = {5, 7, 9};
+  const size_t n = 5 * 7 * 9;
+  std::vector<uint8_t> u8(n);
+  std::vector<uint16_t> u16(n);
+  std::vector<int16_t> i16(n);
+  std::vector<int8_t> i8(n);
+  std::vector<int32_t> i32(n);
+  for (size_t i = 0; i < n; ++i) {
+    u8[i] = static_cast<uint8_t>(i * 37 + 5);
+    u16[i] = static_cast<uint16_t>(i * 211 + 0x8102);
+    i16[i] = static_cast<int16_t>(static_cast<int>(i) * -97 + 300);
+    i8[i] = static_cast<int8_t>(static_cast<int>(i % 200) - 100);
+    i32[i] = static_cast<int32_t>(i) * -3;
+  }
+  const std::string p8 = path("u8.h5"), p16 = path("u16be.h5"), pi16 = path("i16.h5");
+  write_h5(p8, H5T_STD_U8LE, H5T_NATIVE_UINT8, zyx, u8.data());
+  write_h5(p16, H5T_STD_U16BE, H5T_NATIVE_UINT16, zyx, u16.data(), {2, 3, 4});
+  write_h5(pi16, H5T_STD_I16LE, H5T_NATIVE_INT16, zyx, i16.data());
+  expect_read_as_stored(*open_reader(p8 + ":/volume", dir_.string()), bytes_of(u8, std::endian::native),
+                        ScalarType::uint8, "uint8");
+  expect_read_as_stored(*open_reader(p16 + ":/volume", dir_.string()), bytes_of(u16, std::endian::native),
+                        ScalarType::uint16, "uint16, big-endian and chunked");
+  expect_read_as_stored(*open_reader(pi16 + ":/volume", dir_.string()), bytes_of(i16, std::endian::native),
+                        ScalarType::int16, "int16");
+  const std::string pi8 = path("i8.h5"), pi32 = path("i32.h5");
+  write_h5(pi8, H5T_STD_I8LE, H5T_NATIVE_INT8, zyx, i8.data());
+  write_h5(pi32, H5T_STD_I32LE, H5T_NATIVE_INT32, zyx, i32.data());
+  EXPECT_EQ(open_reader(pi8 + ":/volume", dir_.string())->stored_type(), std::nullopt) << "int8";
+  EXPECT_EQ(open_reader(pi32 + ":/volume", dir_.string())->stored_type(), std::nullopt) << "int32";
+  EXPECT_EQ(open_reader((kData / "hydrogen.h5").string() + ":/volume", dir_.string())->stored_type(), std::nullopt)
+      << "float32";
 }
 
 TEST_F(BoxReaderTest, GzipNrrdIsInflatedIntoScratchAndRemovedWithTheReader) {

@@ -3,6 +3,7 @@
 // And the baseline itself, built in slabs on several threads, is the one-walk mesh bit for bit, as
 // is eps 0 streamed from a file a window of layers at a time.
 #include <gtest/gtest.h>
+#include <hdf5.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -915,6 +916,30 @@ TEST_F(SourceOfAFile, ARawFileOf16BitIntegersIsStreamedToTheSameMesh) {
   const Mesh m = source.extract(o);
   EXPECT_GT(m.triangles.size(), 0u);
   EXPECT_TRUE(same_mesh(m, extract(read_volume(spec_of(file)), o)));
+  EXPECT_FALSE(source.info().values_in_memory);
+}
+
+// An HDF5 dataset of big-endian 16-bit integers, chunked, is streamed as this machine stores them
+// (HDF5 swaps the bytes), to the mesh of the volume read whole.
+TEST_F(SourceOfAFile, AnHdf5DatasetOf16BitIntegersIsStreamedToTheSameMesh) {
+  const Volume neghip = read_volume(spec_of(copy_of("neghip_66x66x66_uint8.raw")));
+  std::vector<int16_t> values(neghip.values.size());
+  for (size_t i = 0; i < values.size(); ++i) values[i] = static_cast<int16_t>(neghip.values[i] * 200 - 25000);
+  const std::string file = path("n16.h5");
+  const hsize_t zyx[3] = {66, 66, 66}, chunk[3] = {9, 17, 66};
+  const hid_t f = H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  const hid_t space = H5Screate_simple(3, zyx, nullptr);
+  const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+  ASSERT_GE(H5Pset_chunk(dcpl, 3, chunk), 0);
+  const hid_t ds = H5Dcreate2(f, "/volume", H5T_STD_I16BE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+  ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_INT16, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), 0);
+  H5Dclose(ds), H5Pclose(dcpl), H5Sclose(space), H5Fclose(f);
+  ExtractOptions o;
+  o.iso = 128.5f * 200 - 25000;
+  const Source source = open_volume(spec_of(file + ":/volume"));
+  const Mesh m = source.extract(o);
+  EXPECT_GT(m.triangles.size(), 1000u);
+  EXPECT_TRUE(same_mesh(m, extract(read_volume(spec_of(file + ":/volume")), o)));
   EXPECT_FALSE(source.info().values_in_memory);
 }
 

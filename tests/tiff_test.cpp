@@ -213,6 +213,45 @@ TEST_F(TiffStack, EveryElementTypeIsReadAsItsValues) {
   check("f64.tif", double{}, {.bits = 64, .format = SAMPLEFORMAT_IEEEFP, .compression = COMPRESSION_LZW}, "float64");
 }
 
+// Integers of one or two bytes are read as the pages store them, in this machine's byte order,
+// for the one-shot march: any box across strips, tiles and pages, byte for byte; floats are not.
+TEST_F(TiffStack, SmallIntegersAreReadAsStoredAcrossStripsTilesAndPages) {
+  const uint32_t w = 37, h = 29;
+  const uint32_t pages = 6;
+  const auto check = [&](const std::string& name, auto sample, Layout layout, ScalarType type) {
+    using T = decltype(sample);
+    SCOPED_TRACE(name);
+    std::vector<T> values(size_t{w} * h * pages);
+    for (size_t i = 0; i < values.size(); ++i)
+      values[i] = static_cast<T>(std::is_signed_v<T> ? int(i) * -97 + 300 : int(i) * 211 + 7);
+    std::vector<std::vector<unsigned char>> slices;
+    for (size_t z = 0; z < pages; ++z) {
+      const auto* first = reinterpret_cast<const unsigned char*>(values.data() + z * w * h);
+      slices.emplace_back(first, first + size_t{w} * h * sizeof(T));
+    }
+    write_tiff(path(name), w, h, slices, layout);
+    const auto reader = open_box_reader(spec(path(name)), path(""));
+    ASSERT_EQ(reader->stored_type(), type);
+    for (const auto& [lo, size] : std::vector<std::pair<std::array<int64_t, 3>, std::array<int64_t, 3>>>{
+             {{0, 0, 0}, {w, h, pages}}, {{3, 4, 1}, {17, 13, 4}}, {{w - 7, h - 11, 4}, {7, 11, 2}}}) {
+      std::vector<T> box(static_cast<size_t>(size[0] * size[1] * size[2]));
+      reader->read_box_stored(lo, size, reinterpret_cast<unsigned char*>(box.data()));
+      size_t i = 0;
+      for (int64_t z = 0; z < size[2]; ++z)
+        for (int64_t y = 0; y < size[1]; ++y)
+          for (int64_t x = 0; x < size[0]; ++x, ++i)
+            ASSERT_EQ(box[i], values[static_cast<size_t>(((lo[2] + z) * h + lo[1] + y) * w + lo[0] + x)])
+                << x << "," << y << "," << z;
+    }
+  };
+  check("u8.tif", uint8_t{}, {.bits = 8, .compression = COMPRESSION_LZW}, ScalarType::uint8);
+  check("u16.tif", uint16_t{}, {.bits = 16, .compression = COMPRESSION_PACKBITS, .tile = 16}, ScalarType::uint16);
+  check("i16.tif", int16_t{}, {.bits = 16, .format = SAMPLEFORMAT_INT}, ScalarType::int16);
+  write_tiff(path("f32.tif"), w, h, std::vector<std::vector<unsigned char>>(2, std::vector<unsigned char>(w * h * 4)),
+             {.bits = 32, .format = SAMPLEFORMAT_IEEEFP});
+  EXPECT_EQ(open_box_reader(spec(path("f32.tif")), path(""))->stored_type(), std::nullopt);
+}
+
 // convert reads the stack box by box (streamed, as raw input is); the store is the raw volume's.
 TEST_F(TiffStack, ConvertGivesTheStoreOfTheRawVolume) {
   write_tiff(path("neghip.tif"), 66, 66, slices_of(kNeghip), {.compression = COMPRESSION_LZW, .tile = 16});

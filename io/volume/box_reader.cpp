@@ -297,8 +297,9 @@ std::unique_ptr<BoxReader> open_nrrd(const std::string& path, const std::string&
 
 // ---------------------------------------------------------------- HDF5
 
-// HDF5 selects the box as a hyperslab and converts to float itself, undoing chunking and
-// filters; every call holds hdf5_mutex(), so concurrent boxes are read one after the other.
+// HDF5 selects the box as a hyperslab and converts to float (or reads small integers as they
+// are) itself, undoing chunking and filters; every call holds hdf5_mutex(), so concurrent boxes
+// are read one after the other.
 class Hdf5BoxReader final : public BoxReader {
  public:
   Hdf5BoxReader(Hdf5Handle file, Hdf5Handle dataset, std::string where, const VolumeInfo& info)
@@ -322,11 +323,37 @@ class Hdf5BoxReader final : public BoxReader {
                           float* out) const override {
     check_box(lo, size, info_, where_);
     if (size[0] * size[1] * size[2] == 0) return;
-    read_hyperslab(lo, size, out);
+    read_hyperslab(lo, size, H5T_NATIVE_FLOAT, out);
+  }
+
+  // Integers of one or two bytes, in this machine's byte order (HDF5 swaps a big-endian file's).
+  // Converting them to float is HDF5's slowest path: one value at a time, on one thread, through a
+  // buffer of its own, which the one-shot march at eps 0 (the raw file's path) need not take.
+  std::optional<ScalarType> stored_type() const override {
+    if (!info_.is_integer) return std::nullopt;
+    if (info_.type == "uint8") return ScalarType::uint8;
+    if (info_.type == "uint16") return ScalarType::uint16;
+    if (info_.type == "int16") return ScalarType::int16;
+    return std::nullopt;
+  }
+
+  void read_box_stored(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                       unsigned char* out) const override {
+    const std::optional<ScalarType> type = stored_type();
+    if (!type) throw std::logic_error(where_ + ": values cannot be read as stored");
+    check_box(lo, size, info_, where_);
+    if (size[0] * size[1] * size[2] == 0) return;
+    read_hyperslab(lo, size,
+                   *type == ScalarType::uint8    ? H5T_NATIVE_UINT8
+                   : *type == ScalarType::uint16 ? H5T_NATIVE_UINT16
+                                                 : H5T_NATIVE_INT16,
+                   out);
   }
 
  private:
-  void read_hyperslab(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const {
+  // The box as MEMORY_TYPE values (HDF5 converts from the file's type), into OUT.
+  void read_hyperslab(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, hid_t memory_type,
+                      void* out) const {
     const hsize_t start[3] = {static_cast<hsize_t>(lo[2]), static_cast<hsize_t>(lo[1]), static_cast<hsize_t>(lo[0])};
     const hsize_t count[3] = {static_cast<hsize_t>(size[2]), static_cast<hsize_t>(size[1]),
                               static_cast<hsize_t>(size[0])};
@@ -337,7 +364,7 @@ class Hdf5BoxReader final : public BoxReader {
     if (!file_space || !memory_space ||
         H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr) < 0)
       throw IoError(where_ + ": cannot select the" + box + ": " + hdf5_error_detail());
-    if (H5Dread(dataset_.get(), H5T_NATIVE_FLOAT, memory_space.get(), file_space.get(), H5P_DEFAULT, out) < 0)
+    if (H5Dread(dataset_.get(), memory_type, memory_space.get(), file_space.get(), H5P_DEFAULT, out) < 0)
       throw IoError(where_ + ": cannot read the" + box + ": " + hdf5_error_detail());
   }
 

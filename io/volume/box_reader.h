@@ -40,7 +40,8 @@ class BoxReader {
   }
   // The type read_box_stored reads values as, for a reader that can read them as the file stores
   // them, not converted: integers of one or two bytes in this machine's byte order in raw data (a
-  // raw file's, a raw or inflated NRRD's). None for any other.
+  // raw file's, a raw or inflated NRRD's), and in an HDF5 dataset or a TIFF stack of either byte
+  // order (HDF5 and libtiff swap them). None for any other.
   virtual std::optional<ScalarType> stored_type() const { return std::nullopt; }
   // The box's values as stored, element_bytes each, into out (only where stored_type() is not
   // none): for a caller that converts the few it needs to float. An integer is finite.

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <optional>
+#include <stdexcept>
 #include <system_error>
 #include <vector>
 
@@ -382,6 +383,35 @@ class TiffBoxReader final : public BoxReader {
 
   void read_box_unchecked(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
                           float* out) const override {
+    const ScalarType type = stack_.format.type;
+    constexpr bool big = std::endian::native == std::endian::big;  // libtiff hands over native order
+    read_pages(lo, size, [&](const unsigned char* run, int64_t count, int64_t at) {
+      decode_scalars(type, big, run, static_cast<size_t>(count), out + at);
+    });
+  }
+
+  // Integers of one or two bytes, as libtiff hands them over: in this machine's byte order.
+  std::optional<ScalarType> stored_type() const override {
+    const ScalarType t = stack_.format.type;
+    if (t == ScalarType::uint8 || t == ScalarType::uint16 || t == ScalarType::int16) return t;
+    return std::nullopt;
+  }
+
+  void read_box_stored(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                       unsigned char* out) const override {
+    if (!stored_type()) throw std::logic_error(stack_.where + ": values cannot be read as stored");
+    const auto eb = static_cast<size_t>(info_.element_bytes);
+    read_pages(lo, size, [&](const unsigned char* run, int64_t count, int64_t at) {
+      std::memcpy(out + static_cast<size_t>(at) * eb, run, static_cast<size_t>(count) * eb);
+    });
+  }
+
+ private:
+  // The box, page by page: put(run, count, at) for each run of COUNT elements of a row, decoded
+  // in the page's type and this machine's byte order at RUN, whose first is the box's node AT
+  // (x fastest).
+  template <class Put>
+  void read_pages(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, const Put& put) const {
     check_box(lo, size, info_, stack_.where);
     if (size[0] * size[1] * size[2] == 0) return;
     std::optional<TiffFile> multipage;  // one handle per call: concurrent boxes share nothing
@@ -389,40 +419,38 @@ class TiffBoxReader final : public BoxReader {
     std::vector<unsigned char> buffer;
     for (int64_t k = 0; k < size[2]; ++k) {
       const int64_t z = lo[2] + k;
-      float* slice = out + k * size[0] * size[1];
+      const int64_t slice = k * size[0] * size[1];
       if (multipage) {
         if (!TIFFSetSubDirectory(multipage->get(), stack_.directories[static_cast<size_t>(z)]))
           multipage->fail("page " + std::to_string(z) + " cannot be read");
         if (page_format(*multipage) != stack_.format)  // the file may have been replaced since
           multipage->fail("page " + std::to_string(z) + " changed since the stack was opened");
-        read_rows(*multipage, lo, size, slice, buffer, "page " + std::to_string(z));
+        read_rows(*multipage, lo, size, slice, buffer, "page " + std::to_string(z), put);
         multipage->refuse_guessed_data("page " + std::to_string(z));
       } else {
         const TiffFile file(stack_.files[static_cast<size_t>(z)], stack_.files[static_cast<size_t>(z)]);
         // The file may have been replaced since the stack was opened.
         if (page_format(file) != stack_.format) file.fail("changed since the stack was opened");
-        read_rows(file, lo, size, slice, buffer, "slice");
+        read_rows(file, lo, size, slice, buffer, "slice", put);
         file.refuse_guessed_data("slice");
       }
     }
   }
 
- private:
-  // Rows lo[1] .. lo[1]+size[1]-1, columns lo[0] .. lo[0]+size[0]-1 of the current page into OUT,
-  // decoding the strips or tiles they lie in.
-  void read_rows(const TiffFile& file, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out,
-                 std::vector<unsigned char>& buffer, const std::string& page) const {
+  // Rows lo[1] .. lo[1]+size[1]-1, columns lo[0] .. lo[0]+size[0]-1 of the current page, the box's
+  // nodes from SLICE on, decoding the strips or tiles they lie in.
+  template <class Put>
+  void read_rows(const TiffFile& file, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                 int64_t slice, std::vector<unsigned char>& buffer, const std::string& page, const Put& put) const {
     TIFF* tif = file.get();
     const ScalarType type = stack_.format.type;
     const int64_t eb = scalar_type_size(type), width = stack_.format.width, height = stack_.format.height;
     const int64_t x0 = lo[0], x1 = lo[0] + size[0], y0 = lo[1], y1 = lo[1] + size[1];
-    constexpr bool big = std::endian::native == std::endian::big;  // libtiff hands over native order
-    // A block of BW x BH elements at (BX, BY) decoded in `buffer`: its part inside the box, to float.
+    // A block of BW x BH elements at (BX, BY) decoded in `buffer`: its part inside the box.
     const auto copy_block = [&](int64_t bx, int64_t by, int64_t bw, int64_t bh) {
       const int64_t cx0 = std::max(x0, bx), cx1 = std::min(x1, bx + bw);
       for (int64_t y = std::max(y0, by); y < std::min(y1, by + bh); ++y)
-        decode_scalars(type, big, buffer.data() + ((y - by) * bw + (cx0 - bx)) * eb, static_cast<size_t>(cx1 - cx0),
-                       out + (y - y0) * size[0] + (cx0 - x0));
+        put(buffer.data() + ((y - by) * bw + (cx0 - bx)) * eb, cx1 - cx0, slice + (y - y0) * size[0] + (cx0 - x0));
     };
     if (TIFFIsTiled(tif)) {
       uint32_t tw = 0, th = 0;
