@@ -12,6 +12,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <atomic>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -524,6 +525,44 @@ TEST_F(BoxReaderTest, ChunkedGzipHdf5EqualsReadVolume) {
   expected.dims = {37, 23, 19};
   expected.values.assign(u16.begin(), u16.end());
   expect_boxes_match(*open_reader(pu, dir_.string()), expected, 300);
+}
+
+// A filter that changes nothing and counts the chunks it decodes.
+std::atomic<int> g_chunks_decoded{0};
+size_t count_decoded(unsigned int flags, size_t, const unsigned int[], size_t nbytes, size_t*, void**) {
+  if (flags & H5Z_FLAG_REVERSE) g_chunks_decoded.fetch_add(1);
+  return nbytes;
+}
+constexpr H5Z_filter_t kCountingFilter = 300;  // in the range HDF5 leaves for testing
+
+// Boxes of whole planes, each a quarter of a chunk's depth, as the one-shot march reads windows: a
+// layer of chunks across the plane (6 of 256 KB, more than HDF5's default cache) is decoded once,
+// not once for every box that cuts it.
+TEST_F(BoxReaderTest, ChunksDeeperThanTheBoxesAreDecodedOnce) {
+  const H5Z_class2_t filter{H5Z_CLASS_T_VERS, kCountingFilter, 1, 1, "count", nullptr, nullptr, count_decoded};
+  ASSERT_GE(H5Zregister(&filter), 0);
+  const hsize_t zyx[3] = {64, 128, 192}, chunk[3] = {32, 64, 64};
+  std::vector<uint16_t> values(64 * 128 * 192);
+  for (size_t i = 0; i < values.size(); ++i) values[i] = static_cast<uint16_t>(i * 7919);
+  const std::string p = path("counted.h5");
+  {
+    const hid_t file = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hid_t space = H5Screate_simple(3, zyx, nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    ASSERT_GE(H5Pset_chunk(dcpl, 3, chunk), 0);
+    ASSERT_GE(H5Pset_filter(dcpl, kCountingFilter, H5Z_FLAG_MANDATORY, 0, nullptr), 0);
+    const hid_t ds = H5Dcreate2(file, "/volume", H5T_STD_U16LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_UINT16, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), 0);
+    H5Dclose(ds), H5Pclose(dcpl), H5Sclose(space), H5Fclose(file);
+  }
+  const auto reader = open_reader(p + ":/volume", dir_.string());
+  g_chunks_decoded = 0;
+  std::vector<uint16_t> layers(8 * 128 * 192);
+  for (int64_t z = 0; z < 64; z += 8) {
+    reader->read_box_stored({0, 0, z}, {192, 128, 8}, reinterpret_cast<unsigned char*>(layers.data()));
+    ASSERT_EQ(std::memcmp(layers.data(), values.data() + z * 128 * 192, layers.size() * 2), 0) << z;
+  }
+  EXPECT_EQ(g_chunks_decoded.load(), 2 * 2 * 3);
 }
 
 // ---------------------------------------------------------------- threads
