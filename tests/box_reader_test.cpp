@@ -9,10 +9,10 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdint>
-#include <atomic>
 #include <cstring>
 #include <filesystem>
 #include <fstream>

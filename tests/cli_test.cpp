@@ -995,7 +995,8 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
   }
   // Per dataset: the baseline on 1 and 2 threads; six extraction cases in memory and from a warm
   // store; five from a cold one and mode none on one thread; one shot at eps 0 on 1 and 2 threads
-  // and coarse; quiet, at eps 0 into PLY and into GLB on 1 and 2 threads; convert + extract.
+  // and coarse; quiet, at eps 0 into PLY and into GLB on 1 and 2 threads; convert + extract. From
+  // an HDF5 copy, eps 0 on 2 threads: neghip's (neghip.h5), none for the generated volume.
   EXPECT_EQ(inputs, (std::map<std::string, int>{{"raw", 4},
                                                 {"memory", 12},
                                                 {"store-warm", 12},
@@ -1003,6 +1004,7 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
                                                 {"one-shot", 6},
                                                 {"one-shot -q ply", 4},
                                                 {"one-shot -q glb", 4},
+                                                {"one-shot h5", 1},
                                                 {"convert+extract", 2}}));
 
   // scikit-image on the same files: the triangles of marching cubes, fewer than our tetrahedra's.
