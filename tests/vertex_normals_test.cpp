@@ -1,10 +1,13 @@
 // vertex_normals (isotope/mesh.h), the shading normals GLB, VTP and the viewer carry: area-weighted
 // sums of the triangles' normals, the same bits on any number of threads as one walk over the
 // triangles in order.
+#include "engine/mesh/vertex_normals.h"
+
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include <cmath>
+#include <limits>
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
@@ -73,6 +76,34 @@ TEST(VertexNormals, AVertexOfNoTriangleGetsZero) {
   const auto n = vertex_normals(m);
   EXPECT_EQ(n[0], (std::array<float, 3>{0, 0, 1}));
   EXPECT_EQ(n[3], (std::array<float, 3>{0, 0, 0}));
+}
+
+// Into an array the writers do not zero-fill: every vertex is written on any thread count, a
+// vertex without a normal (of a degenerate triangle only, or of none) with the one asked for.
+TEST(VertexNormals, IntoAnArrayEveryVertexIsWrittenThoseWithoutANormalAsAsked) {
+  ExtractOptions o;
+  Mesh m = extract(generate_linked_tori(65), o);
+  const auto first = static_cast<uint32_t>(m.positions.size());
+  m.positions.push_back({1, 1, 1});
+  m.positions.push_back({2, 2, 2});
+  m.positions.push_back({3, 3, 3});  // on one line: a triangle of no area
+  m.positions.push_back({9, 9, 9});  // in no triangle
+  m.triangles.push_back({first, first + 1, first + 2});
+  const std::vector<std::array<float, 3>> expected = one_walk(m);
+  const std::array<float, 3> none = {0, 0, 1};
+  for (size_t threads : {1, 2, 7}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    std::vector<std::array<float, 3>> out(m.positions.size(), {nan, nan, nan});
+    vertex_normals_into(m, out, none);
+    size_t differ = 0;
+    for (size_t i = 0; i < out.size(); ++i) {
+      const bool has = expected[i] != std::array<float, 3>{0, 0, 0};
+      differ += out[i] != (has ? expected[i] : none);
+    }
+    EXPECT_EQ(differ, 0u) << threads << " threads";
+    for (uint32_t i = first; i < first + 4; ++i) EXPECT_EQ(out[i], none) << i;
+  }
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
+#include "engine/mesh/vertex_normals.h"
 #include "io/file/extension.h"
 #include "isotope/error.h"
 #include "isotope/version.h"
@@ -197,16 +198,14 @@ void encode_stl(const Mesh& mesh, AtomicFile& out) {
   });
 }
 
-// Vertex normals as glTF requires them: unit length. A vertex whose triangles are all degenerate
-// has none (isotope::vertex_normals gives 0); it gets +z, which no shading of a zero-area
-// triangle can show.
-std::vector<std::array<float, 3>> unit_vertex_normals(const Mesh& mesh) {
-  std::vector<std::array<float, 3>> normals = vertex_normals(mesh);
-  parallel_for(int64_t{0}, static_cast<int64_t>((normals.size() + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
-    const size_t end = std::min(normals.size(), static_cast<size_t>(b + 1) * kBlockItems);
-    for (size_t i = static_cast<size_t>(b) * kBlockItems; i < end; ++i)
-      if (normals[i][0] == 0 && normals[i][1] == 0 && normals[i][2] == 0) normals[i] = {0, 0, 1};
-  });
+// The vertex normals (isotope::vertex_normals) for a writer, in an array not zero-filled first:
+// every one is written. A vertex whose triangles are all degenerate has none and gets NONE: glTF
+// requires unit length, so its writer gives +z, which no shading of a zero-area triangle can show;
+// VTK's takes 0, as isotope::vertex_normals gives.
+Mesh::Array<std::array<float, 3>> normals_of(const Mesh& mesh, const std::array<float, 3>& none) {
+  Mesh::Array<std::array<float, 3>> normals;
+  normals.resize(mesh.positions.size());  // writes nothing (Mesh::Array's allocator)
+  vertex_normals_into(mesh, normals, none);
   return normals;
 }
 
@@ -284,7 +283,7 @@ void encode_glb(const Mesh& mesh, AtomicFile& out) {
   put_le(p, uint32_t{0x004E4942});  // "BIN\0"
   out.write(head.data(), 8);
   write_records(out, mesh.positions, 12, put_vec3);
-  write_records(out, unit_vertex_normals(mesh), 12, put_vec3);
+  write_records(out, normals_of(mesh, {0, 0, 1}), 12, put_vec3);
   write_records(out, mesh.triangles, 12, [](unsigned char* q, const std::array<uint32_t, 3>& t) {
     for (uint32_t v : t) q = put_le(q, v);
     return q;
@@ -334,7 +333,7 @@ void encode_vtp(const Mesh& mesh, AtomicFile& out) {
                array(index_type, "connectivity", 1, connectivity_at) + array(index_type, "offsets", 1, offsets_at) +
                "      </Polys>\n    </Piece>\n  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _");
   write_u64(out, 12 * n);
-  write_records(out, vertex_normals(mesh), 12, put_vec3);
+  write_records(out, normals_of(mesh, {0, 0, 0}), 12, put_vec3);
   write_u64(out, 12 * n);
   write_records(out, mesh.positions, 12, put_vec3);
   if (wide)

@@ -1,0 +1,15 @@
+#pragma once
+// Vertex normals into an array the caller provides (isotope::vertex_normals is this into a
+// zero-filled vector): every element written, so the array need not be zero-filled first.
+#include <array>
+#include <span>
+
+#include "isotope/mesh.h"
+
+namespace isotope {
+
+// OUT (one element per vertex) gets each vertex's unit normal, or NONE for a vertex of only
+// degenerate triangles; each page of it first touched by the thread that writes it.
+void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> out, const std::array<float, 3>& none);
+
+}  // namespace isotope
