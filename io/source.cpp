@@ -154,7 +154,11 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
     // gzip-encoded NRRD is read at random only through an inflated copy: read it whole, once.
     impl->hold(std::make_unique<Volume>(read_volume(spec)));
   } else {
-    impl->file = open_box_reader(spec, "");  // checks what needs no value: size, layout, dataset
+    // Checks what needs no value: size, layout, dataset. A chunked HDF5 dataset keeps a layer of
+    // its chunks decoded (at most 256 MB, and a layer of the stored volume), so that each window of
+    // the one-shot march does not decode again the chunks the window before it cut.
+    constexpr uint64_t kChunkCacheBytes = uint64_t{256} << 20;
+    impl->file = open_box_reader(spec, "", kChunkCacheBytes);
     impl->path = spec.path;
   }
   impl->read_seconds = seconds_since(start);

@@ -535,9 +535,9 @@ size_t count_decoded(unsigned int flags, size_t, const unsigned int[], size_t nb
 }
 constexpr H5Z_filter_t kCountingFilter = 300;  // in the range HDF5 leaves for testing
 
-// Boxes of whole planes, each a quarter of a chunk's depth, as the one-shot march reads windows: a
-// layer of chunks across the plane (6 of 256 KB, more than HDF5's default cache) is decoded once,
-// not once for every box that cuts it.
+// Boxes of whole planes, each a quarter of a chunk's depth, as the one-shot march reads windows:
+// with a chunk cache that holds it, a layer of chunks across the plane (6 of 256 KB, more than
+// HDF5's default cache) is decoded once, not once for every box that cuts it.
 TEST_F(BoxReaderTest, ChunksDeeperThanTheBoxesAreDecodedOnce) {
   const H5Z_class2_t filter{H5Z_CLASS_T_VERS, kCountingFilter, 1, 1, "count", nullptr, nullptr, count_decoded};
   ASSERT_GE(H5Zregister(&filter), 0);
@@ -555,14 +555,21 @@ TEST_F(BoxReaderTest, ChunksDeeperThanTheBoxesAreDecodedOnce) {
     ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_UINT16, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), 0);
     H5Dclose(ds), H5Pclose(dcpl), H5Sclose(space), H5Fclose(file);
   }
-  const auto reader = open_reader(p + ":/volume", dir_.string());
-  g_chunks_decoded = 0;
-  std::vector<uint16_t> layers(8 * 128 * 192);
-  for (int64_t z = 0; z < 64; z += 8) {
-    reader->read_box_stored({0, 0, z}, {192, 128, 8}, reinterpret_cast<unsigned char*>(layers.data()));
-    ASSERT_EQ(std::memcmp(layers.data(), values.data() + z * 128 * 192, layers.size() * 2), 0) << z;
-  }
-  EXPECT_EQ(g_chunks_decoded.load(), 2 * 2 * 3);
+  const auto decoded = [&](uint64_t cache_bytes) {
+    const auto reader = open_box_reader({p + ":/volume", {}, {}}, dir_.string(), cache_bytes);
+    g_chunks_decoded = 0;
+    std::vector<uint16_t> layers(8 * 128 * 192);
+    for (int64_t z = 0; z < 64; z += 8) {
+      reader->read_box_stored({0, 0, z}, {192, 128, 8}, reinterpret_cast<unsigned char*>(layers.data()));
+      EXPECT_EQ(std::memcmp(layers.data(), values.data() + z * 128 * 192, layers.size() * 2), 0) << z;
+    }
+    return g_chunks_decoded.load();
+  };
+  EXPECT_EQ(decoded(uint64_t{256} << 20), 2 * 2 * 3);
+  // HDF5's default, and a cache smaller than the layer (1.5 MB), which the reader does not set:
+  // chunks decoded again.
+  EXPECT_GT(decoded(0), 2 * 2 * 3);
+  EXPECT_GT(decoded(uint64_t{1400} << 10), 2 * 2 * 3);
 }
 
 // ---------------------------------------------------------------- threads

@@ -33,6 +33,7 @@
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/mesh/marching_tetrahedra.h"
+#include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/detail/huge_page_allocator.h"
@@ -934,6 +935,7 @@ TEST_F(SourceOfAFile, AnHdf5DatasetOf16BitIntegersIsStreamedToTheSameMesh) {
   const hid_t ds = H5Dcreate2(f, "/volume", H5T_STD_I16BE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
   ASSERT_GE(H5Dwrite(ds, H5T_NATIVE_INT16, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), 0);
   H5Dclose(ds), H5Pclose(dcpl), H5Sclose(space), H5Fclose(f);
+  ASSERT_EQ(open_box_reader(spec_of(file + ":/volume"), "")->stored_type(), ScalarType::int16);
   ExtractOptions o;
   o.iso = 128.5f * 200 - 25000;
   const Source source = open_volume(spec_of(file + ":/volume"));

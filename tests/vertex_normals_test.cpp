@@ -11,6 +11,7 @@
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
+#include "engine/mesh/vertex_parts.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
@@ -82,7 +83,8 @@ TEST(VertexNormals, AVertexOfNoTriangleGetsZero) {
 // vertex without a normal (of a degenerate triangle only, or of none) with the one asked for.
 TEST(VertexNormals, IntoAnArrayEveryVertexIsWrittenThoseWithoutANormalAsAsked) {
   ExtractOptions o;
-  Mesh m = extract(generate_linked_tori(65), o);
+  Mesh m = extract(generate_linked_tori(129), o);
+  ASSERT_GT(chunks_of(m.triangles.size()), 2) << "parts that read chunks of other parts";
   const auto first = static_cast<uint32_t>(m.positions.size());
   m.positions.push_back({1, 1, 1});
   m.positions.push_back({2, 2, 2});
@@ -104,6 +106,8 @@ TEST(VertexNormals, IntoAnArrayEveryVertexIsWrittenThoseWithoutANormalAsAsked) {
     EXPECT_EQ(differ, 0u) << threads << " threads";
     for (uint32_t i = first; i < first + 4; ++i) EXPECT_EQ(out[i], none) << i;
   }
+  std::vector<std::array<float, 3>> short_by_one(m.positions.size() - 1);
+  EXPECT_THROW(vertex_normals_into(m, short_by_one, none), std::invalid_argument);
 }
 
 }  // namespace

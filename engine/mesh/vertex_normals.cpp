@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_parts.h"
@@ -20,6 +22,9 @@ namespace isotope {
 // normals).
 void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> normals, const std::array<float, 3>& none) {
   const size_t n = mesh.positions.size();
+  if (normals.size() != n)
+    throw std::invalid_argument("vertex normals: an array of " + std::to_string(normals.size()) + " for " +
+                                std::to_string(n) + " vertices");
   const VertexParts plan = plan_vertex_parts(n, mesh.triangles);
   parallel_for(int64_t{0}, static_cast<int64_t>(plan.parts.size()), [&](int64_t p) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <system_error>
 #include <utility>
@@ -324,7 +325,7 @@ class Hdf5BoxReader final : public BoxReader {
                           float* out) const override {
     check_box(lo, size, info_, where_);
     if (size[0] * size[1] * size[2] == 0) return;
-    read_hyperslab(lo, size, H5T_NATIVE_FLOAT, out);
+    read_hyperslab(lo, size, std::nullopt, out);
   }
 
   // Integers of one or two bytes, in this machine's byte order (HDF5 swaps a big-endian file's).
@@ -344,17 +345,13 @@ class Hdf5BoxReader final : public BoxReader {
     if (!type) throw std::logic_error(where_ + ": values cannot be read as stored");
     check_box(lo, size, info_, where_);
     if (size[0] * size[1] * size[2] == 0) return;
-    read_hyperslab(lo, size,
-                   *type == ScalarType::uint8    ? H5T_NATIVE_UINT8
-                   : *type == ScalarType::uint16 ? H5T_NATIVE_UINT16
-                                                 : H5T_NATIVE_INT16,
-                   out);
+    read_hyperslab(lo, size, type, out);
   }
 
  private:
-  // The box as MEMORY_TYPE values (HDF5 converts from the file's type), into OUT.
-  void read_hyperslab(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, hid_t memory_type,
-                      void* out) const {
+  // The box as floats, or as STORED values, into OUT: HDF5 converts from the file's type.
+  void read_hyperslab(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
+                      std::optional<ScalarType> stored, void* out) const {
     const hsize_t start[3] = {static_cast<hsize_t>(lo[2]), static_cast<hsize_t>(lo[1]), static_cast<hsize_t>(lo[0])};
     const hsize_t count[3] = {static_cast<hsize_t>(size[2]), static_cast<hsize_t>(size[1]),
                               static_cast<hsize_t>(size[0])};
@@ -365,6 +362,11 @@ class Hdf5BoxReader final : public BoxReader {
     if (!file_space || !memory_space ||
         H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr) < 0)
       throw IoError(where_ + ": cannot select the" + box + ": " + hdf5_error_detail());
+    // H5T_NATIVE_* call into the library (they open it on first use): under the lock too.
+    const hid_t memory_type = !stored                         ? H5T_NATIVE_FLOAT
+                              : *stored == ScalarType::uint8  ? H5T_NATIVE_UINT8
+                              : *stored == ScalarType::uint16 ? H5T_NATIVE_UINT16
+                                                              : H5T_NATIVE_INT16;
     if (H5Dread(dataset_.get(), memory_type, memory_space.get(), file_space.get(), H5P_DEFAULT, out) < 0)
       throw IoError(where_ + ": cannot read the" + box + ": " + hdf5_error_detail());
   }
@@ -385,15 +387,15 @@ void set_hdf5_type(hid_t dataset, const std::string& where, VolumeInfo& info) {
       std::string(info.is_integer ? (is_unsigned ? "uint" : "int") : "float") + std::to_string(8 * info.element_bytes);
 }
 
-// Boxes cut a chunked dataset's chunks (the one-shot march's windows of z-layers, convert's tiles),
-// and HDF5 keeps 1 MB of decoded chunks by default: a chunk deeper than a window was read and
-// inflated again for every window that cuts it (embryo in deflated chunks of 64^3: four times,
-// 293 ms for the one-shot process against 154 ms contiguous). DS is opened again with a cache
-// that holds one layer of chunks across the plane, where that is at most kMaxChunkCacheBytes; a
-// chunk read wholly goes first (w0 = 1). The caller holds hdf5_mutex().
+// Boxes cut a chunked dataset's chunks (the one-shot march's windows of z-layers), and HDF5 keeps
+// 1 MB of decoded chunks by default: a chunk deeper than a window was read and inflated again for
+// every window that cut it (docs/METHOD.md, "eps = 0 from a file"). DS is opened again with a
+// cache that holds one layer of chunks across the plane, where that takes more than the default
+// and at most CACHE_BYTES; a chunk read wholly goes first (w0 = 1). The caller holds
+// hdf5_mutex().
 Hdf5Handle with_chunk_cache(hid_t file, const std::string& dataset, const std::string& where, Hdf5Handle ds,
-                            const VolumeInfo& info) {
-  constexpr double kMaxChunkCacheBytes = 256.0 * (1 << 20), kDefaultBytes = 1 << 20;
+                            const VolumeInfo& info, uint64_t cache_bytes) {
+  constexpr double kDefaultBytes = 1 << 20;
   const Hdf5Handle create(H5Dget_create_plist(ds.get()), H5Pclose);
   hsize_t zyx[3] = {0, 0, 0};
   if (!create || H5Pget_layout(create.get()) != H5D_CHUNKED || H5Pget_chunk(create.get(), 3, zyx) != 3 ||
@@ -402,11 +404,14 @@ Hdf5Handle with_chunk_cache(hid_t file, const std::string& dataset, const std::s
   const auto chunks_along = [](int64_t nodes, hsize_t chunk) {
     return std::ceil(static_cast<double>(nodes) / static_cast<double>(chunk));
   };
-  const double chunk_bytes = static_cast<double>(zyx[0] * zyx[1] * zyx[2]) * info.element_bytes;
-  const double layer = chunk_bytes * chunks_along(info.dims[1], zyx[1]) * chunks_along(info.dims[0], zyx[2]);
-  if (layer <= kDefaultBytes || layer > kMaxChunkCacheBytes) return ds;
-  // HDF5's guide: slots a prime number about 100 times the chunks the cache holds.
-  auto slots = static_cast<size_t>(100 * std::ceil(layer / chunk_bytes)) | 1;
+  const double chunk_bytes =
+      static_cast<double>(zyx[0]) * static_cast<double>(zyx[1]) * static_cast<double>(zyx[2]) * info.element_bytes;
+  const double chunks = chunks_along(info.dims[1], zyx[1]) * chunks_along(info.dims[0], zyx[2]);
+  const double layer = chunk_bytes * chunks;
+  if (layer <= kDefaultBytes || layer > static_cast<double>(cache_bytes)) return ds;
+  // HDF5's guide: slots a prime number about 100 times the chunks the cache holds; a pointer each,
+  // allocated at open, so at most 2^18 of them (a hash table of tiny chunks only collides more).
+  auto slots = static_cast<size_t>(std::min(100 * chunks, double{1 << 18})) | 1;
   const auto prime = [](size_t n) {
     for (size_t d = 3; d * d <= n; d += 2)
       if (n % d == 0) return false;
@@ -419,10 +424,15 @@ Hdf5Handle with_chunk_cache(hid_t file, const std::string& dataset, const std::s
   ds.close();
   Hdf5Handle again(H5Dopen2(file, dataset.c_str(), access.get()), H5Dclose);
   if (!again) throw IoError(where + ": cannot open it again with a chunk cache: " + hdf5_error_detail());
+  VolumeInfo now;  // the same path may have come to name another dataset since
+  now.dims = hdf5_dataset_dims(again.get(), where);
+  set_hdf5_type(again.get(), where, now);
+  if (now.dims != info.dims || now.type != info.type)
+    throw IoError(where + ": the dataset changed while it was opened");
   return again;
 }
 
-std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string& dataset) {
+std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string& dataset, uint64_t chunk_cache_bytes) {
   const std::lock_guard lock(hdf5_mutex());  // declared first, so released after the handles close
   Hdf5Handle f = open_hdf5_file(file);
   Hdf5Handle ds = open_hdf5_dataset(f.get(), file, dataset);
@@ -432,7 +442,7 @@ std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string&
   checked_node_count(info.dims, static_cast<int>(sizeof(float)), where);
   read_hdf5_geometry(ds.get(), where, info.spacing, info.origin);
   set_hdf5_type(ds.get(), where, info);
-  Hdf5Handle cached = with_chunk_cache(f.get(), dataset, where, std::move(ds), info);
+  Hdf5Handle cached = with_chunk_cache(f.get(), dataset, where, std::move(ds), info, chunk_cache_bytes);
   return std::make_unique<Hdf5BoxReader>(std::move(f), std::move(cached), where, info);
 }
 
@@ -449,11 +459,12 @@ void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& s
   }
 }
 
-std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir) {
+std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir,
+                                           uint64_t hdf5_chunk_cache_bytes) {
   const VolumeLocation at = locate_volume(source);
   std::unique_ptr<BoxReader> reader;
   switch (at.format) {
-    case VolumeLocation::Format::hdf5: reader = open_hdf5(at.file, at.dataset); break;
+    case VolumeLocation::Format::hdf5: reader = open_hdf5(at.file, at.dataset, hdf5_chunk_cache_bytes); break;
     case VolumeLocation::Format::nrrd: reader = open_nrrd(at.file, scratch_dir); break;
     case VolumeLocation::Format::tiff: reader = open_tiff_stack(at.file); break;
     case VolumeLocation::Format::raw: reader = open_raw(at.file, at.layout); break;

@@ -65,6 +65,10 @@ void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& s
 // gzip-encoded NRRD cannot be read at random: it is inflated once, streaming, into a temporary
 // raw file inside SCRATCH_DIR, removed when the reader is destroyed or the open fails.
 // Throws IoError naming the file and what is wrong.
-std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir);
+// HDF5_CHUNK_CACHE_BYTES: the most a chunked HDF5 dataset's reader may keep of decoded chunks, so
+// that boxes of whole planes each decode a layer of chunks once (0: HDF5's default, 1 MB). Memory
+// beside the caller's own, for as long as the reader lives.
+std::unique_ptr<BoxReader> open_box_reader(const VolumeSpec& source, const std::string& scratch_dir,
+                                           uint64_t hdf5_chunk_cache_bytes = 0);
 
 }  // namespace isotope
