@@ -332,10 +332,8 @@ class Hdf5BoxReader final : public BoxReader {
   // Converting them to float is HDF5's slowest path: one value at a time, on one thread, through a
   // buffer of its own, which the one-shot march at eps 0 (the raw file's path) need not take.
   std::optional<ScalarType> stored_type() const override {
-    if (!info_.is_integer) return std::nullopt;
-    if (info_.type == "uint8") return ScalarType::uint8;
-    if (info_.type == "uint16") return ScalarType::uint16;
-    if (info_.type == "int16") return ScalarType::int16;
+    const std::optional<ScalarType> t = parse_scalar_type(info_.type);
+    if (t == ScalarType::uint8 || t == ScalarType::uint16 || t == ScalarType::int16) return t;
     return std::nullopt;
   }
 
