@@ -164,18 +164,17 @@ PagedVolume::Pager::Slot PagedVolume::Pager::slot_near(const Coord& v, const std
   return s;
 }
 
-Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, uint32_t m) {
+Record PagedVolume::Pager::band0_record_inside(const Coord& v, CachedBrick& home, int64_t index, uint32_t m) {
   const Band0Template& t = template_of(v);
-  const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
   const Near near = near_of(v);
   float f[11];
-  DiamondBounds range = polyhedron_values(v, t, *home, near, f);
+  DiamondBounds range = polyhedron_values(v, t, home, near, f);
   // As read_polyhedron with every polyhedron vertex real and in the box.
   DiamondValues dv;
   dv.type = t.type;
   dv.fa = f[0], dv.fb = f[1], dv.fv = f[2];
   std::copy(f + 3, f + t.values, dv.ring);
-  const RecordFields held = fields_held(*home);
+  const RecordFields held = fields_held(home);
   Saturation sat;
   for (int i = 0; i < t.children; ++i) {
     const Slot c = slot_near(v, t.child[static_cast<size_t>(i)], index, near);
@@ -183,24 +182,28 @@ Record PagedVolume::Pager::band0_record_inside(const Coord& v, int64_t index, ui
   }
   CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
   const Record r = finish_record(dv, t.shape, true, range, sat, unused, true, nullptr, held.weights);
-  store_band0_record(*home, m, r, true, held);
+  store_band0_record(home, m, r, true, held);
   return r;
 }
 
-void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint32_t m) {
+void PagedVolume::Pager::band0_bounds_inside(const Coord& v, CachedBrick& home, int64_t index, uint32_t m) {
   const Band0Template& t = template_of(v);
-  const std::shared_ptr<CachedBrick> home = hold(index);  // alive while the children pin others
   const Near near = near_of(v);
-  if (home->narrow() && home->surplus() == nullptr) return band0_narrow_inside(v, t, index, *home, m, near);
+  if (home.narrow() && home.surplus() == nullptr) return band0_narrow_inside(v, t, index, home, m, near);
   float f[11];
   // As read_polyhedron and finish_record (engine/hierarchy/record_builder.h) with every vertex in the box.
-  DiamondBounds range = polyhedron_values(v, t, *home, near, f);
-  const bool surplus = home->surplus() != nullptr;
+  DiamondBounds range = polyhedron_values(v, t, home, near, f);
+  const bool surplus = home.surplus() != nullptr;
   Saturation sat;
   for (int i = 0; i < t.children; ++i) {
     const Slot s = slot_near(v, t.child[static_cast<size_t>(i)], index, near);
-    uint64_t word = s.home ? word_of(*home, s.m) : kUnsetBounds;
-    if (word == kUnsetBounds) word = bounds_word(s.index, s.m);
+    uint64_t word;
+    if (!s.home) {
+      word = bounds_word(s.index, s.m);
+    } else if ((word = word_of(home, s.m)) == kUnsetBounds) {
+      compute_band0(home, index, s.m, false);  // HOME is held: no lookup, no hold
+      word = word_of(home, s.m);
+    }
     const PackedBounds p = bounds_of(word);
     Record c;
     c.bounds = {bf16_to_float(p.lo), bf16_to_float(p.hi), p.bound,
@@ -210,8 +213,8 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v, int64_t index, uint
   const double eta = std::fabs(static_cast<double>(f[2]) - 0.5 * (static_cast<double>(f[0]) + f[1]));
   range.error_bound = round_up(eta + sat.bound);
   range.error_surplus = std::max(round_up(eta), sat.surplus);
-  if (surplus) store(home->surplus() + m, bf16_up(range.error_surplus));
-  store_bounds(*home, m, pack_bounds(range));
+  if (surplus) store(home.surplus() + m, bf16_up(range.error_surplus));
+  store_bounds(home, m, pack_bounds(range));
 }
 
 void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Band0Template& t, int64_t index, CachedBrick& home,
@@ -233,8 +236,13 @@ void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Band0Template
   uint32_t halves = 0;  // the children's largest bound
   for (int i = 0; i < t.children; ++i) {
     const Slot s = slot_near(v, t.child[static_cast<size_t>(i)], index, near);
-    uint32_t w = s.home ? load(words + s.m) : kUnsetNarrowBounds;
-    if (w == kUnsetNarrowBounds) w = narrow_word(s.index, s.m);
+    uint32_t w;
+    if (!s.home) {
+      w = narrow_word(s.index, s.m);
+    } else if ((w = load(words + s.m)) == kUnsetNarrowBounds) {
+      compute_narrow(home, index, s.m);  // HOME is held: no lookup, no hold
+      w = load(words + s.m);
+    }
     lo = std::min(lo, w & 0xffu), hi = std::max(hi, w >> 8 & 0xffu), halves = std::max(halves, w >> 16);
   }
   const auto eta = static_cast<uint32_t>(
@@ -257,14 +265,14 @@ void PagedVolume::Pager::store_bounds(CachedBrick& home, uint32_t m, const Packe
   store(home.narrow_bounds() + m, narrow);
 }
 
-void PagedVolume::Pager::compute_band0(const CachedBrick& home, int64_t index, uint32_t m, bool topology) {
+void PagedVolume::Pager::compute_band0(CachedBrick& home, int64_t index, uint32_t m, bool topology) {
   const Coord v = band0_node(home, m);
   if (!inside_by_one(v))
     band0_record(v, topology);
   else if (topology)
-    band0_record_inside(v, index, m);
+    band0_record_inside(v, home, index, m);
   else
-    band0_bounds_inside(v, index, m);
+    band0_bounds_inside(v, home, index, m);
 }
 
 uint64_t PagedVolume::Pager::computed_bounds_word(int64_t index, uint32_t m) {
@@ -280,8 +288,19 @@ uint32_t PagedVolume::Pager::narrow_word(int64_t index, uint32_t m) {
   const uint32_t w = load(brick(index).narrow_bounds() + m);
   if (w != kUnsetNarrowBounds) return w;
   const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
-  bounds_word(index, m);
+  compute_narrow(*home, index, m);
   return load(home->narrow_bounds() + m);
+}
+
+void PagedVolume::Pager::compute_narrow(CachedBrick& home, int64_t index, uint32_t m) {
+  // compute_band0 without topology, straight to band0_narrow_inside where it would go: a fine
+  // extraction from a one-byte store computes millions of these, most of them for a child in the
+  // same brick, and the lookups and holds on the way there cost as much as the record.
+  const Coord v = band0_node(home, m);
+  if (home.surplus() == nullptr && inside_by_one(v))
+    band0_narrow_inside(v, template_of(v), index, home, m, near_of(v));
+  else
+    compute_band0(home, index, m, false);
 }
 
 Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {

@@ -104,18 +104,19 @@ class PagedVolume {
     // `topology` its intervals and its weights where the brick holds them. From the node's class
     // template when it lies inside the box by one node (band0_record_inside, band0_bounds_inside),
     // else from its diamond (band0_record).
-    void compute_band0(const CachedBrick& home, int64_t index, uint32_t m, bool topology);
+    void compute_band0(CachedBrick& home, int64_t index, uint32_t m, bool topology);
     // compute_band0 of the node v through its diamond: any band-0 node.
     Record band0_record(const Coord& v, bool topology);
     // Whether v's polyhedron and its children lie in the data box (all but the box's outer layer
     // of nodes).
     bool inside_by_one(const Coord& v) const;
     // band0_record with `topology` of such a vertex, from its class's template (no diamond built,
-    // the values within its brick read from it): the same record, bit for bit. (index, m): where
-    // v's record lives.
-    Record band0_record_inside(const Coord& v, int64_t index, uint32_t m);
+    // the values within its brick read from it): the same record, bit for bit. (home, index, m):
+    // where v's record lives, HOME held by the caller, as compute_band0's; a child in HOME whose
+    // record is not computed yet is computed through it, with no lookup and no hold of its own.
+    Record band0_record_inside(const Coord& v, CachedBrick& home, int64_t index, uint32_t m);
     // band0_record without `topology` of such a vertex, the same way: its range and errors.
-    void band0_bounds_inside(const Coord& v, int64_t index, uint32_t m);
+    void band0_bounds_inside(const Coord& v, CachedBrick& home, int64_t index, uint32_t m);
     // The nodes within one node of such a vertex, by their offset from it: whether they lie in its
     // brick, and where there. (Within the data box: the vertex lies inside it by one node.)
     struct Near {
@@ -160,6 +161,8 @@ class PagedVolume {
     uint64_t computed_bounds_word(int64_t index, uint32_t m);
     // bounds_word's narrow word, for a brick whose words are narrow (CachedBrick::narrow).
     uint32_t narrow_word(int64_t index, uint32_t m);
+    // compute_band0 without topology of node m of a narrow brick HOME (held by the caller).
+    void compute_narrow(CachedBrick& home, int64_t index, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
     // The record fields a brick holds arrays for, taken once per band-0 record computed: the
     // children are read, the record computed and stored with those alone. An array another
