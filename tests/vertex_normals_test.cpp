@@ -6,8 +6,11 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <atomic>
 #include <cmath>
 #include <limits>
+#include <span>
+#include <vector>
 
 #include "engine/core/fields.h"
 #include "engine/extract/extract.h"
@@ -108,6 +111,39 @@ TEST(VertexNormals, IntoAnArrayEveryVertexIsWrittenThoseWithoutANormalAsAsked) {
   }
   std::vector<std::array<float, 3>> short_by_one(m.positions.size() - 1);
   EXPECT_THROW(vertex_normals_into(m, short_by_one, none), std::invalid_argument);
+}
+
+// Run by run, as the writers take them: every vertex in exactly one run, no run longer than
+// kNormalsPerRun, and each the normals vertex_normals_into gives, on any thread count (on one
+// thread the whole mesh is one part, cut into runs).
+TEST(VertexNormals, RunByRunEveryVertexComesOnceWithTheSameNormal) {
+  ExtractOptions o;
+  Mesh m = extract(generate_linked_tori(193), o);
+  ASSERT_GT(m.positions.size(), 2 * kNormalsPerRun) << "parts of several runs";
+  m.positions.push_back({9, 9, 9});  // in no triangle
+  const std::array<float, 3> none = {0, 0, 1};
+  std::vector<std::array<float, 3>> expected(m.positions.size());
+  vertex_normals_into(m, expected, none);
+  for (size_t threads : {1, 2, 7}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    std::vector<std::array<float, 3>> got(m.positions.size(), {0, 0, 0});
+    std::vector<std::atomic<int>> seen(m.positions.size());
+    std::atomic<size_t> too_long{0}, runs{0};
+    for_each_vertex_normals_run(m, none, [&](uint32_t first, std::span<const std::array<float, 3>> normals) {
+      ++runs;
+      if (normals.size() > kNormalsPerRun) ++too_long;
+      for (size_t k = 0; k < normals.size(); ++k) {
+        ++seen[first + k];
+        got[first + k] = normals[k];
+      }
+    });
+    size_t not_once = 0;
+    for (const auto& s : seen) not_once += s.load() != 1;
+    EXPECT_EQ(not_once, 0u) << threads << " threads";
+    EXPECT_EQ(too_long.load(), 0u) << threads << " threads";
+    EXPECT_GT(runs.load(), 2u) << threads << " threads";
+    EXPECT_TRUE(got == expected) << threads << " threads";
+  }
 }
 
 }  // namespace

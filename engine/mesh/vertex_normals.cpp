@@ -2,14 +2,19 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
+#include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_parts.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
+namespace {
 
 // On all threads, the same bits on any number: the vertices are split into parts (VertexParts),
 // and each part walks its triangles in order and sums the normals of those that touch its
@@ -20,12 +25,12 @@ namespace isotope {
 // Every vertex is written, the ones without a normal too: the array is not zero-filled first, on
 // one thread (a GLB of embryo's eps 0 mesh waited for 15 MB of zeros between the march and the
 // normals).
-void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> normals, const std::array<float, 3>& none) {
-  const size_t n = mesh.positions.size();
-  if (normals.size() != n)
-    throw std::invalid_argument("vertex normals: an array of " + std::to_string(normals.size()) + " for " +
-                                std::to_string(n) + " vertices");
-  const VertexParts plan = plan_vertex_parts(n, mesh.triangles);
+//
+// The normals' sums part by part (VertexParts), on all threads: FINISH(part, sums) gets each part's
+// sums once they are all added, sums[i - part.begin] for its vertex i.
+template <class Finish>
+void sum_by_parts(const Mesh& mesh, const Finish& finish) {
+  const VertexParts plan = plan_vertex_parts(mesh.positions.size(), mesh.triangles);
   parallel_for(int64_t{0}, static_cast<int64_t>(plan.parts.size()), [&](int64_t p) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];
     std::vector<std::array<double, 3>> sum(part.end - part.begin, {0, 0, 0});
@@ -41,14 +46,40 @@ void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> norma
         if (part.holds(i))
           for (int k = 0; k < 3; ++k) sum[i - part.begin][k] += m[k];
     });
-    for (uint32_t i = part.begin; i < part.end; ++i) {
-      const auto& s = sum[i - part.begin];
-      const double len = std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
-      if (len > 0)
-        for (int k = 0; k < 3; ++k) normals[i][k] = static_cast<float>(s[k] / len);
-      else
-        normals[i] = none;
+    finish(part, sum);
+  });
+}
+
+std::array<float, 3> unit(const std::array<double, 3>& s, const std::array<float, 3>& none) {
+  const double len = std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+  if (!(len > 0)) return none;
+  return {static_cast<float>(s[0] / len), static_cast<float>(s[1] / len), static_cast<float>(s[2] / len)};
+}
+
+}  // namespace
+
+void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> normals, const std::array<float, 3>& none) {
+  const size_t n = mesh.positions.size();
+  if (normals.size() != n)
+    throw std::invalid_argument("vertex normals: an array of " + std::to_string(normals.size()) + " for " +
+                                std::to_string(n) + " vertices");
+  sum_by_parts(mesh, [&](const VertexPart& part, const std::vector<std::array<double, 3>>& sum) {
+    for (uint32_t i = part.begin; i < part.end; ++i) normals[i] = unit(sum[i - part.begin], none);
+  });
+}
+
+void for_each_vertex_normals_run(const Mesh& mesh, const std::array<float, 3>& none, const NormalsRun& done) {
+  using Run = std::vector<std::array<float, 3>>;
+  LendingPool<Run> runs;
+  sum_by_parts(mesh, [&](const VertexPart& part, const std::vector<std::array<double, 3>>& sum) {
+    std::unique_ptr<Run> run = runs.take([] { return std::make_unique<Run>(kNormalsPerRun); });
+    for (uint32_t first = part.begin; first < part.end;) {
+      const auto count = static_cast<uint32_t>(std::min<size_t>(kNormalsPerRun, part.end - first));
+      for (uint32_t k = 0; k < count; ++k) (*run)[k] = unit(sum[first + k - part.begin], none);
+      done(first, std::span<const std::array<float, 3>>(run->data(), count));
+      first += count;
     }
+    runs.give(std::move(run));
   });
 }
 

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "engine/core/lending_pool.h"
@@ -198,15 +199,23 @@ void encode_stl(const Mesh& mesh, AtomicFile& out) {
   });
 }
 
-// The vertex normals (isotope::vertex_normals) for a writer, in an array not zero-filled first:
-// every one is written. A vertex whose triangles are all degenerate has none and gets NONE: glTF
-// requires unit length, so its writer gives +z, which no shading of a zero-area triangle can show;
-// VTK's takes 0, as isotope::vertex_normals gives.
-Mesh::Array<std::array<float, 3>> normals_of(const Mesh& mesh, const std::array<float, 3>& none) {
-  Mesh::Array<std::array<float, 3>> normals;
-  normals.resize(mesh.positions.size());  // writes nothing (Mesh::Array's allocator)
-  vertex_normals_into(mesh, normals, none);
-  return normals;
+// The vertex normals (isotope::vertex_normals) as records of 12 bytes, each run of them encoded
+// and written by the thread that finished it, as write_records does, with no array of the normals
+// held (for_each_vertex_normals_run). A vertex whose triangles are all degenerate has none and
+// gets NONE: glTF requires unit length, so its writer gives +z, which no shading of a zero-area
+// triangle can show; VTK's takes 0, as isotope::vertex_normals gives.
+void write_normals(AtomicFile& out, const Mesh& mesh, const std::array<float, 3>& none) {
+  const uint64_t at = out.append_region(mesh.positions.size() * 12);
+  using Buffer = std::unique_ptr<unsigned char[]>;
+  LendingPool<Buffer> buffers;
+  for_each_vertex_normals_run(mesh, none, [&](uint32_t first, std::span<const std::array<float, 3>> normals) {
+    std::unique_ptr<Buffer> buffer =
+        buffers.take([] { return std::make_unique<Buffer>(new unsigned char[kNormalsPerRun * 12]); });
+    unsigned char* p = buffer->get();
+    for (const auto& v : normals) p = put_vec3(p, v);
+    out.write_region(at + uint64_t{first} * 12, buffer->get(), normals.size() * 12);
+    buffers.give(std::move(buffer));
+  });
 }
 
 // The least and greatest coordinates of the positions, on all threads (the same on any number:
@@ -283,7 +292,7 @@ void encode_glb(const Mesh& mesh, AtomicFile& out) {
   put_le(p, uint32_t{0x004E4942});  // "BIN\0"
   out.write(head.data(), 8);
   write_records(out, mesh.positions, 12, put_vec3);
-  write_records(out, normals_of(mesh, {0, 0, 1}), 12, put_vec3);
+  write_normals(out, mesh, {0, 0, 1});
   write_records(out, mesh.triangles, 12, [](unsigned char* q, const std::array<uint32_t, 3>& t) {
     for (uint32_t v : t) q = put_le(q, v);
     return q;
@@ -333,7 +342,7 @@ void encode_vtp(const Mesh& mesh, AtomicFile& out) {
                array(index_type, "connectivity", 1, connectivity_at) + array(index_type, "offsets", 1, offsets_at) +
                "      </Polys>\n    </Piece>\n  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _");
   write_u64(out, 12 * n);
-  write_records(out, normals_of(mesh, {0, 0, 0}), 12, put_vec3);
+  write_normals(out, mesh, {0, 0, 0});
   write_u64(out, 12 * n);
   write_records(out, mesh.positions, 12, put_vec3);
   if (wide)
