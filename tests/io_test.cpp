@@ -7,6 +7,7 @@
 #include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
+#include <tbb/global_control.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -27,6 +28,9 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/fields.h"
+#include "engine/extract/extract.h"
+#include "engine/mesh/vertex_normals.h"
 #include "io/file/atomic_file.h"
 #include "io/mesh/mesh_writer.h"
 #include "io/store/store_reader.h"
@@ -974,6 +978,49 @@ TEST_F(IoTest, PlyWithADanglingIndexIsRejectedAndNotWritten) {
   const std::string msg = io_error_of([&] { write_ply(m, p); });
   EXPECT_CONTAINS(msg, "triangle 1 references vertex 3");
   EXPECT_TRUE(entries().empty());
+}
+
+// The normals a GLB and a VTP carry are each vertex's own, at its place, on any thread count: the
+// writers take them run by run from the threads that finish them (for_each_vertex_normals_run), on
+// a mesh of several runs. glTF gives a vertex without a normal +z, VTK 0.
+TEST_F(IoTest, GlbAndVtpCarryEveryVertexsNormalAtItsPlace) {
+  const Mesh m = extract(generate_linked_tori(193), ExtractOptions{});
+  const size_t n = m.positions.size();
+  ASSERT_GT(n, 2 * kNormalsPerRun);
+  const std::vector<std::array<float, 3>> expected = vertex_normals(m);
+  const auto normals_at = [&](const std::vector<unsigned char>& bytes, size_t at) {
+    std::vector<std::array<float, 3>> normals(n);
+    for (auto& v : normals)
+      for (float& c : v) c = take_le<float>(bytes, at);
+    return normals;
+  };
+  for (const size_t threads : {1, 2, 7}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    write_mesh(m, path("m.glb"));
+    write_mesh(m, path("m.vtp"));
+    // GLB: a 12-byte header, the JSON chunk (its length, its type, the text), the binary chunk's
+    // length and type, then positions, normals and indices.
+    const std::vector<unsigned char> glb = read_bytes(path("m.glb"));
+    size_t at = 12;
+    const size_t json = take_le<uint32_t>(glb, at);
+    const std::vector<std::array<float, 3>> in_glb = normals_at(glb, 12 + 8 + json + 8 + 12 * n);
+    // VTP: the appended data after "_": the normals' byte count, then the normals.
+    const std::vector<unsigned char> vtp = read_bytes(path("m.vtp"));
+    const std::string marker = "<AppendedData encoding=\"raw\">\n   _";
+    const auto found = std::search(vtp.begin(), vtp.end(), marker.begin(), marker.end());
+    ASSERT_NE(found, vtp.end());
+    at = static_cast<size_t>(found - vtp.begin()) + marker.size();
+    EXPECT_EQ(take_le<uint64_t>(vtp, at), 12 * n);
+    const std::vector<std::array<float, 3>> in_vtp = normals_at(vtp, at);
+    size_t glb_differ = 0, vtp_differ = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const bool none = expected[i] == std::array<float, 3>{0, 0, 0};
+      glb_differ += in_glb[i] != (none ? std::array<float, 3>{0, 0, 1} : expected[i]);
+      vtp_differ += in_vtp[i] != expected[i];
+    }
+    EXPECT_EQ(glb_differ, 0u) << threads << " threads";
+    EXPECT_EQ(vtp_differ, 0u) << threads << " threads";
+  }
 }
 
 }  // namespace

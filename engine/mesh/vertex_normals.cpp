@@ -16,18 +16,14 @@
 namespace isotope {
 namespace {
 
-// On all threads, the same bits on any number: the vertices are split into parts (VertexParts),
-// and each part walks its triangles in order and sums the normals of those that touch its
-// vertices. A vertex's sum thus adds its triangles' normals in triangle order, as one walk does;
-// a triangle that spans two parts is computed in both, the same way. A part reads only the chunks
-// of triangles that can touch it: embryo's eps 0 mesh (2.5 M triangles) took 35-42 ms on two
-// threads when every part read every triangle, and takes 25-29 ms so.
-// Every vertex is written, the ones without a normal too: the array is not zero-filled first, on
-// one thread (a GLB of embryo's eps 0 mesh waited for 15 MB of zeros between the march and the
-// normals).
-//
-// The normals' sums part by part (VertexParts), on all threads: FINISH(part, sums) gets each part's
-// sums once they are all added, sums[i - part.begin] for its vertex i.
+// The normals' sums part by part, on all threads: FINISH(part, sums) gets each part's sums once
+// they are all added, sums[i - part.begin] for its vertex i. The same bits on any number of
+// threads: the vertices are split into parts (VertexParts), and each part walks its triangles in
+// order and sums the normals of those that touch its vertices. A vertex's sum thus adds its
+// triangles' normals in triangle order, as one walk does; a triangle that spans two parts is
+// computed in both, the same way. A part reads only the chunks of triangles that can touch it:
+// embryo's eps 0 mesh (2.5 M triangles) took 35-42 ms on two threads when every part read every
+// triangle, and takes 25-29 ms so.
 template <class Finish>
 void sum_by_parts(const Mesh& mesh, const Finish& finish) {
   const VertexParts plan = plan_vertex_parts(mesh.positions.size(), mesh.triangles);
@@ -58,6 +54,9 @@ std::array<float, 3> unit(const std::array<double, 3>& s, const std::array<float
 
 }  // namespace
 
+// Every vertex is written, the ones without a normal too: the array is not zero-filled first, on
+// one thread (a GLB of embryo's eps 0 mesh waited for 15 MB of zeros between the march and the
+// normals).
 void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> normals, const std::array<float, 3>& none) {
   const size_t n = mesh.positions.size();
   if (normals.size() != n)
@@ -69,14 +68,16 @@ void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> norma
 }
 
 void for_each_vertex_normals_run(const Mesh& mesh, const std::array<float, 3>& none, const NormalsRun& done) {
-  using Run = std::vector<std::array<float, 3>>;
+  // Not zero-filled: each run writes what it hands out first.
+  using Run = std::unique_ptr<std::array<float, 3>[]>;
   LendingPool<Run> runs;
   sum_by_parts(mesh, [&](const VertexPart& part, const std::vector<std::array<double, 3>>& sum) {
-    std::unique_ptr<Run> run = runs.take([] { return std::make_unique<Run>(kNormalsPerRun); });
+    std::unique_ptr<Run> run = runs.take(
+        [] { return std::make_unique<Run>(std::make_unique_for_overwrite<std::array<float, 3>[]>(kNormalsPerRun)); });
     for (uint32_t first = part.begin; first < part.end;) {
       const auto count = static_cast<uint32_t>(std::min<size_t>(kNormalsPerRun, part.end - first));
       for (uint32_t k = 0; k < count; ++k) (*run)[k] = unit(sum[first + k - part.begin], none);
-      done(first, std::span<const std::array<float, 3>>(run->data(), count));
+      done(first, std::span<const std::array<float, 3>>(run->get(), count));
       first += count;
     }
     runs.give(std::move(run));

@@ -297,7 +297,7 @@ void PagedVolume::Pager::compute_narrow(CachedBrick& home, int64_t index, uint32
   // extraction from a one-byte store computes millions of these, most of them for a child in the
   // same brick, and the lookups and holds on the way there cost as much as the record.
   const Coord v = band0_node(home, m);
-  if (home.surplus() == nullptr && inside_by_one(v))
+  if (home.narrow() && home.surplus() == nullptr && inside_by_one(v))
     band0_narrow_inside(v, template_of(v), index, home, m, near_of(v));
   else
     compute_band0(home, index, m, false);

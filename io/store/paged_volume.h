@@ -112,10 +112,11 @@ class PagedVolume {
     bool inside_by_one(const Coord& v) const;
     // band0_record with `topology` of such a vertex, from its class's template (no diamond built,
     // the values within its brick read from it): the same record, bit for bit. (home, index, m):
-    // where v's record lives, HOME held by the caller, as compute_band0's; a child in HOME whose
-    // record is not computed yet is computed through it, with no lookup and no hold of its own.
+    // where v's record lives, HOME held by the caller, as compute_band0's.
     Record band0_record_inside(const Coord& v, CachedBrick& home, int64_t index, uint32_t m);
-    // band0_record without `topology` of such a vertex, the same way: its range and errors.
+    // band0_record without `topology` of such a vertex, the same way: its range and errors. A child
+    // in HOME whose record is not computed yet is computed through HOME, with no lookup and no hold
+    // of its own (as in band0_narrow_inside).
     void band0_bounds_inside(const Coord& v, CachedBrick& home, int64_t index, uint32_t m);
     // The nodes within one node of such a vertex, by their offset from it: whether they lie in its
     // brick, and where there. (Within the data box: the vertex lies inside it by one node.)
@@ -161,7 +162,8 @@ class PagedVolume {
     uint64_t computed_bounds_word(int64_t index, uint32_t m);
     // bounds_word's narrow word, for a brick whose words are narrow (CachedBrick::narrow).
     uint32_t narrow_word(int64_t index, uint32_t m);
-    // compute_band0 without topology of node m of a narrow brick HOME (held by the caller).
+    // compute_band0 without topology of node m of brick HOME (held by the caller), straight to
+    // band0_narrow_inside where that would go.
     void compute_narrow(CachedBrick& home, int64_t index, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
     // The record fields a brick holds arrays for, taken once per band-0 record computed: the
