@@ -90,23 +90,36 @@ void write_blocks(AtomicFile& out, size_t count, Encode encode) {
   }
 }
 
+// Buffers of a block of records, lent from block to block (not zero-filled: each is written
+// whole first).
+using BlockBuffer = std::unique_ptr<unsigned char[]>;
+using BlockBuffers = LendingPool<BlockBuffer>;
+
+// Records ITEMS[0..) of RECORD_BYTES each (at most kBlockItems), the first being record FIRST of
+// a region append_region() made at AT: PUT(p, item) writes one at p and returns the end. Encoded
+// into a lent buffer and written by the calling thread.
+template <typename Item, typename Put>
+void write_record_block(AtomicFile& out, uint64_t at, size_t first, std::span<const Item> items, size_t record_bytes,
+                        BlockBuffers& buffers, Put put) {
+  std::unique_ptr<BlockBuffer> buffer =
+      buffers.take([&] { return std::make_unique<BlockBuffer>(new unsigned char[kBlockItems * record_bytes]); });
+  unsigned char* p = buffer->get();
+  for (const Item& item : items) p = put(p, item);
+  out.write_region(at + first * record_bytes, buffer->get(), items.size() * record_bytes);
+  buffers.give(std::move(buffer));
+}
+
 // Items of RECORD_BYTES each: PUT(p, item) writes one at p and returns the end. Every block's
-// place in the file is known, so each is encoded and written by one thread, all threads at once,
-// through buffers lent from block to block (not zero-filled: each is written whole first).
+// place in the file is known, so each is encoded and written by one thread, all threads at once
+// (write_record_block).
 template <typename Items, typename Put>
 void write_records(AtomicFile& out, const Items& items, size_t record_bytes, Put put) {
   const size_t count = items.size();
   const uint64_t at = out.append_region(count * record_bytes);
-  using Buffer = std::unique_ptr<unsigned char[]>;
-  LendingPool<Buffer> buffers;
+  BlockBuffers buffers;
   parallel_for(int64_t{0}, static_cast<int64_t>((count + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
     const size_t begin = static_cast<size_t>(b) * kBlockItems, end = std::min(count, begin + kBlockItems);
-    std::unique_ptr<Buffer> buffer =
-        buffers.take([&] { return std::make_unique<Buffer>(new unsigned char[kBlockItems * record_bytes]); });
-    unsigned char* p = buffer->get();
-    for (size_t k = begin; k < end; ++k) p = put(p, items[k]);
-    out.write_region(at + begin * record_bytes, buffer->get(), (end - begin) * record_bytes);
-    buffers.give(std::move(buffer));
+    write_record_block(out, at, begin, std::span(items.data() + begin, end - begin), record_bytes, buffers, put);
   });
 }
 
@@ -200,21 +213,16 @@ void encode_stl(const Mesh& mesh, AtomicFile& out) {
 }
 
 // The vertex normals (isotope::vertex_normals) as records of 12 bytes, each run of them encoded
-// and written by the thread that finished it, as write_records does, with no array of the normals
+// and written by the thread that finished it (write_record_block), with no array of the normals
 // held (for_each_vertex_normals_run). A vertex whose triangles are all degenerate has none and
 // gets NONE: glTF requires unit length, so its writer gives +z, which no shading of a zero-area
 // triangle can show; VTK's takes 0, as isotope::vertex_normals gives.
 void write_normals(AtomicFile& out, const Mesh& mesh, const std::array<float, 3>& none) {
+  static_assert(kNormalsPerRun <= kBlockItems, "a run of normals is written as one block");
   const uint64_t at = out.append_region(mesh.positions.size() * 12);
-  using Buffer = std::unique_ptr<unsigned char[]>;
-  LendingPool<Buffer> buffers;
+  BlockBuffers buffers;
   for_each_vertex_normals_run(mesh, none, [&](uint32_t first, std::span<const std::array<float, 3>> normals) {
-    std::unique_ptr<Buffer> buffer =
-        buffers.take([] { return std::make_unique<Buffer>(new unsigned char[kNormalsPerRun * 12]); });
-    unsigned char* p = buffer->get();
-    for (const auto& v : normals) p = put_vec3(p, v);
-    out.write_region(at + uint64_t{first} * 12, buffer->get(), normals.size() * 12);
-    buffers.give(std::move(buffer));
+    write_record_block(out, at, first, normals, 12, buffers, put_vec3);
   });
 }
 

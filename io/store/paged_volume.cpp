@@ -240,7 +240,7 @@ void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Band0Template
     if (!s.home) {
       w = narrow_word(s.index, s.m);
     } else if ((w = load(words + s.m)) == kUnsetNarrowBounds) {
-      compute_narrow(home, index, s.m);  // HOME is held: no lookup, no hold
+      compute_band0(home, index, s.m, false);  // HOME is held: no lookup, no hold
       w = load(words + s.m);
     }
     lo = std::min(lo, w & 0xffu), hi = std::max(hi, w >> 8 & 0xffu), halves = std::max(halves, w >> 16);
@@ -288,19 +288,8 @@ uint32_t PagedVolume::Pager::narrow_word(int64_t index, uint32_t m) {
   const uint32_t w = load(brick(index).narrow_bounds() + m);
   if (w != kUnsetNarrowBounds) return w;
   const std::shared_ptr<CachedBrick> home = hold(index);  // as in computed_bounds_word
-  compute_narrow(*home, index, m);
+  compute_band0(*home, index, m, false);
   return load(home->narrow_bounds() + m);
-}
-
-void PagedVolume::Pager::compute_narrow(CachedBrick& home, int64_t index, uint32_t m) {
-  // compute_band0 without topology, straight to band0_narrow_inside where it would go: a fine
-  // extraction from a one-byte store computes millions of these, most of them for a child in the
-  // same brick, and the lookups and holds on the way there cost as much as the record.
-  const Coord v = band0_node(home, m);
-  if (home.narrow() && home.surplus() == nullptr && inside_by_one(v))
-    band0_narrow_inside(v, template_of(v), index, home, m, near_of(v));
-  else
-    compute_band0(home, index, m, false);
 }
 
 Bf16 PagedVolume::Pager::surplus(int64_t index, uint32_t m) {

@@ -162,9 +162,6 @@ class PagedVolume {
     uint64_t computed_bounds_word(int64_t index, uint32_t m);
     // bounds_word's narrow word, for a brick whose words are narrow (CachedBrick::narrow).
     uint32_t narrow_word(int64_t index, uint32_t m);
-    // compute_band0 without topology of node m of brick HOME (held by the caller), straight to
-    // band0_narrow_inside where that would go.
-    void compute_narrow(CachedBrick& home, int64_t index, uint32_t m);
     void store_bounds(CachedBrick& home, uint32_t m, const PackedBounds& p);
     // The record fields a brick holds arrays for, taken once per band-0 record computed: the
     // children are read, the record computed and stored with those alone. An array another
