@@ -980,6 +980,25 @@ TEST_F(IoTest, PlyWithADanglingIndexIsRejectedAndNotWritten) {
   EXPECT_TRUE(entries().empty());
 }
 
+// Dangling indices in the middle and the last of three blocks of triangles (PLY checks its faces
+// block by block as it writes them, the other formats all before): every format refuses the mesh,
+// names the first, and leaves no file, on any number of threads.
+TEST_F(IoTest, EveryFormatRefusesADanglingIndexInAnyBlockAndNamesTheFirst) {
+  Mesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  m.triangles.assign(140000, {0, 1, 2});
+  m.triangles[70000] = {0, 5, 1};
+  m.triangles[139999] = {9, 0, 1};
+  for (const size_t threads : {1, 2, 7}) {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    for (const char* name : {"bad.ply", "bad.glb", "bad.vtp", "bad.stl", "bad.obj"}) {
+      const std::string msg = io_error_of([&] { write_mesh(m, path(name)); });
+      EXPECT_CONTAINS(msg, "triangle 70000 references vertex 5");
+      EXPECT_TRUE(entries().empty()) << name << " on " << threads << " threads";
+    }
+  }
+}
+
 // The normals a GLB and a VTP carry are each vertex's own, at its place, on any thread count: the
 // writers take them run by run from the threads that finish them (for_each_vertex_normals_run), on
 // a mesh of several runs. glTF gives a vertex without a normal +z, VTK 0.

@@ -13,6 +13,7 @@
 #include <limits>
 #include <memory>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "engine/core/lending_pool.h"
@@ -46,16 +47,25 @@ void write_u64(AtomicFile& out, uint64_t value) {
   out.write(bytes.data(), bytes.size());
 }
 
+// The greatest vertex index of TRIANGLES (0 for none): tested once, where a test per index and a
+// store of the verdict kept the loop from running without branches.
+uint32_t greatest_index(std::span<const std::array<uint32_t, 3>> triangles) {
+  uint32_t greatest = 0;
+  for (const auto& t : triangles) greatest = std::max({greatest, t[0], t[1], t[2]});
+  return greatest;
+}
+
 // A dangling index would make a file other tools reject (or, for the formats that store corners,
-// read outside the positions): refused before anything is encoded.
+// read outside the positions): refused before anything is encoded (PLY, which only copies the
+// indices, checks each block as it encodes it: write_ply_faces).
 void check_indices(const Mesh& mesh, const std::string& path) {
   const size_t n = mesh.positions.size();
   const int64_t blocks = static_cast<int64_t>((mesh.triangles.size() + kBlockItems - 1) / kBlockItems);
   std::atomic<bool> bad{false};  // on all threads; the serial scan below only names the first
   parallel_for(int64_t{0}, blocks, [&](int64_t b) {
-    const size_t end = std::min(mesh.triangles.size(), static_cast<size_t>(b + 1) * kBlockItems);
-    for (size_t t = static_cast<size_t>(b) * kBlockItems; t < end; ++t)
-      if (mesh.triangles[t][0] >= n || mesh.triangles[t][1] >= n || mesh.triangles[t][2] >= n) bad = true;
+    const size_t begin = static_cast<size_t>(b) * kBlockItems;
+    const size_t end = std::min(mesh.triangles.size(), begin + kBlockItems);
+    if (greatest_index(std::span(mesh.triangles.data() + begin, end - begin)) >= n) bad = true;
   });
   if (!bad) return;
   for (size_t t = 0; t < mesh.triangles.size(); ++t)
@@ -128,7 +138,62 @@ unsigned char* put_vec3(unsigned char* p, const std::array<float, 3>& v) {
   return p;
 }
 
+// Items whose records are their own values back to back, little-endian (positions as float x, y,
+// z; indices as 32-bit integers). On a little-endian machine those are the bytes in memory: each
+// block is written straight from the mesh's array, on all threads at once, with nothing encoded
+// (encoding them cost a pass over the array and a buffer as large as the block, for a copy).
+template <typename Items>
+void write_as_stored(AtomicFile& out, const Items& items) {
+  using Item = typename Items::value_type;
+  using Value = typename Item::value_type;
+  static_assert(sizeof(Item) == std::tuple_size_v<Item> * sizeof(Value), "records without padding");
+  if constexpr (std::endian::native == std::endian::little) {
+    const size_t count = items.size();
+    const uint64_t at = out.append_region(count * sizeof(Item));
+    parallel_for(int64_t{0}, static_cast<int64_t>((count + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
+      const size_t begin = static_cast<size_t>(b) * kBlockItems, end = std::min(count, begin + kBlockItems);
+      out.write_region(at + begin * sizeof(Item), items.data() + begin, (end - begin) * sizeof(Item));
+    });
+  } else {
+    write_records(out, items, sizeof(Item), [](unsigned char* p, const Item& item) {
+      for (Value v : item) p = put_le(p, v);
+      return p;
+    });
+  }
+}
+
 // ---- PLY ----
+
+unsigned char* put_ply_face(unsigned char* p, const std::array<uint32_t, 3>& t) {
+  *p++ = 3;
+  if constexpr (std::endian::native == std::endian::little) {
+    std::memcpy(p, t.data(), 12);  // a uint32 index and its int32 have the same bytes
+    return p + 12;
+  }
+  for (uint32_t v : t) p = put_le(p, static_cast<int32_t>(v));
+  return p;
+}
+
+// The faces as write_records would write them, each block's indices checked against the vertex
+// count just before it is encoded, from the cache, where check_indices reads the whole array from
+// memory once more. A block that fails is not written, and check_indices names the first dangling
+// index (the file is left unfinished: AtomicFile discards it).
+void write_ply_faces(AtomicFile& out, const Mesh& mesh) {
+  const size_t count = mesh.triangles.size(), n = mesh.positions.size();
+  const uint64_t at = out.append_region(count * 13);
+  BlockBuffers buffers;
+  std::atomic<bool> bad{false};
+  parallel_for(int64_t{0}, static_cast<int64_t>((count + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
+    const size_t begin = static_cast<size_t>(b) * kBlockItems, end = std::min(count, begin + kBlockItems);
+    const std::span<const std::array<uint32_t, 3>> block(mesh.triangles.data() + begin, end - begin);
+    if (greatest_index(block) >= n) {
+      bad = true;
+      return;
+    }
+    write_record_block(out, at, begin, block, 13, buffers, put_ply_face);
+  });
+  if (bad) check_indices(mesh, out.path());
+}
 
 void encode_ply(const Mesh& mesh, AtomicFile& out) {
   check_count(mesh.positions.size(), std::numeric_limits<int32_t>::max(), out.path(), "vertices", "PLY int index");
@@ -136,12 +201,8 @@ void encode_ply(const Mesh& mesh, AtomicFile& out) {
                       std::to_string(mesh.positions.size()) +
                       "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
                       std::to_string(mesh.triangles.size()) + "\nproperty list uchar int vertex_indices\nend_header\n");
-  write_records(out, mesh.positions, 12, put_vec3);
-  write_records(out, mesh.triangles, 13, [](unsigned char* p, const std::array<uint32_t, 3>& t) {
-    p = put_le(p, uint8_t{3});
-    for (uint32_t v : t) p = put_le(p, static_cast<int32_t>(v));
-    return p;
-  });
+  write_as_stored(out, mesh.positions);
+  write_ply_faces(out, mesh);
 }
 
 // ---- OBJ ----
@@ -299,12 +360,9 @@ void encode_glb(const Mesh& mesh, AtomicFile& out) {
   p = put_le(head.data(), static_cast<uint32_t>(bin));
   put_le(p, uint32_t{0x004E4942});  // "BIN\0"
   out.write(head.data(), 8);
-  write_records(out, mesh.positions, 12, put_vec3);
+  write_as_stored(out, mesh.positions);
   write_normals(out, mesh, {0, 0, 1});
-  write_records(out, mesh.triangles, 12, [](unsigned char* q, const std::array<uint32_t, 3>& t) {
-    for (uint32_t v : t) q = put_le(q, v);
-    return q;
-  });
+  write_as_stored(out, mesh.triangles);
 }
 
 // ---- VTK XML PolyData ----
@@ -316,10 +374,14 @@ template <typename Index>
 void encode_vtp_polys(const Mesh& mesh, AtomicFile& out) {
   const uint64_t m = mesh.triangles.size();
   write_u64(out, 3 * m * sizeof(Index));
-  write_records(out, mesh.triangles, 3 * sizeof(Index), [](unsigned char* p, const std::array<uint32_t, 3>& t) {
-    for (uint32_t v : t) p = put_le(p, static_cast<Index>(v));
-    return p;
-  });
+  if constexpr (sizeof(Index) == sizeof(uint32_t)) {
+    write_as_stored(out, mesh.triangles);  // a uint32 index and its Int32 have the same bytes
+  } else {
+    write_records(out, mesh.triangles, 3 * sizeof(Index), [](unsigned char* p, const std::array<uint32_t, 3>& t) {
+      for (uint32_t v : t) p = put_le(p, static_cast<Index>(v));
+      return p;
+    });
+  }
   write_u64(out, m * sizeof(Index));
   write_blocks(out, m, [](size_t begin, size_t end, Bytes& buffer) {
     buffer.resize((end - begin) * sizeof(Index));
@@ -352,7 +414,7 @@ void encode_vtp(const Mesh& mesh, AtomicFile& out) {
   write_u64(out, 12 * n);
   write_normals(out, mesh, {0, 0, 0});
   write_u64(out, 12 * n);
-  write_records(out, mesh.positions, 12, put_vec3);
+  write_as_stored(out, mesh.positions);
   if (wide)
     encode_vtp_polys<int64_t>(mesh, out);
   else
@@ -380,7 +442,7 @@ std::string unknown_mesh_format_message(const std::string& path) {
 }
 
 void write_mesh(const Mesh& mesh, AtomicFile& out, MeshFormat format) {
-  check_indices(mesh, out.path());
+  if (format != MeshFormat::ply) check_indices(mesh, out.path());
   switch (format) {
     case MeshFormat::ply: encode_ply(mesh, out); break;
     case MeshFormat::obj: encode_obj(mesh, out); break;
