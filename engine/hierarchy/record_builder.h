@@ -40,7 +40,9 @@ using CriticalCounts = int64_t[2][3];
 
 // What a vertex inherits from the records of its children's refinement vertices.
 struct Saturation {
-  double bound = 0;
+  // The children's greatest bound as the float it is, widened once where it is summed (the
+  // conversion is exact and monotone: the same double as a max taken over doubles).
+  float bound = 0;
   float surplus = 0;
   IsoInterval exact, paper;
   std::array<float, 3> weight{0, 0, 0};
@@ -48,7 +50,7 @@ struct Saturation {
   // Folds in one child; its range widens the vertex's range `bounds`. Without `topology`, only
   // the range and errors (a store's band 0 read in mode none: io/store/paged_volume.h).
   void add(const Record& c, DiamondBounds& bounds, bool topology = true) {
-    bound = std::max(bound, static_cast<double>(c.bounds.error_bound));
+    bound = std::max(bound, c.bounds.error_bound);
     surplus = std::max(surplus, c.bounds.error_surplus);
     bounds.lo = std::min(bounds.lo, c.bounds.lo);
     bounds.hi = std::max(bounds.hi, c.bounds.hi);
@@ -229,7 +231,7 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
   // box that field is the data, and the traversal clips what it emits there to the box
   // (docs/METHOD.md, "Volumes that are not (2^k+1)^3").
   const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
-  r.bounds.error_bound = round_up(eta + sat.bound);
+  r.bounds.error_bound = round_up(eta + static_cast<double>(sat.bound));
   r.bounds.error_surplus = std::max(round_up(eta), sat.surplus);
   if (!topology) return r;
   if (!inside_box) {
@@ -240,11 +242,13 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     sat.exact.hull({-kInf, kInf});
     sat.paper.hull({-kInf, kInf});
   } else {
-    // Where one of a and b lies above v and the other not, neither rule can fire (docs/METHOD.md,
-    // "The exact rule"; the paper's rule asks for equal signs at a and b too): most vertices of smooth
-    // data, settled here without a call.
+    // Unless v lies strictly beyond both a and b, neither rule can fire (docs/METHOD.md, "The exact
+    // rule"): where one of a and b lies above v and the other not, the paper's rule asks for equal
+    // signs at a and b too; where v ties the greater of two ends not above it, the paper's interval
+    // [max(fa, fb), fv) is empty. Most vertices of smooth data, and of quantized data's plateaus,
+    // settled here without a call.
     IsoInterval exact, paper;
-    if ((dv.fa > dv.fv) == (dv.fb > dv.fv)) {
+    if (dv.fv < std::min(dv.fa, dv.fb) || dv.fv > std::max(dv.fa, dv.fb)) {
       exact = exact_interval(dv);
       paper = paper_interval(dv);
     }
