@@ -242,11 +242,11 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     sat.exact.hull({-kInf, kInf});
     sat.paper.hull({-kInf, kInf});
   } else {
-    // Unless v lies strictly beyond both a and b, neither rule can fire (docs/METHOD.md, "The exact
-    // rule"): where one of a and b lies above v and the other not, the paper's rule asks for equal
-    // signs at a and b too; where v ties the greater of two ends not above it, the paper's interval
-    // [max(fa, fb), fv) is empty. Most vertices of smooth data, and of quantized data's plateaus,
-    // settled here without a call.
+    // Unless v lies strictly beyond both a and b, neither rule flags an isovalue (docs/METHOD.md,
+    // "The exact rule"): where one of a and b lies above v and the other not, the paper's rule asks
+    // for equal signs at a and b too; where v ties the greater of two ends not above it, the
+    // paper's pattern may be critical but its interval [max(fa, fb), fv) is empty. Most vertices
+    // of smooth data, and of quantized data's plateaus, settled here without a call.
     IsoInterval exact, paper;
     if (dv.fv < std::min(dv.fa, dv.fb) || dv.fv > std::max(dv.fa, dv.fb)) {
       exact = exact_interval(dv);
