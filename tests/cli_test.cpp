@@ -702,11 +702,19 @@ TEST_F(Cli, ReportSaysWhetherAStoresReadsWaitedForTheDisk) {
   EXPECT_GT(warm["bricks_read"].get<int64_t>(), 0);
   EXPECT_EQ(warm["cache"]["read_waits"].get<int64_t>(), 0) << warm["cache"];
   EXPECT_EQ(warm["cache"]["read_hints"].get<int64_t>(), 0) << warm["cache"];
-  ASSERT_TRUE(isotope::testing::drop_from_page_cache(store)) << store << ": fdatasync or posix_fadvise failed";
-  if (isotope::testing::page_cached(store, 1024) != 0)
-    GTEST_SKIP() << "the page cache keeps " << store << " when asked to drop it (a file system in memory?)";
-  const nlohmann::json cold = extract_report(quote(store) + " --iso 0 --threads 2");
-  ASSERT_TRUE(cold.contains("cache")) << cold;
+  // The cold half, up to three tries, each from a store dropped again: once, in a CI run under
+  // ASan+UBSan with another test beside it, every read of the dropped store found its bytes in the
+  // page cache (the page checked below was dropped; what read the file back is not known). A try in
+  // which no read waited is taken again; a reader that never waits, or never says so, fails all three.
+  nlohmann::json cold;
+  for (int tries = 0; tries < 3; ++tries) {
+    ASSERT_TRUE(isotope::testing::drop_from_page_cache(store)) << store << ": fdatasync or posix_fadvise failed";
+    if (isotope::testing::page_cached(store, 1024) != 0)
+      GTEST_SKIP() << "the page cache keeps " << store << " when asked to drop it (a file system in memory?)";
+    cold = extract_report(quote(store) + " --iso 0 --threads 2");
+    ASSERT_TRUE(cold.contains("cache")) << cold;
+    if (cold["cache"]["read_waits"].get<int64_t>() > 0) break;
+  }
   EXPECT_GT(cold["cache"]["read_waits"].get<int64_t>(), 0) << cold["cache"];
   EXPECT_GT(cold["cache"]["read_hints"].get<int64_t>(), 0) << cold["cache"];
 }
