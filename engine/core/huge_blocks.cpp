@@ -100,10 +100,7 @@ struct HugeBlocks {
         if (still_mapped(target)) return true;                         // failed before it unmapped the target
         void* again = mmap(target, kHugePage, PROT_READ | PROT_WRITE,
                            MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE | MAP_FIXED_NOREPLACE, -1, 0);
-        if (again == target) {
-          advise_huge_pages(target, kHugePage);
-          return true;
-        }
+        if (again == target) return true;
         if (again != MAP_FAILED) munmap(again, kHugePage);  // a kernel that ignores NOREPLACE
         // Another thread mapped the hole: give back the rest, around it.
         munmap(reinterpret_cast<void*>(at), done);
@@ -263,7 +260,6 @@ void* allocate_huge(size_t bytes) {
     if (rounded > address_space_to_spare()) throw std::bad_alloc();
     void* m = map_aligned(rounded, MAP_NORESERVE);
     if (!m) throw std::bad_alloc();
-    advise_huge_pages(m, rounded);
     const std::lock_guard<std::mutex> lock(b.mutex);
     try {
       b.reserved.emplace(reinterpret_cast<uintptr_t>(m), HugeBlocks::Reservation{rounded, reservation_purpose});
@@ -288,7 +284,6 @@ void* allocate_huge(size_t bytes) {
           m = map_aligned(rounded);
         }
         if (!m) throw std::bad_alloc();
-        advise_huge_pages(m, rounded);
         p = reinterpret_cast<uintptr_t>(m);
       }
       try {
@@ -302,7 +297,6 @@ void* allocate_huge(size_t bytes) {
   }
   void* p = std::aligned_alloc(kHugePage, rounded);
   if (!p) throw std::bad_alloc();
-  advise_huge_pages(p, rounded);
   return p;
 }
 

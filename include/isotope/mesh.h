@@ -10,7 +10,7 @@
 namespace isotope {
 
 struct Mesh {
-  // Meshes run to hundreds of megabytes: on huge pages, and resize() leaves the new elements
+  // Meshes run to hundreds of megabytes: in large blocks, and resize() leaves the new elements
   // unwritten (detail::UninitializedHugePageAllocator), for the writer to fill.
   template <class T>
   using Array = std::vector<T, detail::UninitializedHugePageAllocator<T>>;

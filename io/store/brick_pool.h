@@ -1,9 +1,8 @@
 #pragma once
 // Memory for decoded bricks (io/store/brick_cache.h): blocks of one fixed size carved from 16 MB chunks
-// that the kernel is asked to back with huge pages, and recycled through a free list. A paged
-// extraction decodes hundreds of MB of bricks; on fresh 4 KB pages the page faults alone cost
-// more than decoding them, and being serialized in the kernel they did not scale with threads.
-// Chunks are kept until the pool goes; untouched parts of a chunk cost no memory.
+// and recycled through a free list, so that a brick evicted leaves its memory, already faulted in,
+// to the next one decoded. Chunks are kept until the pool goes; untouched parts of a chunk cost no
+// memory.
 #include <cstddef>
 #include <mutex>
 #include <vector>

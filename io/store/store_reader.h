@@ -72,8 +72,8 @@ class StoreReader {
   std::pair<int, Box3> locate_brick(int64_t index) const;
 
  private:
-  // On huge pages: a band's directory is megabytes (24 bytes a brick) touched at once, a page fault
-  // every 4 KB otherwise (docs/METHOD.md, "Out of core").
+  // A large array (detail::HugePageAllocator): a band's directory is megabytes (24 bytes a brick)
+  // read at once (docs/METHOD.md, "Out of core").
   using Directory = std::vector<BrickEntry, detail::HugePageAllocator<BrickEntry>>;
   const Directory& band_directory(int band) const;
   // Asks the kernel for the read windows that hold [begin, stop), none past the bricks' area.

@@ -1,9 +1,10 @@
 #pragma once
-// Allocator for the engine's large arrays (values, records): asks the kernel for transparent
-// huge pages, so that touching hundreds of megabytes takes hundreds of page faults instead of
-// hundreds of thousands, and the traversal's scattered reads miss the TLB less. Small
-// allocations, and kernels without THP, fall back to ordinary pages.
-#include <sys/mman.h>
+// Allocator for the engine's large arrays (values, records, meshes): blocks aligned to 2 MB (a huge
+// page), which a process that repeats its work can keep and take again already faulted in. It does
+// not ask the kernel for transparent huge pages (the kernel's own policy decides): where a virtual
+// machine's host takes freed memory back, a fresh huge page costs about five times a fresh 4 KB
+// page per byte, more than the TLB misses it spares, and every extraction and convert measured
+// here ran as fast or faster without it (docs/METHOD.md, "Fresh memory").
 
 #include <cstddef>
 #include <cstdint>
@@ -17,23 +18,14 @@ namespace isotope::detail {
 
 inline constexpr size_t kHugePage = size_t{2} << 20;
 
-// Asks the kernel for transparent huge pages over the whole 2 MB pages that lie inside
-// [p, p + bytes): a hint, whose failure only costs speed.
-inline void advise_huge_pages(void* p, size_t bytes) {
-  const auto begin = reinterpret_cast<uintptr_t>(p);
-  const uintptr_t first = (begin + kHugePage - 1) & ~(uintptr_t{kHugePage} - 1);
-  const uintptr_t end = (begin + bytes) & ~(uintptr_t{kHugePage} - 1);
-  if (end > first) madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
-}
-
 // Faults in the pages of [p, p + bytes) for writing, on all threads at once, a chunk a task
 // (MADV_POPULATE_WRITE): for an array about to be written whole by one thread (a std::vector's
 // resize, which zero-fills), whose first touch is the kernel zeroing every page, on one core, and
-// costs more than the write itself (docs/METHOD.md, "Per-vertex records"). A hint: where the kernel
+// costs more than the write itself (docs/METHOD.md, "Fresh memory"). A hint: where the kernel
 // refuses it, the pages fault in at the write as before.
 void prefault_in_parallel(void* p, size_t bytes) noexcept;
 
-// A block of at least BYTES, aligned to 2 MB and advised for huge pages; throws std::bad_alloc.
+// A block of at least BYTES, aligned to 2 MB; throws std::bad_alloc.
 // By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
 // store's own, outside malloc's heap: a freed block is kept (up to the bytes given) and handed out
 // again whole or in part, so a process that repeats the same work (a server answering the same
