@@ -5,6 +5,7 @@
 #include <tbb/global_control.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstring>
 #include <map>
 
@@ -13,6 +14,7 @@
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/hierarchy/record_builder.h"
 #include "isotope/distribution.h"
 #include "tests/test_support.h"
 
@@ -100,6 +102,60 @@ int64_t check_banded(const Volume& volume, int brick_bits) {
       for (int64_t x = 0; x <= l.n; ++x) records += scale_of({x, y, z}, l) < l.k && mv.has_record({x, y, z});
   EXPECT_EQ(checked, records);
   return checked;
+}
+
+// The builds fold children four fields at a time (ChildFold); Saturation::add is the fold one
+// field at a time. Records of a few values, signed zeros and infinities among them, so that
+// most folds meet ties, and intervals empty in several ways: every record the same bits.
+TEST(BandBuild, TheVectorFoldOfChildrenIsTheScalarOne) {
+  const float pool[] = {0.0f, -0.0f, 1.0f, -1.0f, 2.5f, INFINITY, -INFINITY, 1e-3f};
+  uint64_t state = 12345;
+  auto pick = [&] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return pool[(state >> 33) % std::size(pool)];
+  };
+  auto interval = [&](float& lo, float& hi) {
+    lo = pick(), hi = pick();
+    if ((state >> 40) % 4 == 0) lo = 1, hi = 0;  // as a record without one holds it
+  };
+  int64_t differing = 0, nonempty = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    DiamondBounds range{pick(), pick(), 0, 0};
+    if (range.hi < range.lo) std::swap(range.lo, range.hi);
+    const int children = static_cast<int>(trial % 9);
+    std::vector<Record> c(static_cast<size_t>(children));
+    for (Record& r : c) {
+      r.bounds = {pick(), pick(), std::fabs(pick()), std::fabs(pick())};
+      interval(r.topology.exact_lo, r.topology.exact_hi);
+      interval(r.topology.paper_lo, r.topology.paper_hi);
+      r.topology.weight = {std::fabs(pick()), std::fabs(pick()), std::fabs(pick())};
+    }
+    for (bool topology : {true, false}) {
+      Saturation scalar;
+      DiamondBounds scalar_range = range;
+      ChildFold fold(range);
+      for (const Record& r : c) {
+        scalar.add(r, scalar_range, topology);
+        if (topology)
+          fold.add(r);
+        else
+          fold.add_bounds(r);
+      }
+      DiamondBounds fold_range = range;
+      const Saturation folded = fold.finish(fold_range);
+      // v between a and b: the record's intervals and weights are its children's alone.
+      DiamondValues dv;
+      dv.fa = 0, dv.fb = 2, dv.fv = 1;
+      const DiamondShape shape;
+      CriticalCounts counts = {{0, 0, 0}, {0, 0, 0}};
+      const Record a = finish_record(dv, shape, true, scalar_range, scalar, counts, topology);
+      const Record b = finish_record(dv, shape, true, fold_range, folded, counts, topology);
+      differing += !same_bits(a, b);
+      nonempty += !scalar.exact.empty();
+    }
+  }
+  EXPECT_EQ(differing, 0);
+  EXPECT_GT(nonempty, 5000);  // the hulls were exercised
 }
 
 TEST(BandBuild, EqualsInMemoryBuildOnOddDimensions) {

@@ -4,6 +4,7 @@
 #include <cassert>
 #include <cmath>
 #include <tuple>
+#include <type_traits>
 
 namespace isotope {
 
@@ -155,9 +156,11 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
 }
 
 // RecordBuilder::build for a diamond inside the data box, reading through a template; the same
-// record bit for bit (the max and hull folds do not depend on the order of the children).
-void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts, bool topology) {
-  const int64_t base = index(g, size_);
+// record bit for bit (the max and hull folds do not depend on the order of the children). Inlined
+// in build()'s row loop, its one caller: a call's saving and restoring of registers was a tenth
+// of it.
+[[gnu::always_inline]] inline void BandTile::build_fast(int64_t base, int64_t cell, const DiamondTemplate& t,
+                                                        CriticalCounts& counts, bool topology) {
   const float* v = values_.data() + base;
   DiamondValues dv;
   dv.type = t.type;
@@ -167,16 +170,33 @@ void BandTile::build_fast(const Box3& g, const DiamondTemplate& t, CriticalCount
   DiamondBounds range;
   range.lo = std::min({dv.fa, dv.fb, dv.fv});
   range.hi = std::max({dv.fa, dv.fb, dv.fv});
-  for (int i = 0; i < t.ring_count; ++i) {
-    dv.ring[i] = v[t.ring[i]];
-    range.lo = std::min(range.lo, dv.ring[i]);
-    range.hi = std::max(range.hi, dv.ring[i]);
+  // A ring of the diamond's type, whole inside the box: its size known to the compiler, the
+  // loop unrolled.
+  auto ring = [&]<int n>(std::integral_constant<int, n>) {
+    for (int i = 0; i < n; ++i) {
+      dv.ring[i] = v[t.ring[i]];
+      range.lo = std::min(range.lo, dv.ring[i]);
+      range.hi = std::max(range.hi, dv.ring[i]);
+    }
+  };
+  static_assert(ring_size(PolyhedronType::octahedron) == 4 && ring_size(PolyhedronType::cube) == 6 &&
+                ring_size(PolyhedronType::diamond) == 8);
+  switch (t.ring_count) {
+    case 4: ring(std::integral_constant<int, 4>{}); break;
+    case 6: ring(std::integral_constant<int, 6>{}); break;
+    default: assert(t.ring_count == 8); ring(std::integral_constant<int, 8>{});
   }
-  Saturation sat;
-  for (int i = 0; i < t.same_count; ++i) sat.add(records_[static_cast<size_t>(base + t.same[i])], range, topology);
-  const int64_t cell_base = index(g, cells_);
-  for (int i = 0; i < t.cube_count; ++i)
-    sat.add(children_[static_cast<size_t>(cell_base + t.cube[i])], range, topology);
+  ChildFold fold(range);
+  const Record* same = records_.data() + base;
+  const Record* cubes = children_.data();  // empty in band 0, whose vertices have no such children
+  if (topology) {
+    for (int i = 0; i < t.same_count; ++i) fold.add(same[t.same[i]]);
+    for (int i = 0; i < t.cube_count; ++i) fold.add(cubes[cell + t.cube[i]]);
+  } else {
+    for (int i = 0; i < t.same_count; ++i) fold.add_bounds(same[t.same[i]]);
+    for (int i = 0; i < t.cube_count; ++i) fold.add_bounds(cubes[cell + t.cube[i]]);
+  }
+  const Saturation sat = fold.finish(range);
   records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology, &t.gradients);
 }
 
@@ -284,28 +304,55 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
         const bool box_yz = y >= box_first[1] && y <= box_last[1] && z >= box_first[2] && z <= box_last[2];
         const bool trivial_yz =
             trivial && y >= trivial_first[1] && y <= trivial_last[1] && z >= trivial_first[2] && z <= trivial_last[2];
-        // x steps by 2: a row's nodes are of two template classes, alternately.
-        const DiamondTemplate* row_templates[2] = {nullptr, nullptr};
-        for (int64_t x = first[0]; x <= last[0]; x += 2) {
-          if (trivial_yz && x >= trivial_first[0] && x <= trivial_last[0] &&
-              constant_[static_cast<size_t>((((z - lo_[2]) >> 2) * blocks_[1] + ((y - lo_[1]) >> 2)) * blocks_[0] +
-                                            ((x - lo_[0]) >> 2))]) {
-            const float c = node_value({x, y, z});
-            Record& r = records_[static_cast<size_t>(index({x, y, z}, size_))];
-            r = Record{};
-            r.bounds = {c, c, 0, 0};
-            continue;
-          }
-          const bool core = core_yz && x >= core_first[0] && x <= core_last[0];
-          CriticalCounts& c = core ? counts : halo_counts;
-          if (box_yz && x >= box_first[0] && x <= box_last[0]) {
-            const DiamondTemplate*& t = row_templates[(x >> 1) & 1];
-            if (!t) t = &template_for({x, y, z});
-            build_fast({x, y, z}, *t, c, topology);
+        // Band 0's nodes within a constant block: their record without computing (above).
+        const int64_t block_row = (((z - lo_[2]) >> 2) * blocks_[1] + ((y - lo_[1]) >> 2)) * blocks_[0];
+        auto constant = [&](int64_t x, int64_t at) {
+          if (!trivial_yz || x < trivial_first[0] || x > trivial_last[0] ||
+              !constant_[static_cast<size_t>(block_row + ((x - lo_[0]) >> 2))])
+            return false;
+          const float c = values_[static_cast<size_t>(at)];
+          Record& r = records_[static_cast<size_t>(at)];
+          r = Record{};
+          r.bounds = {c, c, 0, 0};
+          return true;
+        };
+        auto counts_of = [&](int64_t x) -> CriticalCounts& {
+          return core_yz && x >= core_first[0] && x <= core_last[0] ? counts : halo_counts;
+        };
+        // x steps by 2. The nodes inside the data box, a range of the row, take templates, of
+        // two classes alternately (x mod 4); the few at either end, the general builder.
+        auto general = [&](int64_t x) {
+          if (!constant(x, index({x, y, z}, size_))) builder.build({x << j_, y << j_, z << j_}, counts_of(x), topology);
+        };
+        int64_t fast_first = last[0] + 2, fast_last = last[0];
+        if (box_yz) {
+          fast_first = first[0] + std::max<int64_t>(0, box_first[0] - first[0] + 1) / 2 * 2;
+          fast_last = std::min(last[0], box_last[0]);
+        }
+        int64_t x = first[0];
+        for (; x <= last[0] && x < fast_first; x += 2) general(x);
+        if (x <= fast_last) {
+          const DiamondTemplate* templates[2] = {&template_for({x, y, z}), nullptr};
+          if (x + 2 <= fast_last) templates[1] = &template_for({x + 2, y, z});
+          int64_t at = index({x, y, z}, size_), cell = index({x, y, z}, cells_);
+          if (trivial_yz) {
+            for (int64_t i = 0; x <= fast_last; x += 2, ++i, at += 2, cell += 2)
+              if (!constant(x, at)) build_fast(at, cell, *templates[i & 1], counts_of(x), topology);
           } else {
-            builder.build({x << j_, y << j_, z << j_}, c, topology);
+            // The row's core nodes, a range of it, count critical points; the halo's do not.
+            const int64_t x0 = x;
+            auto run = [&](int64_t end, CriticalCounts& c) {
+              for (; x <= end; x += 2, at += 2, cell += 2)
+                build_fast(at, cell, *templates[((x - x0) >> 1) & 1], c, topology);
+            };
+            if (core_yz) {
+              run(std::min(fast_last, core_first[0] - 1), halo_counts);
+              run(std::min(fast_last, core_last[0]), counts);
+            }
+            run(fast_last, halo_counts);
           }
         }
+        for (; x <= last[0]; x += 2) general(x);
       }
     }
 }

@@ -112,7 +112,8 @@ class BandTile {
   };
   const DiamondTemplate& template_for(const Box3& g);
   bool inside_data_box(const Box3& g) const;
-  void build_fast(const Box3& g, const DiamondTemplate& t, CriticalCounts& counts, bool topology);
+  // The record of the node at `base` in the window's arrays (index()), `cell` its cell's index.
+  void build_fast(int64_t base, int64_t cell, const DiamondTemplate& t, CriticalCounts& counts, bool topology);
   DiamondTemplate templates_[64];
   // Band 0: per 4^3 block of the window, whether every value within 4 nodes of it is one and the
   // same (most of a CT scan's background). Such a block's records are known without computing.

@@ -13,8 +13,12 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include "engine/hierarchy/critical_rule.h"
 #include "engine/hierarchy/diamond.h"
@@ -59,6 +63,97 @@ struct Saturation {
     paper.hull({c.topology.paper_lo, c.topology.paper_hi});
     for (size_t w = 0; w < weight.size(); ++w) weight[w] = std::max(weight[w], c.topology.weight[w]);
   }
+};
+
+// Saturation's fold over the children of one vertex, four fields an instruction: the same bits as
+// Saturation::add called child by child. The builds, in memory and banded, fold a few children
+// into each of a volume's vertices, billions at the sizes a convert meets.
+// Every field is a running max, in one of three vectors: the range and errors (-lo, hi,
+// error_bound, error_surplus), the two intervals (-exact_lo, exact_hi, -paper_lo, paper_hi), the
+// weights. A min is the max of the negated values (negation is exact), and each max keeps the
+// operands in the order of the scalar comparison it replaces, so that of two equal values (0 and
+// -0) the same one is kept. An empty interval enters the hull as -infinity in both of its lanes,
+// which every max passes over, as hull() skips it.
+class ChildFold {
+ public:
+  explicit ChildFold(const DiamondBounds& range) {
+#if defined(__SSE2__)
+    bounds_ = _mm_setr_ps(-range.lo, range.hi, 0.0f, 0.0f);
+    intervals_ = _mm_set1_ps(-std::numeric_limits<float>::infinity());
+    weights_ = _mm_setzero_ps();
+#else
+    range_ = range;
+#endif
+  }
+
+  // A child's range and errors (Saturation::add without topology).
+  void add_bounds(const Record& c) {
+#if defined(__SSE2__)
+    // std::min(lo, c.lo) is c.lo < lo ? c.lo : lo, std::max(m, c.m) is m < c.m ? c.m : m: the
+    // child's value first (MAXPS keeps its first operand only when it is greater).
+    bounds_ = _mm_max_ps(_mm_xor_ps(_mm_loadu_ps(&c.bounds.lo), sign_mask(0x1)), bounds_);
+#else
+    sat_.add(c, range_, false);
+#endif
+  }
+
+  // A child's whole record (Saturation::add with topology).
+  void add(const Record& c) {
+#if defined(__SSE2__)
+    add_bounds(c);
+    // hull(): lo < o.lo ? lo : o.lo and hi > o.hi ? hi : o.hi, the running value first.
+    const __m128 v = _mm_loadu_ps(&c.topology.exact_lo);  // exact_lo, exact_hi, paper_lo, paper_hi
+    const __m128 lo = _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 2, 0, 0)), hi = _mm_shuffle_ps(v, v, _MM_SHUFFLE(3, 3, 1, 1));
+    const __m128 not_empty = _mm_cmplt_ps(lo, hi);
+    const __m128 entered = _mm_or_ps(_mm_and_ps(not_empty, _mm_xor_ps(v, sign_mask(0x5))),
+                                     _mm_andnot_ps(not_empty, _mm_set1_ps(-std::numeric_limits<float>::infinity())));
+    intervals_ = _mm_max_ps(intervals_, entered);
+    // paper_hi, weight[0..2]: the first lane is not read.
+    weights_ = _mm_max_ps(_mm_loadu_ps(&c.topology.paper_hi), weights_);
+#else
+    sat_.add(c, range_, true);
+#endif
+  }
+
+  // The saturation, and the vertex's range widened by its children's.
+  Saturation finish(DiamondBounds& range) const {
+#if defined(__SSE2__)
+    alignas(16) float b[4], i[4], w[4];
+    _mm_store_ps(b, bounds_);
+    _mm_store_ps(i, intervals_);
+    _mm_store_ps(w, weights_);
+    range.lo = -b[0];
+    range.hi = b[1];
+    Saturation s;
+    s.bound = b[2];
+    s.surplus = b[3];
+    // An interval no child entered is (+infinity, -infinity): empty, as hull() reads it.
+    s.exact = {-i[0], i[1]};
+    s.paper = {-i[2], i[3]};
+    s.weight = {w[1], w[2], w[3]};
+    return s;
+#else
+    range = range_;
+    return sat_;
+#endif
+  }
+
+ private:
+#if defined(__SSE2__)
+  // The loads above read four consecutive floats of a record from each of these.
+  static_assert(offsetof(DiamondBounds, error_surplus) == 3 * sizeof(float));
+  static_assert(offsetof(DiamondTopology, paper_hi) == offsetof(DiamondTopology, exact_lo) + 3 * sizeof(float));
+  static_assert(offsetof(DiamondTopology, weight) == offsetof(DiamondTopology, paper_hi) + sizeof(float));
+  // The sign bit in the lanes of `lanes` (bit i: lane i).
+  static __m128 sign_mask(int lanes) {
+    const auto bit = [&](int i) { return (lanes >> i & 1) ? -0.0f : 0.0f; };
+    return _mm_setr_ps(bit(0), bit(1), bit(2), bit(3));
+  }
+  __m128 bounds_, intervals_, weights_;
+#else
+  DiamondBounds range_;
+  Saturation sat_;
+#endif
 };
 
 // Where v's polyhedron lies, relative to v, in lattice steps: what the gradient and size weights
@@ -334,13 +429,18 @@ class RecordBuilder {
     DiamondBounds range;
     const bool inside_box = read_polyhedron(
         d, lattice_, grid_.data_dims(), [&](const Coord& c) { return grid_.value(c); }, dv, range);
-    Saturation sat;
+    ChildFold fold(range);
     for_each_child(d, lattice_, [&](const Coord& u) {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node
       // below it, and what the traversal emits there is clipped away (engine/mesh/box_clip.h).
       Record c;
-      if (grid_.child(u, c)) sat.add(c, range, topology);
+      if (!grid_.child(u, c)) return;
+      if (topology)
+        fold.add(c);
+      else
+        fold.add_bounds(c);
     });
+    const Saturation sat = fold.finish(range);
     grid_.store(v, finish_record(dv, shape_of(d, lattice_), inside_box, range, sat, counts, topology));
   }
 
