@@ -115,22 +115,20 @@ class ChildFold {
 #endif
   }
 
-  // The saturation, and the vertex's range widened by its children's.
+  // The saturation, and the vertex's range widened by its children's (its errors: theirs, the
+  // saturation's bound and surplus, which finish_record adds the vertex's own to).
   Saturation finish(DiamondBounds& range) const {
 #if defined(__SSE2__)
-    alignas(16) float b[4], i[4], w[4];
-    _mm_store_ps(b, bounds_);
-    _mm_store_ps(i, intervals_);
-    _mm_store_ps(w, weights_);
-    range.lo = -b[0];
-    range.hi = b[1];
+    // Stored as they lie in memory (static_asserts below), the weights first: their first lane
+    // falls on paper_hi, which the intervals then write.
     Saturation s;
-    s.bound = b[2];
-    s.surplus = b[3];
+    _mm_storeu_ps(&s.paper.hi, weights_);
     // An interval no child entered is (+infinity, -infinity): empty, as hull() reads it.
-    s.exact = {-i[0], i[1]};
-    s.paper = {-i[2], i[3]};
-    s.weight = {w[1], w[2], w[3]};
+    _mm_storeu_ps(&s.exact.lo, _mm_xor_ps(intervals_, sign_mask(0x5)));
+    const __m128 b = _mm_xor_ps(bounds_, sign_mask(0x1));  // lo, hi, error_bound, error_surplus
+    _mm_storeu_ps(&range.lo, b);
+    s.bound = range.error_bound;
+    s.surplus = range.error_surplus;
     return s;
 #else
     range = range_;
@@ -144,6 +142,8 @@ class ChildFold {
   static_assert(offsetof(DiamondBounds, error_surplus) == 3 * sizeof(float));
   static_assert(offsetof(DiamondTopology, paper_hi) == offsetof(DiamondTopology, exact_lo) + 3 * sizeof(float));
   static_assert(offsetof(DiamondTopology, weight) == offsetof(DiamondTopology, paper_hi) + sizeof(float));
+  static_assert(offsetof(Saturation, paper) == offsetof(Saturation, exact) + 2 * sizeof(float) &&
+                offsetof(Saturation, weight) == offsetof(Saturation, paper) + 2 * sizeof(float));
   // The sign bit in the lanes of `lanes` (bit i: lane i).
   static __m128 sign_mask(int lanes) {
     const auto bit = [&](int i) { return (lanes >> i & 1) ? -0.0f : 0.0f; };
