@@ -136,10 +136,7 @@ TEST(BandBuild, TheVectorFoldOfChildrenIsTheScalarOne) {
       ChildFold fold(range);
       for (const Record& r : c) {
         scalar.add(r, scalar_range, topology);
-        if (topology)
-          fold.add(r);
-        else
-          fold.add_bounds(r);
+        fold.add(r, topology);
       }
       DiamondBounds fold_range = range;
       const Saturation folded = fold.finish(fold_range);

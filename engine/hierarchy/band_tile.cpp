@@ -189,13 +189,8 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
   ChildFold fold(range);
   const Record* same = records_.data() + base;
   const Record* cubes = children_.data();  // empty in band 0, whose vertices have no such children
-  if (topology) {
-    for (int i = 0; i < t.same_count; ++i) fold.add(same[t.same[i]]);
-    for (int i = 0; i < t.cube_count; ++i) fold.add(cubes[cell + t.cube[i]]);
-  } else {
-    for (int i = 0; i < t.same_count; ++i) fold.add_bounds(same[t.same[i]]);
-    for (int i = 0; i < t.cube_count; ++i) fold.add_bounds(cubes[cell + t.cube[i]]);
-  }
+  for (int i = 0; i < t.same_count; ++i) fold.add(same[t.same[i]], topology);
+  for (int i = 0; i < t.cube_count; ++i) fold.add(cubes[cell + t.cube[i]], topology);
   const Saturation sat = fold.finish(range);
   records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology, &t.gradients);
 }
@@ -335,22 +330,17 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
           const DiamondTemplate* templates[2] = {&template_for({x, y, z}), nullptr};
           if (x + 2 <= fast_last) templates[1] = &template_for({x + 2, y, z});
           int64_t at = index({x, y, z}, size_), cell = index({x, y, z}, cells_);
-          if (trivial_yz) {
-            for (int64_t i = 0; x <= fast_last; x += 2, ++i, at += 2, cell += 2)
-              if (!constant(x, at)) build_fast(at, cell, *templates[i & 1], counts_of(x), topology);
-          } else {
-            // The row's core nodes, a range of it, count critical points; the halo's do not.
-            const int64_t x0 = x;
-            auto run = [&](int64_t end, CriticalCounts& c) {
-              for (; x <= end; x += 2, at += 2, cell += 2)
-                build_fast(at, cell, *templates[((x - x0) >> 1) & 1], c, topology);
-            };
-            if (core_yz) {
-              run(std::min(fast_last, core_first[0] - 1), halo_counts);
-              run(std::min(fast_last, core_last[0]), counts);
-            }
-            run(fast_last, halo_counts);
+          // The row's core nodes, a range of it, count critical points; the halo's do not.
+          const int64_t x0 = x;
+          auto run = [&](int64_t end, CriticalCounts& c) {
+            for (; x <= end; x += 2, at += 2, cell += 2)
+              if (!constant(x, at)) build_fast(at, cell, *templates[((x - x0) >> 1) & 1], c, topology);
+          };
+          if (core_yz) {
+            run(std::min(fast_last, core_first[0] - 1), halo_counts);
+            run(std::min(fast_last, core_last[0]), counts);
           }
+          run(fast_last, halo_counts);
         }
         for (; x <= last[0]; x += 2) general(x);
       }

@@ -86,21 +86,13 @@ class ChildFold {
 #endif
   }
 
-  // A child's range and errors (Saturation::add without topology).
-  void add_bounds(const Record& c) {
+  // A child's record (Saturation::add): without `topology`, its range and errors only.
+  void add(const Record& c, bool topology = true) {
 #if defined(__SSE2__)
     // std::min(lo, c.lo) is c.lo < lo ? c.lo : lo, std::max(m, c.m) is m < c.m ? c.m : m: the
     // child's value first (MAXPS keeps its first operand only when it is greater).
     bounds_ = _mm_max_ps(_mm_xor_ps(_mm_loadu_ps(&c.bounds.lo), sign_mask(0x1)), bounds_);
-#else
-    sat_.add(c, range_, false);
-#endif
-  }
-
-  // A child's whole record (Saturation::add with topology).
-  void add(const Record& c) {
-#if defined(__SSE2__)
-    add_bounds(c);
+    if (!topology) return;
     // hull(): lo < o.lo ? lo : o.lo and hi > o.hi ? hi : o.hi, the running value first.
     const __m128 v = _mm_loadu_ps(&c.topology.exact_lo);  // exact_lo, exact_hi, paper_lo, paper_hi
     const __m128 lo = _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 2, 0, 0)), hi = _mm_shuffle_ps(v, v, _MM_SHUFFLE(3, 3, 1, 1));
@@ -111,7 +103,7 @@ class ChildFold {
     // paper_hi, weight[0..2]: the first lane is not read.
     weights_ = _mm_max_ps(_mm_loadu_ps(&c.topology.paper_hi), weights_);
 #else
-    sat_.add(c, range_, true);
+    sat_.add(c, range_, topology);
 #endif
   }
 
@@ -434,11 +426,7 @@ class RecordBuilder {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node
       // below it, and what the traversal emits there is clipped away (engine/mesh/box_clip.h).
       Record c;
-      if (!grid_.child(u, c)) return;
-      if (topology)
-        fold.add(c);
-      else
-        fold.add_bounds(c);
+      if (grid_.child(u, c)) fold.add(c, topology);
     });
     const Saturation sat = fold.finish(range);
     grid_.store(v, finish_record(dv, shape_of(d, lattice_), inside_box, range, sat, counts, topology));
