@@ -67,6 +67,27 @@ TEST(CompactRecord, RecordsRoundOutwardAndKeepTheBound) {
   for (size_t w = 0; w < 3; ++w) EXPECT_GE(c.topology.weight[w], r.topology.weight[w]);
 }
 
+// A record without an interval holds (+infinity, -infinity), which the store writes as {1, 0}:
+// the words stores held before, so that stores keep their bytes; other empty intervals as they are.
+TEST(CompactRecord, NoIntervalIsStoredAsOneZero) {
+  const Record none;
+  const PackedTopology p = pack_topology(none.topology, 0.0f);
+  EXPECT_EQ(p.exact_lo, bf16_down(1.0f));
+  EXPECT_EQ(p.exact_hi, bf16_up(0.0f));
+  EXPECT_EQ(p.paper_lo, bf16_down(1.0f));
+  EXPECT_EQ(p.paper_hi, bf16_up(0.0f));
+  EXPECT_NE(bf16_down(1.0f), bf16_down(0.0f));
+  DiamondTopology absent{0, 0, 2, 2, {0, 0, 0}};
+  const PackedTopology q = pack_topology(absent, 0.0f);
+  EXPECT_EQ(q.exact_lo, bf16_down(0.0f));
+  EXPECT_EQ(q.exact_hi, bf16_up(0.0f));
+  EXPECT_EQ(q.paper_lo, bf16_down(2.0f));
+  EXPECT_EQ(q.paper_hi, bf16_up(2.0f));
+  const DiamondTopology back = unpack(p);
+  EXPECT_FALSE(back.exact_lo < back.exact_hi);
+  EXPECT_FALSE(back.paper_lo < back.paper_hi);
+}
+
 // The meshes of the compact hierarchy against those of the exact records, on the shared volumes
 // and synthetic fields, over modes and eps.
 TEST(CompactRecord, MeshesRefineOnlyMoreAndStayWithinFivePercent) {

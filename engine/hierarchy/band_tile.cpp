@@ -1,10 +1,15 @@
 #include "engine/hierarchy/band_tile.h"
 
 #include <algorithm>
+#include <bit>
 #include <cassert>
 #include <cmath>
+#include <cstddef>
 #include <tuple>
 #include <type_traits>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 namespace isotope {
 
@@ -164,21 +169,52 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
   const float* v = values_.data() + base;
   DiamondValues dv;
   dv.type = t.type;
-  dv.fa = v[t.a];
-  dv.fb = v[t.b];
-  dv.fv = v[0];
-  DiamondBounds range;
-  range.lo = std::min({dv.fa, dv.fb, dv.fv});
-  range.hi = std::max({dv.fa, dv.fb, dv.fv});
+  float lo, hi;
   // A ring of the diamond's type, whole inside the box: its size known to the compiler, the
   // loop unrolled.
   auto ring = [&]<int n>(std::integral_constant<int, n>) {
+#if defined(__SSE2__)
+    if (!signed_zero_) {
+      // The values four to a register, min and max taken lane-wise and then across: another
+      // order than the scalar folds below, and the same bits, since only -0 and 0 compare equal
+      // with other bits, and no value here is -0. Vectors overlap where n is not a multiple of 4
+      // (a value taken twice changes neither), each stored where dv holds its values: fa, fb, fv
+      // and ring[0] lie in a row (static_assert below).
+      const __m128 a = _mm_setr_ps(v[t.a], v[t.b], v[0], v[t.ring[0]]);
+      const __m128 b = _mm_setr_ps(v[t.ring[0]], v[t.ring[1]], v[t.ring[2]], v[t.ring[3]]);
+      _mm_storeu_ps(&dv.fa, a);
+      _mm_storeu_ps(&dv.ring[0], b);
+      __m128 l = _mm_min_ps(a, b), h = _mm_max_ps(a, b);
+      if constexpr (n > 4) {
+        constexpr int first = n - 4;
+        const __m128 c =
+            _mm_setr_ps(v[t.ring[first]], v[t.ring[first + 1]], v[t.ring[first + 2]], v[t.ring[first + 3]]);
+        _mm_storeu_ps(&dv.ring[first], c);
+        l = _mm_min_ps(l, c);
+        h = _mm_max_ps(h, c);
+      }
+      l = _mm_min_ps(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(1, 0, 3, 2)));
+      h = _mm_max_ps(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(1, 0, 3, 2)));
+      lo = _mm_cvtss_f32(_mm_min_ss(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(2, 3, 0, 1))));
+      hi = _mm_cvtss_f32(_mm_max_ss(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(2, 3, 0, 1))));
+      return;
+    }
+#endif
+    // The order of RecordBuilder's read_polyhedron: of -0 and 0, the first met.
+    dv.fa = v[t.a];
+    dv.fb = v[t.b];
+    dv.fv = v[0];
+    lo = std::min({dv.fa, dv.fb, dv.fv});
+    hi = std::max({dv.fa, dv.fb, dv.fv});
     for (int i = 0; i < n; ++i) {
       dv.ring[i] = v[t.ring[i]];
-      range.lo = std::min(range.lo, dv.ring[i]);
-      range.hi = std::max(range.hi, dv.ring[i]);
+      lo = std::min(lo, dv.ring[i]);
+      hi = std::max(hi, dv.ring[i]);
     }
   };
+  static_assert(offsetof(DiamondValues, fb) == offsetof(DiamondValues, fa) + sizeof(float) &&
+                offsetof(DiamondValues, fv) == offsetof(DiamondValues, fa) + 2 * sizeof(float) &&
+                offsetof(DiamondValues, ring) == offsetof(DiamondValues, fa) + 3 * sizeof(float));
   static_assert(ring_size(PolyhedronType::octahedron) == 4 && ring_size(PolyhedronType::cube) == 6 &&
                 ring_size(PolyhedronType::diamond) == 8);
   switch (t.ring_count) {
@@ -186,11 +222,21 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
     case 6: ring(std::integral_constant<int, 6>{}); break;
     default: assert(t.ring_count == 8); ring(std::integral_constant<int, 8>{});
   }
+  DiamondBounds range;
+  range.lo = lo;
+  range.hi = hi;
   ChildFold fold(range);
   const Record* same = records_.data() + base;
   const Record* cubes = children_.data();  // empty in band 0, whose vertices have no such children
   for (int i = 0; i < t.same_count; ++i) fold.add(same[t.same[i]], topology);
   for (int i = 0; i < t.cube_count; ++i) fold.add(cubes[cell + t.cube[i]], topology);
+#if defined(__SSE2__)
+  // Most vertices: no critical interval of their own.
+  if (!topology || !beyond_both_ends(dv)) {
+    fold.store_without_own_topology(dv, records_[static_cast<size_t>(base)]);
+    return;
+  }
+#endif
   const Saturation sat = fold.finish(range);
   records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology, &t.gradients);
 }
@@ -202,13 +248,23 @@ void BandTile::find_constant_blocks() {
   auto block = [&](int64_t bx, int64_t by, int64_t bz) {
     return static_cast<size_t>((bz * blocks_[1] + by) * blocks_[0] + bx);
   };
+  // A row's blocks four values at a time. Only equality with one value is asked of the range
+  // (below), so the order of the folds does not matter.
   for (int64_t z = 0; z < size_[2]; ++z)
     for (int64_t y = 0; y < size_[1]; ++y) {
       const float* row = values_.data() + (z * size_[1] + y) * size_[0];
-      for (int64_t x = 0; x < size_[0]; ++x) {
-        const size_t b = block(x >> 2, y >> 2, z >> 2);
-        lo[b] = std::min(lo[b], row[x]);
-        hi[b] = std::max(hi[b], row[x]);
+      float* const row_lo = lo.data() + block(0, y >> 2, z >> 2);
+      float* const row_hi = hi.data() + block(0, y >> 2, z >> 2);
+      int64_t x = 0;
+      for (; x + 4 <= size_[0]; x += 4) {
+        const float l = std::min(std::min(row[x], row[x + 1]), std::min(row[x + 2], row[x + 3]));
+        const float h = std::max(std::max(row[x], row[x + 1]), std::max(row[x + 2], row[x + 3]));
+        row_lo[x >> 2] = std::min(row_lo[x >> 2], l);
+        row_hi[x >> 2] = std::max(row_hi[x >> 2], h);
+      }
+      for (; x < size_[0]; ++x) {
+        row_lo[x >> 2] = std::min(row_lo[x >> 2], row[x]);
+        row_hi[x >> 2] = std::max(row_hi[x >> 2], row[x]);
       }
     }
   constant_.assign(count, 0);
@@ -239,6 +295,12 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
   // topology mode: engine/hierarchy/record_builder.h).
   const bool trivial = j_ == 0;
   if (trivial) find_constant_blocks();
+  // Whether a value of the window is -0 (build_fast's vector range takes none).
+  uint32_t negative_zeros = 0;
+  const int64_t window_nodes = size_[0] * size_[1] * size_[2];
+  for (int64_t i = 0; i < window_nodes; ++i)
+    negative_zeros |= std::bit_cast<uint32_t>(values_[static_cast<size_t>(i)]) == 0x80000000u;
+  signed_zero_ = negative_zeros != 0;
   Box3 trivial_first{}, trivial_last{};
   for (int a = 0; a < 3; ++a) trivial_first[a] = 3, trivial_last[a] = layout_.dims()[a] - 4;
   RecordBuilder<BandTile> builder(*this);
@@ -301,14 +363,17 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
             trivial && y >= trivial_first[1] && y <= trivial_last[1] && z >= trivial_first[2] && z <= trivial_last[2];
         // Band 0's nodes within a constant block: their record without computing (above).
         const int64_t block_row = (((z - lo_[2]) >> 2) * blocks_[1] + ((y - lo_[1]) >> 2)) * blocks_[0];
-        auto constant = [&](int64_t x, int64_t at) {
-          if (!trivial_yz || x < trivial_first[0] || x > trivial_last[0] ||
-              !constant_[static_cast<size_t>(block_row + ((x - lo_[0]) >> 2))])
-            return false;
+        auto set_constant = [this](int64_t at) {
           const float c = values_[static_cast<size_t>(at)];
           Record& r = records_[static_cast<size_t>(at)];
           r = Record{};
           r.bounds = {c, c, 0, 0};
+        };
+        auto constant = [&](int64_t x, int64_t at) {
+          if (!trivial_yz || x < trivial_first[0] || x > trivial_last[0] ||
+              !constant_[static_cast<size_t>(block_row + ((x - lo_[0]) >> 2))])
+            return false;
+          set_constant(at);
           return true;
         };
         auto counts_of = [&](int64_t x) -> CriticalCounts& {
@@ -332,9 +397,25 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
           int64_t at = index({x, y, z}, size_), cell = index({x, y, z}, cells_);
           // The row's core nodes, a range of it, count critical points; the halo's do not.
           const int64_t x0 = x;
+          // The nodes whose block may be constant, [block_first, block_last] (none beyond band 0).
+          const uint8_t* const row_blocks = trivial_yz ? constant_.data() + block_row : nullptr;
+          const int64_t block_first = trivial_yz ? trivial_first[0] : 1, block_last = trivial_yz ? trivial_last[0] : 0;
           auto run = [&](int64_t end, CriticalCounts& c) {
-            for (; x <= end; x += 2, at += 2, cell += 2)
-              if (!constant(x, at)) build_fast(at, cell, *templates[((x - x0) >> 1) & 1], c, topology);
+            // What each node reads, in locals: the run is not inlined, its captures are references,
+            // and values the record stores might alias would be loaded again for every node.
+            int64_t i = x, i_at = at, i_cell = cell;
+            const DiamondTemplate* t = templates[((i - x0) >> 1) & 1];
+            const DiamondTemplate* t_next = templates[(((i - x0) >> 1) + 1) & 1];
+            const uint8_t* const blocks = row_blocks;
+            const int64_t first_block = block_first, last_block = block_last, origin = lo_[0];
+            for (; i <= end; i += 2, i_at += 2, i_cell += 2) {
+              if (i >= first_block && i <= last_block && blocks[(i - origin) >> 2])
+                set_constant(i_at);
+              else
+                build_fast(i_at, i_cell, *t, c, topology);
+              std::swap(t, t_next);
+            }
+            x = i, at = i_at, cell = i_cell;
           };
           if (core_yz) {
             run(std::min(fast_last, core_first[0] - 1), halo_counts);

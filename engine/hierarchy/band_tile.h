@@ -119,6 +119,7 @@ class BandTile {
   // same (most of a CT scan's background). Such a block's records are known without computing.
   void find_constant_blocks();
   std::vector<uint8_t> constant_;  // per block: 1 when constant around it
+  bool signed_zero_ = false;       // some value of the window is -0
   Box3 blocks_{};
 
   const StoreLayout& layout_;

@@ -74,14 +74,18 @@ struct PackedTopology {
 
 inline PackedBounds pack_bounds(const DiamondBounds& b) { return {bf16_down(b.lo), bf16_up(b.hi), b.error_bound}; }
 
-// An empty interval (lo >= hi) stays empty: the only one records hold is {1, 0}, exact in bf16.
+// An empty interval (lo >= hi) stays empty. A record's "none", (+infinity, -infinity), is written
+// {1, 0}, exact in bf16: the words stores have always held for it (docs/FORMAT.md).
+inline void pack_interval(float lo, float hi, Bf16& packed_lo, Bf16& packed_hi) {
+  const bool none = lo == DiamondTopology::kNone;
+  packed_lo = none ? bf16_down(1.0f) : bf16_down(lo);
+  packed_hi = none ? bf16_up(0.0f) : bf16_up(hi);
+}
 inline PackedTopology pack_topology(const DiamondTopology& t, float surplus) {
   PackedTopology p;
   p.surplus = bf16_up(surplus);
-  p.exact_lo = bf16_down(t.exact_lo);
-  p.exact_hi = bf16_up(t.exact_hi);
-  p.paper_lo = bf16_down(t.paper_lo);
-  p.paper_hi = bf16_up(t.paper_hi);
+  pack_interval(t.exact_lo, t.exact_hi, p.exact_lo, p.exact_hi);
+  pack_interval(t.paper_lo, t.paper_hi, p.paper_lo, p.paper_hi);
   for (int w = 0; w < 3; ++w) p.weight[w] = bf16_up(t.weight[static_cast<size_t>(w)]);
   return p;
 }

@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cstdint>
+#include <limits>
 
 #include "engine/hierarchy/lattice.h"
 
@@ -17,10 +18,13 @@ struct DiamondBounds {
 };
 
 // What only a tetrahedron that the error would let stop reads. Intervals are half-open
-// [lo, hi), empty when lo >= hi.
+// [lo, hi), empty when lo >= hi. A record without one holds (+infinity, -infinity): what the hull
+// of no interval is, so that a vertex folds its children's intervals by min and max alone, with
+// no test for emptiness (ChildFold). The store writes it as {1, 0} (pack_topology).
 struct DiamondTopology {
-  float exact_lo = 1, exact_hi = 0;  // hull X_bar of isovalues where the exact rule fires
-  float paper_lo = 1, paper_hi = 0;  // hull I_bar of the paper's critical intervals
+  static constexpr float kNone = std::numeric_limits<float>::infinity();
+  float exact_lo = kNone, exact_hi = -kNone;  // hull X_bar of isovalues where the exact rule fires
+  float paper_lo = kNone, paper_hi = -kNone;  // hull I_bar of the paper's critical intervals
   // Saturated simplification weights (max over the subtree), indexed by SimplificationWeight
   // (engine/extract/options.h): |X|, |X| times the steepest gradient around v, and the local isosurface
   // size (engine/hierarchy/record_builder.h, local_weights).

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cassert>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -36,6 +37,22 @@ inline float round_up(double d) {
                                                         : std::nextafter(f, std::numeric_limits<float>::infinity());
   }
   return f;
+}
+
+// A vertex's errors from its values and its children's (saturated) errors: eta, the distance of
+// f(v) from the midpoint of its ends, added to the children's bound, and the larger of it and
+// their surplus.
+inline void vertex_errors(const DiamondValues& dv, float child_bound, float child_surplus, float& error_bound,
+                          float& error_surplus) {
+  const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
+  error_bound = round_up(eta + static_cast<double>(child_bound));
+  error_surplus = std::max(round_up(eta), child_surplus);
+}
+
+// Whether v lies strictly beyond both a and b: only then may either rule flag an isovalue
+// (finish_record).
+inline bool beyond_both_ends(const DiamondValues& dv) {
+  return dv.fv < std::min(dv.fa, dv.fb) || dv.fv > std::max(dv.fa, dv.fb);
 }
 
 // Per diamond type (cube, octahedron, diamond): how many vertices the paper's rule flags at
@@ -72,8 +89,10 @@ struct Saturation {
 // error_bound, error_surplus), the two intervals (-exact_lo, exact_hi, -paper_lo, paper_hi), the
 // weights. A min is the max of the negated values (negation is exact), and each max keeps the
 // operands in the order of the scalar comparison it replaces, so that of two equal values (0 and
-// -0) the same one is kept. An empty interval enters the hull as -infinity in both of its lanes,
-// which every max passes over, as hull() skips it.
+// -0) the same one is kept. A child without an interval holds (+infinity, -infinity)
+// (DiamondTopology), which enters the hull as -infinity in both of its lanes: every max passes
+// over it, as hull() skips an empty interval. Every record a build writes holds its empty
+// intervals so; the scalar Saturation::add takes any empty interval.
 class ChildFold {
  public:
   explicit ChildFold(const DiamondBounds& range) {
@@ -93,19 +112,34 @@ class ChildFold {
     // child's value first (MAXPS keeps its first operand only when it is greater).
     bounds_ = _mm_max_ps(_mm_xor_ps(_mm_loadu_ps(&c.bounds.lo), sign_mask(0x1)), bounds_);
     if (!topology) return;
+    assert(in_hull_form(c.topology.exact_lo, c.topology.exact_hi) &&
+           in_hull_form(c.topology.paper_lo, c.topology.paper_hi));
     // hull(): lo < o.lo ? lo : o.lo and hi > o.hi ? hi : o.hi, the running value first.
-    const __m128 v = _mm_loadu_ps(&c.topology.exact_lo);  // exact_lo, exact_hi, paper_lo, paper_hi
-    const __m128 lo = _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 2, 0, 0)), hi = _mm_shuffle_ps(v, v, _MM_SHUFFLE(3, 3, 1, 1));
-    const __m128 not_empty = _mm_cmplt_ps(lo, hi);
-    const __m128 entered = _mm_or_ps(_mm_and_ps(not_empty, _mm_xor_ps(v, sign_mask(0x5))),
-                                     _mm_andnot_ps(not_empty, _mm_set1_ps(-std::numeric_limits<float>::infinity())));
-    intervals_ = _mm_max_ps(intervals_, entered);
+    // exact_lo, exact_hi, paper_lo, paper_hi
+    intervals_ = _mm_max_ps(intervals_, _mm_xor_ps(_mm_loadu_ps(&c.topology.exact_lo), sign_mask(0x5)));
     // paper_hi, weight[0..2]: the first lane is not read.
     weights_ = _mm_max_ps(_mm_loadu_ps(&c.topology.paper_hi), weights_);
 #else
     sat_.add(c, range_, topology);
 #endif
   }
+
+#if defined(__SSE2__)
+  // finish_record of a vertex inside the data box that adds nothing to its children's topology
+  // (without `topology`, or v not beyond both of its ends: no interval of its own, so no weight),
+  // stored into `r`: the children's intervals and weights as they are, the range and errors
+  // beside them. The same bits, from three stores and no round trip through a Saturation.
+  void store_without_own_topology(const DiamondValues& dv, Record& r) const {
+    const __m128 b = _mm_xor_ps(bounds_, sign_mask(0x1));  // lo, hi, the children's bound and surplus
+    float error_bound, error_surplus;
+    vertex_errors(dv, _mm_cvtss_f32(_mm_shuffle_ps(b, b, _MM_SHUFFLE(2, 2, 2, 2))),
+                  _mm_cvtss_f32(_mm_shuffle_ps(b, b, _MM_SHUFFLE(3, 3, 3, 3))), error_bound, error_surplus);
+    // The weights first: their first lane falls on paper_hi, which the intervals then write.
+    _mm_storeu_ps(&r.topology.paper_hi, weights_);
+    _mm_storeu_ps(&r.topology.exact_lo, _mm_xor_ps(intervals_, sign_mask(0x5)));
+    _mm_storeu_ps(&r.bounds.lo, _mm_movelh_ps(b, _mm_unpacklo_ps(_mm_set_ss(error_bound), _mm_set_ss(error_surplus))));
+  }
+#endif
 
   // The saturation, and the vertex's range widened by its children's (its errors: theirs, the
   // saturation's bound and surplus, which finish_record adds the vertex's own to).
@@ -136,6 +170,10 @@ class ChildFold {
   static_assert(offsetof(DiamondTopology, weight) == offsetof(DiamondTopology, paper_hi) + sizeof(float));
   static_assert(offsetof(Saturation, paper) == offsetof(Saturation, exact) + 2 * sizeof(float) &&
                 offsetof(Saturation, weight) == offsetof(Saturation, paper) + 2 * sizeof(float));
+  // An interval, or none as a record holds it: what add() may fold.
+  static bool in_hull_form(float lo, float hi) {
+    return lo < hi || (lo == DiamondTopology::kNone && hi == -DiamondTopology::kNone);
+  }
   // The sign bit in the lanes of `lanes` (bit i: lane i).
   static __m128 sign_mask(int lanes) {
     const auto bit = [&](int i) { return (lanes >> i & 1) ? -0.0f : 0.0f; };
@@ -317,9 +355,7 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
   // A diamond reaching past the data box is judged on the clamped field like any other: inside the
   // box that field is the data, and the traversal clips what it emits there to the box
   // (docs/METHOD.md, "Volumes that are not (2^k+1)^3").
-  const double eta = std::fabs(static_cast<double>(dv.fv) - 0.5 * (static_cast<double>(dv.fa) + dv.fb));
-  r.bounds.error_bound = round_up(eta + static_cast<double>(sat.bound));
-  r.bounds.error_surplus = std::max(round_up(eta), sat.surplus);
+  vertex_errors(dv, sat.bound, sat.surplus, r.bounds.error_bound, r.bounds.error_surplus);
   if (!topology) return r;
   if (!inside_box) {
     // The clipped surface's topology is not what the clamped field's rules see: the topology
@@ -335,7 +371,7 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
     // paper's pattern may be critical but its interval [max(fa, fb), fv) is empty. Most vertices
     // of smooth data, and of quantized data's plateaus, settled here without a call.
     IsoInterval exact, paper;
-    if (dv.fv < std::min(dv.fa, dv.fb) || dv.fv > std::max(dv.fa, dv.fb)) {
+    if (beyond_both_ends(dv)) {
       exact = exact_interval(dv);
       paper = paper_interval(dv);
     }

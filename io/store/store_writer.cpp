@@ -99,18 +99,26 @@ class QuantizingReader : public BoxReader {
 
 // The fields of the brick whose first node is `origin` (G_j units) of a built tile, as the store
 // holds them: values, and for bands that store records each field rounded as the compact record
-// (engine/hierarchy/compact_record.h). Band 0 and the corners: values only.
-BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
+// (engine/hierarchy/compact_record.h). Band 0 and the corners: values only. Into `f`, a thread's
+// own, whose arrays keep their size from brick to brick: a brick within the band's grid writes
+// every entry, so that only one past it (nodes beyond the grid: 0 in every field) fills them first.
+void brick_fields(const BandTile& tile, const Box3& origin, BrickFields& f) {
   const StoreLayout& layout = tile.layout();
   const int j = tile.band();
   const Band& band = layout.band(j);
   const int64_t t = layout.brick_width();
   const auto nodes = static_cast<uint32_t>(layout.brick_nodes());
-  BrickFields f;
-  f.values.assign(nodes, 0.0f);  // nodes beyond the band's grid: 0
   // Walked row by row of the tile's window (x fastest), written at each node's Morton position.
   const Box3 end{std::min(t, band.nodes[0] - origin[0]), std::min(t, band.nodes[1] - origin[1]),
                  std::min(t, band.nodes[2] - origin[2])};
+  const bool whole = end[0] == t && end[1] == t && end[2] == t;
+  auto size = [&](std::vector<float>& field, size_t n) {
+    if (whole)
+      field.resize(n);
+    else
+      field.assign(n, 0.0f);
+  };
+  size(f.values, nodes);
   const uint32_t* const sx = kSpreadBits3.data();
   for (int64_t z = 0; z < end[2]; ++z)
     for (int64_t y = 0; y < end[1]; ++y) {
@@ -119,13 +127,16 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
       float* const values = f.values.data();
       for (int64_t x = 0; x < end[0]; ++x) values[yz | sx[x]] = row[x];
     }
-  if (!stores_records(layout, j)) return f;
+  if (!stores_records(layout, j)) {
+    for (auto& field : f.records) field.clear();
+    return;
+  }
   // Nodes beyond the band's grid: 0 in every field. Walked row by row (the tile's records in
   // memory order), each written at its place among the brick's nodes with records: Morton order
   // without the nodes whose three coordinates are even (m & 7 == 0), i = m - m / 8 - 1.
   std::array<float*, BrickFields::count> out;
   for (size_t k = 0; k < out.size(); ++k) {
-    f.records[k].assign(nodes - nodes / 8, 0.0f);
+    size(f.records[k], nodes - nodes / 8);
     out[k] = f.records[k].data();
   }
   for (int64_t z = 0; z < end[2]; ++z)
@@ -150,7 +161,6 @@ BrickFields brick_fields(const BandTile& tile, const Box3& origin) {
         out[BrickFields::surplus][i] = bf16_to_float(p.surplus);
       }
     }
-  return f;
 }
 
 // Where a sink's bricks go: the store's file, or (a distributed convert's rank > 0) an unlinked
@@ -196,7 +206,9 @@ class FileSink {
   using Sections = std::array<std::vector<uint8_t>, kSections>;
   Sections process(int band, const Box3& b, const BandTile& tile) const {
     const int64_t t = layout_.brick_width();
-    return encode_brick(layout_, band, brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}), zstd_level_);
+    thread_local BrickFields fields;
+    brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}, fields);
+    return encode_brick(layout_, band, fields, zstd_level_);
   }
   void commit(int band, const Box3& b, Sections&& sections) {
     BrickEntry& e = entries_[static_cast<size_t>(layout_.brick_index(band, b))];
