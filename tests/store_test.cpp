@@ -156,6 +156,18 @@ TEST_F(Store, RoundTripIsExactOnOddDimensionsAndAnyBrickSize) {
     }
 }
 
+// The header's value range is the data's least and greatest value as the tiles meet them, in the
+// store's order: between -0 and 0 (equal, other bits) the first least met. Here the first node,
+// which the first row of the first tile starts with, is -0, and every other zero 0.
+TEST_F(Store, ValueRangeKeepsTheFirstOfEqualZeros) {
+  Volume v = testing::crop(generate_noise(40, 8), {40, 33, 37});
+  for (float& f : v.values) f = std::fabs(f) < 0.2f ? 0.0f : std::fabs(f);
+  v.values[0] = -0.0f;
+  const StoreReader reader(convert(v, "zeros"));
+  EXPECT_EQ(reader.header().value_min, 0.0);
+  EXPECT_TRUE(std::signbit(reader.header().value_min)) << "the first zero met is -0";
+}
+
 // Each real volume as floats, and converted from its raw file in its own type: a uint8 store's
 // cache holds its records in narrow words (io/store/held_words.h), which must read back as the
 // very records.

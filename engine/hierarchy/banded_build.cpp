@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cassert>
 #include <tuple>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 namespace isotope {
 
@@ -276,6 +279,37 @@ void write_next(const BandTile& tile, BandHandover& next) {
     }
 }
 
+// The least and greatest of n > 0 values, as std::minmax_element finds them: of equal values
+// the first least and the last greatest, which differ in their bits only for -0 and 0. Four
+// lanes at a time, the row taken again in that order where either end is a zero.
+static std::pair<float, float> row_range(const float* row, int64_t n) {
+  float mn = row[0], mx = row[0];
+  int64_t i = 0;
+#if defined(__SSE2__)
+  if (n >= 4) {
+    __m128 l = _mm_loadu_ps(row), h = l;
+    for (i = 4; i + 4 <= n; i += 4) {
+      const __m128 v = _mm_loadu_ps(row + i);
+      l = _mm_min_ps(l, v);
+      h = _mm_max_ps(h, v);
+    }
+    l = _mm_min_ps(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(1, 0, 3, 2)));
+    h = _mm_max_ps(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(1, 0, 3, 2)));
+    mn = _mm_cvtss_f32(_mm_min_ss(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(2, 3, 0, 1))));
+    mx = _mm_cvtss_f32(_mm_max_ss(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(2, 3, 0, 1))));
+  }
+#endif
+  for (; i < n; ++i) {
+    mn = std::min(mn, row[i]);
+    mx = std::max(mx, row[i]);
+  }
+  if (mn == 0.0f || mx == 0.0f) {
+    const auto [first_least, last_greatest] = std::minmax_element(row, row + n);
+    return {*first_least, *last_greatest};
+  }
+  return {mn, mx};
+}
+
 void value_range(const BandTile& tile, const StoreLayout& layout, float& lo, float& hi) {
   // Over the nodes the tile counts: a fused tile's widened core reaches into its neighbours'.
   const auto& d = layout.dims();
@@ -285,9 +319,9 @@ void value_range(const BandTile& tile, const StoreLayout& layout, float& lo, flo
   for (int64_t z = c0[2]; z < std::min(c1[2], d[2]); ++z)
     for (int64_t y = c0[1]; y < std::min(c1[1], d[1]); ++y) {
       const float* row = &tile.node_value({c0[0], y, z});
-      const auto [mn, mx] = std::minmax_element(row, row + (x1 - c0[0]));
-      lo = std::min(lo, *mn);
-      hi = std::max(hi, *mx);
+      const auto [mn, mx] = row_range(row, x1 - c0[0]);
+      lo = std::min(lo, mn);
+      hi = std::max(hi, mx);
     }
 }
 

@@ -465,7 +465,9 @@ class RecordBuilder {
       if (grid_.child(u, c)) fold.add(c, topology);
     });
     const Saturation sat = fold.finish(range);
-    grid_.store(v, finish_record(dv, shape_of(d, lattice_), inside_box, range, sat, counts, topology));
+    // The shape serves only the weights of a vertex with an interval of its own (finish_record).
+    const DiamondShape shape = topology && inside_box && beyond_both_ends(dv) ? shape_of(d, lattice_) : DiamondShape{};
+    grid_.store(v, finish_record(dv, shape, inside_box, range, sat, counts, topology));
   }
 
  private:

@@ -98,7 +98,10 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
     sat.add(child_record(ci, cm, topology, held), range, topology);
   });
   CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
-  const Record r = finish_record(dv, shape_of(d, lattice), inside, range, sat, unused, topology, nullptr, held.weights);
+  // The shape serves only the weights of a vertex with an interval of its own (finish_record).
+  const bool shaped = topology && held.weights && inside && beyond_both_ends(dv);
+  const Record r = finish_record(dv, shaped ? shape_of(d, lattice) : DiamondShape{}, inside, range, sat, unused,
+                                 topology, nullptr, held.weights);
   store_band0_record(*home, m, r, topology, held);
   return r;
 }
