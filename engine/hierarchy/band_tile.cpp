@@ -7,9 +7,8 @@
 #include <cstddef>
 #include <tuple>
 #include <type_traits>
-#if defined(__SSE2__)
-#include <xmmintrin.h>
-#endif
+
+#include "engine/core/lanes.h"
 
 namespace isotope {
 
@@ -193,10 +192,8 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
         l = _mm_min_ps(l, c);
         h = _mm_max_ps(h, c);
       }
-      l = _mm_min_ps(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(1, 0, 3, 2)));
-      h = _mm_max_ps(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(1, 0, 3, 2)));
-      lo = _mm_cvtss_f32(_mm_min_ss(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(2, 3, 0, 1))));
-      hi = _mm_cvtss_f32(_mm_max_ss(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(2, 3, 0, 1))));
+      lo = least_lane(l);
+      hi = greatest_lane(h);
       return;
     }
 #endif

@@ -3,9 +3,8 @@
 #include <algorithm>
 #include <cassert>
 #include <tuple>
-#if defined(__SSE2__)
-#include <xmmintrin.h>
-#endif
+
+#include "engine/core/lanes.h"
 
 namespace isotope {
 
@@ -293,10 +292,8 @@ static std::pair<float, float> row_range(const float* row, int64_t n) {
       l = _mm_min_ps(l, v);
       h = _mm_max_ps(h, v);
     }
-    l = _mm_min_ps(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(1, 0, 3, 2)));
-    h = _mm_max_ps(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(1, 0, 3, 2)));
-    mn = _mm_cvtss_f32(_mm_min_ss(l, _mm_shuffle_ps(l, l, _MM_SHUFFLE(2, 3, 0, 1))));
-    mx = _mm_cvtss_f32(_mm_max_ss(h, _mm_shuffle_ps(h, h, _MM_SHUFFLE(2, 3, 0, 1))));
+    mn = least_lane(l);
+    mx = greatest_lane(h);
   }
 #endif
   for (; i < n; ++i) {
