@@ -366,10 +366,11 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
           r = Record{};
           r.bounds = {c, c, 0, 0};
         };
+        // The row's nodes whose block may be constant, [block_first, block_last] (none beyond band 0).
+        const uint8_t* const row_blocks = trivial_yz ? constant_.data() + block_row : nullptr;
+        const int64_t block_first = trivial_yz ? trivial_first[0] : 1, block_last = trivial_yz ? trivial_last[0] : 0;
         auto constant = [&](int64_t x, int64_t at) {
-          if (!trivial_yz || x < trivial_first[0] || x > trivial_last[0] ||
-              !constant_[static_cast<size_t>(block_row + ((x - lo_[0]) >> 2))])
-            return false;
+          if (x < block_first || x > block_last || !row_blocks[(x - lo_[0]) >> 2]) return false;
           set_constant(at);
           return true;
         };
@@ -394,9 +395,6 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
           int64_t at = index({x, y, z}, size_), cell = index({x, y, z}, cells_);
           // The row's core nodes, a range of it, count critical points; the halo's do not.
           const int64_t x0 = x;
-          // The nodes whose block may be constant, [block_first, block_last] (none beyond band 0).
-          const uint8_t* const row_blocks = trivial_yz ? constant_.data() + block_row : nullptr;
-          const int64_t block_first = trivial_yz ? trivial_first[0] : 1, block_last = trivial_yz ? trivial_last[0] : 0;
           auto run = [&](int64_t end, CriticalCounts& c) {
             // What each node reads, in locals: the run is not inlined, its captures are references,
             // and values the record stores might alias would be loaded again for every node.
