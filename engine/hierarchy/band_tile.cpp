@@ -300,7 +300,7 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
   signed_zero_ = negative_zeros != 0;
   Box3 trivial_first{}, trivial_last{};
   for (int a = 0; a < 3; ++a) trivial_first[a] = 3, trivial_last[a] = layout_.dims()[a] - 4;
-  RecordBuilder<BandTile> builder(*this);
+  RecordBuilder<BandTile> builder(*this, j_);
   CriticalCounts halo_counts = {{0, 0, 0}, {0, 0, 0}};  // halo nodes belong to (and are counted by) other tiles
   const int64_t h = int64_t{1} << j_;
   // Finest first, as in MultiresVolume::build: edge midpoints, face centres, cube centres; each

@@ -17,6 +17,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <vector>
 #if defined(__SSE2__)
 #include <xmmintrin.h>
 #endif
@@ -398,25 +399,34 @@ inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, 
   return r;
 }
 
-// Calls f(u) for the refinement vertex u of each child tetrahedron of v's diamond d. The
-// children of tetrahedron (a, b, p, q) are (a, v, p, q) and (b, v, p, q), bisected at the
-// midpoint of `end` and the farther of p and q (checked by the hierarchy test). Far vertices
-// alternate around the ring, so each child is shared by two tetrahedra: each (end, far ring
-// vertex) pair once. A real far vertex always has a real tetrahedron; leaves have no children.
-template <class F>
-void for_each_child(const Diamond& d, const Lattice& lattice, F f) {
-  if (d.level + 1 >= lattice.max_level()) return;
+// Whether the midpoint of `end` (d.a or d.b) and ring vertex i is a child of v's diamond d, but
+// for that vertex's lying in the lattice. The children of tetrahedron (a, b, p, q) are (a, v, p,
+// q) and (b, v, p, q), bisected at the midpoint of `end` and the farther of p and q (checked by
+// the hierarchy test). Far vertices alternate around the ring, so each child is shared by two
+// tetrahedra: each (end, far ring vertex) pair once. Leaves have no children.
+inline bool is_child_pair(const Diamond& d, const Lattice& lattice, const Coord& end, int i) {
+  if (d.level + 1 >= lattice.max_level()) return false;
   auto squared_distance = [](const Coord& p, const Coord& q) {
     int64_t s = 0;
     for (int a = 0; a < 3; ++a) s += (p[a] - q[a]) * (p[a] - q[a]);
     return s;
   };
+  return squared_distance(end, d.ring[i]) >= squared_distance(end, d.ring[(i + 1) % d.ring_count]);
+}
+
+inline Coord midpoint(const Coord& p, const Coord& q) {
+  return {(p[0] + q[0]) / 2, (p[1] + q[1]) / 2, (p[2] + q[2]) / 2};
+}
+
+// Calls f(u) for the refinement vertex u of each child tetrahedron of v's diamond d. A real far
+// vertex always has a real tetrahedron.
+template <class F>
+void for_each_child(const Diamond& d, const Lattice& lattice, F f) {
   for (const Coord* end : {&d.a, &d.b})
     for (int i = 0; i < d.ring_count; ++i) {
-      const Coord& r = d.ring[i];
-      if (squared_distance(*end, r) < squared_distance(*end, d.ring[(i + 1) % d.ring_count])) continue;
-      if (!lattice.contains(r)) continue;  // a missing tetrahedron of a cut diamond
-      f(Coord{((*end)[0] + r[0]) / 2, ((*end)[1] + r[1]) / 2, ((*end)[2] + r[2]) / 2});
+      if (!is_child_pair(d, lattice, *end, i)) continue;
+      if (!lattice.contains(d.ring[i])) continue;  // a missing tetrahedron of a cut diamond
+      f(midpoint(*end, d.ring[i]));
     }
 }
 
@@ -445,20 +455,110 @@ bool read_polyhedron(const Diamond& d, const Lattice& lattice, const std::array<
   return inside_box;
 }
 
+// A vertex's diamond and the children for_each_child would call back, from the vertex's class:
+// diamond_of depends on a scale-j vertex only through its coordinates mod 4 * 2^j (which of them
+// are odd multiples of 2^j, and of those which lie 2^j above a multiple of 4 * 2^j), so one
+// diamond per class, moved to the vertex, is diamond_of's, and the children for_each_child
+// chooses by their distances are the class's too; only whether a ring vertex lies in the lattice
+// is the vertex's own. The two were 6% of the instructions of embryo's convert (256^3), for the
+// vertices at the faces of the data box (the others take band tiles' templates), and run for
+// every vertex of the in-memory build.
+class DiamondClasses {
+ public:
+  // The classes of scale `scale`, or of every scale (-1).
+  DiamondClasses(const Lattice& lattice, int scale) : lattice_(lattice), first_(std::max(scale, 0)) {
+    const int last = scale < 0 ? lattice.k - 1 : std::min(scale, lattice.k - 1);
+    classes_.resize(static_cast<size_t>(std::max(0, last - first_ + 1)) * 64);
+    for (int j = first_; j <= last; ++j)
+      for (int key = 0; key < 64; ++key) {
+        const Coord v{int64_t{key & 3} << j, int64_t{key >> 2 & 3} << j, int64_t{key >> 4} << j};
+        if (((key & 1) | (key >> 2 & 1) | (key >> 4 & 1)) == 0) continue;  // of a coarser scale
+        Class& c = classes_[static_cast<size_t>((j - first_) * 64 + key)];
+        c.diamond = diamond_of(v, lattice);
+        for (const int end : {0, 1})
+          for (int i = 0; i < c.diamond.ring_count; ++i)
+            if (is_child_pair(c.diamond, lattice, end == 0 ? c.diamond.a : c.diamond.b, i)) {
+              c.end[c.children] = static_cast<uint8_t>(end);
+              c.ring[c.children++] = static_cast<uint8_t>(i);
+            }
+        auto relative = [&](Coord& p) {
+          for (int a = 0; a < 3; ++a) p[a] -= v[a];
+        };
+        relative(c.diamond.a);
+        relative(c.diamond.b);
+        for (int i = 0; i < c.diamond.ring_count; ++i) relative(c.diamond.ring[i]);
+      }
+  }
+
+  // diamond_of(v) for a vertex v of a scale held.
+  Diamond diamond(const Coord& v, int j) const {
+    const Class& c = class_of(v, j);
+    Diamond d = c.diamond;
+    d.v = v;
+    for (int a = 0; a < 3; ++a) {
+      d.a[a] += v[a];
+      d.b[a] += v[a];
+    }
+    for (int i = 0; i < d.ring_count; ++i)
+      for (int a = 0; a < 3; ++a) d.ring[i][a] += v[a];
+    return d;
+  }
+  // for_each_child(d, lattice, f), d the diamond() of v: the same children in the same order.
+  template <class F>
+  void for_each_child(const Diamond& d, int j, F f) const {
+    const Class& c = class_of(d.v, j);
+    for (int i = 0; i < c.children; ++i) {
+      const Coord& end = c.end[i] ? d.b : d.a;
+      const Coord& r = d.ring[c.ring[i]];
+      if (!lattice_.contains(r)) continue;
+      f(midpoint(end, r));
+    }
+  }
+
+ private:
+  struct Class {
+    Diamond diamond;  // a, b and the ring relative to the vertex
+    int children = 0;
+    uint8_t end[16] = {}, ring[16] = {};  // child i: the midpoint of end (a or b) and ring vertex
+  };
+  const Class& class_of(const Coord& v, int j) const {
+    assert(j >= first_ && (j - first_) * 64 < static_cast<int>(classes_.size()));
+    const int key = static_cast<int>((v[0] >> j & 3) | (v[1] >> j & 3) << 2 | (v[2] >> j & 3) << 4);
+    return classes_[static_cast<size_t>((j - first_) * 64 + key)];
+  }
+  const Lattice& lattice_;
+  int first_;
+  std::vector<Class> classes_;
+};
+
 template <class Grid>
 class RecordBuilder {
  public:
-  explicit RecordBuilder(Grid& grid) : grid_(grid), lattice_(grid.lattice()) {}
+  // `scale`: the only scale whose vertices build() is given, or -1 for any.
+  explicit RecordBuilder(Grid& grid, int scale = -1)
+      : grid_(grid), lattice_(grid.lattice()), classes_(grid.lattice(), scale) {}
 
   // Without `topology`, the range and errors alone (engine/hierarchy/band_tile.h, build).
   void build(const Coord& v, CriticalCounts& counts, bool topology = true) const {
-    const Diamond d = diamond_of(v, lattice_);
+    const int j = scale_of(v, lattice_);
+    const Diamond d = classes_.diamond(v, j);
+#ifndef NDEBUG
+    {
+      const Diamond e = diamond_of(v, lattice_);
+      assert(d.type == e.type && d.level == e.level && d.ring_count == e.ring_count && d.a == e.a && d.b == e.b &&
+             d.ring == e.ring);
+      std::vector<Coord> by_class, by_distance;
+      classes_.for_each_child(d, j, [&](const Coord& u) { by_class.push_back(u); });
+      isotope::for_each_child(e, lattice_, [&](const Coord& u) { by_distance.push_back(u); });
+      assert(by_class == by_distance);
+    }
+#endif
     DiamondValues dv;
     DiamondBounds range;
     const bool inside_box = read_polyhedron(
         d, lattice_, grid_.data_dims(), [&](const Coord& c) { return grid_.value(c); }, dv, range);
     ChildFold fold(range);
-    for_each_child(d, lattice_, [&](const Coord& u) {
+    classes_.for_each_child(d, j, [&](const Coord& u) {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node
       // below it, and what the traversal emits there is clipped away (engine/mesh/box_clip.h).
       Record c;
@@ -473,6 +573,7 @@ class RecordBuilder {
  private:
   Grid& grid_;
   const Lattice& lattice_;
+  DiamondClasses classes_;
 };
 
 }  // namespace isotope
