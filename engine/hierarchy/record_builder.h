@@ -211,6 +211,13 @@ inline DiamondShape shape_of(const Diamond& d, const Lattice& lattice) {
   return s;
 }
 
+// The shape finish_record needs: only the weights of a vertex with an interval of its own read it
+// (with topology and weights, inside the data box, v beyond both ends), and it is not made for others.
+inline DiamondShape shape_for_weights(const Diamond& d, const Lattice& lattice, const DiamondValues& dv,
+                                      bool inside_box, bool topology, bool weights = true) {
+  return topology && weights && inside_box && beyond_both_ends(dv) ? shape_of(d, lattice) : DiamondShape{};
+}
+
 // The gradient and size weights of a vertex whose exact interval x is not empty, over the
 // tetrahedra (end, v, r_i, r_i+1) that refining v creates: the steepest linear gradient among them
 // (value per lattice step), and how many full-resolution tetrahedra those that some isovalue in x
@@ -565,9 +572,8 @@ class RecordBuilder {
       if (grid_.child(u, c)) fold.add(c, topology);
     });
     const Saturation sat = fold.finish(range);
-    // The shape serves only the weights of a vertex with an interval of its own (finish_record).
-    const DiamondShape shape = topology && inside_box && beyond_both_ends(dv) ? shape_of(d, lattice_) : DiamondShape{};
-    grid_.store(v, finish_record(dv, shape, inside_box, range, sat, counts, topology));
+    grid_.store(v, finish_record(dv, shape_for_weights(d, lattice_, dv, inside_box, topology), inside_box, range, sat,
+                                 counts, topology));
   }
 
  private:

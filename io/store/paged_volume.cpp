@@ -98,10 +98,8 @@ Record PagedVolume::Pager::band0_record(const Coord& v, bool topology) {
     sat.add(child_record(ci, cm, topology, held), range, topology);
   });
   CriticalCounts unused = {{0, 0, 0}, {0, 0, 0}};
-  // The shape serves only the weights of a vertex with an interval of its own (finish_record).
-  const bool shaped = topology && held.weights && inside && beyond_both_ends(dv);
-  const Record r = finish_record(dv, shaped ? shape_of(d, lattice) : DiamondShape{}, inside, range, sat, unused,
-                                 topology, nullptr, held.weights);
+  const Record r = finish_record(dv, shape_for_weights(d, lattice, dv, inside, topology, held.weights), inside, range,
+                                 sat, unused, topology, nullptr, held.weights);
   store_band0_record(*home, m, r, topology, held);
   return r;
 }
