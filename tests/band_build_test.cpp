@@ -354,24 +354,48 @@ TEST(BandBuild, StagedGroupsOfALargerVolumeBuildWhatTheirTilesBuildAlone) {
   expect_staged_groups_build_what_their_tiles_build_alone({70, 53, 61});
 }
 
-// Tiles of 128^3 nodes where band 0 has at least 64 of them a thread (fewer halo records computed
-// twice), of 64^3 otherwise (the last tiles would leave threads idle), smaller still where the
-// budget asks it; fused, an even number of bricks of at least 64 nodes.
-TEST(BandBuild, LargeVolumesTakeLargerTilesWhereEveryThreadHasManyOfThem) {
+// Fused tiles of 128^3 nodes where band 0 has at least 64 of them a thread (fewer halo records
+// computed twice), of 64^3 otherwise (the last tiles would leave threads idle), smaller still where
+// the budget asks it; fused, an even number of bricks of at least 64 nodes. Tiles that are not
+// fused: 32^3 nodes, whose records stay in cache.
+TEST(BandBuild, LargeVolumesTakeLargerFusedTilesWhereEveryThreadHasManyOfThem) {
   const uint64_t gib = uint64_t{1} << 30;
-  const StoreLayout large({1025, 1025, 1025}, 4), small({513, 513, 513}, 4);
+  const StoreLayout large({1025, 1025, 1025}, 4), small({513, 513, 513}, 4), coarse({1025, 1025, 1025}, 6);
   {
     const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-    EXPECT_EQ(tile_bricks_for(large, 4096, gib), 8);  // 9^3 tiles of 128^3 nodes: 364 a thread
+    EXPECT_EQ(tile_bricks_for(large, 4096, gib, true), 8);  // 9^3 tiles of 128^3 nodes: 364 a thread
     EXPECT_EQ(fused_tile_bricks_for(large, 4096, gib), 8);
-    EXPECT_EQ(tile_bricks_for(small, 4096, gib), 4);  // 5^3 tiles of 128^3: 62 a thread
+    EXPECT_EQ(tile_bricks_for(small, 4096, gib, true), 4);  // 5^3 tiles of 128^3: 62 a thread
     EXPECT_EQ(fused_tile_bricks_for(small, 4096, gib), 4);
-    EXPECT_LT(tile_bricks_for(large, 4096, 256 << 20), 8);  // a 128^3 tile's window would not fit
+    EXPECT_LT(tile_bricks_for(large, 4096, 256 << 20, true), 8);  // a 128^3 tile's window would not fit
+    EXPECT_EQ(tile_bricks_for(large, 4096, gib), 2);
+    EXPECT_EQ(tile_bricks_for(small, 4096, gib), 2);
+    EXPECT_EQ(tile_bricks_for(coarse, 4096, gib), 1);  // a brick of 64^3 nodes: no smaller tile
   }
   {
     // (global_control keeps the least of the values set: one at a time.)
     const tbb::global_control many(tbb::global_control::max_allowed_parallelism, 16);
-    EXPECT_EQ(tile_bricks_for(large, 4096, 16 * gib), 4);  // 45 a thread
+    EXPECT_EQ(fused_tile_bricks_for(large, 4096, 16 * gib), 4);  // 45 a thread
+  }
+}
+
+// A band too small for four full tiles a thread takes smaller tiles, so that the coarse bands, or
+// band 0 of a small volume, are not one thread's work; on one thread, the tiles chosen.
+TEST(BandBuild, SmallBandsTakeSmallerTilesOnSeveralThreads) {
+  const StoreLayout embryo({256, 256, 256}, 4), neghip({66, 66, 66}, 4), hundred({100, 100, 100}, 4);
+  {
+    const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(0), 2), 2);    // 257^3 nodes: 8 tiles of 32^3 a thread
+    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(2), 2), 2);    // 65^3: 4.2 a thread
+    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(3), 2), 1);    // 33^3: tiles of 16^3
+    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(5), 2), 1);    // a brick: no smaller tile
+    EXPECT_EQ(band_tile_bricks(neghip, neghip.band(0), 4), 2);    // 66^3: one tile of 64^3 and thin ones
+    EXPECT_EQ(band_tile_bricks(hundred, hundred.band(0), 4), 2);  // 100^3: 3.9 tiles of 64^3, 1.9 a thread
+  }
+  {
+    const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(3), 2), 2);
+    EXPECT_EQ(band_tile_bricks(neghip, neghip.band(0), 4), 4);
   }
 }
 

@@ -151,11 +151,17 @@ std::vector<Box3> in_morton_order(const Box3& count);
 int64_t tile_bytes(const StoreLayout& layout, int64_t c, int64_t brick_bytes, bool fused = false);
 
 // Bricks per tile side that keep every thread busy within three quarters of the budget and give
-// every thread a few tiles of band 0 (what build_bands uses unless told).
+// every thread a few tiles of band 0 (what build_bands uses unless told): up to 32 nodes a side,
+// fused up to 128.
 int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes, bool fused = false);
 // tile_bricks_for's fused tile, where band j+1 can be built in band j's pass with it: an even
 // count of at least kFusedSide nodes a side; else 0.
 int64_t fused_tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes);
+// A band's own tile side, at most c bricks (a power of two): halved while the band's nodes would
+// make fewer than four full tiles a thread, so that a small band (the coarse bands, or band 0 of a
+// small volume, whose grid is one tile of c and thin ones at its far faces) is not one thread's
+// work while the others wait. On one thread, c.
+int64_t band_tile_bricks(const StoreLayout& layout, const Band& band, int64_t c);
 // Tiles per side of a staged group (below: a power of two, aligned, so that a group is a run of
 // the band's Morton order) whose stage fits in `room` bytes; 0 when not even two a side fit.
 int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room, bool fused = false);
@@ -277,8 +283,9 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   if (options.fuse_pair && (c <= 0 || c % 2 != 0 || options.last_band != options.first_band + 1))
     throw std::logic_error("build_bands: a fused pair is two bands in tiles of an even number of bricks");
   bool can_fuse = (fusing || options.fuse_pair) && c % 2 == 0;
+  int64_t plain_c = c;  // the tiles of a pass that is not fused
   if (c <= 0) {
-    c = tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
+    c = plain_c = tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
     const int64_t fused = fusing ? fused_tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes) : 0;
     can_fuse = fused > 0;
     if (can_fuse) c = fused;
@@ -318,13 +325,14 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
     b.children.reserve(cells);
     return b;
   };
-  const int64_t side = c * width, widened = side + (can_fuse ? kFuseBelow + kFuseAbove : 0);
+  const int64_t widened = c * width + (can_fuse ? kFuseBelow + kFuseAbove : 0);
   std::vector<BandTile::Buffers> buffers, upper_buffers;
   std::vector<StagedBox> handed(can_fuse ? static_cast<size_t>(in_flight) : 0);  // band j to j+1, in a fused pass
   for (int i = 0; i < in_flight; ++i) {
     buffers.push_back(reserved({widened, widened, widened}, layout.band(0).nodes));
     if (can_fuse && k > 0)
-      upper_buffers.push_back(reserved({side / 2 + 1, side / 2 + 1, side / 2 + 1}, layout.band(1).nodes));
+      upper_buffers.push_back(
+          reserved({c * width / 2 + 1, c * width / 2 + 1, c * width / 2 + 1}, layout.band(1).nodes));
   }
   // What the tiles in flight leave of the budget goes to the stage.
   const int64_t tiles_held = in_flight * tile_bytes(layout, c, sink_brick_bytes, can_fuse);
@@ -365,7 +373,11 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       ++stats.bands_built_beside;
     }
     const Band* upper = fuse ? &layout.band(j + 1) : nullptr;
-    std::vector<Box3> tile_coords = in_morton_order(tile_grid(band, c));
+    // Tiles of the chosen side (a fused pass's, or tiles counted by the caller), else the band's own.
+    const bool whole_band = options.tile_bricks <= 0 && options.first_tile == 0 && options.last_tile == SIZE_MAX;
+    const int64_t c_band = fuse || !whole_band ? c : band_tile_bricks(layout, band, std::min(c, plain_c));
+    const int64_t side = c_band * width;
+    std::vector<Box3> tile_coords = in_morton_order(tile_grid(band, c_band));
     tile_coords = std::vector<Box3>(tile_coords.begin() + std::min(options.first_tile, tile_coords.size()),
                                     tile_coords.begin() + std::min(options.last_tile, tile_coords.size()));
     auto core_of = [&](const Box3& tc) {
@@ -399,7 +411,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
     const bool costly = (in && !in->in_memory()) || (next && !next->in_memory());
     const int64_t s = !options.staged || !costly ? 0
                       : options.stage_tiles > 0  ? options.stage_tiles
-                                                 : stage_tiles_for(layout, j, c, stage_room, fuse);
+                                                 : stage_tiles_for(layout, j, c_band, stage_room, fuse);
     std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
     std::future<void> writing;  // a group's rows to `next`; waited for before this band's end
     for (size_t group = 0; group < tile_coords.size();) {
@@ -464,8 +476,8 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
             if (j == 0) value_range(tile, layout, r.lo, r.hi);
             // A tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
             // the band's bricks are committed in Morton order whatever the tile size.
-            for (const Box3& l : in_morton_order({c, c, c})) {
-              const Box3 b{tc[0] * c + l[0], tc[1] * c + l[1], tc[2] * c + l[2]};
+            for (const Box3& l : in_morton_order({c_band, c_band, c_band})) {
+              const Box3 b{tc[0] * c_band + l[0], tc[1] * c_band + l[1], tc[2] * c_band + l[2]};
               if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
               r.bricks.emplace_back(b, sink.process(j, b, tile));
             }
