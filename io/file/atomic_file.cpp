@@ -146,6 +146,10 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
     }
   }
   if (file_ == nullptr) throw IoError(path_ + ": cannot find a free temporary name in '" + dir + "'");
+  // Appends of a few KB each (a store's brick sections, a mesh's rows) in few calls: stdio's own
+  // buffer is a page, a call for every 4 KB (and glibc takes a size only with a buffer).
+  buffer_ = std::make_unique_for_overwrite<char[]>(kBufferBytes);
+  std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferBytes);
   registered_ = register_temporary(temp_path_);
 }
 

@@ -12,6 +12,7 @@
 //   work (check_outputs, which every command calls with what it read and will write).
 #include <cstdint>
 #include <cstdio>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -62,6 +63,8 @@ class AtomicFile {
   const std::string& path() const { return path_; }  // as named
 
  private:
+  static constexpr size_t kBufferBytes = size_t{256} << 10;
+  std::unique_ptr<char[]> buffer_;         // stdio's, for file_ (closed before this is freed)
   std::string path_, target_, temp_path_;  // as named; the file replaced (output_target); temporary
   std::FILE* file_ = nullptr;
   bool finished_ = false, committed_ = false;
