@@ -19,6 +19,7 @@
 #include <limits>
 #include <vector>
 #if defined(__SSE2__)
+#include <emmintrin.h>
 #include <xmmintrin.h>
 #endif
 
@@ -245,8 +246,9 @@ inline double exact_reciprocal(double d) {
 // brick are many.
 struct ShapeGradients {
   bool inverse;       // inv holds the exact inverse for every tetrahedron (above)
-  double det[16];     // of tetrahedron e * ring_count + i
-  double inv[16][9];  // M^-1 transposed: g_c = sum over rows of (f(row) - f(v)) * inv[row * 3 + c]
+  double det[16];     // of tetrahedron t = e * ring_count + i
+  double inv[9][16];  // M^-1 transposed: g_c = sum over rows of (f(row) - f(v)) * inv[row * 3 + c][t],
+                      // tetrahedra side by side (local_weights takes two at a time)
 };
 
 // The determinant of a row-major 3x3 matrix, by the first row's cofactors.
@@ -273,6 +275,7 @@ inline ShapeGradients gradients_of(const DiamondShape& s) {
     for (int i = 0; i < s.ring_count; ++i) {
       const int t = e * s.ring_count + i, i1 = (i + 1) % s.ring_count;
       g.det[t] = 0;
+      for (auto& entry : g.inv) entry[t] = 0;  // read, and masked out, beside a live tetrahedron
       if ((s.real_ring >> i & 1u) == 0 || (s.real_ring >> i1 & 1u) == 0) continue;
       double m[9];
       edge_matrix(s, e, i, m);
@@ -285,7 +288,7 @@ inline ShapeGradients gradients_of(const DiamondShape& s) {
       for (int row = 0; row < 3; ++row)
         for (int c = 0; c < 3; ++c) {
           const int r1 = (row + 1) % 3, r2 = (row + 2) % 3, c1 = (c + 1) % 3, c2 = (c + 2) % 3;
-          g.inv[t][row * 3 + c] = (m[r1 * 3 + c1] * m[r2 * 3 + c2] - m[r1 * 3 + c2] * m[r2 * 3 + c1]) * r;
+          g.inv[row * 3 + c][t] = (m[r1 * 3 + c1] * m[r2 * 3 + c2] - m[r1 * 3 + c2] * m[r2 * 3 + c1]) * r;
         }
     }
   return g;
@@ -309,6 +312,51 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
   // The steepest gradient's square: the root is monotone, so the root of the largest square is
   // the largest root, bit for bit, for one root where each tetrahedron took one.
   double steepest = 0;
+#if defined(__SSE2__)
+  if (exact && s.ring_count % 2 == 0) {
+    // Two tetrahedra (i, i + 1) of an end at a time (rings have 4, 6 or 8 vertices), each in its
+    // lane with the scalar loop's operations in its order, so the same bits; a missing or
+    // degenerate tetrahedron's lane masked out.
+    const int n = s.ring_count;
+    const double fv = dv.fv;
+    double f[9], d[9];  // ring values, and ring value - f(v); the first again after the last
+    for (int i = 0; i < n; ++i) {
+      f[i] = double(dv.ring[i]);
+      d[i] = f[i] - fv;
+    }
+    f[n] = f[0];
+    d[n] = d[0];
+    const __m128d vv = _mm_set1_pd(fv), xlo = _mm_set1_pd(double(x.lo)), xhi = _mm_set1_pd(double(x.hi));
+    __m128d top = _mm_setzero_pd(), cut_count = _mm_setzero_pd();
+    for (int e = 0; e < 2; ++e) {
+      const double fe = e == 0 ? dv.fa : dv.fb;
+      const __m128d r0 = _mm_set1_pd(fe - fv), ve = _mm_set1_pd(fe);
+      for (int i = 0; i < n; i += 2) {
+        const int t = e * n + i;
+        const __m128d live = _mm_cmpneq_pd(_mm_loadu_pd(g.det + t), _mm_setzero_pd());
+        const __m128d r1 = _mm_loadu_pd(d + i), r2 = _mm_loadu_pd(d + i + 1);
+        __m128d g2 = _mm_setzero_pd();
+        for (int c = 0; c < 3; ++c) {
+          const __m128d gc = _mm_add_pd(
+              _mm_add_pd(_mm_mul_pd(r0, _mm_loadu_pd(g.inv[c] + t)), _mm_mul_pd(r1, _mm_loadu_pd(g.inv[3 + c] + t))),
+              _mm_mul_pd(r2, _mm_loadu_pd(g.inv[6 + c] + t)));
+          g2 = _mm_add_pd(g2, _mm_mul_pd(gc, gc));
+        }
+        top = _mm_max_pd(top, _mm_and_pd(g2, live));
+        // Cut by some t in [x.lo, x.hi): some corner > t and some corner <= t.
+        const __m128d f1 = _mm_loadu_pd(f + i), f2 = _mm_loadu_pd(f + i + 1);
+        const __m128d lo = _mm_min_pd(_mm_min_pd(ve, vv), _mm_min_pd(f1, f2));
+        const __m128d hi = _mm_max_pd(_mm_max_pd(ve, vv), _mm_max_pd(f1, f2));
+        const __m128d cut = _mm_and_pd(_mm_cmplt_pd(_mm_max_pd(lo, xlo), _mm_min_pd(hi, xhi)), live);
+        cut_count = _mm_add_pd(cut_count, _mm_and_pd(cut, _mm_set1_pd(1.0)));
+      }
+    }
+    steepest = std::max(_mm_cvtsd_f64(top), _mm_cvtsd_f64(_mm_unpackhi_pd(top, top)));
+    w.size = (_mm_cvtsd_f64(cut_count) + _mm_cvtsd_f64(_mm_unpackhi_pd(cut_count, cut_count))) * s.child_tets;
+    w.gradient = std::sqrt(steepest);
+    return w;
+  }
+#endif
   for (int e = 0; e < 2; ++e) {
     const double fe = e == 0 ? dv.fa : dv.fb;
     for (int i = 0; i < s.ring_count; ++i) {
@@ -319,9 +367,8 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
       const double r[3] = {fe - fv, f1 - fv, f2 - fv};
       double g2 = 0;
       if (exact) {
-        const double* inv = g.inv[t];
         for (int c = 0; c < 3; ++c) {
-          const double gc = r[0] * inv[c] + r[1] * inv[3 + c] + r[2] * inv[6 + c];
+          const double gc = r[0] * g.inv[c][t] + r[1] * g.inv[3 + c][t] + r[2] * g.inv[6 + c][t];
           g2 += gc * gc;
         }
       } else {
