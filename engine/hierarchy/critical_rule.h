@@ -4,6 +4,9 @@
 // Ties: a node is inside iff value > t, so an isovalue equal to a data value behaves like one
 // just above it. Intervals are half-open, [lo, hi); empty when lo >= hi.
 #include <cstdint>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include "engine/hierarchy/diamond.h"
 
@@ -37,8 +40,17 @@ struct DiamondValues {
 inline uint32_t sign_pattern(const DiamondValues& d, float t) {
   uint32_t p = (d.fa > t ? 1u : 0u) | (d.fb > t ? 2u : 0u);
   const int r = ring_size(d.type);
+#if defined(__SSE2__)
+  // The ring's eight slots compared at once (a NaN compares false either way), those past the
+  // ring masked out.
+  const __m128 at = _mm_set1_ps(t);
+  const auto ring = static_cast<uint32_t>(_mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(d.ring), at))) |
+                    static_cast<uint32_t>(_mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(d.ring + 4), at))) << 4;
+  return p | (ring & ((1u << r) - 1)) << 2;
+#else
   for (int i = 0; i < r; ++i) p |= (d.ring[i] > t ? 1u : 0u) << (2 + i);
   return p;
+#endif
 }
 
 // Paper: signs relative to f(v); if critical, I = [f(v), min(fa, fb)) or [max(fa, fb), f(v)).
