@@ -5,6 +5,7 @@
 #include <cassert>
 #include <cmath>
 #include <cstddef>
+#include <memory>
 #include <tuple>
 #include <type_traits>
 
@@ -134,9 +135,32 @@ bool BandTile::inside_data_box(const Box3& g) const {
   return true;
 }
 
+BandTile::DiamondTemplate* BandTile::shared_templates(int k, int j, const Box3& size, const Box3& cells) {
+  struct Set {
+    int k = -1, j = -1;
+    Box3 size{}, cells{};
+    DiamondTemplate templates[64];
+  };
+  // Eight, in turn: a fused pass's tiles of bands j and j + 1 take turns on a thread, and the
+  // tiles at the grid's far faces are thinner (one window size for each face, edge and corner).
+  // On the heap: 110 KB each.
+  constexpr size_t kSets = 8;
+  thread_local std::unique_ptr<std::array<Set, kSets>> sets;
+  thread_local size_t next = 0;
+  if (!sets) sets = std::make_unique<std::array<Set, kSets>>();
+  for (Set& set : *sets)
+    if (set.k == k && set.j == j && set.size == size && set.cells == cells) return set.templates;
+  Set& set = (*sets)[next];
+  next = (next + 1) % kSets;
+  set.k = k, set.j = j, set.size = size, set.cells = cells;
+  for (DiamondTemplate& t : set.templates) t.ready = false;
+  return set.templates;
+}
+
 const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
   DiamondTemplate& t = templates_[(g[0] & 3) | (g[1] & 3) << 2 | (g[2] & 3) << 4];
   if (t.ready) return t;
+  t = DiamondTemplate{};  // what another window's made before is gone
   const Lattice& l = layout_.lattice();
   const Diamond d = diamond_of({g[0] << j_, g[1] << j_, g[2] << j_}, l);
   const int64_t base = index(g, size_), cell_base = index(g, cells_);
@@ -283,6 +307,7 @@ void BandTile::find_constant_blocks() {
 void BandTile::build(CriticalCounts& counts, bool topology) {
   const Lattice& l = layout_.lattice();
   if (j_ >= l.k) return;  // the corners: no records
+  templates_ = shared_templates(l.k, j_, size_, cells_);
   const Band& band = layout_.band(j_);
   // Band 0 where the values around a node are all one value c: its record is range [c, c], errors
   // 0 (every surplus is 0), no critical interval (the exact rule needs v beyond both a and b; the

@@ -99,7 +99,8 @@ class BandTile {
   // A diamond's polyhedron and children as offsets in the window's arrays. The geometry of a
   // scale-j vertex depends only on its G_j coordinates mod 4 (engine/hierarchy/diamond.cpp), so one
   // template per class serves every vertex whose diamond lies inside the data box: no
-  // coordinates, no mirroring, no existence checks.
+  // coordinates, no mirroring, no existence checks. The offsets depend on the window's size
+  // alone, so the tiles of a band, most of one size, share their templates (per thread).
   struct DiamondTemplate {
     bool ready = false;
     PolyhedronType type = PolyhedronType::cube;
@@ -114,7 +115,9 @@ class BandTile {
   bool inside_data_box(const Box3& g) const;
   // The record of the node at `base` in the window's arrays (index()), `cell` its cell's index.
   void build_fast(int64_t base, int64_t cell, const DiamondTemplate& t, CriticalCounts& counts, bool topology);
-  DiamondTemplate templates_[64];
+  // This thread's templates for windows of this tile's band and size, made as first asked for.
+  static DiamondTemplate* shared_templates(int k, int j, const Box3& size, const Box3& cells);
+  DiamondTemplate* templates_ = nullptr;
   // Band 0: per 4^3 block of the window, whether every value within 4 nodes of it is one and the
   // same (most of a CT scan's background). Such a block's records are known without computing.
   void find_constant_blocks();
