@@ -245,17 +245,17 @@ class CountingHandover : public MemoryHandover {
  public:
   using MemoryHandover::MemoryHandover;
   bool in_memory() const override { return false; }
-  void write_row(int64_t x0, int64_t y, int64_t z, const float* v, const Record* r, int64_t n) override {
+  void write_box(const Box3& lo, const Box3& hi, const float* v, const Record* r, int64_t row, int64_t plane) override {
     ++calls;
-    MemoryHandover::write_row(x0, y, z, v, r, n);
+    MemoryHandover::write_box(lo, hi, v, r, row, plane);
   }
-  void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const override {
+  void read_values(const Box3& lo, const Box3& hi, float* out, int64_t row, int64_t plane) const override {
     ++calls;
-    MemoryHandover::read_values(x0, count, y, z, out);
+    MemoryHandover::read_values(lo, hi, out, row, plane);
   }
-  void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const override {
+  void read_children(const Box3& lo, const Box3& hi, Record* out, int64_t row, int64_t plane) const override {
     ++calls;
-    MemoryHandover::read_children(x0, count, y, z, out);
+    MemoryHandover::read_children(lo, hi, out, row, plane);
   }
   mutable std::atomic<int64_t> calls{0};
 };

@@ -24,6 +24,7 @@
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "io/store/brick_cache.h"
+#include "io/store/handover_file.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
@@ -418,6 +419,87 @@ TEST_F(Store, FileDoesNotDependOnThreadsOrMemoryBudget) {
   EXPECT_FALSE(a.empty());
   EXPECT_TRUE(a == b);
   EXPECT_TRUE(a == c);
+}
+
+// A hand-over in a file (scratch or shared) reads back what its tiles wrote, for any box: whole
+// cubes of kHandoverBlock^3 entries and boxes cut off their grid, the grid's thin last cubes, and
+// boxes in memory with room between their rows and planes.
+TEST_F(Store, AHandoverInAFileReadsBackAnyBoxOfWhatItsTilesWrote) {
+  const Box3 nodes{37, 21, 50};  // cubes of 16: 3 x 2 x 4, the last of 5, 5 and 2 entries
+  std::mt19937 rng(7);
+  const auto n = static_cast<size_t>(nodes[0] * nodes[1] * nodes[2]);
+  std::vector<float> values(n);
+  std::vector<Record> children(n);
+  for (float& v : values) v = std::uniform_real_distribution<float>(-5, 5)(rng);
+  std::vector<uint8_t> noise(n * sizeof(Record));
+  for (uint8_t& b : noise) b = static_cast<uint8_t>(rng());
+  std::memcpy(static_cast<void*>(children.data()), noise.data(), noise.size());
+  auto at = [&](int64_t x, int64_t y, int64_t z) { return static_cast<size_t>((z * nodes[1] + y) * nodes[0] + x); };
+  // Tiles' parts: whole cubes below z = 16, slabs of a cube's planes (3 at a time) below 32,
+  // boxes of 7 x 5 x 3 cut off the cubes above.
+  std::vector<std::pair<Box3, Box3>> parts;
+  for (int64_t z = 0; z < nodes[2];) {
+    const Box3 step = z < 16 ? Box3{16, 16, 16} : z < 32 ? Box3{16, 16, 3} : Box3{7, 5, 3};
+    const int64_t z1 = std::min({z + step[2], nodes[2], z < 32 ? (z / 16 + 1) * int64_t{16} : nodes[2]});
+    for (int64_t y = 0; y < nodes[1]; y += step[1])
+      for (int64_t x = 0; x < nodes[0]; x += step[0])
+        parts.push_back({{x, y, z}, {std::min(x + step[0], nodes[0]), std::min(y + step[1], nodes[1]), z1}});
+    z = z1;
+  }
+  std::vector<std::unique_ptr<BandHandover>> files;
+  files.push_back(std::make_unique<ScratchHandover>(dir_.string(), nodes));
+  files.push_back(std::make_unique<SharedHandover>(path("shared.handover"), SharedFile::Mode::create, nodes));
+  for (auto& file : files) {
+    for (const auto& [lo, hi] : parts)
+      file->write_box(lo, hi, &values[at(lo[0], lo[1], lo[2])], &children[at(lo[0], lo[1], lo[2])], nodes[0],
+                      nodes[0] * nodes[1]);
+    for (int trial = 0; trial < 200; ++trial) {
+      Box3 lo, hi;
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::uniform_int_distribution<int64_t>(0, nodes[a] - 1)(rng);
+        hi[a] = std::uniform_int_distribution<int64_t>(lo[a] + 1, nodes[a])(rng);
+      }
+      const int64_t row = hi[0] - lo[0] + 3, plane = row * (hi[1] - lo[1] + 2);
+      const auto room = static_cast<size_t>(plane * (hi[2] - lo[2]));
+      std::vector<float> v(room, -1.0f);
+      std::vector<Record> r(room);
+      file->read_values(lo, hi, v.data(), row, plane);
+      file->read_children(lo, hi, r.data(), row, plane);
+      for (int64_t z = lo[2]; z < hi[2]; ++z)
+        for (int64_t y = lo[1]; y < hi[1]; ++y)
+          for (int64_t x = lo[0]; x < hi[0]; ++x) {
+            const auto i = static_cast<size_t>((z - lo[2]) * plane + (y - lo[1]) * row + (x - lo[0]));
+            ASSERT_EQ(v[i], values[at(x, y, z)]) << x << "," << y << "," << z;
+            ASSERT_EQ(std::memcmp(&r[i], &children[at(x, y, z)], sizeof(Record)), 0) << x << "," << y << "," << z;
+          }
+      // Nothing written beyond the box's rows.
+      for (int64_t z = lo[2]; z < hi[2]; ++z)
+        for (int64_t y = lo[1]; y < hi[1]; ++y)
+          ASSERT_EQ(v[static_cast<size_t>((z - lo[2]) * plane + (y - lo[1]) * row + (hi[0] - lo[0]))], -1.0f);
+    }
+  }
+}
+
+// A tile's part of whole cubes is written in a call a cube and read back in a call a cube; a box
+// cut off the cubes' grid takes a call a row to write, and still one a cube to read.
+TEST(HandoverFile, WholeCubesTakeACallEach) {
+  struct CountingFile {
+    void write(const void*, size_t, uint64_t) const { ++writes; }
+    void read(void*, size_t, uint64_t) const { ++reads; }
+    mutable int64_t writes = 0, reads = 0;
+  };
+  const Box3 nodes{40, 40, 40};
+  const BlockedEntries blocks(nodes);
+  std::vector<float> v(static_cast<size_t>(40 * 40 * 40));
+  CountingFile file;
+  blocks.write(file, 0, {0, 0, 16}, {32, 32, 33}, v.data(), 40, 40 * 40);  // 2 x 2 x 2 cubes, the last one plane
+  EXPECT_EQ(file.writes, 8);
+  blocks.write(file, 0, {32, 32, 32}, {40, 40, 40}, v.data(), 40, 40 * 40);  // the grid's last cube, whole
+  EXPECT_EQ(file.writes, 9);
+  blocks.write(file, 0, {3, 0, 0}, {16, 16, 2}, v.data(), 40, 40 * 40);  // cut off: 16 rows of 2 planes
+  EXPECT_EQ(file.writes, 9 + 32);
+  blocks.read(file, 0, {15, 15, 15}, {17, 17, 17}, v.data(), 40, 40 * 40);
+  EXPECT_EQ(file.reads, 8);
 }
 
 // Where band 1's hand-over would be a scratch file (at 128 MB, 97 x 96 x 92 x 48 bytes is beyond a

@@ -151,17 +151,19 @@ void StagedBox::read_input(const Box3& lo, const Box3& hi, const Box3& dims, con
 void StagedBox::read_handover(const Box3& lo, const Box3& hi, const BandHandover& in) {
   frame(lo, hi, in.nodes(), true);
   records_.resize(static_cast<size_t>(cell_size_[0] * cell_size_[1] * cell_size_[2]));
+  // Slabs of planes cut at the hand-over's blocks, on every thread.
+  const int64_t first = lo_[2] / kHandoverBlock, last = (lo_[2] + size_[2] - 1) / kHandoverBlock;
   const bool parallel = thread_count() > 1 && size_[0] * size_[1] * size_[2] > (int64_t{1} << 18);
-  parallel_for(int64_t{0}, parallel ? size_[2] : 1, [&](int64_t i) {
-    const int64_t z0 = parallel ? i : 0, z1 = parallel ? i + 1 : size_[2];
-    for (int64_t z = z0; z < z1; ++z) {
-      for (int64_t y = 0; y < size_[1]; ++y)
-        in.read_values(lo_[0], size_[0], lo_[1] + y, lo_[2] + z, values_.data() + (z * size_[1] + y) * size_[0]);
-      if (z >= cell_size_[2] || cell_size_[0] == 0) continue;
-      for (int64_t y = 0; y < cell_size_[1]; ++y)
-        in.read_children(cell_lo_[0], cell_size_[0], cell_lo_[1] + y, cell_lo_[2] + z,
-                         records_.data() + (z * cell_size_[1] + y) * cell_size_[0]);
-    }
+  parallel_for(first, parallel ? last + 1 : first + 1, [&](int64_t i) {
+    const int64_t z0 = parallel ? std::max(lo_[2], i * kHandoverBlock) : lo_[2];
+    const int64_t z1 = parallel ? std::min(lo_[2] + size_[2], (i + 1) * kHandoverBlock) : lo_[2] + size_[2];
+    in.read_values({lo_[0], lo_[1], z0}, {lo_[0] + size_[0], lo_[1] + size_[1], z1},
+                   values_.data() + (z0 - lo_[2]) * size_[0] * size_[1], size_[0], size_[0] * size_[1]);
+    const int64_t c1 = std::min(z1, cell_lo_[2] + cell_size_[2]);
+    if (c1 <= z0 || cell_size_[0] == 0 || cell_size_[1] == 0) return;
+    in.read_children({cell_lo_[0], cell_lo_[1], z0}, {cell_lo_[0] + cell_size_[0], cell_lo_[1] + cell_size_[1], c1},
+                     records_.data() + (z0 - cell_lo_[2]) * cell_size_[0] * cell_size_[1], cell_size_[0],
+                     cell_size_[0] * cell_size_[1]);
   });
 }
 
@@ -210,26 +212,37 @@ void StagedBox::fill(BandTile& tile) const {
 
 void fill_from_handover(BandTile& tile, const BandHandover& in) {
   const Box3& n = in.nodes();
-  const Box3 lo = tile.window_lo(), hi = tile.window_hi(), size = tile.window_size();
-  const int64_t x0 = std::min(lo[0], n[0] - 1), count = std::min(hi[0], n[0] - 1) - x0 + 1;
-  thread_local std::vector<float> row;
-  row.resize(static_cast<size_t>(count));
+  const Box3 lo = tile.window_lo(), size = tile.window_size();
+  // The window's nodes in the grid, read in place; those beyond its far faces repeat its last.
+  Box3 inside;
+  for (int a = 0; a < 3; ++a) {
+    assert(lo[a] < n[a] && "a tile's window starts in its band's grid");
+    inside[a] = std::min(size[a], n[a] - lo[a]);
+  }
   auto& v = tile.values();
-  for (int64_t z = 0; z < size[2]; ++z)
-    for (int64_t y = 0; y < size[1]; ++y) {
-      in.read_values(x0, count, std::min(lo[1] + y, n[1] - 1), std::min(lo[2] + z, n[2] - 1), row.data());
-      float* dst = v.data() + (z * size[1] + y) * size[0];
-      for (int64_t x = 0; x < size[0]; ++x) dst[x] = row[static_cast<size_t>(std::min(lo[0] + x, n[0] - 1) - x0)];
+  const int64_t plane = size[0] * size[1];
+  in.read_values(lo, {lo[0] + inside[0], lo[1] + inside[1], lo[2] + inside[2]}, v.data(), size[0], plane);
+  for (int64_t z = 0; z < size[2]; ++z) {
+    float* p = v.data() + z * plane;
+    if (z >= inside[2]) {
+      std::copy_n(v.data() + (inside[2] - 1) * plane, plane, p);
+      continue;
     }
+    for (int64_t y = 0; y < size[1]; ++y) {
+      float* row = p + y * size[0];
+      if (y >= inside[1])
+        std::copy_n(p + (inside[1] - 1) * size[0], size[0], row);
+      else
+        std::fill(row + inside[0], row + size[0], row[inside[0] - 1]);
+    }
+  }
   // Cells of the window whose corner node lies in the grid; the others' centres are beyond
   // record_extent and never read.
   const Box3 cells{size[0] - 1, size[1] - 1, size[2] - 1};
-  const int64_t cx = std::min(cells[0], n[0] - lo[0]);
-  if (cx <= 0) return;
-  auto& c = tile.children();
-  for (int64_t z = 0; z < cells[2] && lo[2] + z < n[2]; ++z)
-    for (int64_t y = 0; y < cells[1] && lo[1] + y < n[1]; ++y)
-      in.read_children(lo[0], cx, lo[1] + y, lo[2] + z, c.data() + (z * cells[1] + y) * cells[0]);
+  Box3 hi;
+  for (int a = 0; a < 3; ++a) hi[a] = lo[a] + std::min(cells[a], n[a] - lo[a]);
+  if (hi[0] <= lo[0]) return;
+  in.read_children(lo, hi, tile.children().data(), cells[0], cells[0] * cells[1]);
 }
 
 void StagedNext::reset(const Box3& lo, const Box3& hi) {
@@ -275,25 +288,34 @@ void StagedNext::write(const std::vector<std::pair<Box3, Box3>>& tile_boxes, Ban
   }
   // On one thread: writes to one file take its inode's lock, for which a second thread would spin.
   for (const auto& [lo, hi] : runs)
-    for (int64_t z = lo[2]; z < hi[2]; ++z)
-      for (int64_t y = lo[1]; y < hi[1]; ++y)
-        next.write_row(lo[0], y, z, values_.data() + index(lo[0], y, z), children_.data() + index(lo[0], y, z),
-                       hi[0] - lo[0]);
+    next.write_box(lo, hi, values_.data() + index(lo[0], lo[1], lo[2]), children_.data() + index(lo[0], lo[1], lo[2]),
+                   size_[0], size_[0] * size_[1]);
 }
 
 void write_next(const BandTile& tile, BandHandover& next) {
   const Box3 lo = tile.next_lo(), hi = tile.next_hi();
-  const auto n = static_cast<size_t>(std::max<int64_t>(0, hi[0] - lo[0]));
-  if (n == 0) return;
+  const int64_t nx = hi[0] - lo[0], ny = hi[1] - lo[1];
+  if (nx <= 0 || ny <= 0) return;
+  // Slabs of planes cut at the hand-over's blocks: a file writes a block's part of a slab in a
+  // call, and a slab of a tile's part (at most 16 x 64 x 64 entries, 2.7 MB) stays in cache
+  // between its gathering and its writing.
   thread_local std::vector<float> v;
   thread_local std::vector<Record> r;
-  v.resize(n);
-  r.resize(n);
-  for (int64_t z = lo[2]; z < hi[2]; ++z)
-    for (int64_t y = lo[1]; y < hi[1]; ++y) {
-      tile.next_row(lo[0], hi[0], y, z, v.data(), r.data());
-      next.write_row(lo[0], y, z, v.data(), r.data(), static_cast<int64_t>(n));
-    }
+  const auto slab = static_cast<size_t>(kHandoverBlock * nx * ny);
+  if (v.size() < slab) {
+    v.resize(slab);
+    r.resize(slab);
+  }
+  for (int64_t z0 = lo[2]; z0 < hi[2];) {
+    const int64_t z1 = std::min(hi[2], (z0 / kHandoverBlock + 1) * kHandoverBlock);
+    for (int64_t z = z0; z < z1; ++z)
+      for (int64_t y = lo[1]; y < hi[1]; ++y) {
+        const int64_t at = ((z - z0) * ny + (y - lo[1])) * nx;
+        tile.next_row(lo[0], hi[0], y, z, v.data() + at, r.data() + at);
+      }
+    next.write_box({lo[0], lo[1], z0}, {hi[0], hi[1], z1}, v.data(), r.data(), nx, nx * ny);
+    z0 = z1;
+  }
 }
 
 // The least and greatest of n > 0 values, as std::minmax_element finds them: of equal values

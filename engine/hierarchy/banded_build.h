@@ -35,8 +35,10 @@ namespace isotope {
 // several threads at once.
 using ReadBox = std::function<void(const Box3& lo, const Box3& size, float* out)>;
 
-// What band j hands band j+1: one entry per node of band j+1's grid, x fastest: the value, and the
-// record of the cell's scale-j cube centre. Disjoint rows may be written and read concurrently.
+// What band j hands band j+1: one entry per node of band j+1's grid: the value, and the record
+// of the cell's scale-j cube centre. It is written and read a box at a time: nodes lo .. hi - 1 of
+// the grid, in memory `row` entries from one row to the next and `plane` from one plane to the
+// next (x fastest). Disjoint boxes may be written and read concurrently.
 class BandHandover {
  public:
   explicit BandHandover(const Box3& nodes) : nodes_(nodes) {}
@@ -44,19 +46,23 @@ class BandHandover {
   static uint64_t count(const Box3& n) { return static_cast<uint64_t>(n[0] * n[1] * n[2]); }
   static uint64_t bytes(const Box3& n) { return count(n) * (sizeof(float) + sizeof(Record)); }
   const Box3& nodes() const { return nodes_; }
-  uint64_t at(int64_t x, int64_t y, int64_t z) const {
-    return static_cast<uint64_t>((z * nodes_[1] + y) * nodes_[0] + x);
-  }
 
   // Whether a call costs a copy only (else a system call: a stage pays, below).
   virtual bool in_memory() const { return false; }
-  virtual void write_row(int64_t x0, int64_t y, int64_t z, const float* values, const Record* children, int64_t n) = 0;
-  virtual void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const = 0;
-  virtual void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const = 0;
+  virtual void write_box(const Box3& lo, const Box3& hi, const float* values, const Record* children, int64_t row,
+                         int64_t plane) = 0;
+  virtual void read_values(const Box3& lo, const Box3& hi, float* out, int64_t row, int64_t plane) const = 0;
+  virtual void read_children(const Box3& lo, const Box3& hi, Record* out, int64_t row, int64_t plane) const = 0;
 
  private:
   Box3 nodes_;
 };
+
+// The side of the cubes of entries a hand-over in a file keeps together (one call writes or reads
+// a cube's planes): the boxes the tiles write are unions of them wherever a tile's part of the
+// next band is a multiple of it (16, 32 or 64 nodes a side), and readers cut their boxes at its
+// multiples along z.
+inline constexpr int64_t kHandoverBlock = 16;
 
 class MemoryHandover : public BandHandover {
  public:
@@ -75,18 +81,31 @@ class MemoryHandover : public BandHandover {
 #endif
   }
   bool in_memory() const override { return true; }
-  void write_row(int64_t x0, int64_t y, int64_t z, const float* values, const Record* children, int64_t n) override {
-    std::copy(values, values + n, values_.get() + at(x0, y, z));
-    std::copy(children, children + n, children_.get() + at(x0, y, z));
+  void write_box(const Box3& lo, const Box3& hi, const float* values, const Record* children, int64_t row,
+                 int64_t plane) override {
+    for_each_row(lo, hi, row, plane, [&](size_t at, int64_t from, int64_t n) {
+      std::copy_n(values + from, n, values_.get() + at);
+      std::copy_n(children + from, n, children_.get() + at);
+    });
   }
-  void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const override {
-    std::copy_n(values_.get() + at(x0, y, z), count, out);
+  void read_values(const Box3& lo, const Box3& hi, float* out, int64_t row, int64_t plane) const override {
+    for_each_row(lo, hi, row, plane,
+                 [&](size_t at, int64_t to, int64_t n) { std::copy_n(values_.get() + at, n, out + to); });
   }
-  void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const override {
-    std::copy_n(children_.get() + at(x0, y, z), count, out);
+  void read_children(const Box3& lo, const Box3& hi, Record* out, int64_t row, int64_t plane) const override {
+    for_each_row(lo, hi, row, plane,
+                 [&](size_t at, int64_t to, int64_t n) { std::copy_n(children_.get() + at, n, out + to); });
   }
 
  private:
+  // f(entry of the row's first node, its index in memory, nodes) for each row of the box.
+  template <class F>
+  void for_each_row(const Box3& lo, const Box3& hi, int64_t row, int64_t plane, const F& f) const {
+    const Box3& n = nodes();
+    for (int64_t z = lo[2]; z < hi[2]; ++z)
+      for (int64_t y = lo[1]; y < hi[1]; ++y)
+        f(static_cast<size_t>((z * n[1] + y) * n[0] + lo[0]), (z - lo[2]) * plane + (y - lo[1]) * row, hi[0] - lo[0]);
+  }
   std::unique_ptr<float[]> values_;
   struct Free {  // what operator new gave
     void operator()(Record* p) const { ::operator delete(p); }

@@ -21,6 +21,7 @@
 #include "io/file/atomic_file.h"
 #include "io/file/scratch_file.h"
 #include "io/file/shared_file.h"
+#include "io/store/handover_file.h"
 #include "io/store/store_format.h"
 #include "io/volume/volume_box_reader.h"
 #include "isotope/error.h"
@@ -30,26 +31,6 @@ namespace isotope {
 static_assert(kDefaultBrickBits == StoreLayout::kDefaultBrickBits,
               "isotope/convert.h names the store layout's default");
 namespace {
-
-// A band's hand-over (engine/hierarchy/banded_build.h) in two unlinked scratch files beside the output, for
-// volumes whose hand-over does not fit the budget.
-class ScratchHandover : public BandHandover {
- public:
-  ScratchHandover(const std::string& dir, const Box3& nodes) : BandHandover(nodes), values_(dir), children_(dir) {}
-  void write_row(int64_t x0, int64_t y, int64_t z, const float* v, const Record* r, int64_t n) override {
-    values_.write(v, static_cast<size_t>(n) * sizeof(float), at(x0, y, z) * sizeof(float));
-    children_.write(r, static_cast<size_t>(n) * sizeof(Record), at(x0, y, z) * sizeof(Record));
-  }
-  void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const override {
-    values_.read(out, static_cast<size_t>(count) * sizeof(float), at(x0, y, z) * sizeof(float));
-  }
-  void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const override {
-    children_.read(out, static_cast<size_t>(count) * sizeof(Record), at(x0, y, z) * sizeof(Record));
-  }
-
- private:
-  ScratchFile values_, children_;
-};
 
 // The input as integer codes 0 .. 2^bits - 1 over [offset, offset + scale * (2^bits - 1)].
 class QuantizingReader : public BoxReader {
@@ -276,28 +257,6 @@ class FileSink {
   uint64_t held_bytes_ = 0;
   std::vector<std::pair<uint64_t, int64_t>> held_;  // Morton code, brick index
   ScratchOut* release_to_ = nullptr;
-};
-
-// A band's hand-over to the next in one named file beside the output, which every rank of a
-// distributed convert writes its tiles' rows into and reads the whole of for the next band.
-class SharedHandover : public BandHandover {
- public:
-  SharedHandover(const std::string& path, SharedFile::Mode mode, const Box3& nodes)
-      : BandHandover(nodes), file_(path, mode), records_at_(count(nodes) * sizeof(float)) {}
-  void write_row(int64_t x0, int64_t y, int64_t z, const float* v, const Record* r, int64_t n) override {
-    file_.write(v, static_cast<size_t>(n) * sizeof(float), at(x0, y, z) * sizeof(float));
-    file_.write(r, static_cast<size_t>(n) * sizeof(Record), records_at_ + at(x0, y, z) * sizeof(Record));
-  }
-  void read_values(int64_t x0, int64_t count, int64_t y, int64_t z, float* out) const override {
-    file_.read(out, static_cast<size_t>(count) * sizeof(float), at(x0, y, z) * sizeof(float));
-  }
-  void read_children(int64_t x0, int64_t count, int64_t y, int64_t z, Record* out) const override {
-    file_.read(out, static_cast<size_t>(count) * sizeof(Record), records_at_ + at(x0, y, z) * sizeof(Record));
-  }
-
- private:
-  SharedFile file_;
-  uint64_t records_at_;
 };
 
 // A brick's directory entry as a rank of a distributed convert hands it to rank 0.
