@@ -5,9 +5,12 @@
 #include <tbb/global_control.h>
 
 #include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstring>
 #include <map>
+#include <mutex>
 
 #include "engine/core/fields.h"
 #include "engine/hierarchy/band_tile.h"
@@ -475,6 +478,69 @@ TEST(BandBuild, BandsOfLargerVolumesBuiltBesideAreBuiltFromTheirHandOver) {
 // takes smaller ones where those would be mostly padding (StoreLayout::memory_brick_bits): a
 // 500000x2x2 volume in 16^3 bricks held 28 slots a node and took 4.0 GB for 2 MB of data. The mesh
 // does not depend on the bricks.
+// A slow tile holds up only the commits after it: the tiles after it go on being built, up to the
+// tiles in flight, where runs of that many tiles, each waited for before the next began, left a
+// thread idle at each run's end. Here tile 1 finishes only once tile W (the first beyond a run of
+// W, the tiles in flight) has begun: it would wait for ever in runs, and a timeout fails it.
+TEST(BandBuild, ASlowTileHoldsUpOnlyTheCommitsAfterIt) {
+  const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
+  if (thread_count() < 2) GTEST_FAIL() << "needs two threads";
+  const Volume v = generate_noise(33, 5);
+  const StoreLayout layout(v.dims, 2);  // band 0: 9^3 bricks, tiles of one brick
+  const std::vector<Box3> order = in_morton_order(layout.band(0).bricks);
+  struct WaitingSink : RecordingSink {
+    using RecordingSink::RecordingSink;
+    std::vector<Box3> order;
+    int64_t window = -1;  // -1: no tile waits
+    std::mutex mutex;
+    std::condition_variable begun;
+    bool last_begun = false, timed_out = false;
+    std::vector<uint8_t> process(int band, const Box3& b, const BandTile& tile) {
+      if (window < 0) return RecordingSink::process(band, b, tile);
+      if (band == 0 && b == order[static_cast<size_t>(window)]) {
+        const std::lock_guard<std::mutex> lock(mutex);
+        last_begun = true;
+        begun.notify_all();
+      }
+      if (band == 0 && b == order[1]) {
+        std::unique_lock<std::mutex> lock(mutex);
+        if (!begun.wait_for(lock, std::chrono::seconds(20), [&] { return last_begun; })) timed_out = true;
+      }
+      return RecordingSink::process(band, b, tile);
+    }
+  };
+  BandedBuildOptions o;
+  o.tile_bricks = 1;
+  // The tiles in flight, as build_bands counts them (a build reports it): four on two threads.
+  WaitingSink probe(&layout);
+  probe.order = order;
+  const int64_t window = build_bands(
+                             layout,
+                             [&](const Box3& lo, const Box3& size, float* out) {
+                               for (int64_t z = 0; z < size[2]; ++z)
+                                 for (int64_t y = 0; y < size[1]; ++y)
+                                   for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
+                             },
+                             probe, 0, o)
+                             .tiles_in_flight;
+  ASSERT_GE(window, 3);
+  ASSERT_LT(window, static_cast<int64_t>(order.size()));
+  WaitingSink sink(&layout);
+  sink.order = order;
+  sink.window = window;
+  build_bands(
+      layout,
+      [&](const Box3& lo, const Box3& size, float* out) {
+        for (int64_t z = 0; z < size[2]; ++z)
+          for (int64_t y = 0; y < size[1]; ++y)
+            for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
+      },
+      sink, 0, o);
+  EXPECT_FALSE(sink.timed_out) << "tile " << window << " did not begin while tile 1 was being built";
+  EXPECT_TRUE(sink.bricks == probe.bricks);
+  EXPECT_EQ(sink.order, probe.order);
+}
+
 TEST(BandBuild, AHierarchyInMemoryPadsLittleWhateverTheVolumesShape) {
   auto slots_per_node = [](const Box3& dims, int bits) {
     const StoreLayout layout(dims, bits);

@@ -426,7 +426,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       return std::pair{ulo, uhi};
     };
     // A group: the tiles of one aligned cube of s^3 tiles, which share a stage; without a stage,
-    // a batch of tiles in flight.
+    // the band's tiles.
     const bool costly = (in && !in->in_memory()) || (next && !next->in_memory());
     const int64_t s = !options.staged || !costly ? 0
                       : options.stage_tiles > 0  ? options.stage_tiles
@@ -434,7 +434,10 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
     std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
     std::future<void> writing;  // a group's rows to `next`; waited for before this band's end
     for (size_t group = 0; group < tile_coords.size();) {
-      size_t group_end = std::min(tile_coords.size(), group + results.size());
+      // Without a stage, the whole band in one run: the tiles in flight are bounded by the
+      // commits (parallel_in_order_committed), and a run ended every few tiles would leave a
+      // thread idle at each end, waiting for the slowest tile of the run.
+      size_t group_end = tile_coords.size();
       if (s > 0) {
         group_end = group + 1;
         auto cube = [s](const Box3& tc) { return Box3{tc[0] / s, tc[1] / s, tc[2] / s}; };
