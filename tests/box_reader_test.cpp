@@ -238,6 +238,15 @@ TEST_F(BoxReaderTest, EveryBoxOfEverySharedHdf5VolumeEqualsReadVolume) {
   }
 }
 
+// What a convert groups its tiles' reads by: a box of raw data costs its own rows, one of an HDF5
+// dataset (its chunks, or the library's own copies) is left to the stage.
+TEST_F(BoxReaderTest, ABoxOfRawDataCostsItsOwnBytesAndOneOfHdf5IsLeftToTheStage) {
+  for (const char* name : kSharedRaw)
+    EXPECT_TRUE(open_reader((kData / name).string(), dir_.string())->reads_box_alone()) << name;
+  for (const char* name : kSharedH5)
+    EXPECT_FALSE(open_reader((kData / name).string() + ":/volume", dir_.string())->reads_box_alone()) << name;
+}
+
 TEST_F(BoxReaderTest, RawLayoutOverridesApplyAsInReadVolume) {
   fs::copy_file(kNeghip, path("unnamed.bin"));
   const VolumeSpec source{path("unnamed.bin"), Xyz{66, 66, 66}, ScalarType::uint8};

@@ -46,6 +46,7 @@ class QuantizingReader : public BoxReader {
   double offset() const { return offset_; }
   double max() const { return max_; }
   double scale() const { return scale_; }
+  bool reads_box_alone() const override { return input_.reads_box_alone(); }
   void read_box(const Box3& lo, const Box3& size, float* out) const override {
     input_.read_box(lo, size, out);
     const int64_t n = size[0] * size[1] * size[2];
@@ -327,8 +328,13 @@ class Converter {
   BandedBuildOptions build_options() {
     BandedBuildOptions build;
     build.memory_bytes = static_cast<uint64_t>(options_.memory_mb) << 20;
-    build.staged = true;  // a file's reader, and scratch hand-overs, cost a call a row
-    build.fuse = true;    // a hand-over that would be a scratch file: built beside instead
+    // A stage gathers the reads of a group of tiles into one: worth it where a box costs more
+    // than its bytes (strips or chunks decoded again for each tile). For raw data it saved only
+    // part of the rows' gaps, and its groups ended in waits for their slowest tile: a 2048^3
+    // convert took 158.7 s with it, 140.7 s without (a hand-over in a file costs a call a cube
+    // whether staged or not).
+    build.staged = !input_.reads_box_alone();
+    build.fuse = true;  // a hand-over that would be a scratch file: built beside instead
     build.progress = options_.progress;
     build.check_cancel = [this] {
       if (options_.cancel && options_.cancel->load()) throw IoError("interrupted");

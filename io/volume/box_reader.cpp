@@ -172,6 +172,8 @@ class RawBoxReader final : public BoxReader {
     for_each_run(lo, size, run, [&](int64_t done, int64_t node) { read_run(node, run, out + done, stage); });
   }
 
+  bool reads_box_alone() const override { return true; }
+
   std::optional<ScalarType> stored_type() const override {
     const bool native = info_.element_bytes == 1 || data_.big_endian == (std::endian::native == std::endian::big);
     if (!native || !info_.is_integer || info_.element_bytes > 2) return std::nullopt;

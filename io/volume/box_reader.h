@@ -38,6 +38,11 @@ class BoxReader {
                                   float* out) const {
     read_box(lo, size, out);
   }
+  // Whether a box costs about its own bytes to read, whatever boxes were read before (raw data:
+  // a read of its rows, or of the rows with the gaps between them), rather than whole units
+  // around it decoded again for each box (a TIFF stack's strips, an HDF5 dataset's chunks): a
+  // convert gathers the boxes of neighbouring tiles into one read only where it does not.
+  virtual bool reads_box_alone() const { return false; }
   // The type read_box_stored reads values as, for a reader that can read them as the file stores
   // them, not converted: integers of one or two bytes in this machine's byte order in raw data (a
   // raw file's, a raw or inflated NRRD's), and in an HDF5 dataset or a TIFF stack of either byte
