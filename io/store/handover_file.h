@@ -16,9 +16,10 @@ namespace isotope {
 // A band's hand-over in a file, laid out in cubes of kHandoverBlock^3 entries, each in a slot of
 // that many (the grid's last cubes along an axis are thinner), x fastest within a cube and cubes
 // x fastest in the grid. A tile writes its part, whole cubes, in a call a cube, where a row-major
-// file took a call a row of 16-64 entries (and the file system zeroed a page at each first write
-// into it: at 2048^3, a tenth of the convert's time went to those calls); a reader takes the
-// planes it needs of each cube it crosses in a call, rows and columns it does not need with them.
+// file took a call a row of 16-64 entries, each into pages other tiles wrote too (at 2048^3 the
+// kernel took 20% of the convert's time that way, 14% in cubes: docs/FORMAT.md); a reader takes
+// the planes it needs of each cube it crosses in a call, rows and columns it does not need with
+// them.
 class BlockedEntries {
  public:
   explicit BlockedEntries(const Box3& nodes) : nodes_(nodes) {
