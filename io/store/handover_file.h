@@ -115,7 +115,7 @@ class ScratchHandover : public BandHandover {
 };
 
 // A band's hand-over to the next in one named file beside the output, which every rank of a
-// distributed convert writes its tiles' rows into and reads the whole of for the next band.
+// distributed convert writes its tiles' parts into and reads the whole of for the next band.
 class SharedHandover : public BandHandover {
  public:
   SharedHandover(const std::string& path, SharedFile::Mode mode, const Box3& nodes)
