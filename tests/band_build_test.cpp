@@ -24,6 +24,15 @@
 namespace isotope {
 namespace {
 
+// Band 0's input read from a volume in memory, as a ReadBox.
+ReadBox read_from(const Volume& v) {
+  return [&v](const Box3& lo, const Box3& size, float* out) {
+    for (int64_t z = 0; z < size[2]; ++z)
+      for (int64_t y = 0; y < size[1]; ++y)
+        for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
+  };
+}
+
 struct NextBand {
   Box3 nodes{};
   std::vector<float> values;
@@ -273,11 +282,7 @@ struct StagedRun {
 // share one hand-over file: a run that wrote rows beyond its own tiles would overwrite the rows of
 // a run built before it).
 StagedRun build_staged(const Volume& v, const StoreLayout& layout, bool staged, int64_t stage_tiles, int ranks) {
-  const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
-    for (int64_t z = 0; z < size[2]; ++z)
-      for (int64_t y = 0; y < size[1]; ++y)
-        for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
-  };
+  const ReadBox read = read_from(v);
   StagedRun run{RecordingSink(&layout), 0};
   std::unique_ptr<CountingHandover> in;
   for (const Band& band : layout.bands()) {
@@ -338,14 +343,7 @@ TEST(BandBuild, AStagedGroupOfTilesBuildsWhatItsTilesBuildAloneInFewerCalls) {
   BandedBuildOptions o;
   o.staged = true;  // hand-overs in memory: no stage (one more copy for nothing), the same bricks
   RecordingSink budgeted(&layout);
-  build_bands(
-      layout,
-      [&](const Box3& lo, const Box3& size, float* out) {
-        for (int64_t z = 0; z < size[2]; ++z)
-          for (int64_t y = 0; y < size[1]; ++y)
-            for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
-      },
-      budgeted, 0, o);
+  build_bands(layout, read_from(v), budgeted, 0, o);
   EXPECT_TRUE(budgeted.bricks == build_staged(v, layout, false, 0, 1).sink.bricks);
   EXPECT_GE(stage_tiles_for(layout, 0, 1, o.memory_bytes), 16);
   EXPECT_EQ(stage_tiles_for(layout, 0, 1, 1 << 10), 0);  // not even 2^3 tiles fit: no stage
@@ -411,11 +409,7 @@ void expect_bands_built_beside_as_from_their_hand_over(const Box3& dims) {
   const Volume v = testing::crop(generate_noise(70, 13), dims);
   const StoreLayout layout(v.dims, 2);  // bricks of 4^3 nodes
   const StagedRun alone = build_staged(v, layout, false, 0, 1);
-  const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
-    for (int64_t z = 0; z < size[2]; ++z)
-      for (int64_t y = 0; y < size[1]; ++y)
-        for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
-  };
+  const ReadBox read = read_from(v);
   for (int64_t c : {2, 4})
     for (bool staged : {false, true}) {
       SCOPED_TRACE(::testing::Message() << dims[0] << "x" << dims[1] << "x" << dims[2] << ", tiles of " << c
@@ -514,28 +508,13 @@ TEST(BandBuild, ASlowTileHoldsUpOnlyTheCommitsAfterIt) {
   // The tiles in flight, as build_bands counts them (a build reports it): four on two threads.
   WaitingSink probe(&layout);
   probe.order = order;
-  const int64_t window = build_bands(
-                             layout,
-                             [&](const Box3& lo, const Box3& size, float* out) {
-                               for (int64_t z = 0; z < size[2]; ++z)
-                                 for (int64_t y = 0; y < size[1]; ++y)
-                                   for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
-                             },
-                             probe, 0, o)
-                             .tiles_in_flight;
+  const int64_t window = build_bands(layout, read_from(v), probe, 0, o).tiles_in_flight;
   ASSERT_GE(window, 3);
   ASSERT_LT(window, static_cast<int64_t>(order.size()));
   WaitingSink sink(&layout);
   sink.order = order;
   sink.window = window;
-  build_bands(
-      layout,
-      [&](const Box3& lo, const Box3& size, float* out) {
-        for (int64_t z = 0; z < size[2]; ++z)
-          for (int64_t y = 0; y < size[1]; ++y)
-            for (int64_t x = 0; x < size[0]; ++x) *out++ = v.at(lo[0] + x, lo[1] + y, lo[2] + z);
-      },
-      sink, 0, o);
+  build_bands(layout, read_from(v), sink, 0, o);
   EXPECT_FALSE(sink.timed_out) << "tile " << window << " did not begin while tile 1 was being built";
   EXPECT_TRUE(sink.bricks == probe.bricks);
   EXPECT_EQ(sink.order, probe.order);
