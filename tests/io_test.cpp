@@ -32,6 +32,7 @@
 #include "engine/extract/extract.h"
 #include "engine/mesh/vertex_normals.h"
 #include "io/file/atomic_file.h"
+#include "io/file/direct_appends.h"
 #include "io/mesh/mesh_writer.h"
 #include "io/store/store_reader.h"
 #include "io/volume/hdf5_reader.h"
@@ -807,6 +808,88 @@ TEST_F(IoTest, AtomicFileRegionsAreFilledOnSeveralThreadsBetweenOrdinaryWrites) 
     f.commit();
   }
   EXPECT_EQ(read_bytes(p), expected);
+}
+
+// Direct appends (io/file/direct_appends.h) write the bytes they were given, past the page cache
+// or through it: pieces of odd sizes across several of its buffers, overwrites of bytes on disk,
+// in the buffer being filled and across the two, appends after a drain, a file whose end is a
+// whole buffer and one whose end is not.
+TEST_F(IoTest, DirectAppendsWriteWhatTheyWereGivenWithOrWithoutThePageCache) {
+  for (const bool direct : {false, true}) {
+    for (const size_t total : {size_t{3} << 20, (size_t{3} << 20) + 4099}) {
+      SCOPED_TRACE(std::string(direct ? "direct" : "buffered") + ", " + std::to_string(total) + " bytes");
+      const std::string p = path("appends.bin");
+      const int buffered = ::open(p.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+      ASSERT_GE(buffered, 0);
+      const int fd = direct ? ::open(p.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC) : -1;
+      if (direct && fd < 0) {
+        ::close(buffered);
+        GTEST_SKIP() << "the file system of " << dir_ << " takes no O_DIRECT: " << std::strerror(errno);
+      }
+      std::vector<unsigned char> expected(total);
+      for (size_t i = 0; i < total; ++i) expected[i] = static_cast<unsigned char>(i * 13 + i / 4093);
+      {
+        DirectAppends appends(fd, buffered);
+        const size_t half = total / 2;
+        for (size_t at = 0, piece = 1; at < half; at += piece, piece = piece * 3 % 70001 + 1)
+          ASSERT_EQ(appends.append(expected.data() + at, std::min(piece, half - at)), 0);
+        ASSERT_EQ(appends.drain(), 0);  // the second half starts at an unaligned offset
+        for (size_t at = half, piece = 7; at < total; at += piece, piece = piece * 5 % 300007 + 1)
+          ASSERT_EQ(appends.append(expected.data() + at, std::min(piece, total - at)), 0);
+        EXPECT_EQ(appends.size(), total);
+        const std::vector<std::pair<size_t, size_t>> patches{
+            {0, 1000}, {(size_t{1} << 20) - 10, 20}, {total - 5000, 4000}, {total - 3, 3}, {(size_t{2} << 20) - 1, 2}};
+        for (const auto& [at, bytes] : patches) {
+          for (size_t i = at; i < at + bytes; ++i) expected[i] = static_cast<unsigned char>(~expected[i]);
+          ASSERT_EQ(appends.overwrite(at, expected.data() + at, bytes), 0);
+        }
+        ASSERT_EQ(appends.drain(), 0);
+        EXPECT_EQ(appends.direct(), direct);
+      }
+      if (fd >= 0) ::close(fd);
+      ::close(buffered);
+      EXPECT_EQ(read_bytes(p), expected);
+    }
+  }
+}
+
+// A write the writer thread fails (here: a descriptor not open for writing) is reported by the
+// append or the drain after it, with its errno.
+TEST_F(IoTest, DirectAppendsReportAFailedWriteByTheirWriterThread) {
+  const std::string p = path("refused.bin");
+  write_values(p, std::vector<uint8_t>{1});
+  const int read_only = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+  ASSERT_GE(read_only, 0);
+  {
+    DirectAppends appends(-1, read_only);
+    const std::vector<unsigned char> bytes(size_t{1} << 20, 7);
+    int err = 0;
+    for (int i = 0; i < 3 && err == 0; ++i) err = appends.append(bytes.data(), bytes.size());
+    if (err == 0) err = appends.drain();
+    EXPECT_EQ(err, EBADF);
+  }
+  ::close(read_only);
+}
+
+// A store's file takes its appends past the page cache: the same bytes, the same file, as through
+// it, with its header written last, and a commit as any other output's.
+TEST_F(IoTest, AtomicFileWithDirectAppendsHoldsWhatABufferedOneHolds) {
+  std::vector<unsigned char> bytes((size_t{5} << 20) + 333);
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<unsigned char>(i * 31 + i / 509);
+  for (const AtomicFile::Appends appends : {AtomicFile::Appends::buffered, AtomicFile::Appends::direct}) {
+    const std::string p = path(appends == AtomicFile::Appends::direct ? "direct.bin" : "buffered.bin");
+    AtomicFile f(p, appends);
+    f.write(bytes.data(), 100);
+    for (size_t at = 100; at < bytes.size(); at += 65521)
+      f.write(bytes.data() + at, std::min<size_t>(65521, bytes.size() - at));
+    f.write_at(0, "header", 6);
+    f.commit();
+  }
+  std::vector<unsigned char> expected = bytes;
+  std::memcpy(expected.data(), "header", 6);
+  EXPECT_EQ(read_bytes(path("buffered.bin")), expected);
+  EXPECT_EQ(read_bytes(path("direct.bin")), expected);
+  EXPECT_EQ(entries(), (std::vector<std::string>{"buffered.bin", "direct.bin"}));
 }
 
 // The output policy (io/file/atomic_file.h): what is not a regular file is never replaced, and

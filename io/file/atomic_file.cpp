@@ -11,6 +11,7 @@
 #include <system_error>
 #include <utility>
 
+#include "io/file/direct_appends.h"
 #include "io/file/positioned_io.h"
 #include "io/file/temporary_registry.h"
 #include "isotope/error.h"
@@ -128,7 +129,7 @@ void check_outputs(const std::vector<NamedPath>& inputs, const std::vector<Named
   }
 }
 
-AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
+AtomicFile::AtomicFile(std::string path, Appends appends) : path_(std::move(path)) {
   if (path_.empty()) throw IoError("output path is empty");
   target_ = output_target(path_);
   const std::string dir = directory_of(target_);
@@ -151,9 +152,20 @@ AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
   buffer_ = std::make_unique_for_overwrite<char[]>(kBufferBytes);
   std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferBytes);
   registered_ = register_temporary(temp_path_);
+  if (appends == Appends::direct) {
+    // A file system that refuses O_DIRECT here (or a thread that cannot start) leaves the appends
+    // to stdio, as for any other output.
+    direct_fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
+    try {
+      direct_ = std::make_unique<DirectAppends>(direct_fd_, ::fileno(file_));
+    } catch (const std::exception&) {
+      direct_.reset();
+    }
+  }
 }
 
 AtomicFile::~AtomicFile() {
+  end_direct();
   if (file_ != nullptr) std::fclose(file_);
   if (!committed_ && !temp_path_.empty()) std::remove(temp_path_.c_str());
   unregister_temporary(registered_);
@@ -162,6 +174,11 @@ AtomicFile::~AtomicFile() {
 void AtomicFile::write(const void* data, size_t bytes) {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (bytes == 0) return;
+  if (direct_) {
+    if (const int err = direct_->append(data, bytes)) throw IoError(path_ + ": write failed: " + errno_text(err));
+    size_ += bytes;
+    return;
+  }
   errno = 0;
   if (std::fwrite(data, 1, bytes, file_) != bytes)
     throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
@@ -171,6 +188,11 @@ void AtomicFile::write(const void* data, size_t bytes) {
 void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (offset + bytes > size_) throw IoError(path_ + ": write_at past the end of what was written");
+  if (direct_) {
+    if (const int err = direct_->overwrite(offset, data, bytes))
+      throw IoError(path_ + ": write failed: " + errno_text(err));
+    return;
+  }
   errno = 0;
   // Back to where the next write() appends: size_, which lies past the end of the file while a
   // region appended is not yet filled.
@@ -199,6 +221,7 @@ void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) c
 
 void AtomicFile::continue_at(uint64_t offset) {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
+  drain_direct();
   errno = 0;
   if (std::fflush(file_) != 0 || fseeko(file_, static_cast<off_t>(offset), SEEK_SET) != 0)
     throw IoError(path_ + ": write failed: " + errno_text(errno != 0 ? errno : EIO));
@@ -208,6 +231,7 @@ void AtomicFile::continue_at(uint64_t offset) {
 void AtomicFile::finish() {
   if (finished_) return;
   if (file_ == nullptr) throw IoError(path_ + ": finish after commit");
+  drain_direct();
   // Buffered data may only meet a full disk here, so flush and close are checked too.
   errno = 0;
   const bool flushed = std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
@@ -218,6 +242,19 @@ void AtomicFile::finish() {
   if (!flushed) throw IoError(path_ + ": write failed: " + errno_text(flush_err != 0 ? flush_err : EIO));
   if (!closed) throw IoError(path_ + ": close failed: " + errno_text(close_err != 0 ? close_err : EIO));
   finished_ = true;
+}
+
+void AtomicFile::drain_direct() {
+  if (!direct_) return;
+  const int err = direct_->drain();
+  end_direct();
+  if (err != 0) throw IoError(path_ + ": write failed: " + errno_text(err));
+}
+
+void AtomicFile::end_direct() {
+  direct_.reset();
+  if (direct_fd_ >= 0) ::close(direct_fd_);
+  direct_fd_ = -1;
 }
 
 void AtomicFile::commit() {

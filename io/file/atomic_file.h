@@ -33,9 +33,16 @@ struct NamedPath {
 // output_target. Inputs that do not exist are left to their readers' messages.
 void check_outputs(const std::vector<NamedPath>& inputs, const std::vector<NamedPath>& outputs);
 
+class DirectAppends;
+
 class AtomicFile {
  public:
-  explicit AtomicFile(std::string path);  // throws IoError when the directory is not writable
+  // How appends reach the disk: through the page cache, or, for a large output written once from
+  // start to end (a store), past it from a writer thread (io/file/direct_appends.h). Where the
+  // file system takes no direct writes, they go through the page cache; the bytes are the same.
+  enum class Appends { buffered, direct };
+  // Throws IoError when the directory is not writable.
+  explicit AtomicFile(std::string path, Appends appends = Appends::buffered);
   ~AtomicFile();
   AtomicFile(const AtomicFile&) = delete;
   AtomicFile& operator=(const AtomicFile&) = delete;
@@ -51,7 +58,8 @@ class AtomicFile {
   // disk. Safe on several threads at once.
   void write_region(uint64_t offset, const void* data, size_t bytes) const;
   // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
-  // into temp_path() meanwhile (a distributed convert, io/store/store_writer.cpp).
+  // into temp_path() meanwhile (a distributed convert, io/store/store_writer.cpp). Direct appends
+  // end here: all writes after it go through the page cache.
   void continue_at(uint64_t offset);
   uint64_t size() const { return size_; }  // bytes written so far
   // Flushes, fsyncs and closes the temporary file: what can fail for lack of disk fails here.
@@ -63,10 +71,14 @@ class AtomicFile {
   const std::string& path() const { return path_; }  // as named
 
  private:
+  void drain_direct();  // what direct appends hold, to the file; then stdio's (throws IoError)
+  void end_direct();    // no more direct appends; nothing written
   static constexpr size_t kBufferBytes = size_t{256} << 10;
   std::unique_ptr<char[]> buffer_;         // stdio's, for file_ (closed before this is freed)
   std::string path_, target_, temp_path_;  // as named; the file replaced (output_target); temporary
   std::FILE* file_ = nullptr;
+  std::unique_ptr<DirectAppends> direct_;  // Appends::direct, until continue_at or finish
+  int direct_fd_ = -1;                     // the temporary opened with O_DIRECT, or -1
   bool finished_ = false, committed_ = false;
   int registered_ = -1;  // io/file/temporary_registry.h
   uint64_t size_ = 0;

@@ -354,7 +354,7 @@ class Converter {
   int64_t sink_brick_bytes() const { return layout_.brick_nodes() * 30; }
 
   BandedBuildStats run_alone() {
-    out_.emplace(output_);
+    out_.emplace(output_, AtomicFile::Appends::direct);  // written once, start to end
     const std::array<uint8_t, kHeaderBytes> blank{};
     out_->write(blank.data(), blank.size());
     FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_);

@@ -1,0 +1,111 @@
+#include "io/file/direct_appends.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <new>
+
+#include "io/file/positioned_io.h"
+
+namespace isotope {
+
+void DirectAppends::Free::operator()(unsigned char* p) const { std::free(p); }
+
+DirectAppends::DirectAppends(int direct, int buffered) : direct_(direct), buffered_(buffered) {
+  for (auto& b : buffers_) {
+    b.reset(static_cast<unsigned char*>(std::aligned_alloc(kAlign, kBufferBytes)));
+    if (!b) throw std::bad_alloc();
+  }
+  thread_ = std::thread([this] { writer(); });
+}
+
+DirectAppends::~DirectAppends() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  changed_.notify_all();
+  thread_.join();
+}
+
+int DirectAppends::write_out(const unsigned char* data, size_t bytes, uint64_t offset) {
+  if (direct_ >= 0 && offset % kAlign == 0 && bytes % kAlign == 0) {
+    const int err = pwrite_all(direct_, data, bytes, offset);
+    if (err != EINVAL) return err;
+    direct_ = -1;  // refused (not a short write's unaligned rest: that fails again below, as it should)
+  }
+  return pwrite_all(buffered_, data, bytes, offset);
+}
+
+void DirectAppends::writer() {
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    changed_.wait(lock, [&] { return pending_ >= 0 || stop_; });
+    if (pending_ < 0) return;  // stopped, nothing held
+    const unsigned char* data = buffers_[pending_].get();
+    const uint64_t offset = pending_offset_;
+    const size_t bytes = pending_bytes_;
+    lock.unlock();
+    const int err = write_out(data, bytes, offset);
+    lock.lock();
+    if (err != 0 && error_ == 0) error_ = err;
+    pending_ = -1;
+    changed_.notify_all();
+  }
+}
+
+int DirectAppends::wait_idle() {
+  std::unique_lock lock(mutex_);
+  changed_.wait(lock, [&] { return pending_ < 0; });
+  return error_;
+}
+
+int DirectAppends::append(const void* data, size_t bytes) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  while (bytes > 0) {
+    const size_t piece = std::min(bytes, kBufferBytes - used_);
+    std::memcpy(buffers_[fill_].get() + used_, p, piece);
+    used_ += piece, p += piece, bytes -= piece;
+    if (used_ < kBufferBytes) break;
+    // Full: to the writer, once it is done with the other buffer, which this one then becomes.
+    {
+      std::unique_lock lock(mutex_);
+      changed_.wait(lock, [&] { return pending_ < 0; });
+      if (error_ != 0) return error_;
+      pending_ = fill_;
+      pending_offset_ = written_;
+      pending_bytes_ = used_;
+    }
+    changed_.notify_all();
+    fill_ ^= 1;
+    written_ += used_;
+    used_ = 0;
+  }
+  return 0;
+}
+
+int DirectAppends::overwrite(uint64_t offset, const void* data, size_t bytes) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  if (offset < written_) {  // on disk or on its way: once the writer is done, through the page cache
+    if (const int err = wait_idle()) return err;
+    const size_t before = static_cast<size_t>(std::min<uint64_t>(bytes, written_ - offset));
+    if (const int err = pwrite_all(buffered_, p, before, offset)) return err;
+    p += before, offset += before, bytes -= before;
+  }
+  if (bytes > 0) std::memcpy(buffers_[fill_].get() + (offset - written_), p, bytes);
+  return 0;
+}
+
+int DirectAppends::drain() {
+  if (const int err = wait_idle()) return err;
+  const unsigned char* data = buffers_[fill_].get();
+  const size_t whole = used_ / kAlign * kAlign;
+  if (const int err = write_out(data, whole, written_)) return err;
+  if (const int err = pwrite_all(buffered_, data + whole, used_ - whole, written_ + whole)) return err;
+  written_ += used_;
+  used_ = 0;
+  return 0;
+}
+
+}  // namespace isotope

@@ -1,0 +1,74 @@
+#pragma once
+// The appends of a large output written past the page cache (O_DIRECT), a buffer at a time by a
+// writer thread of their own while the caller goes on producing the next.
+//
+// Why: a store of a float volume is as large as its input, and copying it into the page cache
+// (into pages the kernel must first find, and a virtual machine back) cost as much as a quarter
+// of a convert's processor time (docs/METHOD.md, "Reading and writing files"). A direct write
+// moves the bytes from the buffer to the disk; the fsync that makes the output durable then waits
+// for nothing but metadata.
+//
+// The appends start at offset 0 of the file. Whole buffers (aligned in memory and in the file) go
+// through DIRECT; the last, partial one goes through BUFFERED up to its unaligned end, as do
+// overwrites of bytes already written and everything after a direct write is refused (EINVAL: a
+// file system or device that takes no such writes, or other alignment), so that the bytes on
+// disk are the same either way.
+#include <atomic>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+namespace isotope {
+
+class DirectAppends {
+ public:
+  // DIRECT: the file opened with O_DIRECT, or -1 to write all through BUFFERED, the same file
+  // opened without it. Neither is closed here. Throws std::system_error when no thread can start.
+  DirectAppends(int direct, int buffered);
+  ~DirectAppends();  // waits for a write under way; an error not yet reported is dropped
+  DirectAppends(const DirectAppends&) = delete;
+  DirectAppends& operator=(const DirectAppends&) = delete;
+
+  // Each returns 0, or the errno of the first write that failed (that one, or an earlier one the
+  // writer thread met); after a failure the file's content means nothing.
+  int append(const void* data, size_t bytes);
+  // Overwrites BYTES at OFFSET, all of them appended before (a header completed last).
+  int overwrite(uint64_t offset, const void* data, size_t bytes);
+  // Writes all that was appended. Appends may follow.
+  int drain();
+
+  uint64_t size() const { return written_ + used_; }
+  bool direct() const { return direct_ >= 0; }  // false from the first refusal on
+
+ private:
+  static constexpr size_t kAlign = 4096;           // memory and file offsets of a direct write
+  static constexpr size_t kBufferBytes = 1 << 20;  // a direct write's size; two buffers in all
+
+  int write_out(const unsigned char* data, size_t bytes, uint64_t offset);  // direct, else buffered
+  int wait_idle();  // until the writer holds no buffer; its error
+  void writer();
+
+  struct Free {
+    void operator()(unsigned char* p) const;
+  };
+  std::unique_ptr<unsigned char, Free> buffers_[2];
+  std::atomic<int> direct_;  // the writer thread may give it up
+  int buffered_;
+  int fill_ = 0;          // the buffer being filled
+  size_t used_ = 0;       // bytes of it
+  uint64_t written_ = 0;  // the file offset of its first byte: all before went to the writer
+
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  int pending_ = -1;  // the buffer the writer holds, or -1
+  uint64_t pending_offset_ = 0;
+  size_t pending_bytes_ = 0;
+  int error_ = 0;
+  bool stop_ = false;
+  std::thread thread_;  // last: started once everything above is in place
+};
+
+}  // namespace isotope
