@@ -153,13 +153,13 @@ AtomicFile::AtomicFile(std::string path, Appends appends) : path_(std::move(path
   std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferBytes);
   registered_ = register_temporary(temp_path_);
   if (appends == Appends::direct) {
-    // A file system that refuses O_DIRECT here (or a thread that cannot start) leaves the appends
-    // to stdio, as for any other output.
+    // Where the file system refuses O_DIRECT, the writer thread writes the same buffers through
+    // the page cache; where no thread can start, the appends go to stdio, as any other output's.
     direct_fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
     try {
       direct_ = std::make_unique<DirectAppends>(direct_fd_, ::fileno(file_));
     } catch (const std::exception&) {
-      direct_.reset();
+      end_direct();
     }
   }
 }

@@ -9,10 +9,9 @@
 // for nothing but metadata.
 //
 // The appends start at offset 0 of the file. Whole buffers (aligned in memory and in the file) go
-// through DIRECT; the last, partial one goes through BUFFERED up to its unaligned end, as do
-// overwrites of bytes already written and everything after a direct write is refused (EINVAL: a
-// file system or device that takes no such writes, or other alignment), so that the bytes on
-// disk are the same either way.
+// through DIRECT. Through BUFFERED go the last, partial buffer, overwrites of bytes already
+// written, and every write once a direct one was refused (EINVAL: a file system or device that
+// takes no such writes, or wants another alignment): the bytes on disk are the same either way.
 #include <atomic>
 #include <condition_variable>
 #include <cstddef>
