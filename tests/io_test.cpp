@@ -812,8 +812,8 @@ TEST_F(IoTest, AtomicFileRegionsAreFilledOnSeveralThreadsBetweenOrdinaryWrites) 
 
 // Direct appends (io/file/direct_appends.h) write the bytes they were given, past the page cache
 // or through it: pieces of odd sizes across several of its buffers, overwrites of bytes on disk,
-// in the buffer being filled and across the two, appends after a drain, a file whose end is a
-// whole buffer and one whose end is not.
+// in the buffer being filled and across the two, and appends after a drain, from an aligned
+// offset and from an unaligned one.
 TEST_F(IoTest, DirectAppendsWriteWhatTheyWereGivenWithOrWithoutThePageCache) {
   for (const bool direct : {false, true}) {
     for (const size_t total : {size_t{3} << 20, (size_t{3} << 20) + 4099}) {
@@ -833,7 +833,7 @@ TEST_F(IoTest, DirectAppendsWriteWhatTheyWereGivenWithOrWithoutThePageCache) {
         const size_t half = total / 2;
         for (size_t at = 0, piece = 1; at < half; at += piece, piece = piece * 3 % 70001 + 1)
           ASSERT_EQ(appends.append(expected.data() + at, std::min(piece, half - at)), 0);
-        ASSERT_EQ(appends.drain(), 0);  // the second half starts at an unaligned offset
+        ASSERT_EQ(appends.drain(), 0);  // the second half starts aligned at 3 MiB, unaligned at 3 MiB + 4099
         for (size_t at = half, piece = 7; at < total; at += piece, piece = piece * 5 % 300007 + 1)
           ASSERT_EQ(appends.append(expected.data() + at, std::min(piece, total - at)), 0);
         EXPECT_EQ(appends.size(), total);

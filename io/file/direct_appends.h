@@ -25,7 +25,8 @@ namespace isotope {
 class DirectAppends {
  public:
   // DIRECT: the file opened with O_DIRECT, or -1 to write all through BUFFERED, the same file
-  // opened without it. Neither is closed here. Throws std::system_error when no thread can start.
+  // opened without it. Neither is closed here. Throws std::bad_alloc without memory for the
+  // buffers, std::system_error when no thread can start.
   DirectAppends(int direct, int buffered);
   ~DirectAppends();  // waits for a write under way; an error not yet reported is dropped
   DirectAppends(const DirectAppends&) = delete;
