@@ -3,8 +3,8 @@
 // writer thread of their own while the caller goes on producing the next.
 //
 // Why: a store of a float volume is as large as its input, and copying it into the page cache
-// (into pages the kernel must first find, and a virtual machine back) cost as much as a quarter
-// of a convert's processor time (docs/METHOD.md, "Reading and writing files"). A direct write
+// (into pages the kernel must first find, and a virtual machine back) cost a sixth of a convert's
+// processor time (docs/METHOD.md, "Reading and writing files"). A direct write
 // moves the bytes from the buffer to the disk; the fsync that makes the output durable then waits
 // for nothing but metadata.
 //
