@@ -2,21 +2,17 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cstdlib>
 #include <cstring>
-#include <new>
 
 #include "io/file/positioned_io.h"
 
 namespace isotope {
 
-void DirectAppends::Free::operator()(unsigned char* p) const { std::free(p); }
-
-DirectAppends::DirectAppends(int direct, int buffered) : direct_(direct), buffered_(buffered) {
-  for (auto& b : buffers_) {
-    b.reset(static_cast<unsigned char*>(std::aligned_alloc(kAlign, kBufferBytes)));
-    if (!b) throw std::bad_alloc();
-  }
+DirectAppends::DirectAppends(int direct, int buffered)
+    : buffers_{detail::make_page_aligned<unsigned char>(kBufferBytes),
+               detail::make_page_aligned<unsigned char>(kBufferBytes)},
+      direct_(direct),
+      buffered_(buffered) {
   thread_ = std::thread([this] { writer(); });
 }
 

@@ -20,6 +20,8 @@
 #include <mutex>
 #include <thread>
 
+#include "isotope/detail/huge_page_allocator.h"
+
 namespace isotope {
 
 class DirectAppends {
@@ -44,17 +46,14 @@ class DirectAppends {
   bool direct() const { return direct_ >= 0; }  // false from the first refusal on
 
  private:
-  static constexpr size_t kAlign = 4096;           // memory and file offsets of a direct write
-  static constexpr size_t kBufferBytes = 1 << 20;  // a direct write's size; two buffers in all
+  static constexpr size_t kAlign = detail::kPageBytes;  // memory and file offsets of a direct write
+  static constexpr size_t kBufferBytes = 1 << 20;       // a direct write's size; two buffers in all
 
   int write_out(const unsigned char* data, size_t bytes, uint64_t offset);  // direct, else buffered
   int wait_idle();  // until the writer holds no buffer; its error
   void writer();
 
-  struct Free {
-    void operator()(unsigned char* p) const;
-  };
-  std::unique_ptr<unsigned char, Free> buffers_[2];
+  detail::PageAlignedArray<unsigned char> buffers_[2];
   std::atomic<int> direct_;  // the writer thread may give it up
   int buffered_;
   int fill_ = 0;          // the buffer being filled
