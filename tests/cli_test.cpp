@@ -518,7 +518,8 @@ TEST_F(Cli, AFullDiskFailsWithAMessageAndLeavesEveryOutputAsItWas) {
   }
   // A store is appended past the page cache by a writer thread a MiB at a time: one smaller than
   // that (180 KB) meets the limit in its last write, one of 8.5 MB in the writer thread's.
-  for (const std::string& input : {vol, generate("sphere", 129, "s_129x129x129_float32.raw")}) {
+  const std::string big = generate("sphere", 129, "s_129x129x129_float32.raw");
+  for (const std::string& input : {vol, big}) {
     const std::string cmd = limit + quote(ISOTOPE_BINARY) + " convert " + quote(input) + " " + quote(store) + " -q 2>" +
                             quote(in_work("err"));
     const int status = std::system(("bash -c " + quote(cmd)).c_str());
@@ -528,6 +529,18 @@ TEST_F(Cli, AFullDiskFailsWithAMessageAndLeavesEveryOutputAsItWas) {
     fs::remove(in_work("err"));
     EXPECT_FALSE(fs::exists(store));
   }
+  // A mesh's large arrays go past the page cache where whole pages allow: the faces of this one
+  // (2.2 MB) meet a limit of 1 MiB in such a write, on 2 threads.
+  const std::set<std::string> before = listing();
+  const std::string cmd = "ulimit -f 1024; " + quote(ISOTOPE_BINARY) + " extract " + quote(big) +
+                          " --iso 0 --threads 2 -o " + quote(mesh) + " 2>" + quote(in_work("err"));
+  const int status = std::system(("bash -c " + quote(cmd)).c_str());
+  ASSERT_TRUE(WIFEXITED(status)) << "killed by a signal";
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  EXPECT_NE(slurp(in_work("err")).find("m.ply: write failed: File too large"), std::string::npos);
+  fs::remove(in_work("err"));
+  EXPECT_EQ(listing(), before);
+  EXPECT_EQ(slurp(mesh), "old mesh");
 }
 
 TEST_F(Cli, InvalidNumbersAreUsageErrors) {

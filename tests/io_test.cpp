@@ -5,6 +5,7 @@
 #include <hdf5.h>
 #include <linux/fs.h>
 #include <sys/ioctl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <tbb/global_control.h>
@@ -808,6 +809,61 @@ TEST_F(IoTest, AtomicFileRegionsAreFilledOnSeveralThreadsBetweenOrdinaryWrites) 
     f.commit();
   }
   EXPECT_EQ(read_bytes(p), expected);
+}
+
+// A large region's whole pages go past the page cache (O_DIRECT) and its partial pages through it:
+// filled on several threads, out of order, in pieces of odd sizes at odd offsets (large ones, ones
+// of about 64 KB whose whole pages may or may not be enough for a direct write, small ones), the
+// file holds every byte in its place, and where the file system takes direct writes, most of its
+// pages are not in the page cache once it is finished (the direct writes never put them there).
+TEST_F(IoTest, AtomicFileLargeRegionsGoPastThePageCacheWithTheSameBytes) {
+  const std::string p = path("large_regions.bin");
+  const size_t n = (size_t{5} << 20) + 4099;
+  std::vector<unsigned char> bytes(n);
+  for (size_t i = 0; i < n; ++i) bytes[i] = static_cast<unsigned char>(i * 11 + i / 4091);
+  std::vector<std::pair<size_t, size_t>> pieces;  // [begin, end)
+  for (size_t at = 0, k = 0; at < n; ++k) {
+    const size_t length = std::min(n - at, k % 3 == 0 ? 852001 + 37 * k : k % 3 == 1 ? 70001 - 7 * k : 1000 + k);
+    pieces.emplace_back(at, at + length);
+    at += length;
+  }
+  std::vector<unsigned char> expected{'h', 'e', 'a', 'd', 'e', 'r'};  // the region starts 6 bytes into a page
+  std::vector<unsigned char> resident;
+  {
+    AtomicFile f(p);
+    f.write("header", 6);
+    const uint64_t at = f.append_region(n);
+    std::atomic<size_t> taken{0};
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 3; ++t)
+      threads.emplace_back([&] {
+        for (size_t i; (i = taken++) < pieces.size();) {
+          const auto [begin, end] = pieces[pieces.size() - 1 - i];  // the last piece first
+          f.write_region(at + begin, bytes.data() + begin, end - begin);
+        }
+      });
+    for (std::thread& th : threads) th.join();
+    f.write("tail", 4);
+    f.finish();
+    const int fd = ::open(f.temp_path().c_str(), O_RDONLY | O_CLOEXEC);
+    ASSERT_GE(fd, 0);
+    const size_t file_bytes = 6 + n + 4, pages = (file_bytes + 4095) / 4096;
+    void* map = ::mmap(nullptr, file_bytes, PROT_READ, MAP_SHARED, fd, 0);  // touches no page
+    ASSERT_NE(map, MAP_FAILED);
+    resident.resize(pages);
+    ASSERT_EQ(::mincore(map, file_bytes, resident.data()), 0);
+    ::munmap(map, file_bytes);
+    ::close(fd);
+    f.commit();
+  }
+  expected.insert(expected.end(), bytes.begin(), bytes.end());
+  expected.insert(expected.end(), {'t', 'a', 'i', 'l'});
+  EXPECT_EQ(read_bytes(p), expected);
+  const int probe = ::open(path("probe.bin").c_str(), O_WRONLY | O_CREAT | O_DIRECT | O_CLOEXEC, 0644);
+  if (probe < 0) GTEST_SKIP() << "the file system of " << dir_ << " takes no O_DIRECT: " << std::strerror(errno);
+  ::close(probe);
+  const auto cached = std::count_if(resident.begin(), resident.end(), [](unsigned char r) { return (r & 1) != 0; });
+  EXPECT_LT(cached, static_cast<std::ptrdiff_t>(resident.size() / 10)) << "of " << resident.size() << " pages";
 }
 
 // Direct appends (io/file/direct_appends.h) write the bytes they were given, past the page cache

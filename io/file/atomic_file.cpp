@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstring>
@@ -166,6 +167,7 @@ AtomicFile::AtomicFile(std::string path, Appends appends) : path_(std::move(path
 
 AtomicFile::~AtomicFile() {
   end_direct();
+  if (region_fd_ >= 0) ::close(region_fd_);
   if (file_ != nullptr) std::fclose(file_);
   if (!committed_ && !temp_path_.empty()) std::remove(temp_path_.c_str());
   unregister_temporary(registered_);
@@ -205,18 +207,55 @@ void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
 uint64_t AtomicFile::append_region(uint64_t bytes) {
   const uint64_t at = size_;
   continue_at(at + bytes);
+  // Opened once, on the first large region: a small mesh's file never asks for it.
+  if (bytes >= kDirectRegionBytes && region_fd_ < 0 && regions_direct_.load(std::memory_order_relaxed)) {
+    region_fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
+    if (region_fd_ < 0) regions_direct_ = false;
+  }
   return at;
 }
 
 void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) const {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (offset + bytes > size_) throw IoError(path_ + ": write_region past the regions appended");
-  if (const int err = pwrite_all(::fileno(file_), data, bytes, offset))
+  const int buffered = ::fileno(file_);
+  const auto* p = static_cast<const unsigned char*>(data);
+  // The whole pages of the piece: [first, last).
+  constexpr uint64_t kPage = detail::kPageBytes;
+  const uint64_t first = (offset + kPage - 1) & ~(kPage - 1), last = (offset + bytes) & ~(kPage - 1);
+  if (region_fd_ >= 0 && last > first && last - first >= kMinDirectBytes &&
+      regions_direct_.load(std::memory_order_relaxed)) {
+    // Through the page cache, a mesh's copy into fresh pages took a third of a one-shot eps 0's
+    // processor time, and parallel buffered writes queued on the file's lock (docs/METHOD.md,
+    // "Reading and writing files").
+    if (const int err = pwrite_all(buffered, p, first - offset, offset))
+      throw IoError(path_ + ": write failed: " + errno_text(err));
+    unsigned char* bounce = positioned_detail::bounce_buffer();
+    for (uint64_t at = first; at < last;) {
+      const size_t piece = static_cast<size_t>(std::min<uint64_t>(last - at, positioned_detail::kBounceBytes));
+      const unsigned char* from = p + (at - offset);
+      int err = EINVAL;
+      if (bounce != nullptr && regions_direct_.load(std::memory_order_relaxed)) {
+        std::memcpy(bounce, from, piece);
+        err = pwrite_all(region_fd_, bounce, piece, at);
+      }
+      if (err == EINVAL) {  // refused (or no bounce buffer): through the page cache, from here on
+        if (bounce != nullptr) regions_direct_ = false;
+        err = pwrite_all(buffered, from, piece, at);
+      }
+      if (err != 0) throw IoError(path_ + ": write failed: " + errno_text(err));
+      at += piece;
+    }
+    if (const int err = pwrite_all(buffered, p + (last - offset), offset + bytes - last, last))
+      throw IoError(path_ + ": write failed: " + errno_text(err));
+    return;
+  }
+  if (const int err = pwrite_all(buffered, data, bytes, offset))
     throw IoError(path_ + ": write failed: " + errno_text(err));
   // The disk's writeback of these bytes starts now, on this thread, while the other threads still
   // encode theirs: finish()'s fsync then waits for less (a hint; what fails shows at the fsync).
   static_cast<void>(
-      ::sync_file_range(::fileno(file_), static_cast<off_t>(offset), static_cast<off_t>(bytes), SYNC_FILE_RANGE_WRITE));
+      ::sync_file_range(buffered, static_cast<off_t>(offset), static_cast<off_t>(bytes), SYNC_FILE_RANGE_WRITE));
 }
 
 void AtomicFile::continue_at(uint64_t offset) {
@@ -232,6 +271,8 @@ void AtomicFile::finish() {
   if (finished_) return;
   if (file_ == nullptr) throw IoError(path_ + ": finish after commit");
   drain_direct();
+  if (region_fd_ >= 0) ::close(region_fd_);  // its writes are done: each returned when the disk had it
+  region_fd_ = -1;
   // Buffered data may only meet a full disk here, so flush and close are checked too.
   errno = 0;
   const bool flushed = std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
