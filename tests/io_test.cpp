@@ -24,6 +24,7 @@
 #include <iterator>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <utility>
@@ -40,6 +41,7 @@
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
 #include "io/volume/volume_writer.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 #include "tests/child_process.h"
 #include "tests/io_error_of.h"
@@ -811,6 +813,21 @@ TEST_F(IoTest, AtomicFileRegionsAreFilledOnSeveralThreadsBetweenOrdinaryWrites) 
   EXPECT_EQ(read_bytes(p), expected);
 }
 
+// Of each page of the file's first BYTES, whether the page cache holds it (mincore's bit 0): mapped,
+// not read, so that looking touches no page.
+std::vector<unsigned char> pages_in_cache(const std::string& file, size_t bytes) {
+  std::vector<unsigned char> resident((bytes + 4095) / 4096);
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error(file + ": cannot open");
+  void* map = ::mmap(nullptr, bytes, PROT_READ, MAP_SHARED, fd, 0);
+  ::close(fd);
+  if (map == MAP_FAILED) throw std::runtime_error(file + ": cannot map");
+  const int looked = ::mincore(map, bytes, resident.data());
+  ::munmap(map, bytes);
+  if (looked != 0) throw std::runtime_error(file + ": mincore failed");
+  return resident;
+}
+
 // A large region's whole pages go past the page cache (O_DIRECT) and its partial pages through it:
 // filled on several threads, out of order, in pieces of odd sizes at odd offsets (large ones, ones
 // of about 64 KB whose whole pages may or may not be enough for a direct write, small ones), the
@@ -845,23 +862,23 @@ TEST_F(IoTest, AtomicFileLargeRegionsGoPastThePageCacheWithTheSameBytes) {
     for (std::thread& th : threads) th.join();
     f.write("tail", 4);
     f.finish();
-    const int fd = ::open(f.temp_path().c_str(), O_RDONLY | O_CLOEXEC);
-    ASSERT_GE(fd, 0);
-    const size_t file_bytes = 6 + n + 4, pages = (file_bytes + 4095) / 4096;
-    void* map = ::mmap(nullptr, file_bytes, PROT_READ, MAP_SHARED, fd, 0);  // touches no page
-    ASSERT_NE(map, MAP_FAILED);
-    resident.resize(pages);
-    ASSERT_EQ(::mincore(map, file_bytes, resident.data()), 0);
-    ::munmap(map, file_bytes);
-    ::close(fd);
+    resident = pages_in_cache(f.temp_path(), 6 + n + 4);
     f.commit();
   }
   expected.insert(expected.end(), bytes.begin(), bytes.end());
   expected.insert(expected.end(), {'t', 'a', 'i', 'l'});
   EXPECT_EQ(read_bytes(p), expected);
-  const int probe = ::open(path("probe.bin").c_str(), O_WRONLY | O_CREAT | O_DIRECT | O_CLOEXEC, 0644);
-  if (probe < 0) GTEST_SKIP() << "the file system of " << dir_ << " takes no O_DIRECT: " << std::strerror(errno);
-  ::close(probe);
+  // Whether this file system's direct writes leave the page cache alone: 64 KB written so, then looked for.
+  const std::string probe = path("probe.bin");
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_DIRECT | O_CLOEXEC, 0644);
+  if (fd < 0) GTEST_SKIP() << "the file system of " << dir_ << " takes no O_DIRECT: " << std::strerror(errno);
+  const auto block = detail::make_page_aligned<unsigned char>(size_t{64} << 10);
+  std::memset(block.get(), 7, size_t{64} << 10);
+  const bool written = ::pwrite(fd, block.get(), size_t{64} << 10, 0) == (ssize_t{64} << 10);
+  ::close(fd);
+  const std::vector<unsigned char> probed = pages_in_cache(probe, size_t{64} << 10);
+  if (!written || std::any_of(probed.begin(), probed.end(), [](unsigned char r) { return (r & 1) != 0; }))
+    GTEST_SKIP() << "the file system of " << dir_ << " takes no direct write past its page cache";
   const auto cached = std::count_if(resident.begin(), resident.end(), [](unsigned char r) { return (r & 1) != 0; });
   EXPECT_LT(cached, static_cast<std::ptrdiff_t>(resident.size() / 10)) << "of " << resident.size() << " pages";
 }
