@@ -56,10 +56,10 @@ class AtomicFile {
   // write on one thread alone held the others back). Returns where the bytes start.
   uint64_t append_region(uint64_t bytes);
   // Writes BYTES at OFFSET inside a region append_region() made. Safe on several threads at once.
-  // In a region of at least kDirectRegionBytes, the whole pages go past the page cache (O_DIRECT,
-  // from this thread's page-aligned bounce buffer) and the partial pages at the ends through it;
-  // elsewhere, or where the file system takes no direct writes, all go through the page cache and
-  // their writeback starts at once. The bytes on disk are the same either way.
+  // In a region of at least kDirectRegionBytes, a piece's whole pages go past the page cache
+  // (O_DIRECT, from this thread's page-aligned bounce buffer) and the partial pages at its two ends
+  // through it; a small piece, a small region, or a file system that takes no direct writes goes
+  // all through the page cache, its writeback started at once. The bytes on disk are the same.
   void write_region(uint64_t offset, const void* data, size_t bytes) const;
   static constexpr uint64_t kDirectRegionBytes = uint64_t{1} << 20;
   // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
@@ -79,13 +79,14 @@ class AtomicFile {
   void drain_direct();  // what direct appends hold, to the file; then stdio's (throws IoError)
   void end_direct();    // no more direct appends; nothing written
   static constexpr size_t kBufferBytes = size_t{256} << 10;
-  static constexpr uint64_t kMinDirectBytes = uint64_t{64} << 10;  // a piece's whole pages, to go direct
-  std::unique_ptr<char[]> buffer_;                                 // stdio's, for file_ (closed before this is freed)
+  // The whole pages a piece of a region needs to be written direct (fewer go through the page cache).
+  static constexpr uint64_t kMinDirectBytes = uint64_t{64} << 10;
+  std::unique_ptr<char[]> buffer_;         // stdio's, for file_ (closed before this is freed)
   std::string path_, target_, temp_path_;  // as named; the file replaced (output_target); temporary
   std::FILE* file_ = nullptr;
-  std::unique_ptr<DirectAppends> direct_;  // Appends::direct, until continue_at or finish
-  int direct_fd_ = -1;                     // the temporary opened with O_DIRECT, or -1
-  int region_fd_ = -1;                     // the temporary opened with O_DIRECT for regions (first large one on), or -1
+  std::unique_ptr<DirectAppends> direct_;           // Appends::direct, until continue_at or finish
+  int direct_fd_ = -1;                              // the temporary opened with O_DIRECT, or -1
+  int region_fd_ = -1;                              // opened with O_DIRECT at the first large region, or -1
   mutable std::atomic<bool> regions_direct_{true};  // until a direct write is refused
   bool finished_ = false, committed_ = false;
   int registered_ = -1;  // io/file/temporary_registry.h

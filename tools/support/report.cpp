@@ -236,6 +236,17 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   return j;
 }
 
+namespace {
+// A stage's seconds to four significant digits, not to the millisecond: a small volume's
+// extraction takes a few milliseconds, where one step of the last digit was 15-20% of it. From
+// 1,000 s on, whole seconds.
+std::string stage_seconds(double seconds) {
+  char b[32];
+  std::snprintf(b, sizeof b, seconds < 1000 ? "%#.4g" : "%.0f", seconds);
+  return b;
+}
+}  // namespace
+
 std::string summary_line(const ExtractionRun& run) {
   const MeshTopology& t = run.topology;
   std::string chosen = run.options.max_triangles > 0 ? "; eps " + std::to_string(run.extract.chosen_eps) : "";
@@ -243,16 +254,14 @@ std::string summary_line(const ExtractionRun& run) {
     chosen += ", eps-ties " + std::to_string(run.extract.chosen_eps_ties);
   if (run.extract.chosen_delta >= 0) chosen += ", delta " + std::to_string(run.extract.chosen_delta);
   char buf[640];
-  // The stage times to four significant digits, not to the millisecond: a small volume's
-  // extraction takes a few milliseconds, where one step of the last digit was 15-20% of it.
   std::snprintf(buf, sizeof buf,
                 "%s: %lld triangles, %lld vertices, %lld component%s, chi %lld, %lld boundary / %lld "
-                "non-manifold edges; preprocess %#.4g s, extract %#.4g s%s",
+                "non-manifold edges; preprocess %s s, extract %s s%s",
                 run.output.c_str(), static_cast<long long>(t.triangles), static_cast<long long>(t.vertices),
                 static_cast<long long>(t.components), t.components == 1 ? "" : "s",
                 static_cast<long long>(t.euler_characteristic), static_cast<long long>(t.boundary_edges),
-                static_cast<long long>(t.nonmanifold_edges), run.preprocess_seconds, run.extract_seconds,
-                chosen.c_str());
+                static_cast<long long>(t.nonmanifold_edges), stage_seconds(run.preprocess_seconds).c_str(),
+                stage_seconds(run.extract_seconds).c_str(), chosen.c_str());
   return buf + balance_text(run.extract.ranks);
 }
 
