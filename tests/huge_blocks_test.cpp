@@ -384,14 +384,15 @@ TEST_F(HugeBlocks, AReservationFreedLeavesItsPagesToTheNextOfItsPurpose) {
   EXPECT_EQ(warm_reservation_bytes(), 0u) << "more than the bound: given back";
 }
 
-// The pages a range touches, and only those, are in memory once it is prefaulted, on one thread
-// and on two. (Not counted as page faults of a write after: a sanitizer's memset touches
-// its shadow memory too.)
+// The pages a range touches, and only those, are in memory once it is prefaulted, on this thread
+// (prefault; 0 below) or on one thread or two (prefault_in_parallel). (Not counted as page faults of a write after: a
+// sanitizer's memset touches its shadow memory too.)
 TEST(Prefault, TheRangesPagesAndOnlyThoseAreFaultedInForWriting) {
   constexpr size_t kPage = 4096, kBytes = 40 * kMB;
-  for (int threads : {1, 2}) {
+  for (int threads : {0, 1, 2}) {
     SCOPED_TRACE(threads);
-    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism,
+                                    static_cast<size_t>(std::max(threads, 1)));
     // On 4 KB pages, residency is seen page by page.
     void* m = mmap(nullptr, kBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     ASSERT_NE(m, MAP_FAILED);
@@ -400,7 +401,10 @@ TEST(Prefault, TheRangesPagesAndOnlyThoseAreFaultedInForWriting) {
     // From 100 bytes into page 3 to 5 bytes into the page that starts 3 MB before the mapping ends:
     // both partial pages are the range's.
     const size_t from = 3 * kPage + 100, to = kBytes - 3 * kMB + 5;
-    prefault_in_parallel(p + from, to - from);
+    if (threads == 0)
+      prefault(p + from, to - from);
+    else
+      prefault_in_parallel(p + from, to - from);
     std::vector<unsigned char> resident(kBytes / kPage);
     ASSERT_EQ(mincore(m, kBytes, resident.data()), 0);
     size_t in = 0, wrong = 0;
@@ -413,6 +417,32 @@ TEST(Prefault, TheRangesPagesAndOnlyThoseAreFaultedInForWriting) {
     EXPECT_EQ(wrong, 0u);
     munmap(m, kBytes);
   }
+}
+
+// A full array grown for one more element holds the same elements in twice the room, every page of
+// it already in memory, the part no element was copied into included. Not full, it is left as it is.
+TEST(Prefault, AFullArrayGrowsToTwiceItsRoomWithEveryNewPageInMemory) {
+  constexpr size_t kPage = 4096, kCount = 2 * kMB / sizeof(uint32_t);  // 2 MB: from the huge-block store
+  std::vector<uint32_t, UninitializedHugePageAllocator<uint32_t>> v;
+  v.reserve(kCount);
+  for (size_t i = 0; i < kCount; ++i) v.push_back(static_cast<uint32_t>(i * 7));
+  ASSERT_EQ(v.capacity(), kCount);
+  grow_prefaulted(v);
+  ASSERT_EQ(v.size(), kCount);
+  ASSERT_EQ(v.capacity(), 2 * kCount);
+  for (size_t i = 0; i < kCount; ++i) ASSERT_EQ(v[i], static_cast<uint32_t>(i * 7)) << i;
+  // The 2 MB past the elements: neither copied into nor written yet.
+  auto* tail = reinterpret_cast<unsigned char*>(v.data() + kCount);
+  ASSERT_EQ(reinterpret_cast<uintptr_t>(tail) % kPage, 0u);
+  std::vector<unsigned char> resident(2 * kMB / kPage);
+  ASSERT_EQ(mincore(tail, 2 * kMB, resident.data()), 0);
+  EXPECT_EQ(std::count_if(resident.begin(), resident.end(), [](unsigned char r) { return (r & 1) != 0; }),
+            static_cast<std::ptrdiff_t>(resident.size()));
+  const uint32_t* before = v.data();
+  v.push_back(1);
+  grow_prefaulted(v);
+  EXPECT_EQ(v.data(), before);
+  EXPECT_EQ(v.capacity(), 2 * kCount);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 // named, and never crashes, by verify and by the reads an extraction makes.
 #include <gtest/gtest.h>
 #include <hdf5.h>
+#include <sys/mman.h>
 
 #include <algorithm>
 #include <atomic>
@@ -24,6 +25,7 @@
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "io/store/brick_cache.h"
+#include "io/store/brick_pool.h"
 #include "io/store/handover_file.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
@@ -143,6 +145,27 @@ class Store : public TempDirTest {
     EXPECT_EQ(mismatches, 0) << "of " << records << " records";
   }
 };
+
+// Blocks handed out past the pages already in memory bring the next quarter megabyte in at once
+// (detail::prefault), not a page at a time as the decoder writes them.
+TEST(BrickPool, ABlockPastThePagesInMemoryBringsTheNextQuarterMegabyteIn) {
+  constexpr size_t kPage = 4096, kAhead = size_t{256} << 10, kBlock = 40000;
+  BrickPool pool(kBlock);  // 40,000 is a multiple of 64: blocks lie back to back
+  const auto resident = [](const char* from, size_t bytes) {
+    std::vector<unsigned char> r(bytes / kPage);
+    EXPECT_EQ(mincore(const_cast<char*>(from), bytes, r.data()), 0);
+    return std::count_if(r.begin(), r.end(), [](unsigned char c) { return (c & 1) != 0; });
+  };
+  auto* first = static_cast<char*>(pool.allocate());
+  ASSERT_EQ(reinterpret_cast<uintptr_t>(first) % kPage, 0u);
+  EXPECT_EQ(resident(first, kAhead), static_cast<std::ptrdiff_t>(kAhead / kPage));
+  // The blocks that end within those pages bring none; the first past them brings the next 256 KB.
+  char* last = first;
+  while (last + 2 * kBlock <= first + kAhead) last = static_cast<char*>(pool.allocate());
+  last = static_cast<char*>(pool.allocate());
+  ASSERT_EQ(last, first + (kAhead / kBlock) * kBlock);
+  EXPECT_EQ(resident(first + kAhead, kAhead), static_cast<std::ptrdiff_t>(kAhead / kPage));
+}
 
 TEST_F(Store, RoundTripIsExactOnOddDimensionsAndAnyBrickSize) {
   const std::vector<Volume> volumes = {

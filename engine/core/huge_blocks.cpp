@@ -245,6 +245,12 @@ void prefault_in_parallel(void* p, size_t bytes) noexcept {
   }
 }
 
+void prefault(void* p, size_t bytes) noexcept {
+  if (bytes == 0) return;
+  const auto begin = reinterpret_cast<uintptr_t>(p) & ~uintptr_t{4095};  // madvise takes whole pages
+  madvise(reinterpret_cast<void*>(begin), reinterpret_cast<uintptr_t>(p) + bytes - begin, MADV_POPULATE_WRITE);
+}
+
 void* allocate_huge(size_t bytes) {
   const size_t rounded = std::max<size_t>(kHugePage, round_to_huge_pages(bytes));
   HugeBlocks& b = huge_blocks();

@@ -114,7 +114,10 @@ void MeshBuilder::keep_key(uint32_t fresh, uint64_t key, const Coord& p, const C
   // The two planes differ (a slab is a cell layer thick at least), so the vertex is on one at most.
   const int plane = z2 == plane_z2_[0] ? 0 : z2 == plane_z2_[1] ? 1 : -1;
   if (key == 0) key = cutter_.edge_key(p, q);
-  if (keep_keys_) keys_.push_back(key);
+  if (keep_keys_) {
+    detail::grow_prefaulted(keys_);
+    keys_.push_back(key);
+  }
   if (plane >= 0) plane_keys_[static_cast<size_t>(plane)].push_back({fresh, key});
 }
 
@@ -128,6 +131,7 @@ void MeshBuilder::add_tet(const std::array<Coord, 4>& corners, const std::array<
   }
   for (int t = 0; t < k.triangles; ++t) {
     const auto& tri = k.triangle[static_cast<size_t>(t)];
+    detail::grow_prefaulted(mesh_.triangles);
     mesh_.triangles.push_back({v[tri[0]], v[tri[1]], v[tri[2]]});
   }
 }

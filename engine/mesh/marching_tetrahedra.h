@@ -10,6 +10,7 @@
 
 #include "engine/hierarchy/lattice.h"
 #include "engine/mesh/edge_vertex_map.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
@@ -89,7 +90,10 @@ class MeshBuilder {
     return vertex(key, p, fp, q, fq);
   }
   uint32_t unwelded_vertex(const Coord& p, float fp, const Coord& q, float fq) { return new_vertex(0, p, fp, q, fq); }
-  void add_triangle(uint32_t a, uint32_t b, uint32_t c) { mesh_.triangles.push_back({a, b, c}); }
+  void add_triangle(uint32_t a, uint32_t b, uint32_t c) {
+    detail::grow_prefaulted(mesh_.triangles);
+    mesh_.triangles.push_back({a, b, c});
+  }
 
   // The triangles add_tet emits, unwelded (what a count of the mesh's triangles after clipping
   // builds again: engine/mesh/box_clip.h).
@@ -158,6 +162,7 @@ class MeshBuilder {
   // its p + q would be the origin).
   uint32_t new_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
     const auto fresh = static_cast<uint32_t>(mesh_.positions.size());
+    detail::grow_prefaulted(mesh_.positions);
     mesh_.positions.push_back(cutter_.point(p, fp, q, fq));
     const int64_t z2 = p[2] + q[2];
     if (keep_keys_ || z2 == plane_z2_[0] || z2 == plane_z2_[1]) keep_key(fresh, key, p, q);

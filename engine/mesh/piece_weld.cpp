@@ -74,6 +74,11 @@ Mesh weld(std::vector<PartMesh>& parts, int64_t side, bool room_to_clip) {
     std::vector<uint32_t> remap(p.keys.size());
     size_t m = 0;
     auto to = first_vertex[static_cast<size_t>(i)];
+    // This part's stretches of the arrays, faulted in at once rather than a page at a time
+    detail::prefault(out.positions.data() + to,
+                     (first_vertex[static_cast<size_t>(i) + 1] - to) * sizeof(out.positions[0]));
+    detail::prefault(out.triangles.data() + first_triangle[static_cast<size_t>(i)],
+                     p.mesh.triangles.size() * sizeof(out.triangles[0]));
     for (size_t k = 0; k < remap.size(); ++k) {
       if (m < meets.size() && meets[m].first == k) {
         remap[k] = meets[m++].second;

@@ -13,7 +13,7 @@ BrickPool::~BrickPool() {
 }
 
 void* BrickPool::allocate() {
-  const std::lock_guard<std::mutex> lock(mutex_);
+  std::unique_lock<std::mutex> lock(mutex_);
   if (!free_.empty()) {
     void* p = free_.back();
     free_.pop_back();
@@ -31,9 +31,16 @@ void* BrickPool::allocate() {
     }
     next_ = static_cast<char*>(c);
     end_ = next_ + chunk;
+    populated_ = next_;
   }
   void* p = next_;
   next_ += block_;
+  if (next_ <= populated_) return p;
+  char* from = populated_;
+  populated_ = std::min(end_, std::max(next_, populated_ + kPopulateAhead));
+  const size_t bytes = static_cast<size_t>(populated_ - from);
+  lock.unlock();  // another thread may take a block of these pages meanwhile: it faults them in itself
+  detail::prefault(from, bytes);
   return p;
 }
 

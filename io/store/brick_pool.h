@@ -22,11 +22,15 @@ class BrickPool {
 
  private:
   size_t block_;
+  // A new block past the pages faulted in faults in this much more at once (detail::prefault).
+  static constexpr size_t kPopulateAhead = size_t{256} << 10;
+
   std::mutex mutex_;
   std::vector<void*> free_;
   std::vector<void*> chunks_;
   char* next_ = nullptr;  // unused tail of the newest chunk
   char* end_ = nullptr;
+  char* populated_ = nullptr;  // the newest chunk's pages up to here are faulted in, or being so
 };
 
 }  // namespace isotope

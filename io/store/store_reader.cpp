@@ -103,7 +103,13 @@ const StoreReader::Directory& StoreReader::band_directory(int band) const {
   const std::lock_guard<std::mutex> lock(d.mutex);
   if (!d.entries) {
     const BandDirectory& where = header_.bands[static_cast<size_t>(band)];
-    auto entries = std::make_shared<Directory>(static_cast<size_t>(layout_.band(band).brick_count()));
+    // Faulted in at once before the zero-fill and the read write it: a large band's directory is
+    // megabytes of fresh memory (docs/METHOD.md, "Fresh memory")
+    const auto count = static_cast<size_t>(layout_.band(band).brick_count());
+    auto entries = std::make_shared<Directory>();
+    entries->reserve(count);
+    detail::prefault(entries->data(), count * sizeof(BrickEntry));
+    entries->resize(count);
     if (where.bytes != entries->size() * kEntryBytes) throw IoError(path_ + ": directory is truncated");
     read_span(fd_, entries->data(), where.bytes, where.offset, path_);
     check_directory(*entries, layout_.band(band).bricks, where, area_end_, path_);

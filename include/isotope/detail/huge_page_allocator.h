@@ -6,6 +6,7 @@
 // page per byte, more than the TLB misses it spares, and every extraction and convert measured
 // here ran as fast or faster without it (docs/METHOD.md, "Fresh memory").
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -24,6 +25,10 @@ inline constexpr size_t kHugePage = size_t{2} << 20;
 // costs more than the write itself (docs/METHOD.md, "Fresh memory"). A hint: where the kernel
 // refuses it, the pages fault in at the write as before.
 void prefault_in_parallel(void* p, size_t bytes) noexcept;
+// The same on this thread, in one call: for memory about to be written a little at a time (an
+// array that grows, blocks handed out one by one), where each page's own fault costs about twice
+// its share of one call here (docs/METHOD.md, "Fresh memory"). Pages already there cost a look.
+void prefault(void* p, size_t bytes) noexcept;
 
 // A block of at least BYTES, aligned to 2 MB; throws std::bad_alloc.
 // By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
@@ -152,6 +157,31 @@ struct UninitializedHugePageAllocator : HugePageAllocator<T> {
     ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
   }
 };
+
+// Makes room in V for at least one more element, as push_back would (twice the capacity), with
+// the new array's pages faulted in by prefault() before the elements are copied into it: a
+// growing array's pages, every one first touched by the copy or by the next elements, cost half.
+// The last growth faults in pages that may stay unwritten: at most half of that array.
+template <class Vec>
+[[gnu::noinline]] void grow_prefaulted_now(Vec& v) {
+  using T = typename Vec::value_type;
+  Vec bigger;
+  bigger.reserve(std::max<size_t>(2 * v.capacity(), size_t{4096} / sizeof(T)));
+  prefault(bigger.data(), bigger.capacity() * sizeof(T));
+  if constexpr (std::is_same_v<typename Vec::allocator_type, UninitializedHugePageAllocator<T>>) {
+    bigger.resize(v.size());  // unwritten: the copy below is one memmove
+    std::copy(v.begin(), v.end(), bigger.begin());
+  } else {
+    bigger.insert(bigger.end(), v.begin(), v.end());
+  }
+  v.swap(bigger);
+}
+// The growth out of line: the test is all that every push_back sees.
+template <class Vec>
+inline void grow_prefaulted(Vec& v) {
+  if (v.size() == v.capacity()) [[unlikely]]
+    grow_prefaulted_now(v);
+}
 
 // Arrays aligned to a page, not zero-filled (each element is written before it is read): for
 // buffers the kernel copies file pages into, where a destination a few bytes past its source's
