@@ -2,6 +2,7 @@
 // with the bands chained through nothing but each tile's next-band output, as the store writer
 // chains them through its scratch files.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <tbb/global_control.h>
 
 #include <atomic>
@@ -476,6 +477,30 @@ TEST(BandBuild, BandsOfLargerVolumesBuiltBesideAreBuiltFromTheirHandOver) {
 // tiles in flight, where runs of that many tiles, each waited for before the next began, left a
 // thread idle at each run's end. Here tile 1 finishes only once tile W (the first beyond a run of
 // W, the tiles in flight) has begun: it would wait for ever in runs, and a timeout fails it.
+// A hand-over in memory has its pages in memory before the tiles write it, a few rows at a time:
+// writing it whole takes (almost) no page fault on the writing thread.
+TEST(BandBuild, AHandoverInMemoryIsFaultedInBeforeTheTilesWriteIt) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "a sanitizer's writes fault in its own shadow memory";
+#else
+  const Box3 n{129, 129, 129};  // 8.6 MB of values and more of records
+  MemoryHandover h(n);
+  const int64_t row = n[0], plane = n[0] * n[1];
+  std::vector<float> values(static_cast<size_t>(plane * kHandoverBlock), 1.5f);
+  std::vector<Record> records(values.size());
+  rusage before{}, after{};
+  getrusage(RUSAGE_THREAD, &before);
+  for (int64_t z = 0; z < n[2]; z += kHandoverBlock)
+    h.write_box({0, 0, z}, {n[0], n[1], std::min(n[2], z + kHandoverBlock)}, values.data(), records.data(), row, plane);
+  getrusage(RUSAGE_THREAD, &after);
+  const auto pages = static_cast<long>(BandHandover::bytes(n) / 4096);
+  EXPECT_LT(after.ru_minflt - before.ru_minflt, pages / 100) << "of " << pages << " pages";
+  float v = 0;
+  h.read_values({5, 6, 128}, {6, 7, 129}, &v, 1, 1);
+  EXPECT_EQ(v, 1.5f);
+#endif
+}
+
 TEST(BandBuild, ASlowTileHoldsUpOnlyTheCommitsAfterIt) {
   const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
   if (thread_count() < 2) GTEST_FAIL() << "needs two threads";

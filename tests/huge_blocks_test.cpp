@@ -445,5 +445,21 @@ TEST(Prefault, AFullArrayGrowsToTwiceItsRoomWithEveryNewPageInMemory) {
   EXPECT_EQ(v.capacity(), 2 * kCount);
 }
 
+// Resized up, the elements kept and the new ones zero, within the capacity or past it; resized
+// down, the first ones kept.
+TEST(Prefault, AnArrayResizedPrefaultedKeepsItsElementsAndAddsZeros) {
+  std::vector<uint32_t, HugePageAllocator<uint32_t>> v{7, 8, 9};
+  resize_prefaulted(v, 2);
+  EXPECT_EQ(v, (std::vector<uint32_t, HugePageAllocator<uint32_t>>{7, 8}));
+  resize_prefaulted(v, 3);  // within the capacity
+  EXPECT_EQ(v, (std::vector<uint32_t, HugePageAllocator<uint32_t>>{7, 8, 0}));
+  const size_t large = 3 * kMB / sizeof(uint32_t);  // past it, from the huge-block store
+  resize_prefaulted(v, large);
+  ASSERT_EQ(v.size(), large);
+  EXPECT_EQ(v[0], 7u);
+  EXPECT_EQ(v[1], 8u);
+  EXPECT_EQ(std::count(v.begin() + 2, v.end(), 0u), static_cast<std::ptrdiff_t>(large - 2));
+}
+
 }  // namespace
 }  // namespace isotope::detail

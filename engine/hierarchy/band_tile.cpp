@@ -61,10 +61,10 @@ BandTile::BandTile(const StoreLayout& layout, int band, const Box3& core_lo, con
   // build() before any parent reads them, children by the caller where they exist), and
   // re-initializing the arrays of a large tile costs as much as filling them.
   const auto nodes = static_cast<size_t>(size_[0] * size_[1] * size_[2]);
-  if (values_.size() < nodes) values_.resize(nodes);
-  if (records_.size() < nodes) records_.resize(nodes);
+  if (values_.size() < nodes) detail::resize_prefaulted(values_, nodes);
+  if (records_.size() < nodes) detail::resize_prefaulted(records_, nodes);
   const auto cells = static_cast<size_t>(cells_[0] * cells_[1] * cells_[2]);
-  if (band > 0 && children_.size() < cells) children_.resize(cells);
+  if (band > 0 && children_.size() < cells) detail::resize_prefaulted(children_, cells);
 }
 
 float BandTile::value(const Coord& c) const {

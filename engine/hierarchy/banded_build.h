@@ -28,6 +28,7 @@
 #include "engine/core/progress.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/store_layout.h"
+#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 
@@ -79,6 +80,10 @@ class MemoryHandover : public BandHandover {
 #ifndef NDEBUG
     std::memset(static_cast<void*>(children_.get()), 0xFF, count(nodes) * sizeof(Record));
 #endif
+    // Every page is written, a few rows at a time by the tiles: faulted in first, on all threads
+    // (docs/METHOD.md, "Fresh memory").
+    detail::prefault_in_parallel(values_.get(), count(nodes) * sizeof(float));
+    detail::prefault_in_parallel(children_.get(), count(nodes) * sizeof(Record));
   }
   bool in_memory() const override { return true; }
   void write_box(const Box3& lo, const Box3& hi, const float* values, const Record* children, int64_t row,

@@ -183,6 +183,16 @@ inline void grow_prefaulted(Vec& v) {
     grow_prefaulted_now(v);
 }
 
+// V resized to N, the pages of the elements added faulted in at once before they are written (a
+// resize that zero-fills them touches every page anyway).
+template <class Vec>
+void resize_prefaulted(Vec& v, size_t n) {
+  if (n <= v.size()) return v.resize(n);
+  v.reserve(n);
+  prefault(v.data() + v.size(), (n - v.size()) * sizeof(typename Vec::value_type));
+  v.resize(n);
+}
+
 // Arrays aligned to a page, not zero-filled (each element is written before it is read): for
 // buffers the kernel copies file pages into, where a destination a few bytes past its source's
 // place in a page makes that copy several times slower (docs/METHOD.md, "Reading and writing files").
