@@ -105,11 +105,8 @@ const StoreReader::Directory& StoreReader::band_directory(int band) const {
     const BandDirectory& where = header_.bands[static_cast<size_t>(band)];
     // Faulted in at once before the zero-fill and the read write it: a large band's directory is
     // megabytes of fresh memory (docs/METHOD.md, "Fresh memory")
-    const auto count = static_cast<size_t>(layout_.band(band).brick_count());
     auto entries = std::make_shared<Directory>();
-    entries->reserve(count);
-    detail::prefault(entries->data(), count * sizeof(BrickEntry));
-    entries->resize(count);
+    detail::resize_prefaulted(*entries, static_cast<size_t>(layout_.band(band).brick_count()));
     if (where.bytes != entries->size() * kEntryBytes) throw IoError(path_ + ": directory is truncated");
     read_span(fd_, entries->data(), where.bytes, where.offset, path_);
     check_directory(*entries, layout_.band(band).bricks, where, area_end_, path_);
