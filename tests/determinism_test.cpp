@@ -20,12 +20,27 @@
 #include "engine/core/fields.h"
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
+#include "engine/extract/adaptive_extract.h"
 #include "engine/extract/extract.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "tests/test_support.h"
 
 namespace isotope {
 namespace {
+
+// The traversal is cut into pieces at level 6 (a few hundred), or on a small lattice higher up, so
+// that each piece spans at least 15 levels (2^15 finest tetrahedra), down to level 3; a lattice
+// with fewer levels than that is cut at its finest.
+TEST(Pieces, ASmallLatticeIsCutHigherUpSoThatEachPieceSpansFifteenLevels) {
+  const auto level_for = [](int64_t side) { return piece_level(Lattice::enclosing({side, side, side})); };
+  EXPECT_EQ(level_for(1025), 6);
+  EXPECT_EQ(level_for(129), 6);                                // k = 7: 21 levels
+  EXPECT_EQ(level_for(65), 3);                                 // k = 6: 18 levels
+  EXPECT_EQ(level_for(64), 3);                                 // hydrogen's 64^3 takes the same lattice
+  EXPECT_EQ(level_for(17), 3);                                 // k = 4: 12 levels
+  EXPECT_EQ(level_for(2), 0);                                  // one cell: 0 levels
+  EXPECT_EQ(piece_level(Lattice::enclosing({129, 5, 5})), 6);  // the largest side decides
+}
 
 // The loop behind the banded build's tiles: builds run ahead of the commits by at most a window
 // (each in its slot, never two at once in one), commits come in order, and a failed build stops

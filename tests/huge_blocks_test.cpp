@@ -419,6 +419,31 @@ TEST(Prefault, TheRangesPagesAndOnlyThoseAreFaultedInForWriting) {
   }
 }
 
+// A range under kPrefaultMinBytes is left to fault in as it is written; one of that many bytes is
+// faulted in (a call costs several microseconds, which a few pages, or an array in memory malloc
+// hands out again, do not repay).
+TEST(Prefault, ARangeUnderTheLeastIsLeftToItsWrites) {
+  constexpr size_t kPage = 4096, kBytes = 4 * kPrefaultMinBytes;
+  void* m = mmap(nullptr, kBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  ASSERT_NE(m, MAP_FAILED);
+  madvise(m, kBytes, MADV_NOHUGEPAGE);
+  auto* p = static_cast<unsigned char*>(m);
+  auto resident = [&](size_t from, size_t to) {
+    std::vector<unsigned char> r(kBytes / kPage);
+    EXPECT_EQ(mincore(m, kBytes, r.data()), 0);
+    return std::count_if(r.begin() + static_cast<std::ptrdiff_t>(from / kPage),
+                         r.begin() + static_cast<std::ptrdiff_t>(to / kPage),
+                         [](unsigned char x) { return (x & 1) != 0; });
+  };
+  prefault(p, kPrefaultMinBytes - kPage);
+  EXPECT_EQ(resident(0, kBytes), 0);
+  prefault(p + 2 * kPrefaultMinBytes, kPrefaultMinBytes);
+  EXPECT_EQ(resident(0, kBytes), static_cast<std::ptrdiff_t>(kPrefaultMinBytes / kPage));
+  EXPECT_EQ(resident(2 * kPrefaultMinBytes, 3 * kPrefaultMinBytes),
+            static_cast<std::ptrdiff_t>(kPrefaultMinBytes / kPage));
+  munmap(m, kBytes);
+}
+
 // A full array grown for one more element holds the same elements in twice the room, every page of
 // it already in memory, the part no element was copied into included. Not full, it is left as it is.
 TEST(Prefault, AFullArrayGrowsToTwiceItsRoomWithEveryNewPageInMemory) {

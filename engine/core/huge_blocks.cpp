@@ -246,7 +246,7 @@ void prefault_in_parallel(void* p, size_t bytes) noexcept {
 }
 
 void prefault(void* p, size_t bytes) noexcept {
-  if (bytes == 0) return;
+  if (bytes < kPrefaultMinBytes) return;
   const auto begin = reinterpret_cast<uintptr_t>(p) & ~uintptr_t{4095};  // madvise takes whole pages
   madvise(reinterpret_cast<void*>(begin), reinterpret_cast<uintptr_t>(p) + bytes - begin, MADV_POPULATE_WRITE);
 }

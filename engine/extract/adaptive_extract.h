@@ -25,9 +25,16 @@
 namespace isotope {
 
 // Deep enough for a few hundred pieces (6 roots, two children per level) to balance the threads,
-// shallow enough that each is worth a task. Fixed, so the pieces and hence the welding order do
-// not depend on the thread count.
-constexpr int kPieceLevel = 6;
+// shallow enough that each is worth a task: at most kPieceLevel, and at least kPieceDepth levels
+// above the finest, so that a piece of a small lattice still spans 2^15 finest tetrahedra (some
+// 5,500 cells). A piece costs a few microseconds of its own (its walk, its mesh, its share of the
+// weld), which on a 65^3 volume cut at level 6 was about half of a coarse extraction on two
+// threads (docs/METHOD.md, "Fresh memory"). Fixed by the lattice, so the pieces and hence the welding order do not
+// depend on the thread count.
+constexpr int kPieceLevel = 6, kPieceDepth = 15;
+inline int piece_level(const Lattice& lattice) {
+  return std::clamp(lattice.max_level() - kPieceDepth, std::min(3, lattice.max_level()), kPieceLevel);
+}
 
 // The adaptive extraction at the options' eps (in the source's value units): the traversal cut
 // into pieces run as parallel tasks (shared among processes with a group), their meshes welded in
@@ -48,7 +55,7 @@ bool extract_pieces(const Source& source, const ExtractOptions& options, const T
   together([&] {
     {  // scoped: a paged source's reader lets its bricks go before the pieces run
       Traversal<Source> top(source, rule);
-      pieces = top.split(std::min(kPieceLevel, source.lattice().max_level()));
+      pieces = top.split(piece_level(source.lattice()));
       total.tets_visited = top.tets_visited();
       total.tets_simplified = top.tets_simplified();
     }

@@ -28,7 +28,11 @@ void prefault_in_parallel(void* p, size_t bytes) noexcept;
 // The same on this thread, in one call: for memory about to be written a little at a time (an
 // array that grows, blocks handed out one by one), where each page's own fault costs about twice
 // its share of one call here (docs/METHOD.md, "Fresh memory"). Pages already there cost a look.
+// A range under kPrefaultMinBytes is left to fault in as it is written: the call costs about what
+// the faults of so few pages would, and all of it where they are already there, as a small array
+// in memory malloc hands out again mostly finds them.
 void prefault(void* p, size_t bytes) noexcept;
+inline constexpr size_t kPrefaultMinBytes = size_t{64} << 10;
 
 // A block of at least BYTES, aligned to 2 MB; throws std::bad_alloc.
 // By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
@@ -161,7 +165,8 @@ struct UninitializedHugePageAllocator : HugePageAllocator<T> {
 // Makes room in V for at least one more element, as push_back would (twice the capacity), with
 // the new array's pages faulted in by prefault() before the elements are copied into it: a
 // growing array's pages, every one first touched by the copy or by the next elements, cost half.
-// The last growth faults in pages that may stay unwritten: at most half of that array.
+// The last growth faults in pages that may stay unwritten: at most half of that array. (An array
+// under kPrefaultMinBytes grows as push_back grows it.)
 template <class Vec>
 [[gnu::noinline]] void grow_prefaulted_now(Vec& v) {
   using T = typename Vec::value_type;
