@@ -29,8 +29,8 @@ namespace isotope {
 // above the finest, so that a piece of a small lattice still spans 2^15 finest tetrahedra (some
 // 5,500 cells). A piece costs a few microseconds of its own (its walk, its mesh, its share of the
 // weld), which on a 65^3 volume cut at level 6 was about half of a coarse extraction on two
-// threads (docs/METHOD.md, "Fresh memory"). Fixed by the lattice, so the pieces and hence the welding order do not
-// depend on the thread count.
+// threads (docs/METHOD.md, "Fresh memory"). Fixed by the lattice, so the pieces and hence the
+// welding order do not depend on the thread count.
 constexpr int kPieceLevel = 6, kPieceDepth = 15;
 inline int piece_level(const Lattice& lattice) {
   return std::clamp(lattice.max_level() - kPieceDepth, std::min(3, lattice.max_level()), kPieceLevel);
