@@ -10,6 +10,7 @@
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/record_builder.h"
+#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 
@@ -75,6 +76,13 @@ Hierarchy Hierarchy::allocate(const std::array<int64_t, 3>& dims, int brick_bits
   if (fields.exact) h.exact_ = std::make_unique_for_overwrite<uint32_t[]>(n);
   if (fields.paper) h.paper_ = std::make_unique_for_overwrite<uint32_t[]>(n);
   if (fields.weights) h.weights_ = std::make_unique_for_overwrite<uint64_t[]>(n);
+  // Every page is written, a brick at a time by the tiles: faulted in first, on all threads
+  // (docs/METHOD.md, "Fresh memory").
+  auto prefault = [n](auto& array) {
+    if (array) detail::prefault_in_parallel(array.get(), n * sizeof(array[0]));
+  };
+  prefault(h.values_), prefault(h.bounds_), prefault(h.surplus_), prefault(h.exact_), prefault(h.paper_),
+      prefault(h.weights_);
   return h;
 }
 
