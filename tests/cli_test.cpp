@@ -1089,7 +1089,7 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
   for (const auto& [name, d] : dataset) {
     ASSERT_EQ(d["warm_over_memory"].size(), 6u) << name;
     for (const auto& p : d["warm_over_memory"]) {
-      EXPECT_GE(p["pairs"].get<int>(), 3) << p;
+      EXPECT_GE(p["pairs"].get<int>(), 7) << p;
       EXPECT_GT(p["ratio"].get<double>(), 0) << p;
     }
   }

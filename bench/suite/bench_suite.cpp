@@ -100,6 +100,7 @@ const std::map<std::string, double> kFormat2Ratio = {{"bolt", 0.268},     {"negh
 // The paper's speed claim (Sec. 4.6, quoting its ref. [6]): extraction and drawing together.
 constexpr double kPaperTrianglesPerSecondOne = 300000, kPaperTrianglesPerSecondMany = 800000;
 
+constexpr size_t kLeastPairs = 7;       // the fewest pairs of runs a warm-against-memory ratio takes
 constexpr double kCoarseShare = 0.10;   // the coarse eps keeps at most this share of the triangles
 constexpr double kDeltaOfRange = 0.02;  // simplify's delta, as a share of the value range
 
@@ -486,9 +487,14 @@ class Suite {
         f();
         return seconds_since(start);
       };
+      // More pairs than a row's runs: a ratio near 1.25x is decided by them (at least 7 pairs
+      // and a second; with 4, algebraic 257^3's coarse row on one thread read 1.34x where 31 in
+      // one process read 1.19-1.20x).
+      const size_t least = std::max<size_t>(policy_.min_runs, kLeastPairs);
+      const double seconds = std::max(policy_.min_seconds, 1.0);
       std::vector<double> ratios;
       double total = 0;
-      while (ratios.size() < policy_.min_runs || (total < policy_.min_seconds && ratios.size() < policy_.max_runs)) {
+      while (ratios.size() < least || (total < seconds && ratios.size() < policy_.max_runs)) {
         if (InterruptGuard::interrupted()) throw IoError("interrupted");
         double in_memory = 0, warm = 0;
         auto run_memory = [&] { in_memory = timed([&] { extract(memory, o); }); };
