@@ -541,6 +541,21 @@ TEST_F(Cli, AFullDiskFailsWithAMessageAndLeavesEveryOutputAsItWas) {
   fs::remove(in_work("err"));
   EXPECT_EQ(listing(), before);
   EXPECT_EQ(slurp(mesh), "old mesh");
+  // A convert's hand-over of 103 MB (257^3) goes to scratch files beside the store, which meet a
+  // limit of 32 MiB that the store (3 MB) does not: the same, with the scratch files named.
+  const std::string wide = in_work("s_257x257x257_uint8.raw");
+  ASSERT_EQ(run("generate sphere --size 257 --type uint8 -q -o " + quote(wide)).code, 0);
+  const std::set<std::string> before_convert = listing();
+  const std::string convert = "ulimit -f 32768; " + quote(ISOTOPE_BINARY) + " convert " + quote(wide) + " " +
+                              quote(store) + " -q 2>" + quote(in_work("err"));
+  const int converted = std::system(("bash -c " + quote(convert)).c_str());
+  ASSERT_TRUE(WIFEXITED(converted)) << "killed by a signal";
+  EXPECT_EQ(WEXITSTATUS(converted), 1);
+  const std::string err = slurp(in_work("err"));
+  EXPECT_NE(err.find("cannot write scratch data in '" + work().string() + "': File too large"), std::string::npos)
+      << err;
+  fs::remove(in_work("err"));
+  EXPECT_EQ(listing(), before_convert);
 }
 
 TEST_F(Cli, InvalidNumbersAreUsageErrors) {

@@ -87,5 +87,26 @@ TEST_F(ConvertMemory, VolumeEightTimesTheBudgetConvertsWithinItAndTheStoreIgnore
       << "the store written with --memory-mb " << kBudgetMb << " differs from the one written with 1024";
 }
 
+// A band's hand-over that fits the budget is kept in scratch files too (through the page cache),
+// not in the process's memory: a 257^3 volume, whose hand-over to band 1 is 129^3 entries of 48
+// bytes (103 MB, under a quarter of the default budget), converts with a peak resident set well
+// under that above the tiny volume's (140 MB where the hand-over was in memory, 31 MB now), and
+// the store is the one a budget too small for the hand-over writes.
+TEST_F(ConvertMemory, AHandOverThatFitsTheBudgetStaysOutOfTheProcesssMemory) {
+  const std::string volume = path("alg_257x257x257_uint8.raw");
+  const std::string tiny = path("sphere_9x9x9_uint8.raw");
+  expect_ok({"generate", "algebraic", "--size", "257", "--type", "uint8", "-q", "-o", volume});
+  expect_ok({"generate", "sphere", "--size", "9", "--type", "uint8", "-q", "-o", tiny});
+  const Child baseline = expect_ok({"convert", tiny, path("tiny.isotope"), "-q"});
+  const Child convert = expect_ok({"convert", volume, path("roomy.isotope"), "-q"});
+  const int64_t handover_mb = 129 * 129 * 129 * 48 >> 20;
+  report("handover_mb", static_cast<double>(handover_mb));
+  report("baseline_rss_mb", static_cast<double>(baseline.max_rss_kb) / 1024);
+  report("convert_rss_mb", static_cast<double>(convert.max_rss_kb) / 1024);
+  EXPECT_LT(convert.max_rss_kb - baseline.max_rss_kb, handover_mb / 2 * 1024);
+  expect_ok({"convert", volume, path("tight.isotope"), "--memory-mb", "16", "-q"});
+  EXPECT_TRUE(same_bytes(path("roomy.isotope"), path("tight.isotope")));
+}
+
 }  // namespace
 }  // namespace isotope

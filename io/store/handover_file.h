@@ -92,12 +92,13 @@ class BlockedEntries {
   Box3 nodes_, cubes_{};
 };
 
-// A band's hand-over in two unlinked scratch files beside the output, for volumes whose
-// hand-over does not fit the budget.
+// A band's hand-over in two unlinked scratch files beside the output, whether or not it fits the
+// budget (`fits`: BandHandover::fits_budget).
 class ScratchHandover : public BandHandover {
  public:
-  ScratchHandover(const std::string& dir, const Box3& nodes)
-      : BandHandover(nodes), blocks_(nodes), values_(dir), children_(dir) {}
+  ScratchHandover(const std::string& dir, const Box3& nodes, bool fits = false)
+      : BandHandover(nodes), blocks_(nodes), values_(dir), children_(dir), fits_(fits) {}
+  bool fits_budget() const override { return fits_; }
   void write_box(const Box3& lo, const Box3& hi, const float* v, const Record* r, int64_t row, int64_t plane) override {
     blocks_.write(values_, 0, lo, hi, v, row, plane);
     blocks_.write(children_, 0, lo, hi, r, row, plane);
@@ -112,6 +113,7 @@ class ScratchHandover : public BandHandover {
  private:
   BlockedEntries blocks_;
   ScratchFile values_, children_;
+  bool fits_;
 };
 
 // A band's hand-over to the next in one named file beside the output, which every rank of a

@@ -32,6 +32,9 @@ static_assert(kDefaultBrickBits == StoreLayout::kDefaultBrickBits,
               "isotope/convert.h names the store layout's default");
 namespace {
 
+// A hand-over smaller than this stays in memory (build_options).
+constexpr uint64_t kHandoverInMemoryBelow = uint64_t{16} << 20;
+
 // The input as integer codes 0 .. 2^bits - 1 over [offset, offset + scale * (2^bits - 1)].
 class QuantizingReader : public BoxReader {
  public:
@@ -339,11 +342,17 @@ class Converter {
     build.check_cancel = [this] {
       if (options_.cancel && options_.cancel->load()) throw IoError("interrupted");
     };
-    // A hand-over stays in memory when it and the band it comes from fit in a quarter of the
-    // budget; else it goes to unlinked scratch files beside the output.
+    // A hand-over of more than a few MB goes to unlinked scratch files beside the output. One
+    // that fits in a quarter of the budget with the band it comes from is kept there, never built
+    // beside (fuse): written and read back by the kernel through the page cache, it costs less
+    // than the process's own first writes into fresh memory (docs/METHOD.md, "Fresh memory"), and
+    // less than a fused pass's halo at those sizes (docs/FORMAT.md, "How convert bounds its
+    // memory"). A smaller one stays in memory: its pages cost a few milliseconds either way, and
+    // a file's cubes of entries would pad it (a 33^3 hand-over takes 48^3 entries' room).
     build.make_handover = [this](const Box3& nodes, uint64_t held) -> std::unique_ptr<BandHandover> {
-      if (held <= static_cast<uint64_t>(options_.memory_mb) << 18) return nullptr;
-      return std::make_unique<ScratchHandover>(scratch_dir_, nodes);
+      const bool fits = held <= static_cast<uint64_t>(options_.memory_mb) << 18;
+      if (fits && BandHandover::bytes(nodes) < kHandoverInMemoryBelow) return nullptr;
+      return std::make_unique<ScratchHandover>(scratch_dir_, nodes, fits);
     };
     return build;
   }
