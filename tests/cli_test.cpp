@@ -541,14 +541,23 @@ TEST_F(Cli, AFullDiskFailsWithAMessageAndLeavesEveryOutputAsItWas) {
   fs::remove(in_work("err"));
   EXPECT_EQ(listing(), before);
   EXPECT_EQ(slurp(mesh), "old mesh");
-  // A convert's hand-over of 103 MB (257^3) goes to scratch files beside the store, which meet a
-  // limit of 32 MiB that the store (3 MB) does not: the same, with the scratch files named.
+  // A convert's hand-over of 103 MB (257^3) would go to scratch files beside the store, which
+  // cannot take it under a limit of 32 MiB: one that fits the budget is kept in memory instead,
+  // and the store (5 MB) is the one written without the limit; one beyond the budget (16 MB) has
+  // no such way out: the same failure as the store's, the scratch files named.
   const std::string wide = in_work("s_257x257x257_uint8.raw");
   ASSERT_EQ(run("generate sphere --size 257 --type uint8 -q -o " + quote(wide)).code, 0);
+  const std::string limited = "ulimit -f 32768; " + quote(ISOTOPE_BINARY) + " convert " + quote(wide) + " ";
+  const std::string unlimited = in_work("unlimited.isotope");
+  ASSERT_EQ(run("convert " + quote(wide) + " " + quote(unlimited) + " -q").code, 0);
   const std::set<std::string> before_convert = listing();
-  const std::string convert = "ulimit -f 32768; " + quote(ISOTOPE_BINARY) + " convert " + quote(wide) + " " +
-                              quote(store) + " -q 2>" + quote(in_work("err"));
-  const int converted = std::system(("bash -c " + quote(convert)).c_str());
+  const int status_fits = std::system(("bash -c " + quote(limited + quote(store) + " -q")).c_str());
+  ASSERT_TRUE(WIFEXITED(status_fits)) << "killed by a signal";
+  EXPECT_EQ(WEXITSTATUS(status_fits), 0);
+  EXPECT_TRUE(slurp(store) == slurp(unlimited)) << "the store differs from the one written without the limit";
+  fs::remove(store);
+  const std::string beyond = limited + quote(store) + " --memory-mb 16 -q 2>" + quote(in_work("err"));
+  const int converted = std::system(("bash -c " + quote(beyond)).c_str());
   ASSERT_TRUE(WIFEXITED(converted)) << "killed by a signal";
   EXPECT_EQ(WEXITSTATUS(converted), 1);
   const std::string err = slurp(in_work("err"));

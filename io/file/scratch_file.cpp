@@ -1,5 +1,6 @@
 #include "io/file/scratch_file.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -25,6 +26,11 @@ ScratchFile::ScratchFile(uint64_t memory_bytes) : memory_(static_cast<size_t>(me
 
 ScratchFile::~ScratchFile() {
   if (fd_ >= 0) ::close(fd_);
+}
+
+bool ScratchFile::reserve(uint64_t bytes) const noexcept {
+  if (fd_ < 0) return bytes <= memory_.size();
+  return bytes == 0 || ::fallocate(fd_, 0, 0, static_cast<off_t>(bytes)) == 0;
 }
 
 void ScratchFile::write(const void* data, size_t bytes, uint64_t offset) const {

@@ -20,6 +20,9 @@ class ScratchFile {
   ScratchFile(const ScratchFile&) = delete;
   ScratchFile& operator=(const ScratchFile&) = delete;
 
+  // Whether the file system gives the file its first BYTES now (fallocate), so that writes within
+  // them cannot meet a full disk; always so in memory.
+  bool reserve(uint64_t bytes) const noexcept;
   void write(const void* data, size_t bytes, uint64_t offset) const;  // throws IoError (disk full)
   void read(void* data, size_t bytes, uint64_t offset) const;         // throws IoError
 

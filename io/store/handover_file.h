@@ -99,6 +99,10 @@ class ScratchHandover : public BandHandover {
   ScratchHandover(const std::string& dir, const Box3& nodes, bool fits = false)
       : BandHandover(nodes), blocks_(nodes), values_(dir), children_(dir), fits_(fits) {}
   bool fits_budget() const override { return fits_; }
+  // Whether the file system gives both files their whole size now (ScratchFile::reserve).
+  bool reserve() const noexcept {
+    return values_.reserve(blocks_.slots() * sizeof(float)) && children_.reserve(blocks_.slots() * sizeof(Record));
+  }
   void write_box(const Box3& lo, const Box3& hi, const float* v, const Record* r, int64_t row, int64_t plane) override {
     blocks_.write(values_, 0, lo, hi, v, row, plane);
     blocks_.write(children_, 0, lo, hi, r, row, plane);
