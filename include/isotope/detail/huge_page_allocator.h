@@ -22,7 +22,9 @@ inline constexpr size_t kHugePage = size_t{2} << 20;
 // Faults in the pages of [p, p + bytes) for writing, on all threads at once, a chunk a task
 // (MADV_POPULATE_WRITE): for an array about to be written whole by one thread (a std::vector's
 // resize, which zero-fills), whose first touch is the kernel zeroing every page, on one core, and
-// costs more than the write itself (docs/METHOD.md, "Fresh memory"). A hint: where the kernel
+// costs more than the write itself (docs/METHOD.md, "Fresh memory"). Each page is then written
+// once by the tasks, its bytes kept (an atomic or of 0): where a hypervisor maps a page for the
+// process only at its first write, that cost too is paid on all threads. A hint: where the kernel
 // refuses it, the pages fault in at the write as before.
 void prefault_in_parallel(void* p, size_t bytes) noexcept;
 // The same on this thread, in one call: for memory about to be written a little at a time (an
