@@ -349,8 +349,8 @@ class Converter {
     // less than a fused pass's halo at those sizes (docs/FORMAT.md, "How convert bounds its
     // memory"). A smaller one stays in memory: its pages cost a few milliseconds either way, and
     // a file's cubes of entries would pad it (a 33^3 hand-over takes 48^3 entries' room). So
-    // does one that fits where its files find no room (a full disk, a file size limit): the
-    // convert needs no more room beside the output than before, where it was always in memory.
+    // does one that fits where its files find no room (a full disk, a file size limit): a volume
+    // whose hand-overs fit the budget needs no room beside its output but the store's.
     build.make_handover = [this](const Box3& nodes, uint64_t held) -> std::unique_ptr<BandHandover> {
       const bool fits = held <= static_cast<uint64_t>(options_.memory_mb) << 18;
       if (!fits) return std::make_unique<ScratchHandover>(scratch_dir_, nodes);
