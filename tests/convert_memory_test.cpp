@@ -90,7 +90,7 @@ TEST_F(ConvertMemory, VolumeEightTimesTheBudgetConvertsWithinItAndTheStoreIgnore
 // A band's hand-over that fits the budget is kept in scratch files too (through the page cache),
 // not in the process's memory: a 257^3 volume, whose hand-over to band 1 is 129^3 entries of 48
 // bytes (103 MB, under a quarter of the default budget), converts with a peak resident set well
-// under that above the tiny volume's (140 MB where the hand-over was in memory, 31 MB now), and
+// under that above the tiny volume's (about 31 MB; 140 MB with the hand-over in memory), and
 // the store is the one a budget too small for the hand-over writes.
 TEST_F(ConvertMemory, AHandOverThatFitsTheBudgetStaysOutOfTheProcesssMemory) {
   const std::string volume = path("alg_257x257x257_uint8.raw");

@@ -144,11 +144,11 @@ struct BandedBuildOptions {
   // copy and its memory (embryo's HDF5 convert 0.95 -> 1.33 s with stages, 296 MB against 31 MB).
   bool staged = false;
   int64_t stage_tiles = 0;  // tiles a side of a staged group (a power of two); 0: as the budget allows
-  // Whether band j+1 is built in band j's pass where the hand-over between them would not fit the
-  // budget (make_handover gave one that does not, BandHandover::fits_budget): each tile of band j, widened by a halo
-  // (kFuseBelow, kFuseAbove), hands a tile of band j+1 its window, so that hand-over never exists, for a little work
-  // done twice (the halo). Needs a sink that holds (below), tiles of an even number of bricks, and whole bands (no
-  // first_tile, last_tile).
+  // Whether band j+1 is built in band j's pass where the hand-over between them would not fit
+  // the budget (make_handover gave one that does not: BandHandover::fits_budget): each tile of
+  // band j, widened by a halo (kFuseBelow, kFuseAbove), hands a tile of band j+1 its window, so
+  // that hand-over never exists, for a little work done twice (the halo). Needs a sink that holds
+  // (below), tiles of an even number of bricks, and whole bands (no first_tile, last_tile).
   bool fuse = false;
   // A distributed convert's pass (io/store/store_writer.cpp): bands first_band and last_band =
   // first_band + 1 built as `fuse` builds them, over this process's run of band first_band's
@@ -302,10 +302,12 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
   // file (at 64^3, 15% more of band j's work; at 32^3, 31%).
   // Whether a pass will be fused at all: band 0's hand-over, the largest, would be a file (each
   // later one, with the one before it, is smaller than band 0's alone).
+  // The hand-over asked for is band 1's own, taken when band 0 hands over (handover_to, below).
   bool fusing = may_fuse && options.first_band == 0 && layout.lattice().k >= 1 && options.make_handover;
+  std::unique_ptr<BandHandover> probe;
   if (fusing) {
     const Box3& nodes = layout.band(1).nodes;
-    const std::unique_ptr<BandHandover> probe = options.make_handover(nodes, BandHandover::bytes(nodes));
+    probe = options.make_handover(nodes, BandHandover::bytes(nodes));
     fusing = probe && !probe->fits_budget();
   }
   int64_t c = options.tile_bricks;
@@ -385,7 +387,10 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
       if (to - 1 == last_band && options.handover_out) return options.handover_out;
       const Box3& nodes = layout.band(to).nodes;
       const uint64_t held = BandHandover::bytes(nodes) + (in ? BandHandover::bytes(in->nodes()) : 0);
-      if (options.make_handover) owned_next = options.make_handover(nodes, held);
+      if (to == 1 && probe)
+        owned_next = std::move(probe);  // asked for with the same bytes held (band 0 reads none)
+      else if (options.make_handover)
+        owned_next = options.make_handover(nodes, held);
       if (!owned_next) owned_next = std::make_unique<MemoryHandover>(nodes);
       return owned_next.get();
     };
