@@ -382,6 +382,21 @@ TEST(FieldCodecRoundTrip, AnyIntegerPayloadDecodesAsTheFormatDefinesIt) {
 
 // ---- the byte layout of docs/FORMAT.md ----
 
+// What encode_field says of a field is the mode it wrote (the store's encoder chooses zstd's
+// parameters by it).
+TEST(FieldCodecLayout, EncodeSaysWhichModeItWrote) {
+  const auto coding = [](const Floats& values) {
+    Bytes out;
+    const FieldCoding c = encode_field(values, out);
+    EXPECT_FALSE(out.empty());
+    return std::pair{c, out.empty() ? uint8_t{0} : out[0]};
+  };
+  EXPECT_EQ(coding(Floats(100, 2.5f)), std::pair(FieldCoding::constant, kConstant));
+  EXPECT_EQ(coding({1, 2, 3, 250, kInf}), std::pair(FieldCoding::integer, kInteger));
+  EXPECT_EQ(coding({0.1f, 0.2f, 0.7f}), std::pair(FieldCoding::bits, kFloat));
+  EXPECT_EQ(coding({}), std::pair(FieldCoding::bits, kFloat));
+}
+
 TEST(FieldCodecLayout, ConstantIsModeCountAndBits) {
   EXPECT_EQ(encode({2.0f, 2.0f}), (Bytes{1, 2, 0, 0, 0, 0, 0, 0, 0, 0x00, 0x00, 0x00, 0x40}));
 }

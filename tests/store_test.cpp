@@ -359,6 +359,79 @@ TEST_F(Store, IntegerStoresAreAtMostOneAndAHalfTimesTheirInput) {
   }
 }
 
+// The type of the literals of a section's zstd frame, whose one block must be a compressed block
+// (RFC 8878, "Literals_Block_Type"): 0 as they are, 1 one byte repeated, 2 or 3 Huffman-coded.
+int literals_type(const std::vector<uint8_t>& section) {
+  const uint8_t* f = section.data() + 8;  // after the section's checksum
+  const uint8_t descriptor = f[4];        // after the magic number
+  const bool single_segment = (descriptor & 0x20) != 0;
+  const int content_size_flag = descriptor >> 6, dictionary_flag = descriptor & 3;
+  const size_t header = 5 + (single_segment ? 0 : 1) + (dictionary_flag == 3 ? 4 : dictionary_flag) +
+                        (content_size_flag == 0 ? (single_segment ? 1 : 0) : size_t{1} << content_size_flag);
+  const uint32_t block = f[header] | uint32_t{f[header + 1]} << 8 | uint32_t{f[header + 2]} << 16;
+  EXPECT_EQ(block & 1, 1u) << "one block";
+  EXPECT_EQ((block >> 1) & 3, 2u) << "a compressed block";
+  return f[header + 3] & 3;
+}
+
+// A section mostly of floats written as their bit patterns (a float volume stored losslessly)
+// keeps its literals as they are, which spares zstd a third of its time there (docs/FORMAT.md,
+// "Sections"); one of integers, or of bfloat16 fields, has them Huffman-coded.
+TEST(StoreSections, FloatBitPatternsKeepTheirLiteralsAndOtherFieldsHaveThemHuffmanCoded) {
+  const StoreLayout layout({40, 40, 40}, 4);
+  ASSERT_TRUE(stores_records(layout, 1));
+  const auto nodes = static_cast<size_t>(layout.brick_nodes()), records = nodes - nodes / 8;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+  std::uniform_int_distribution<int> small(0, 15);
+  const auto floats = [&](size_t n) {
+    std::vector<float> v(n);
+    for (float& x : v) x = unit(rng);
+    return v;
+  };
+  const auto bfloats = [&](size_t n) {  // the floats a bfloat16 field's codes stand for
+    std::vector<float> v = floats(n);
+    for (float& x : v) x = std::bit_cast<float>(std::bit_cast<uint32_t>(x) & 0xffff0000u);
+    return v;
+  };
+  const auto integers = [&](size_t n) {
+    std::vector<float> v(n);
+    for (float& x : v) x = static_cast<float>(small(rng));
+    return v;
+  };
+  BrickFields noisy;
+  noisy.values = floats(nodes);
+  for (auto& field : noisy.records) field = bfloats(records);
+  noisy.records[BrickFields::bound] = floats(records);
+  BrickFields scan = noisy;
+  scan.values = integers(nodes);
+  scan.records[BrickFields::bound] = integers(records);
+  for (const int level : {1, 3, 9}) {
+    const auto noisy_sections = encode_brick(layout, 1, noisy, level);
+    const auto scan_sections = encode_brick(layout, 1, scan, level);
+    EXPECT_EQ(literals_type(noisy_sections[static_cast<size_t>(Section::core)]), 0) << "level " << level;
+    EXPECT_GE(literals_type(scan_sections[static_cast<size_t>(Section::core)]), 2) << "level " << level;
+    // The bfloat16 fields' sections, whichever the values.
+    for (const Section s : {Section::exact, Section::weights, Section::extra})
+      EXPECT_GE(literals_type(noisy_sections[static_cast<size_t>(s)]), 2) << "section " << static_cast<int>(s);
+    // Either way the brick decodes to its fields.
+    for (const auto& [fields, sections] : {std::pair{&noisy, &noisy_sections}, std::pair{&scan, &scan_sections}}) {
+      std::vector<float> values(nodes);
+      std::vector<uint64_t> bounds(nodes), weights(nodes);
+      std::vector<uint16_t> surplus(nodes);
+      std::vector<uint32_t> exact(nodes), paper(nodes);
+      const BrickView view{values.data(), bounds.data(), surplus.data(), exact.data(), paper.data(), weights.data()};
+      for (int s = 0; s < kSections; ++s) {
+        const auto& bytes = (*sections)[static_cast<size_t>(s)];
+        decode_section(layout, 1, static_cast<Section>(s), bytes.data(), bytes.size(), view, values.data(), "brick");
+      }
+      const BrickFields back = fields_of(layout, 1, view);
+      EXPECT_EQ(back.values, fields->values);
+      EXPECT_EQ(back.records, fields->records);
+    }
+  }
+}
+
 // Paged (out of core, lazily computed band 0) against the in-memory hierarchy: the same mesh,
 // byte for byte, for every mode, indicator and a range of eps.
 TEST_F(Store, ExtractionFromStoreEqualsInMemory) {

@@ -552,20 +552,22 @@ uint8_t read_mode(Reader& r, size_t expected) {
 
 }  // namespace
 
-void encode_field(std::span<const float> values, std::vector<uint8_t>& out) {
+FieldCoding encode_field(std::span<const float> values, std::vector<uint8_t>& out) {
   if (!values.empty() && is_constant(values)) {
     put_u8(out, kModeConstant);
     put_u64(out, values.size());
     put_u32(out, std::bit_cast<uint32_t>(values[0]));
-    return;
+    return FieldCoding::constant;
   }
   const std::optional<IntegerPlan> plan = values.empty() ? std::nullopt : plan_integer(values);
   put_u8(out, plan ? kModeInteger : kModeFloat);
   put_u64(out, values.size());
-  if (plan)
-    encode_integer(values, *plan, out);
-  else
+  if (!plan) {
     encode_float(values, out);
+    return FieldCoding::bits;
+  }
+  encode_integer(values, *plan, out);
+  return FieldCoding::integer;
 }
 
 const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<float> values) {

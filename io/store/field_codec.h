@@ -9,9 +9,13 @@
 
 namespace isotope {
 
+// How a field was written: as a constant, as integers (narrow words), or as its floats' bit
+// patterns (mode 3), whose low bytes are as many distinct bytes as the data has noise.
+enum class FieldCoding { constant, integer, bits };
+
 // Appends a self-describing, lossless encoding of `values` to `out` (decode restores every bit,
-// incl. -0.0, +-inf, NaN payloads, denormals).
-void encode_field(std::span<const float> values, std::vector<uint8_t>& out);
+// incl. -0.0, +-inf, NaN payloads, denormals); returns how it was written.
+FieldCoding encode_field(std::span<const float> values, std::vector<uint8_t>& out);
 
 // Decodes one field starting at `p` into `values` (whose size the caller knows and must match the
 // encoded count, else IoError); returns the pointer just past it. Never reads outside [p, end),

@@ -1,6 +1,8 @@
 #include "io/store/store_format.h"
 
 #include <xxhash.h>
+// For ZSTD_c_literalCompressionMode, a parameter of zstd's experimental API (encode_brick).
+#define ZSTD_STATIC_LINKING_ONLY
 #include <zstd.h>
 
 #include <algorithm>
@@ -390,10 +392,25 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
     const auto fields = fields_of(static_cast<Section>(s), records);
     if (fields.empty()) continue;
     raw.clear();
-    for (const Field f : fields) encode_field(field_of(f), raw);
+    size_t bits = 0;  // bytes of float fields (not bfloat16) written as their bit patterns
+    for (const Field f : fields) {
+      const size_t before = raw.size();
+      const FieldCoding coding = encode_field(field_of(f), raw);
+      if (coding == FieldCoding::bits && (f == Field::values || f == Field::bound)) bits += raw.size() - before;
+    }
     frame.resize(std::max(frame.size(), ZSTD_compressBound(raw.size())));  // grown, never cleared again
-    const size_t n =
-        ZSTD_compressCCtx(compression_context(), frame.data(), frame.size(), raw.data(), raw.size(), zstd_level);
+    ZSTD_CCtx* const context = compression_context();
+    size_t n = ZSTD_CCtx_setParameter(context, ZSTD_c_compressionLevel, zstd_level);
+    if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
+    // A section mostly of float bit patterns (float volumes stored losslessly) leaves its
+    // literals as they are: what zstd does not match there is the floats' low bytes, about as
+    // random as the data's noise, and Huffman-coding them took a third of the compression's time
+    // for a few tenths of a percent to a few percent of the store (docs/FORMAT.md, "Sections").
+    // Where the library does not know the parameter, the literals are Huffman-coded as
+    // elsewhere: the frame is a valid frame either way.
+    ZSTD_CCtx_setParameter(context, ZSTD_c_literalCompressionMode,
+                           2 * bits >= raw.size() ? ZSTD_ps_disable : ZSTD_ps_auto);
+    n = ZSTD_compress2(context, frame.data(), frame.size(), raw.data(), raw.size());
     if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
     std::vector<uint8_t>& bytes = out[static_cast<size_t>(s)];
     bytes.resize(kChecksumBytes + n);
