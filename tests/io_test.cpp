@@ -15,6 +15,7 @@
 #include <array>
 #include <atomic>
 #include <bit>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -942,6 +943,45 @@ TEST_F(IoTest, DirectAppendsReportAFailedWriteByTheirWriterThread) {
     EXPECT_EQ(err, EBADF);
   }
   ::close(read_only);
+}
+
+// Every few MB written, the appends' own thread makes them durable while the caller goes on: a
+// large file's commit then waits for its last few MB alone (io/file/direct_appends.h). Here the
+// syncs are seen before any drain: 25 MB appended, at least 16 MB of them synced in time.
+TEST_F(IoTest, DirectAppendsMakeWhatTheyWroteDurableWhileTheCallerGoesOn) {
+  const std::string p = path("synced.bin");
+  const int buffered = ::open(p.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  ASSERT_GE(buffered, 0);
+  {
+    DirectAppends appends(-1, buffered);
+    const std::vector<unsigned char> bytes(size_t{1} << 20, 5);
+    for (int i = 0; i < 25; ++i) ASSERT_EQ(appends.append(bytes.data(), bytes.size()), 0);
+    // A deadline, not a timing: the syncs take milliseconds.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (appends.synced() < (uint64_t{16} << 20) && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    EXPECT_GE(appends.synced(), uint64_t{16} << 20);
+    EXPECT_LE(appends.synced(), uint64_t{25} << 20);
+    ASSERT_EQ(appends.drain(), 0);
+  }
+  ::close(buffered);
+  EXPECT_EQ(std::filesystem::file_size(p), size_t{25} << 20);
+}
+
+// A sync the appends' thread fails (here: /dev/null, which takes writes but no fdatasync) is
+// reported by the drain, with its errno: the file's own fsync after it may no longer report it.
+TEST_F(IoTest, DirectAppendsReportAFailedSyncByTheDrain) {
+  const int null = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  ASSERT_GE(null, 0);
+  {
+    DirectAppends appends(-1, null);
+    const std::vector<unsigned char> bytes(size_t{1} << 20, 7);
+    int err = 0;
+    for (int i = 0; i < 12 && err == 0; ++i) err = appends.append(bytes.data(), bytes.size());
+    if (err == 0) err = appends.drain();
+    EXPECT_EQ(err, EINVAL);
+  }
+  ::close(null);
 }
 
 // A store's file takes its appends past the page cache: the same bytes, the same file, as through

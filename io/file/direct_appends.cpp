@@ -1,5 +1,7 @@
 #include "io/file/direct_appends.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
@@ -14,6 +16,17 @@ DirectAppends::DirectAppends(int direct, int buffered)
       direct_(direct),
       buffered_(buffered) {
   thread_ = std::thread([this] { writer(); });
+  try {
+    syncer_ = std::thread([this] { syncer(); });
+  } catch (...) {
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    changed_.notify_all();
+    thread_.join();
+    throw;
+  }
 }
 
 DirectAppends::~DirectAppends() {
@@ -23,6 +36,7 @@ DirectAppends::~DirectAppends() {
   }
   changed_.notify_all();
   thread_.join();
+  syncer_.join();
 }
 
 int DirectAppends::write_out(const unsigned char* data, size_t bytes, uint64_t offset) {
@@ -46,7 +60,31 @@ void DirectAppends::writer() {
     const int err = write_out(data, bytes, offset);
     lock.lock();
     if (err != 0 && error_ == 0) error_ = err;
+    if (err == 0) {
+      on_disk_ = offset + bytes;
+      since_sync_ += bytes;
+      if (since_sync_ >= kSyncBytes) sync_wanted_ = true, since_sync_ = 0;
+    }
     pending_ = -1;
+    changed_.notify_all();
+  }
+}
+
+void DirectAppends::syncer() {
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    changed_.wait(lock, [&] { return sync_wanted_ || stop_; });
+    if (stop_) return;
+    sync_wanted_ = false;
+    syncing_ = true;
+    const uint64_t upto = on_disk_;  // written (direct writes return once the disk has them)
+    lock.unlock();
+    // The buffered descriptor: the same file, and there even where direct writes were refused.
+    const int err = ::fdatasync(buffered_) == 0 ? 0 : errno;
+    lock.lock();
+    syncing_ = false;
+    if (err != 0 && error_ == 0) error_ = err;
+    if (err == 0) synced_ = std::max(synced_, upto);
     changed_.notify_all();
   }
 }
@@ -101,7 +139,12 @@ int DirectAppends::drain() {
   if (const int err = pwrite_all(buffered_, data + whole, used_ - whole, written_ + whole)) return err;
   written_ += used_;
   used_ = 0;
-  return 0;
+  // The sync asked for or under way is waited for (no other starts until more is appended): an
+  // error it met is returned here, as the file's fsync, on the same open file, would no longer
+  // report it.
+  std::unique_lock lock(mutex_);
+  changed_.wait(lock, [&] { return !syncing_ && !sync_wanted_; });
+  return error_;
 }
 
 }  // namespace isotope

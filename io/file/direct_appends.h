@@ -5,8 +5,11 @@
 // Why: a store of a float volume is as large as its input, and copying it into the page cache
 // (into pages the kernel must first find, and a virtual machine back) cost a sixth of a convert's
 // processor time (docs/METHOD.md, "Reading and writing files"). A direct write
-// moves the bytes from the buffer to the disk; the fsync that makes the output durable then waits
-// for nothing but metadata.
+// moves the bytes from the buffer to the disk.
+//
+// Every few MB written, a thread of its own makes them durable (fdatasync) while the caller goes
+// on: the fsync that commits the output then waits for the last few MB alone, not for the whole
+// file's blocks and the disk's flush (docs/METHOD.md, "A store is appended past the page cache").
 //
 // The appends start at offset 0 of the file. Whole buffers (aligned in memory and in the file) go
 // through DIRECT. Through BUFFERED go the last, partial buffer, overwrites of bytes already
@@ -39,19 +42,27 @@ class DirectAppends {
   int append(const void* data, size_t bytes);
   // Overwrites BYTES at OFFSET, all of them appended before (a header completed last).
   int overwrite(uint64_t offset, const void* data, size_t bytes);
-  // Writes all that was appended. Appends may follow.
+  // Writes all that was appended, and waits for a sync asked for or under way (whose error it
+  // returns: the file's next fsync may no longer report it). Appends may follow.
   int drain();
 
   uint64_t size() const { return written_ + used_; }
+  // Bytes from offset 0 that a sync of this object's made durable.
+  uint64_t synced() const {
+    std::lock_guard lock(mutex_);
+    return synced_;
+  }
   bool direct() const { return direct_ >= 0; }  // false from the first refusal on
 
  private:
   static constexpr size_t kAlign = detail::kPageBytes;  // memory and file offsets of a direct write
   static constexpr size_t kBufferBytes = 1 << 20;       // a direct write's size; two buffers in all
+  static constexpr uint64_t kSyncBytes = 8 << 20;       // written between two syncs
 
   int write_out(const unsigned char* data, size_t bytes, uint64_t offset);  // direct, else buffered
   int wait_idle();  // until the writer holds no buffer; its error
   void writer();
+  void syncer();
 
   detail::PageAlignedArray<unsigned char> buffers_[2];
   std::atomic<int> direct_;  // the writer thread may give it up
@@ -60,14 +71,20 @@ class DirectAppends {
   size_t used_ = 0;       // bytes of it
   uint64_t written_ = 0;  // the file offset of its first byte: all before went to the writer
 
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
   std::condition_variable changed_;
   int pending_ = -1;  // the buffer the writer holds, or -1
   uint64_t pending_offset_ = 0;
   size_t pending_bytes_ = 0;
+  uint64_t on_disk_ = 0;      // bytes from offset 0 the writer has written
+  uint64_t since_sync_ = 0;   // of them, written since a sync was last asked for
+  uint64_t synced_ = 0;       // bytes from offset 0 a sync made durable
+  bool sync_wanted_ = false;  // for the syncer thread
+  bool syncing_ = false;
   int error_ = 0;
   bool stop_ = false;
   std::thread thread_;  // last: started once everything above is in place
+  std::thread syncer_;
 };
 
 }  // namespace isotope
