@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <hdf5.h>
 #include <sys/mman.h>
+#include <zstd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -414,6 +415,19 @@ TEST(StoreSections, FloatBitPatternsKeepTheirLiteralsAndOtherFieldsHaveThemHuffm
     // The bfloat16 fields' sections, whichever the values.
     for (const Section s : {Section::exact, Section::weights, Section::extra})
       EXPECT_GE(literals_type(noisy_sections[static_cast<size_t>(s)]), 2) << "section " << static_cast<int>(s);
+    // The others are the frames zstd makes of their bytes at the level with nothing else set:
+    // such a section's bytes are those stores held before float sections kept their literals.
+    for (const auto* sections : {&scan_sections, &noisy_sections})
+      for (int s = 0; s < kSections; ++s) {
+        if (sections == &noisy_sections && s == static_cast<int>(Section::core)) continue;
+        const std::vector<uint8_t>& bytes = (*sections)[static_cast<size_t>(s)];
+        std::vector<uint8_t> raw(ZSTD_getFrameContentSize(bytes.data() + 8, bytes.size() - 8));
+        ASSERT_EQ(ZSTD_decompress(raw.data(), raw.size(), bytes.data() + 8, bytes.size() - 8), raw.size());
+        std::vector<uint8_t> frame(ZSTD_compressBound(raw.size()));
+        frame.resize(ZSTD_compress(frame.data(), frame.size(), raw.data(), raw.size(), level));
+        EXPECT_TRUE(std::equal(frame.begin(), frame.end(), bytes.begin() + 8, bytes.end()))
+            << "section " << s << ", level " << level;
+      }
     // Either way the brick decodes to its fields.
     for (const auto& [fields, sections] : {std::pair{&noisy, &noisy_sections}, std::pair{&scan, &scan_sections}}) {
       std::vector<float> values(nodes);

@@ -77,7 +77,7 @@ void DirectAppends::syncer() {
     if (stop_) return;
     sync_wanted_ = false;
     syncing_ = true;
-    const uint64_t upto = on_disk_;  // written (direct writes return once the disk has them)
+    const uint64_t upto = on_disk_;  // writes completed before the sync starts: it covers them
     lock.unlock();
     // The buffered descriptor: the same file, and there even where direct writes were refused.
     const int err = ::fdatasync(buffered_) == 0 ? 0 : errno;

@@ -33,12 +33,12 @@ class DirectAppends {
   // opened without it. Neither is closed here. Throws std::bad_alloc without memory for the
   // buffers, std::system_error when no thread can start.
   DirectAppends(int direct, int buffered);
-  ~DirectAppends();  // waits for a write under way; an error not yet reported is dropped
+  ~DirectAppends();  // waits for a write or a sync under way; an error not yet reported is dropped
   DirectAppends(const DirectAppends&) = delete;
   DirectAppends& operator=(const DirectAppends&) = delete;
 
-  // Each returns 0, or the errno of the first write that failed (that one, or an earlier one the
-  // writer thread met); after a failure the file's content means nothing.
+  // Each returns 0, or the errno of the first write or sync that failed (that one, or an earlier
+  // one the writer or the syncer thread met); after a failure the file's content means nothing.
   int append(const void* data, size_t bytes);
   // Overwrites BYTES at OFFSET, all of them appended before (a header completed last).
   int overwrite(uint64_t offset, const void* data, size_t bytes);

@@ -399,19 +399,23 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
       if (coding == FieldCoding::bits && (f == Field::values || f == Field::bound)) bits += raw.size() - before;
     }
     frame.resize(std::max(frame.size(), ZSTD_compressBound(raw.size())));  // grown, never cleared again
-    ZSTD_CCtx* const context = compression_context();
-    size_t n = ZSTD_CCtx_setParameter(context, ZSTD_c_compressionLevel, zstd_level);
-    if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
     // A section mostly of float bit patterns (float volumes stored losslessly) leaves its
     // literals as they are: what zstd does not match there is the floats' low bytes, about as
     // random as the data's noise, and Huffman-coding them took a third of the compression's time
     // for a few tenths of a percent to a few percent of the store (docs/FORMAT.md, "Sections").
-    // Where the library does not know the parameter, the literals are Huffman-coded as
-    // elsewhere: the frame is a valid frame either way.
-    ZSTD_CCtx_setParameter(context, ZSTD_c_literalCompressionMode,
-                           2 * bits >= raw.size() ? ZSTD_ps_disable : ZSTD_ps_auto);
-    n = ZSTD_compress2(context, frame.data(), frame.size(), raw.data(), raw.size());
-    if (ZSTD_isError(n)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(n));
+    // The context's parameters are sticky: both set for every section, after a reset of the
+    // session (a frame an earlier error left half made would refuse them), so that a section's
+    // bytes never depend on what its thread compressed before.
+    ZSTD_CCtx* const context = compression_context();
+    const auto check = [](size_t code) {
+      if (ZSTD_isError(code)) throw IoError(std::string("zstd compression failed: ") + ZSTD_getErrorName(code));
+      return code;
+    };
+    check(ZSTD_CCtx_reset(context, ZSTD_reset_session_only));
+    check(ZSTD_CCtx_setParameter(context, ZSTD_c_compressionLevel, zstd_level));
+    check(ZSTD_CCtx_setParameter(context, ZSTD_c_literalCompressionMode,
+                                 2 * bits >= raw.size() ? ZSTD_ps_disable : ZSTD_ps_auto));
+    const size_t n = check(ZSTD_compress2(context, frame.data(), frame.size(), raw.data(), raw.size()));
     std::vector<uint8_t>& bytes = out[static_cast<size_t>(s)];
     bytes.resize(kChecksumBytes + n);
     const uint64_t sum = store_checksum(frame.data(), n);
