@@ -927,6 +927,14 @@ TEST_F(IoTest, DirectAppendsWriteWhatTheyWereGivenWithOrWithoutThePageCache) {
   }
 }
 
+// Appends MEGABYTES of 1 MB each, then drains: the first error either met, or 0.
+int append_and_drain(DirectAppends& appends, int megabytes) {
+  const std::vector<unsigned char> bytes(size_t{1} << 20, 7);
+  int err = 0;
+  for (int i = 0; i < megabytes && err == 0; ++i) err = appends.append(bytes.data(), bytes.size());
+  return err != 0 ? err : appends.drain();
+}
+
 // A write the writer thread fails (here: a descriptor not open for writing) is reported by the
 // append or the drain after it, with its errno.
 TEST_F(IoTest, DirectAppendsReportAFailedWriteByTheirWriterThread) {
@@ -936,11 +944,7 @@ TEST_F(IoTest, DirectAppendsReportAFailedWriteByTheirWriterThread) {
   ASSERT_GE(read_only, 0);
   {
     DirectAppends appends(-1, read_only);
-    const std::vector<unsigned char> bytes(size_t{1} << 20, 7);
-    int err = 0;
-    for (int i = 0; i < 3 && err == 0; ++i) err = appends.append(bytes.data(), bytes.size());
-    if (err == 0) err = appends.drain();
-    EXPECT_EQ(err, EBADF);
+    EXPECT_EQ(append_and_drain(appends, 3), EBADF);
   }
   ::close(read_only);
 }
@@ -975,11 +979,7 @@ TEST_F(IoTest, DirectAppendsReportAFailedSyncByTheDrain) {
   ASSERT_GE(null, 0);
   {
     DirectAppends appends(-1, null);
-    const std::vector<unsigned char> bytes(size_t{1} << 20, 7);
-    int err = 0;
-    for (int i = 0; i < 12 && err == 0; ++i) err = appends.append(bytes.data(), bytes.size());
-    if (err == 0) err = appends.drain();
-    EXPECT_EQ(err, EINVAL);
+    EXPECT_EQ(append_and_drain(appends, 12), EINVAL);
   }
   ::close(null);
 }
