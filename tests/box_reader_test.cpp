@@ -19,6 +19,7 @@
 #include <iterator>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -72,10 +73,14 @@ std::string nrrd_header(const std::string& sizes, const std::string& type, const
   return text + "\n";
 }
 
-// One dataset of shape (z, y, x) = ZYX from DATA; chunked and deflated when CHUNK is given.
+// One dataset of shape (z, y, x) = ZYX from DATA; chunked and deflated when CHUNK is given; after
+// a user block of USER_BLOCK bytes (0 or a power of 2 from 512).
 void write_h5(const std::string& path, hid_t file_type, hid_t memory_type, const std::array<hsize_t, 3>& zyx,
-              const void* data, const std::vector<hsize_t>& chunk = {}) {
-  const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+              const void* data, const std::vector<hsize_t>& chunk = {}, hsize_t user_block = 0) {
+  const hid_t fcpl = H5Pcreate(H5P_FILE_CREATE);
+  EXPECT_GE(H5Pset_userblock(fcpl, user_block), 0);
+  const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, fcpl, H5P_DEFAULT);
+  H5Pclose(fcpl);
   ASSERT_GE(file, 0) << path;
   const hid_t space = H5Screate_simple(3, zyx.data(), nullptr);
   const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
@@ -238,13 +243,17 @@ TEST_F(BoxReaderTest, EveryBoxOfEverySharedHdf5VolumeEqualsReadVolume) {
   }
 }
 
-// What a convert groups its tiles' reads by: a box of raw data costs its own rows, one of an HDF5
-// dataset (its chunks, or the library's own copies) is left to the stage.
-TEST_F(BoxReaderTest, ABoxOfRawDataCostsItsOwnBytesAndOneOfHdf5IsLeftToTheStage) {
+// What a convert groups its tiles' reads by: a box of raw data costs its own rows, and so does
+// one of a contiguous HDF5 dataset (the shared files' layout), read as raw data; one of a chunked
+// dataset (its chunks decoded again for each box) is left to the stage.
+TEST_F(BoxReaderTest, ABoxOfRawDataOrAContiguousHdf5DatasetCostsItsOwnBytesAndAChunkedOneIsLeftToTheStage) {
   for (const char* name : kSharedRaw)
     EXPECT_TRUE(open_reader((kData / name).string(), dir_.string())->reads_box_alone()) << name;
   for (const char* name : kSharedH5)
-    EXPECT_FALSE(open_reader((kData / name).string() + ":/volume", dir_.string())->reads_box_alone()) << name;
+    EXPECT_TRUE(open_reader((kData / name).string() + ":/volume", dir_.string())->reads_box_alone()) << name;
+  const std::vector<float> f32(4 * 5 * 6, 1.5f);
+  write_h5(path("chunked.h5"), H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {4, 5, 6}, f32.data(), {2, 2, 2});
+  EXPECT_FALSE(open_reader(path("chunked.h5"), dir_.string())->reads_box_alone());
 }
 
 TEST_F(BoxReaderTest, RawLayoutOverridesApplyAsInReadVolume) {
@@ -376,8 +385,8 @@ void expect_read_as_stored(const BoxReader& r, const Bytes& native, ScalarType t
   }
 }
 
-// Integers of one or two bytes in this machine's byte order are read as the file stores them, any
-// box, byte for byte; floats, and integers of the other byte order, are not.
+// Integers of one or two bytes are read as the file stores them, any box, byte for byte, in this
+// machine's byte order (those of the other order swapped); floats are not.
 TEST_F(BoxReaderTest, NativeIntegersOfRawFilesAreReadAsStored) {
   std::vector<uint16_t> u16(9 * 7 * 5);
   std::vector<int16_t> i16(u16.size());
@@ -397,7 +406,8 @@ TEST_F(BoxReaderTest, NativeIntegersOfRawFilesAreReadAsStored) {
   write_file(other,
              nrrd_header("9 7 5", "ushort", "raw", {foreign == std::endian::big ? "endian: big" : "endian: little"}),
              bytes_of(u16, foreign));
-  EXPECT_EQ(open_reader(other, dir_.string())->stored_type(), std::nullopt) << "the other byte order";
+  expect_read_as_stored(*open_reader(other, dir_.string()), bytes_of(u16, std::endian::native), ScalarType::uint16,
+                        "the other byte order");
 }
 
 // HDF5 datasets of integers of one or two bytes are read as they are, in this machine's byte order
@@ -434,6 +444,79 @@ TEST_F(BoxReaderTest, SmallIntegersOfHdf5DatasetsAreReadAsStoredInThisMachinesOr
   EXPECT_EQ(open_reader(pi32 + ":/volume", dir_.string())->stored_type(), std::nullopt) << "int32";
   EXPECT_EQ(open_reader((kData / "hydrogen.h5").string() + ":/volume", dir_.string())->stored_type(), std::nullopt)
       << "float32";
+}
+
+// The values of V as T, in this machine's byte order.
+template <class T>
+Bytes native_bytes(const Volume& v) {
+  std::vector<T> out;
+  for (const float f : v.values) out.push_back(static_cast<T>(f));
+  return bytes_of(out, std::endian::native);
+}
+
+// A contiguous dataset of a type raw data has is read at its offset in the file, past a user
+// block, in either byte order: the values HDF5 reads, the type as stored. Other types, and space
+// the file never got, are read by HDF5.
+TEST_F(BoxReaderTest, ContiguousHdf5DatasetsOfRawTypesAreReadAtTheirOffsetAsHdf5ReadsThem) {
+  const std::array<hsize_t, 3> zyx = {5, 7, 9};
+  const size_t n = 5 * 7 * 9;
+  std::vector<double> values(n);
+  for (size_t i = 0; i < n; ++i)
+    values[i] = static_cast<double>((i * 37 + 11) % 251) - 20.25 * static_cast<double>(i % 3);
+  struct Case {
+    const char* name;
+    hid_t file_type;
+    bool read_as_raw;
+    std::optional<ScalarType> stored;
+  };
+  const Case cases[] = {
+      {"u8", H5T_STD_U8LE, true, ScalarType::uint8},      {"u8be", H5T_STD_U8BE, true, ScalarType::uint8},
+      {"u16le", H5T_STD_U16LE, true, ScalarType::uint16}, {"u16be", H5T_STD_U16BE, true, ScalarType::uint16},
+      {"i16le", H5T_STD_I16LE, true, ScalarType::int16},  {"i16be", H5T_STD_I16BE, true, ScalarType::int16},
+      {"f32le", H5T_IEEE_F32LE, true, std::nullopt},      {"f32be", H5T_IEEE_F32BE, true, std::nullopt},
+      {"f64le", H5T_IEEE_F64LE, true, std::nullopt},      {"f64be", H5T_IEEE_F64BE, true, std::nullopt},
+      {"i8", H5T_STD_I8LE, false, std::nullopt},          {"i32be", H5T_STD_I32BE, false, std::nullopt},
+  };
+  uint64_t seed = 7;
+  for (const Case& c : cases) {
+    for (const hsize_t user_block : {hsize_t{0}, hsize_t{512}}) {
+      SCOPED_TRACE(std::string(c.name) + ", user block " + std::to_string(user_block));
+      // The values converted to the file's type by HDF5, from doubles in range for every type.
+      std::vector<double> in = values;
+      if (c.file_type == H5T_STD_U8LE || c.file_type == H5T_STD_U8BE || c.file_type == H5T_STD_U16LE ||
+          c.file_type == H5T_STD_U16BE)
+        for (double& v : in) v = std::abs(v);
+      const std::string p = path(std::string(c.name) + std::to_string(user_block) + ".h5");
+      write_h5(p, c.file_type, H5T_NATIVE_DOUBLE, zyx, in.data(), {}, user_block);
+      const auto r = open_reader(p, dir_.string());
+      EXPECT_EQ(r->reads_box_alone(), c.read_as_raw);
+      EXPECT_EQ(r->stored_type(), c.stored);
+      const Volume hdf5 = read_volume({p, {}, {}});
+      expect_boxes_match(*r, hdf5, seed++);
+      if (c.stored == ScalarType::uint8) expect_read_as_stored(*r, native_bytes<uint8_t>(hdf5), *c.stored, c.name);
+      if (c.stored == ScalarType::uint16) expect_read_as_stored(*r, native_bytes<uint16_t>(hdf5), *c.stored, c.name);
+      if (c.stored == ScalarType::int16) expect_read_as_stored(*r, native_bytes<int16_t>(hdf5), *c.stored, c.name);
+    }
+  }
+  // A dataset whose space was never allocated: its fill value, by HDF5.
+  const std::string p = path("unwritten.h5");
+  {
+    const hid_t file = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hid_t space = H5Screate_simple(3, zyx.data(), nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    EXPECT_GE(H5Pset_alloc_time(dcpl, H5D_ALLOC_TIME_LATE), 0);
+    const float fill = 2.5f;
+    EXPECT_GE(H5Pset_fill_value(dcpl, H5T_NATIVE_FLOAT, &fill), 0);
+    const hid_t ds = H5Dcreate2(file, "/volume", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    EXPECT_GE(ds, 0);
+    H5Dclose(ds);
+    H5Pclose(dcpl);
+    H5Sclose(space);
+    H5Fclose(file);
+  }
+  const auto r = open_reader(p, dir_.string());
+  EXPECT_FALSE(r->reads_box_alone());
+  EXPECT_EQ(read(*r, {{0, 0, 0}, {9, 7, 5}}), std::vector<float>(n, 2.5f));
 }
 
 TEST_F(BoxReaderTest, GzipNrrdIsInflatedIntoScratchAndRemovedWithTheReader) {

@@ -174,9 +174,10 @@ class RawBoxReader final : public BoxReader {
 
   bool reads_box_alone() const override { return true; }
 
+  // Integers of one or two bytes, in this machine's byte order: those of the other order are
+  // swapped where they are read, as HDF5 and libtiff swap theirs.
   std::optional<ScalarType> stored_type() const override {
-    const bool native = info_.element_bytes == 1 || data_.big_endian == (std::endian::native == std::endian::big);
-    if (!native || !info_.is_integer || info_.element_bytes > 2) return std::nullopt;
+    if (!info_.is_integer || info_.element_bytes > 2) return std::nullopt;
     return data_.type;
   }
 
@@ -186,9 +187,12 @@ class RawBoxReader final : public BoxReader {
     check_box(lo, size, info_, data_.name);
     const int64_t run = run_length(size);
     const int64_t elem = info_.element_bytes;
+    const bool swap = elem == 2 && data_.big_endian != (std::endian::native == std::endian::big);
     for_each_run(lo, size, run, [&](int64_t done, int64_t node) {
-      pread_fully(fd_.get(), out + done * elem, static_cast<size_t>(run * elem), data_.offset + node * elem,
-                  data_.read_name);
+      unsigned char* const at = out + done * elem;
+      pread_fully(fd_.get(), at, static_cast<size_t>(run * elem), data_.offset + node * elem, data_.read_name);
+      if (swap)
+        for (int64_t i = 0; i < run; ++i) std::swap(at[2 * i], at[2 * i + 1]);
     });
   }
 
@@ -301,9 +305,10 @@ std::unique_ptr<BoxReader> open_nrrd(const std::string& path, const std::string&
 
 // ---------------------------------------------------------------- HDF5
 
-// HDF5 selects the box as a hyperslab and converts to float (or reads small integers as they
-// are) itself, undoing chunking and filters; every call holds hdf5_mutex(), so concurrent boxes
-// are read one after the other.
+// A dataset that is not raw data at an offset (contiguous_hdf5_data, below): HDF5 selects the box
+// as a hyperslab and converts to float (or reads small integers as they are) itself, undoing
+// chunking and filters; every call holds hdf5_mutex(), so concurrent boxes are read one after the
+// other.
 class Hdf5BoxReader final : public BoxReader {
  public:
   Hdf5BoxReader(Hdf5Handle file, Hdf5Handle dataset, std::string where, const VolumeInfo& info)
@@ -432,6 +437,53 @@ Hdf5Handle with_chunk_cache(hid_t file, const std::string& dataset, const std::s
   return again;
 }
 
+// The values of a dataset stored contiguously, unfiltered and whole in the file HDF5 opened, in a
+// type raw data has: where they start, their type and byte order. Such a dataset is raw data at an
+// offset, read without the library, its lock or a stage, on every thread at once (docs/METHOD.md,
+// "HDF5 datasets"). Anything else (chunks, external files, space never written, a file shorter
+// than its data, other types) is left to HDF5, and its messages. The caller holds hdf5_mutex().
+std::optional<RawData> contiguous_hdf5_data(hid_t file, hid_t dataset, const VolumeInfo& info) {
+  const Hdf5Handle create(H5Dget_create_plist(dataset), H5Pclose);
+  if (!create || H5Pget_layout(create.get()) != H5D_CONTIGUOUS || H5Pget_external_count(create.get()) != 0)
+    return std::nullopt;
+  H5D_space_status_t status{};
+  if (H5Dget_space_status(dataset, &status) < 0 || status != H5D_SPACE_STATUS_ALLOCATED) return std::nullopt;
+  const uint64_t bytes =
+      static_cast<uint64_t>(info.dims[0] * info.dims[1] * info.dims[2]) * static_cast<uint64_t>(info.element_bytes);
+  const haddr_t offset = H5Dget_offset(dataset);
+  hsize_t file_bytes = 0;
+  if (offset == HADDR_UNDEF || H5Dget_storage_size(dataset) != bytes || H5Fget_filesize(file, &file_bytes) < 0 ||
+      offset > file_bytes || file_bytes - offset < bytes)
+    return std::nullopt;
+  const Hdf5Handle type(H5Dget_type(dataset), H5Tclose);
+  if (!type) return std::nullopt;
+  struct Known {
+    hid_t little, big;
+    ScalarType as;
+  };
+  const Known known[] = {{H5T_STD_U8LE, H5T_STD_U8BE, ScalarType::uint8},
+                         {H5T_STD_U16LE, H5T_STD_U16BE, ScalarType::uint16},
+                         {H5T_STD_I16LE, H5T_STD_I16BE, ScalarType::int16},
+                         {H5T_IEEE_F32LE, H5T_IEEE_F32BE, ScalarType::float32},
+                         {H5T_IEEE_F64LE, H5T_IEEE_F64BE, ScalarType::float64}};
+  for (const Known& k : known) {
+    for (const bool big : {false, true})
+      if (H5Tequal(type.get(), big ? k.big : k.little) > 0)
+        return RawData{static_cast<int64_t>(offset), k.as, big, {}, {}};
+  }
+  return std::nullopt;
+}
+
+// The descriptor HDF5 read FILE through, duplicated: the file whose layout it read, whatever its
+// path names now. -1 where the driver holds none. The caller holds hdf5_mutex().
+int duplicate_hdf5_descriptor(hid_t file) {
+  const Hdf5Handle access(H5Fget_access_plist(file), H5Pclose);
+  if (!access || H5Pget_driver(access.get()) != H5FD_SEC2) return -1;  // whose handle is a descriptor
+  void* handle = nullptr;
+  if (H5Fget_vfd_handle(file, H5P_DEFAULT, &handle) < 0 || handle == nullptr) return -1;
+  return ::fcntl(*static_cast<int*>(handle), F_DUPFD_CLOEXEC, 0);
+}
+
 std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string& dataset, uint64_t chunk_cache_bytes) {
   const std::lock_guard lock(hdf5_mutex());  // declared first, so released after the handles close
   Hdf5Handle f = open_hdf5_file(file);
@@ -442,6 +494,14 @@ std::unique_ptr<BoxReader> open_hdf5(const std::string& file, const std::string&
   checked_node_count(info.dims, static_cast<int>(sizeof(float)), where);
   read_hdf5_geometry(ds.get(), where, info.spacing, info.origin);
   set_hdf5_type(ds.get(), where, info);
+  if (std::optional<RawData> raw = contiguous_hdf5_data(f.get(), ds.get(), info)) {
+    Fd fd(duplicate_hdf5_descriptor(f.get()));
+    if (fd.get() >= 0) {
+      raw->name = where;
+      raw->read_name = file;
+      return std::make_unique<RawBoxReader>(std::move(fd), std::move(*raw), info, nullptr);
+    }
+  }
   Hdf5Handle cached = with_chunk_cache(f.get(), dataset, where, std::move(ds), info, chunk_cache_bytes);
   return std::make_unique<Hdf5BoxReader>(std::move(f), std::move(cached), where, info);
 }
