@@ -498,25 +498,41 @@ TEST_F(BoxReaderTest, ContiguousHdf5DatasetsOfRawTypesAreReadAtTheirOffsetAsHdf5
       if (c.stored == ScalarType::int16) expect_read_as_stored(*r, native_bytes<int16_t>(hdf5), *c.stored, c.name);
     }
   }
-  // A dataset whose space was never allocated: its fill value, by HDF5.
-  const std::string p = path("unwritten.h5");
-  {
-    const hid_t file = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-    const hid_t space = H5Screate_simple(3, zyx.data(), nullptr);
-    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
-    EXPECT_GE(H5Pset_alloc_time(dcpl, H5D_ALLOC_TIME_LATE), 0);
-    const float fill = 2.5f;
-    EXPECT_GE(H5Pset_fill_value(dcpl, H5T_NATIVE_FLOAT, &fill), 0);
-    const hid_t ds = H5Dcreate2(file, "/volume", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
-    EXPECT_GE(ds, 0);
-    H5Dclose(ds);
-    H5Pclose(dcpl);
-    H5Sclose(space);
-    H5Fclose(file);
+  // Layouts HDF5 reads: space never allocated (the fill value), a compact dataset (in the object
+  // header), values in an external file.
+  const std::vector<float> ones(n, 1.25f);
+  for (const char* layout : {"unwritten", "compact", "external"}) {
+    SCOPED_TRACE(layout);
+    const std::string p = path(std::string(layout) + ".h5");
+    {
+      const hid_t file = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+      const hid_t space = H5Screate_simple(3, zyx.data(), nullptr);
+      const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+      const std::string outside = path(std::string(layout) + ".values");
+      if (std::string(layout) == "unwritten") {
+        EXPECT_GE(H5Pset_alloc_time(dcpl, H5D_ALLOC_TIME_LATE), 0);
+        const float fill = 2.5f;
+        EXPECT_GE(H5Pset_fill_value(dcpl, H5T_NATIVE_FLOAT, &fill), 0);
+      } else if (std::string(layout) == "compact") {
+        EXPECT_GE(H5Pset_layout(dcpl, H5D_COMPACT), 0);
+      } else {
+        EXPECT_GE(H5Pset_external(dcpl, outside.c_str(), 0, H5F_UNLIMITED), 0);
+      }
+      const hid_t ds = H5Dcreate2(file, "/volume", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+      EXPECT_GE(ds, 0);
+      if (std::string(layout) != "unwritten") {
+        EXPECT_GE(H5Dwrite(ds, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, ones.data()), 0);
+      }
+      H5Dclose(ds);
+      H5Pclose(dcpl);
+      H5Sclose(space);
+      H5Fclose(file);
+    }
+    const auto r = open_reader(p, dir_.string());
+    EXPECT_FALSE(r->reads_box_alone());
+    EXPECT_EQ(read(*r, {{0, 0, 0}, {9, 7, 5}}),
+              std::vector<float>(n, std::string(layout) == "unwritten" ? 2.5f : 1.25f));
   }
-  const auto r = open_reader(p, dir_.string());
-  EXPECT_FALSE(r->reads_box_alone());
-  EXPECT_EQ(read(*r, {{0, 0, 0}, {9, 7, 5}}), std::vector<float>(n, 2.5f));
 }
 
 TEST_F(BoxReaderTest, GzipNrrdIsInflatedIntoScratchAndRemovedWithTheReader) {
@@ -697,9 +713,10 @@ TEST_F(BoxReaderTest, NanInABoxIsNamedByItsGlobalCoordinates) {
   values[(6 * 8 + 7) * 9 + 8] = std::numeric_limits<float>::infinity();   // (8, 7, 6)
   const std::string raw = path("nan_9x8x7_float32.raw");
   write_file(raw, "", bytes_of(values, std::endian::little));
-  const std::string h5 = path("nan.h5");
+  const std::string h5 = path("nan.h5"), contiguous = path("nan_contiguous.h5");
   write_h5(h5, H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {7, 8, 9}, values.data(), {4, 4, 4});
-  for (const std::string& p : {raw, h5}) {
+  write_h5(contiguous, H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, {7, 8, 9}, values.data());
+  for (const std::string& p : {raw, h5, contiguous}) {
     SCOPED_TRACE(p);
     const auto r = open_reader(p, dir_.string());
     const std::string nan = io_error_of([&] { read(*r, {{2, 3, 4}, {3, 3, 3}}); });
@@ -733,6 +750,21 @@ TEST_F(BoxReaderTest, RawFileTruncatedAfterOpenGivesAShortReadError) {
   EXPECT_CONTAINS(msg, p);
   EXPECT_CONTAINS(msg, "short read");
   EXPECT_EQ(read(*r, {{0, 0, 0}, {4, 4, 2}}), std::vector<float>(32, 9.0f));  // what is left still reads
+}
+
+// Read at its offset, a contiguous HDF5 dataset cut short after its file was opened is a short
+// read (HDF5 read zeros past the end).
+TEST_F(BoxReaderTest, ContiguousHdf5FileTruncatedAfterOpenGivesAShortReadError) {
+  const std::vector<uint8_t> nines(64, 9);
+  const std::string p = path("shrinks.h5");
+  write_h5(p, H5T_STD_U8LE, H5T_NATIVE_UINT8, {4, 4, 4}, nines.data());
+  const auto r = open_reader(p, dir_.string());
+  ASSERT_TRUE(r->reads_box_alone());
+  EXPECT_EQ(read(*r, {{0, 0, 3}, {4, 4, 1}}), std::vector<float>(16, 9.0f));
+  fs::resize_file(p, fs::file_size(p) - 40);  // the dataset's last bytes, if nothing follows them
+  const std::string msg = io_error_of([&] { read(*r, {{0, 0, 3}, {4, 4, 1}}); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "short read");
 }
 
 TEST_F(BoxReaderTest, BoxOutsideTheVolumeIsAnInvalidArgument) {

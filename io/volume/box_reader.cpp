@@ -440,8 +440,10 @@ Hdf5Handle with_chunk_cache(hid_t file, const std::string& dataset, const std::s
 // The values of a dataset stored contiguously, unfiltered and whole in the file HDF5 opened, in a
 // type raw data has: where they start, their type and byte order. Such a dataset is raw data at an
 // offset, read without the library, its lock or a stage, on every thread at once (docs/METHOD.md,
-// "HDF5 datasets"). Anything else (chunks, external files, space never written, a file shorter
-// than its data, other types) is left to HDF5, and its messages. The caller holds hdf5_mutex().
+// "HDF5 datasets"). Anything else (chunks, a compact dataset, external files, space never written,
+// other types, another file driver) is left to HDF5, and its messages. The end of file it checks
+// against is the one HDF5 knows (which H5Fopen has held the file to). The caller holds
+// hdf5_mutex().
 std::optional<RawData> contiguous_hdf5_data(hid_t file, hid_t dataset, const VolumeInfo& info) {
   const Hdf5Handle create(H5Dget_create_plist(dataset), H5Pclose);
   if (!create || H5Pget_layout(create.get()) != H5D_CONTIGUOUS || H5Pget_external_count(create.get()) != 0)

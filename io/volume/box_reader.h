@@ -44,9 +44,9 @@ class BoxReader {
   // convert gathers the boxes of neighbouring tiles into one read only where it does not.
   virtual bool reads_box_alone() const { return false; }
   // The type read_box_stored reads values as, for a reader that can read them as the file stores
-  // them, not converted: integers of one or two bytes in this machine's byte order in raw data (a
-  // raw file's, a raw or inflated NRRD's), and in an HDF5 dataset or a TIFF stack of either byte
-  // order (HDF5 and libtiff swap them). None for any other.
+  // them, not converted: integers of one or two bytes of either byte order, in raw data (a raw
+  // file's, a raw or inflated NRRD's, a contiguous HDF5 dataset's), an HDF5 dataset or a TIFF stack,
+  // delivered in this machine's order (swapped where read). None for any other.
   virtual std::optional<ScalarType> stored_type() const { return std::nullopt; }
   // The box's values as stored, element_bytes each, into out (only where stored_type() is not
   // none): for a caller that converts the few it needs to float. An integer is finite.
