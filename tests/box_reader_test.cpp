@@ -16,6 +16,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <limits>
 #include <memory>
@@ -73,10 +74,12 @@ std::string nrrd_header(const std::string& sizes, const std::string& type, const
   return text + "\n";
 }
 
-// One dataset of shape (z, y, x) = ZYX from DATA; chunked and deflated when CHUNK is given; after
-// a user block of USER_BLOCK bytes (0 or a power of 2 from 512).
+// One dataset of shape (z, y, x) = ZYX from DATA (none written if null); chunked and deflated when
+// CHUNK is given; after a user block of USER_BLOCK bytes (0 or a power of 2 from 512); LAYOUT sets
+// anything else of its creation properties.
 void write_h5(const std::string& path, hid_t file_type, hid_t memory_type, const std::array<hsize_t, 3>& zyx,
-              const void* data, const std::vector<hsize_t>& chunk = {}, hsize_t user_block = 0) {
+              const void* data, const std::vector<hsize_t>& chunk = {}, hsize_t user_block = 0,
+              const std::function<void(hid_t dcpl)>& layout = {}) {
   const hid_t fcpl = H5Pcreate(H5P_FILE_CREATE);
   EXPECT_GE(H5Pset_userblock(fcpl, user_block), 0);
   const hid_t file = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, fcpl, H5P_DEFAULT);
@@ -88,8 +91,12 @@ void write_h5(const std::string& path, hid_t file_type, hid_t memory_type, const
     EXPECT_GE(H5Pset_chunk(dcpl, 3, chunk.data()), 0);
     EXPECT_GE(H5Pset_deflate(dcpl, 6), 0);
   }
+  if (layout) layout(dcpl);
   const hid_t ds = H5Dcreate2(file, "/volume", file_type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
-  EXPECT_GE(H5Dwrite(ds, memory_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), 0);
+  EXPECT_GE(ds, 0) << path;
+  if (data) {
+    EXPECT_GE(H5Dwrite(ds, memory_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), 0);
+  }
   H5Dclose(ds);
   H5Pclose(dcpl);
   H5Sclose(space);
@@ -501,37 +508,24 @@ TEST_F(BoxReaderTest, ContiguousHdf5DatasetsOfRawTypesAreReadAtTheirOffsetAsHdf5
   // Layouts HDF5 reads: space never allocated (the fill value), a compact dataset (in the object
   // header), values in an external file.
   const std::vector<float> ones(n, 1.25f);
-  for (const char* layout : {"unwritten", "compact", "external"}) {
+  for (const std::string layout : {"unwritten", "compact", "external"}) {
     SCOPED_TRACE(layout);
-    const std::string p = path(std::string(layout) + ".h5");
-    {
-      const hid_t file = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-      const hid_t space = H5Screate_simple(3, zyx.data(), nullptr);
-      const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
-      const std::string outside = path(std::string(layout) + ".values");
-      if (std::string(layout) == "unwritten") {
+    const std::string p = path(layout + ".h5"), outside = path(layout + ".values");
+    const bool unwritten = layout == "unwritten";
+    write_h5(p, H5T_IEEE_F32LE, H5T_NATIVE_FLOAT, zyx, unwritten ? nullptr : ones.data(), {}, 0, [&](hid_t dcpl) {
+      if (unwritten) {
         EXPECT_GE(H5Pset_alloc_time(dcpl, H5D_ALLOC_TIME_LATE), 0);
         const float fill = 2.5f;
         EXPECT_GE(H5Pset_fill_value(dcpl, H5T_NATIVE_FLOAT, &fill), 0);
-      } else if (std::string(layout) == "compact") {
+      } else if (layout == "compact") {
         EXPECT_GE(H5Pset_layout(dcpl, H5D_COMPACT), 0);
       } else {
         EXPECT_GE(H5Pset_external(dcpl, outside.c_str(), 0, H5F_UNLIMITED), 0);
       }
-      const hid_t ds = H5Dcreate2(file, "/volume", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
-      EXPECT_GE(ds, 0);
-      if (std::string(layout) != "unwritten") {
-        EXPECT_GE(H5Dwrite(ds, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, ones.data()), 0);
-      }
-      H5Dclose(ds);
-      H5Pclose(dcpl);
-      H5Sclose(space);
-      H5Fclose(file);
-    }
+    });
     const auto r = open_reader(p, dir_.string());
     EXPECT_FALSE(r->reads_box_alone());
-    EXPECT_EQ(read(*r, {{0, 0, 0}, {9, 7, 5}}),
-              std::vector<float>(n, std::string(layout) == "unwritten" ? 2.5f : 1.25f));
+    EXPECT_EQ(read(*r, {{0, 0, 0}, {9, 7, 5}}), std::vector<float>(n, unwritten ? 2.5f : 1.25f));
   }
 }
 

@@ -136,6 +136,8 @@ struct RawData {
   bool big_endian = false;
   std::string name;       // how messages name the volume
   std::string read_name;  // how read errors name the file read (an inflated copy differs)
+  // Whether values of more than a byte are in the other byte order than this machine's.
+  bool swapped() const { return big_endian != (std::endian::native == std::endian::big); }
 };
 
 // Raw values at a byte offset of one file: each box is read with pread on a descriptor opened
@@ -187,7 +189,7 @@ class RawBoxReader final : public BoxReader {
     check_box(lo, size, info_, data_.name);
     const int64_t run = run_length(size);
     const int64_t elem = info_.element_bytes;
-    const bool swap = elem == 2 && data_.big_endian != (std::endian::native == std::endian::big);
+    const bool swap = elem == 2 && data_.swapped();
     for_each_run(lo, size, run, [&](int64_t done, int64_t node) {
       unsigned char* const at = out + done * elem;
       pread_fully(fd_.get(), at, static_cast<size_t>(run * elem), data_.offset + node * elem, data_.read_name);
@@ -236,9 +238,7 @@ class RawBoxReader final : public BoxReader {
     size_t size;
   };
 
-  bool stored_as_floats() const {
-    return data_.type == ScalarType::float32 && data_.big_endian == (std::endian::native == std::endian::big);
-  }
+  bool stored_as_floats() const { return data_.type == ScalarType::float32 && !data_.swapped(); }
 
   // ROWS rows of the box from its row Y of plane Z in one read through STAGE.
   void read_rows(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, int64_t y, int64_t rows,
