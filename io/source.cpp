@@ -1,14 +1,16 @@
 // Any input opened for extraction (isotope/source.h): the one place that assembles the chain
-// store -> brick cache -> paged volume, or streams a volume file at eps 0 and otherwise reads it
-// whole and builds its hierarchy on demand. Every
+// store -> brick cache -> paged volume, or streams a volume file at eps 0 and otherwise converts it
+// into a store of its own, in the temporary directory, on demand. Every
 // face (the isotope command's extract, sweep and serve, the C++ API, the bench) opens its input
 // here (docs/DESIGN.md, "Seams").
 #include "isotope/source.h"
 
 #include <malloc.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <mutex>
 #include <optional>
 #include <utility>
@@ -19,11 +21,14 @@
 #include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"
+#include "engine/hierarchy/store_layout.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
+#include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
+#include "io/volume/volume_box_reader.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/error.h"
 
@@ -46,6 +51,14 @@ void check_cache_mb(const OpenOptions& options) {
     throw OptionError("cache-mb", "must be 1 .. " + std::to_string(int64_t{1} << 30) + " (MB)");
 }
 
+// A volume's hierarchy as convert makes it, in a store of its own in the temporary directory
+// (isotope/source.h), paged like any store.
+struct ScratchStore {
+  std::unique_ptr<StoreReader> store;
+  std::unique_ptr<BrickCache> cache;
+  std::unique_ptr<PagedVolume> paged;
+};
+
 }  // namespace
 
 struct Source::Impl {
@@ -55,7 +68,8 @@ struct Source::Impl {
   std::unique_ptr<PagedVolume> paged;
   int64_t cache_mb = 0;
   // Or a volume file (named `path`): read a window of layers at a time by each extraction that
-  // streams (eps 0), and read whole, once, by the first that does not.
+  // streams (eps 0), converted into a scratch store by the first that needs a hierarchy, and read
+  // whole only for a triangle budget's count, or where the scratch store could not be written.
   std::unique_ptr<BoxReader> file;
   std::string path;
   // Or a volume held whole (an array, NRRD, or the file once read): set once, never replaced, and
@@ -70,6 +84,11 @@ struct Source::Impl {
   // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
   // that reads more fields builds the next (Source::extract may run on several threads at once).
   mutable std::shared_ptr<const Hierarchy> memory;
+  // The hierarchy in a scratch store, which extractions share as they share `memory`; `memory` is
+  // built only where the scratch store could not be written.
+  mutable std::shared_ptr<const ScratchStore> scratch;
+  mutable bool hierarchy_in_memory = false;  // the scratch store not made, or not made again
+  bool tune_allocator = false;
   // The triangle budgets settled so far: the same data whether paged or in memory. Forgotten when
   // the hierarchy is built again, which reads the array again (a borrowed one may have changed).
   mutable BudgetMemo budgets;
@@ -117,6 +136,62 @@ struct Source::Impl {
     return *volume;
   }
 
+  // The hierarchy in a store of its own, written once (by the first extraction that needs it) into
+  // the temporary directory and unlinked as soon as it is opened, so that nothing is left behind
+  // however the process ends. A store, not the hierarchy in memory: the build holds a budget's
+  // tiles, not the volume's records (16 bytes a node in memory, 20 GB for a 1024^3 volume), and it
+  // is faster, for the same mesh (docs/METHOD.md, "One-shot extraction through a store"). Null,
+  // and the hierarchy built in memory as before, where the temporary directory cannot take the
+  // store (missing, not writable, full), and for a volume so thin along an axis that a store's
+  // bricks would be mostly padding (StoreLayout::memory_brick_bits: the hierarchy in memory takes
+  // smaller bricks, which a store does not have).
+  std::shared_ptr<const ScratchStore> paged_hierarchy() const {
+    const std::lock_guard<std::mutex> lock(build_mutex);
+    if (scratch || hierarchy_in_memory) return scratch;
+    const auto start = std::chrono::steady_clock::now();
+    const Volume* held_volume = in_memory();
+    const std::array<int64_t, 3> dims = held_volume ? held_volume->dims : file->info().dims;
+    namespace fs = std::filesystem;
+    std::error_code failed;
+    const fs::path dir = fs::temp_directory_path(failed);
+    if (failed || StoreLayout::memory_brick_bits(dims) != kDefaultBrickBits) {
+      hierarchy_in_memory = true;
+      return nullptr;
+    }
+    static std::atomic<uint64_t> serial{0};
+    const std::string name =
+        (dir / ("isotope-hierarchy-" + std::to_string(::getpid()) + "-" + std::to_string(serial++) + ".isotope"))
+            .string();
+    ConvertOptions options;
+    options.progress = progress;
+    auto built = std::make_shared<ScratchStore>();
+    try {
+      if (held_volume) {
+        validate_volume(*held_volume);  // a borrowed array may have changed since it was checked
+        convert_to_store(VolumeBoxReader(*held_volume), name, options);
+      } else {
+        convert_to_store(*file, name, options);
+      }
+      built->store = std::make_unique<StoreReader>(name);
+    } catch (const IoError&) {
+      // The scratch store's files (a full disk), or the input's values: the build in memory reads
+      // them again, and refuses what is the input's in the words of the volume read whole.
+      fs::remove(name, failed);
+      hierarchy_in_memory = true;
+      return nullptr;
+    } catch (...) {
+      fs::remove(name, failed);
+      throw;
+    }
+    fs::remove(name, failed);  // the reader keeps its descriptor
+    if (tune_allocator) keep_freed_brick_memory();
+    built->cache = std::make_unique<BrickCache>(*built->store, static_cast<uint64_t>(cache_mb) << 20);
+    built->paged = std::make_unique<PagedVolume>(*built->cache);
+    scratch = std::move(built);
+    preprocess_seconds += seconds_since(start);
+    return scratch;
+  }
+
   std::shared_ptr<const Hierarchy> hierarchy(const RecordFields& fields) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (memory && memory->fields().covers(fields)) return memory;
@@ -141,6 +216,8 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
   auto impl = std::make_unique<Source::Impl>();
   impl->progress = options.preprocess_progress;
   check_cache_mb(options);
+  impl->cache_mb = options.cache_mb;
+  impl->tune_allocator = options.tune_allocator;
   // A store is known by its magic; a file named .isotope without it is a damaged store, whose
   // reader says so, not a raw volume whose name lacks its dimensions (tests/reject/zeros.isotope).
   if (is_store_file(spec.path) || spec.path.ends_with(".isotope")) {
@@ -149,7 +226,6 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
     impl->store = std::make_unique<StoreReader>(spec.path);
     impl->cache = std::make_unique<BrickCache>(*impl->store, static_cast<uint64_t>(options.cache_mb) << 20);
     impl->paged = std::make_unique<PagedVolume>(*impl->cache);
-    impl->cache_mb = options.cache_mb;
   } else if (locate_volume(spec).format == VolumeLocation::Format::nrrd) {
     // gzip-encoded NRRD is read at random only through an inflated copy: read it whole, once.
     impl->hold(std::make_unique<Volume>(read_volume(spec)));
@@ -170,6 +246,8 @@ Source open_volume(Volume volume, const OpenOptions& options) {
   validate_volume(volume);  // what extract() would refuse, refused at open
   auto impl = std::make_unique<Source::Impl>();
   impl->progress = options.preprocess_progress;
+  impl->cache_mb = options.cache_mb;
+  impl->tune_allocator = options.tune_allocator;
   impl->hold(std::make_unique<Volume>(std::move(volume)));
   return Source(std::move(impl));
 }
@@ -201,6 +279,8 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
     return volume.borrowed.data() ? isotope::extract(volume, extracted, stats)
                                   : extract_validated(volume, extracted, stats);
   }
+  if (const std::shared_ptr<const ScratchStore> scratch = impl_->paged_hierarchy())
+    return isotope::extract(*scratch->paged, extracted, stats, &impl_->budgets);
   const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(extracted));
   return isotope::extract(*hierarchy, extracted, stats, &impl_->budgets);
 }
@@ -215,7 +295,7 @@ void Source::prepare(const std::vector<ExtractOptions>& planned) const {
     needed = needed || needs_hierarchy(impl_->as_extracted(o));
     whole = whole || !impl_->streams(o);
   }
-  if (needed)
+  if (needed && !impl_->paged_hierarchy())
     impl_->hierarchy(fields);
   else if (whole)
     impl_->whole();
@@ -245,8 +325,13 @@ SourceInfo Source::info() const {
     info.lattice_k = Lattice::enclosing(info.dims).k;
     info.input_bytes = static_cast<uint64_t>(info.dims[0] * info.dims[1] * info.dims[2]) * sizeof(float);
     info.preprocess_seconds = s.preprocess_seconds;
-    info.hierarchy_built = s.memory != nullptr;
-    if (s.memory)
+    info.hierarchy_built = s.memory != nullptr || s.scratch != nullptr;
+    if (s.scratch)
+      for (int t = 0; t < 3; ++t) {
+        info.critical_paper[t] = s.scratch->store->header().critical_paper[t];
+        info.critical_exact[t] = s.scratch->store->header().critical_exact[t];
+      }
+    else if (s.memory)
       for (int t = 0; t < 3; ++t) {
         info.critical_paper[t] = s.memory->stats().critical_paper[t];
         info.critical_exact[t] = s.memory->stats().critical_exact[t];

@@ -17,6 +17,7 @@
 #include <fstream>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <random>
 #include <span>
 #include <stdexcept>
@@ -30,12 +31,14 @@
 #include "engine/extract/slab_march.h"
 #include "engine/extract/streamed_extract.h"
 #include "engine/extract/traversal.h"
+#include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/mesh/marching_tetrahedra.h"
 #include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/convert.h"
 #include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 #include "isotope/source.h"
@@ -866,7 +869,7 @@ VolumeSpec spec_of(const std::string& file) { return {file, std::nullopt, std::n
 
 bool same_mesh(const Mesh& a, const Mesh& b) { return a.positions == b.positions && a.triangles == b.triangles; }
 
-TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeUntilTheVolumeIsReadWhole) {
+TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeAndAHierarchyIsAStoreOfItsOwn) {
   const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
   const auto [fine, coarse, fine_mesh, coarse_mesh] = fine_and_coarse(read_volume(spec_of(raw)), 64.5f, 1);
   {
@@ -883,12 +886,87 @@ TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeUntilTheVolumeIsReadWhole) {
   std::filesystem::remove(raw);
   copy_of("bolt_70x123x66_uint8.raw");
   const Source source = open_volume(spec_of(raw));
-  EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh));  // reads the volume whole, and keeps it
+  EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh));  // converts the volume into a store
   EXPECT_TRUE(source.info().hierarchy_built);
-  EXPECT_TRUE(source.info().values_in_memory);
+  EXPECT_FALSE(source.info().values_in_memory);
   std::filesystem::resize_file(raw, 0);
-  EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "from the volume in memory";
-  EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh));
+  EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh)) << "from its store";
+  EXPECT_CONTAINS(testing::io_error_of([&] { source.extract(fine); }), raw) << "eps 0 streams the file still";
+}
+
+// The hierarchy of a volume file, or of an array, is a store convert writes into the temporary
+// directory and unlinks at once: every extraction from it gives the mesh of the hierarchy in
+// memory, in every topology mode and for either error, the critical points are the store's, and
+// nothing is left in that directory while the source lives, nor after.
+TEST_F(SourceOfAFile, AHierarchyIsAStoreInTheTemporaryDirectoryThatLeavesNothingThere) {
+  const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
+  const Volume v = read_volume(spec_of(raw));
+  const std::string scratch = path("scratch");
+  std::filesystem::create_directory(scratch);
+  const testing::TemporaryDirectoryIs tmp(scratch);
+  const std::string store = path("bolt.isotope");
+  convert(spec_of(raw), store);
+  const Source converted = open_volume(spec_of(store));
+  const Hierarchy in_memory = Hierarchy::build(v);
+  for (const bool from_array : {false, true}) {
+    const Source source = from_array ? open_volume(Volume(v)) : open_volume(spec_of(raw));
+    for (const TopologyMode mode :
+         {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve, TopologyMode::simplify})
+      for (const ErrorIndicator error : {ErrorIndicator::bound, ErrorIndicator::surplus}) {
+        ExtractOptions o;
+        o.iso = 64.5f;
+        o.eps = 2;
+        o.topology = mode;
+        o.error = error;
+        if (mode == TopologyMode::simplify) o.delta = 20;
+        const Mesh m = source.extract(o);
+        EXPECT_GT(m.triangles.size(), 100u);
+        EXPECT_TRUE(same_mesh(m, extract(in_memory, o))) << to_string(mode) << " " << from_array;
+        EXPECT_TRUE(same_mesh(m, converted.extract(o))) << to_string(mode) << " " << from_array;
+        EXPECT_TRUE(std::filesystem::is_empty(scratch)) << "unlinked once opened";
+      }
+    const SourceInfo info = source.info();
+    EXPECT_TRUE(info.hierarchy_built);
+    EXPECT_FALSE(info.store);
+    EXPECT_EQ(info.values_in_memory, from_array);
+    EXPECT_EQ(info.critical_exact, converted.info().critical_exact);
+    EXPECT_EQ(info.critical_paper, converted.info().critical_paper);
+    for (int t = 0; t < 3; ++t) EXPECT_EQ(info.critical_exact[t], in_memory.stats().critical_exact[t]);
+    EXPECT_GT(info.critical_exact[0] + info.critical_exact[1] + info.critical_exact[2], 0);
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(scratch));
+}
+
+// Where the temporary directory cannot take the store (missing, or refusing files: /proc even to
+// root), and for a volume so thin that a store's bricks would be mostly padding, the hierarchy is
+// built in memory, to the same mesh; an error in the input is the input's, in the words of the
+// volume read whole.
+TEST_F(SourceOfAFile, WithoutARoomForItsStoreAHierarchyIsBuiltInMemory) {
+  const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
+  const auto [fine, coarse, fine_mesh, coarse_mesh] = fine_and_coarse(read_volume(spec_of(raw)), 64.5f, 1);
+  for (const std::string& dir : {path("missing"), std::string("/proc")}) {
+    const testing::TemporaryDirectoryIs tmp(dir);
+    const Source source = open_volume(spec_of(raw));
+    EXPECT_TRUE(same_mesh(source.extract(coarse), coarse_mesh)) << dir;
+    EXPECT_TRUE(source.info().hierarchy_built) << dir;
+    EXPECT_TRUE(source.info().values_in_memory) << dir << ": read whole for the hierarchy in memory";
+  }
+  const testing::TemporaryDirectoryIs tmp(path("."));
+  std::vector<float> thin(40000 * 2 * 2);
+  for (size_t i = 0; i < thin.size(); ++i) thin[i] = std::sin(static_cast<float>(i % 40000) / 30);
+  const std::string thin_raw = path("thin_40000x2x2_float32.raw");
+  std::ofstream(thin_raw, std::ios::binary)
+      .write(reinterpret_cast<const char*>(thin.data()), static_cast<std::streamsize>(thin.size() * 4));
+  ExtractOptions o;
+  o.iso = 0.5f;
+  o.eps = 0.01;
+  const Source source = open_volume(spec_of(thin_raw));
+  EXPECT_TRUE(same_mesh(source.extract(o), extract(read_volume(spec_of(thin_raw)), o)));
+  EXPECT_TRUE(source.info().values_in_memory);
+  std::filesystem::resize_file(raw, 70 * 123 * 60);
+  const std::string whole = testing::io_error_of([&] { read_volume(spec_of(raw)); });
+  EXPECT_CONTAINS(whole, raw);
+  EXPECT_EQ(testing::io_error_of([&] { open_volume(spec_of(raw)).extract(coarse); }), whole);
 }
 
 TEST_F(SourceOfAFile, AnHdf5DatasetIsStreamedToTheSameMesh) {
@@ -946,8 +1024,8 @@ TEST_F(SourceOfAFile, AnHdf5DatasetOf16BitIntegersIsStreamedToTheSameMesh) {
 }
 
 // Extractions from one Source on several threads at once (as Source promises): some stream the file
-// while others read it whole and build the hierarchy; each gets its own mesh, and the volume is
-// read whole once. Run under ThreadSanitizer in CI.
+// while others build the hierarchy's store, once, and page it; each gets its own mesh. Run under
+// ThreadSanitizer in CI.
 TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {
   const std::string raw = copy_of("neghip_66x66x66_uint8.raw");
   const auto [fine, coarse, fine_mesh, coarse_mesh] = fine_and_coarse(read_volume(spec_of(raw)), 128.5f, 4);
@@ -966,8 +1044,9 @@ TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {
       });
     for (std::thread& t : threads) t.join();
     EXPECT_EQ(right, 4) << "round " << round;
-    EXPECT_TRUE(source.info().values_in_memory);
-    EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "from the volume read whole";
+    EXPECT_FALSE(source.info().values_in_memory);
+    EXPECT_TRUE(source.info().hierarchy_built);
+    EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "streamed again";
   }
 }
 

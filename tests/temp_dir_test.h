@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,6 +46,27 @@ class TempDirTest : public ::testing::Test {
   }
 
   std::filesystem::path dir_;
+};
+
+// TMPDIR set to DIR for as long as it lives (inherited by the processes started meanwhile): where
+// a source writes its hierarchy's store.
+class TemporaryDirectoryIs {
+ public:
+  explicit TemporaryDirectoryIs(const std::string& dir) {
+    if (const char* was = std::getenv("TMPDIR")) was_ = was;
+    ::setenv("TMPDIR", dir.c_str(), 1);
+  }
+  ~TemporaryDirectoryIs() {
+    if (was_)
+      ::setenv("TMPDIR", was_->c_str(), 1);
+    else
+      ::unsetenv("TMPDIR");
+  }
+  TemporaryDirectoryIs(const TemporaryDirectoryIs&) = delete;
+  TemporaryDirectoryIs& operator=(const TemporaryDirectoryIs&) = delete;
+
+ private:
+  std::optional<std::string> was_;
 };
 
 }  // namespace isotope::testing

@@ -366,9 +366,9 @@ Command add_extract_command(CLI::App& app) {
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
       ->check(thread_count_check())
       ->capture_default_str();
-  cmd->add_option(
-         "--cache-mb", a->cache_mb,
-         "Store input: memory for decoded bricks, in MB (at least 16 bricks, under 1 MB); the store may be far larger")
+  cmd->add_option("--cache-mb", a->cache_mb,
+                  "Memory for decoded bricks, in MB (at least 16 bricks, under 1 MB), of a store input or of a "
+                  "volume's hierarchy (a store of its own); the store may be far larger")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_option("--focus", a->focus,

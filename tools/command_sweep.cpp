@@ -194,7 +194,8 @@ Command add_sweep_command(CLI::App& app) {
   cmd->add_option("--threads", a->threads, "Worker threads (0 = all cores)")
       ->check(thread_count_check())
       ->capture_default_str();
-  cmd->add_option("--cache-mb", a->cache_mb, "Store input: memory for decoded bricks, in MB")
+  cmd->add_option("--cache-mb", a->cache_mb,
+                  "Memory for decoded bricks, in MB, of a store input or of a volume's hierarchy (a store of its own)")
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   cmd->add_flag("-q,--quiet", a->quiet, "Print nothing on success");

@@ -3,10 +3,15 @@
 // cache, so that only the bricks a traversal reaches are read (memory: the cache's budget plus the
 // mesh, whatever the store's size). A volume file (raw, HDF5, TIFF) is read by each extraction at
 // eps 0 a window of z-layers at a time, marched while the next is read (memory: a few windows plus
-// the mesh, so a file larger than memory works); the first extraction that needs its hierarchy
-// (eps > 0 or a triangle budget) reads it whole, keeps it, and builds the hierarchy. NRRD and an
-// array handed over are held in memory from the start. Either way extract() can run many times,
-// from several threads at once, and gives the same mesh, byte for byte, for the same volume.
+// the mesh, so a file larger than memory works). The first extraction that needs its hierarchy
+// (eps > 0 or a triangle budget) converts the volume into a store of its own, as convert would,
+// in the temporary directory (TMPDIR, else /tmp; unlinked once opened, so nothing is left behind),
+// and every later one pages it like any store: memory within convert's budget and the cache's,
+// not the volume's. Only where that directory cannot take the store is the hierarchy built in
+// memory instead (16 bytes a node). A triangle budget that the full-resolution mesh may fit reads
+// the volume whole to count it, and keeps it. NRRD and an array handed over are held in memory
+// from the start. Either way extract() can run many times, from several threads at once, and gives
+// the same mesh, byte for byte, for the same volume.
 //
 //   isotope::Source scan = isotope::open_volume({"scan_512x512x300_uint16.raw"});
 //   isotope::ExtractOptions o;
@@ -40,7 +45,8 @@ struct VolumeSpec {
 };
 
 struct OpenOptions {
-  int64_t cache_mb = 512;  // a store: memory for decoded bricks (at least 16 bricks); 1 .. 2^30
+  // A store, or the store of a volume's hierarchy: memory for decoded bricks (at least 16 bricks); 1 .. 2^30
+  int64_t cache_mb = 512;
   // A volume's hierarchy being built (on the first extraction that needs it).
   ProgressCallback preprocess_progress;
   // Process-wide: keep freed brick memory for reuse (glibc's mallopt) instead of returning it to the
@@ -57,7 +63,7 @@ struct SourceInfo {
   std::array<double, 3> origin{0, 0, 0};
   int lattice_k = 0;              // the hierarchy's lattice has 2^k cells per axis
   double read_seconds = 0;        // opening, and reading a volume whole (not its streamed reads)
-  double preprocess_seconds = 0;  // a volume: building its hierarchy, so far
+  double preprocess_seconds = 0;  // a volume: building its hierarchy (its scratch store), so far
   bool hierarchy_built = false;   // a store: always (by convert)
   // A volume: its values held whole in memory (an array, NRRD, or a file once an extraction that
   // does not stream has read it); a file at eps 0 is streamed instead.
