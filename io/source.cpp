@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <mutex>
 #include <optional>
+#include <string_view>
 #include <utility>
 
 #include "engine/core/volume_check.h"
@@ -22,6 +23,7 @@
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/store_layout.h"
+#include "io/file/temporary_registry.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"
@@ -49,6 +51,21 @@ void keep_freed_brick_memory() {
 void check_cache_mb(const OpenOptions& options) {
   if (options.cache_mb < 1 || options.cache_mb > (int64_t{1} << 30))
     throw OptionError("cache-mb", "must be 1 .. " + std::to_string(int64_t{1} << 30) + " (MB)");
+}
+
+// What a store and its cache have read and held, for SourceInfo.
+void describe_cache(const StoreReader& store, const BrickCache& cache, int64_t cache_mb, SourceInfo& info) {
+  info.store_bytes = store.file_bytes();
+  info.cache_mb = cache_mb;
+  info.cache_budget_bytes = cache.budget_bytes();
+  info.cache_brick_bytes = cache.brick_bytes();
+  const BrickCacheStats c = cache.stats();
+  info.bytes_read = c.bytes_read;
+  info.bricks_read = c.bricks_read;
+  info.cache_hits = c.hits;
+  info.cache_peak_bytes = c.peak_bytes;
+  info.read_waits = c.read_waits;
+  info.read_hints = c.read_hints;
 }
 
 // A volume's hierarchy as convert makes it, in a store of its own in the temporary directory
@@ -137,31 +154,40 @@ struct Source::Impl {
   }
 
   // The hierarchy in a store of its own, written once (by the first extraction that needs it) into
-  // the temporary directory and unlinked as soon as it is opened, so that nothing is left behind
-  // however the process ends. A store, not the hierarchy in memory: the build holds a budget's
-  // tiles, not the volume's records (16 bytes a node in memory, 20 GB for a 1024^3 volume), and it
-  // is faster, for the same mesh (docs/METHOD.md, "One-shot extraction through a store"). Null,
-  // and the hierarchy built in memory as before, where the temporary directory cannot take the
-  // store (missing, not writable, full), and for a volume so thin along an axis that a store's
-  // bricks would be mostly padding (StoreLayout::memory_brick_bits: the hierarchy in memory takes
-  // smaller bricks, which a store does not have).
+  // a folder of its own in the temporary directory, and unlinked with its folder as soon as it is
+  // opened. A store, not the hierarchy in memory: the build holds a budget's tiles, not the
+  // volume's records (16 bytes a node in memory, 20 GB for a 1024^3 volume), and it is faster, for
+  // the same mesh (docs/METHOD.md, "One-shot extraction through a store"). Null, and the hierarchy
+  // built in memory as before, where the temporary directory cannot take the store (missing, not
+  // writable, full), and for a volume so thin along an axis that a store's bricks would be mostly
+  // padding (StoreLayout::memory_brick_bits: the hierarchy in memory takes bricks of 4^3 there).
   std::shared_ptr<const ScratchStore> paged_hierarchy() const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (scratch || hierarchy_in_memory) return scratch;
     const auto start = std::chrono::steady_clock::now();
     const Volume* held_volume = in_memory();
-    const std::array<int64_t, 3> dims = held_volume ? held_volume->dims : file->info().dims;
+    const bool thin =
+        StoreLayout::memory_brick_bits(held_volume ? held_volume->dims : file->info().dims) != kDefaultBrickBits;
     namespace fs = std::filesystem;
     std::error_code failed;
-    const fs::path dir = fs::temp_directory_path(failed);
-    if (failed || StoreLayout::memory_brick_bits(dims) != kDefaultBrickBits) {
+    const fs::path tmp = fs::temp_directory_path(failed);
+    // A folder of this process's own (mode 0700, a name no other process can take): nothing another
+    // user placed in a shared temporary directory (a link to a file of ours, a store of the name
+    // we would choose) is written through or read.
+    std::string folder = (tmp / "isotope-XXXXXX").string();
+    if (failed || thin || ::mkdtemp(folder.data()) == nullptr) {
       hierarchy_in_memory = true;
       return nullptr;
     }
-    static std::atomic<uint64_t> serial{0};
-    const std::string name =
-        (dir / ("isotope-hierarchy-" + std::to_string(::getpid()) + "-" + std::to_string(serial++) + ".isotope"))
-            .string();
+    const std::string name = folder + "/hierarchy.isotope";
+    // Removed by the command's handler of SIGINT and SIGTERM as well, should the process be told
+    // to end while the store is written (the convert's own temporary name is registered by it).
+    const int folder_slot = register_temporary(folder), name_slot = register_temporary(name);
+    auto remove_folder = [&] {
+      fs::remove_all(folder, failed);
+      unregister_temporary(name_slot);
+      unregister_temporary(folder_slot);
+    };
     ConvertOptions options;
     options.progress = progress;
     auto built = std::make_shared<ScratchStore>();
@@ -173,17 +199,19 @@ struct Source::Impl {
         convert_to_store(*file, name, options);
       }
       built->store = std::make_unique<StoreReader>(name);
-    } catch (const IoError&) {
-      // The scratch store's files (a full disk), or the input's values: the build in memory reads
-      // them again, and refuses what is the input's in the words of the volume read whole.
-      fs::remove(name, failed);
+    } catch (const IoError& e) {
+      remove_folder();
+      // What the store's own files met (a full disk, a file size limit), named in its folder: the
+      // hierarchy in memory instead. The input's errors, and whatever stopped the build (a progress
+      // callback that throws, as a host's cancel does), are the caller's.
+      if (std::string_view(e.what()).find(folder) == std::string_view::npos) throw;
       hierarchy_in_memory = true;
       return nullptr;
     } catch (...) {
-      fs::remove(name, failed);
+      remove_folder();
       throw;
     }
-    fs::remove(name, failed);  // the reader keeps its descriptor
+    remove_folder();  // the reader keeps its descriptor
     if (tune_allocator) keep_freed_brick_memory();
     built->cache = std::make_unique<BrickCache>(*built->store, static_cast<uint64_t>(cache_mb) << 20);
     built->paged = std::make_unique<PagedVolume>(*built->cache);
@@ -242,7 +270,7 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
 }
 
 Source open_volume(Volume volume, const OpenOptions& options) {
-  check_cache_mb(options);  // unused for an array, but refused in the same words as for a file
+  check_cache_mb(options);  // the cache of the array's hierarchy, in a store of its own
   validate_volume(volume);  // what extract() would refuse, refused at open
   auto impl = std::make_unique<Source::Impl>();
   impl->progress = options.preprocess_progress;
@@ -292,13 +320,12 @@ void Source::prepare(const std::vector<ExtractOptions>& planned) const {
   bool needed = false, whole = false;
   for (const ExtractOptions& o : planned) {
     fields = fields | fields_for(o);
-    needed = needed || needs_hierarchy(impl_->as_extracted(o));
-    whole = whole || !impl_->streams(o);
+    const bool hierarchy = needs_hierarchy(impl_->as_extracted(o));
+    needed = needed || hierarchy;
+    whole = whole || (!hierarchy && !impl_->streams(o));  // eps 0 from the volume held whole
   }
-  if (needed && !impl_->paged_hierarchy())
-    impl_->hierarchy(fields);
-  else if (whole)
-    impl_->whole();
+  if (needed && !impl_->paged_hierarchy()) impl_->hierarchy(fields);  // reads the volume whole
+  if (whole) impl_->whole();
 }
 
 const StoreReader* Source::store() const { return impl_->store.get(); }
@@ -326,12 +353,13 @@ SourceInfo Source::info() const {
     info.input_bytes = static_cast<uint64_t>(info.dims[0] * info.dims[1] * info.dims[2]) * sizeof(float);
     info.preprocess_seconds = s.preprocess_seconds;
     info.hierarchy_built = s.memory != nullptr || s.scratch != nullptr;
-    if (s.scratch)
+    if (s.scratch) {
       for (int t = 0; t < 3; ++t) {
         info.critical_paper[t] = s.scratch->store->header().critical_paper[t];
         info.critical_exact[t] = s.scratch->store->header().critical_exact[t];
       }
-    else if (s.memory)
+      describe_cache(*s.scratch->store, *s.scratch->cache, s.cache_mb, info);
+    } else if (s.memory)
       for (int t = 0; t < 3; ++t) {
         info.critical_paper[t] = s.memory->stats().critical_paper[t];
         info.critical_exact[t] = s.memory->stats().critical_exact[t];
@@ -351,17 +379,7 @@ SourceInfo Source::info() const {
     info.critical_paper[t] = h.critical_paper[t];
     info.critical_exact[t] = h.critical_exact[t];
   }
-  info.store_bytes = s.store->file_bytes();
-  info.cache_mb = s.cache_mb;
-  info.cache_budget_bytes = s.cache->budget_bytes();
-  info.cache_brick_bytes = s.cache->brick_bytes();
-  const BrickCacheStats c = s.cache->stats();
-  info.bytes_read = c.bytes_read;
-  info.bricks_read = c.bricks_read;
-  info.cache_hits = c.hits;
-  info.cache_peak_bytes = c.peak_bytes;
-  info.read_waits = c.read_waits;
-  info.read_hints = c.read_hints;
+  describe_cache(*s.store, *s.cache, s.cache_mb, info);
   return info;
 }
 

@@ -678,6 +678,41 @@ TEST_F(Cli, SimplifyBudgetChoosesDeltaAndSaysSo) {
   EXPECT_FALSE(given.contains("chosen_delta")) << "a delta given is used as it is";
 }
 
+// Ctrl-C while a one-shot extraction writes its volume's hierarchy store (in a folder of its own
+// in TMPDIR) ends the command at once, with that folder removed.
+TEST_F(Cli, InterruptedHierarchyStoreLeavesNothing) {
+  const std::string vol = generate("noise", 225, "n_225x225x225_float32.raw");
+  const std::string tmp = in_work("tmp");
+  fs::create_directory(tmp);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int null = open("/dev/null", O_WRONLY);
+    dup2(null, STDOUT_FILENO);
+    setenv("TMPDIR", tmp.c_str(), 1);
+    execl(ISOTOPE_BINARY, ISOTOPE_BINARY, "extract", vol.c_str(), "--iso", "0.2", "--eps", "0.01", "-o",
+          in_work("n.ply").c_str(), "--threads", "1", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  bool writing = false;
+  for (int i = 0; i < 20000 && !writing; ++i) {  // at most 20 s
+    std::error_code ec;
+    for (fs::recursive_directory_iterator it(tmp, ec), end; !ec && it != end; it.increment(ec))
+      writing = writing || it->path().filename().string().rfind(".hierarchy.isotope.tmp.", 0) == 0;
+    if (!writing) usleep(1000);
+  }
+  EXPECT_TRUE(writing) << "the extraction never began its hierarchy's store";
+  kill(pid, SIGINT);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGINT) << "the extraction finished before the signal, or failed otherwise";
+  std::string left;
+  for (const auto& e : fs::recursive_directory_iterator(tmp)) left += " " + e.path().string();
+  EXPECT_EQ(left, "");
+  EXPECT_FALSE(fs::exists(in_work("n.ply")));
+}
+
 TEST_F(Cli, InterruptedConvertLeavesNothing) {
   const std::string vol = generate("noise", 225, "n_225x225x225_float32.raw");
   const std::set<std::string> before = listing();

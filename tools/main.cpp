@@ -1,6 +1,8 @@
 // isotope: multiresolution isosurfaces on a tetrahedral bisection hierarchy
 // (Gerstner & Pajarola, IEEE Visualization 2000). Entry point and exit-code policy:
 // 0 success (and --help, --version), 1 runtime failure, 2 usage error.
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <cstdio>
@@ -9,6 +11,7 @@
 #include <new>
 #include <string>
 
+#include "io/file/temporary_registry.h"
 #include "isotope/error.h"
 #include "isotope/extract.h"  // OptionError
 #include "isotope/version.h"
@@ -16,15 +19,12 @@
 #include "tools/support/command_line.h"
 #include "tools/support/mpi_launcher.h"
 #ifdef ISOTOPE_HAVE_MPI
-#include <unistd.h>
-
 #include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <vector>
 
 #include "dist/mpi_module.h"
-#include "io/file/temporary_registry.h"
 #include "tools/support/command_module.h"
 #endif
 
@@ -86,14 +86,6 @@ int main(int argc, char** argv) {
       if (mpi->world().rank() == 0) std::cerr << "isotope: usage error: " << differ << '\n';
       return 2;
     }
-    // mpirun ends the other ranks of a job one of whose ranks failed or was killed with SIGTERM
-    // (then SIGKILL): a rank blocked in a collective cannot unwind, so its temporary files go here
-    // (io/file/temporary_registry.h) and it ends at once. Ctrl-C reaches the ranks the same way.
-    for (int sig : {SIGTERM, SIGINT})
-      std::signal(sig, [](int s) {
-        isotope::remove_temporaries_now();
-        _exit(128 + s);
-      });
   }
 #else
   // An MPI launcher started this isotope, built without MPI, as one of several ranks: each would run
@@ -108,6 +100,16 @@ int main(int argc, char** argv) {
     return 1;
   }
 #endif
+  // SIGTERM and Ctrl-C end the command at once, its temporary files removed first
+  // (io/file/temporary_registry.h): an output half written, a volume's hierarchy store being
+  // written. Under mpirun, which ends the other ranks of a job one of whose ranks failed or was
+  // killed with SIGTERM (then SIGKILL), a rank blocked in a collective could not unwind to its
+  // destructors. A convert and the bench stop between steps instead, and unwind (InterruptGuard).
+  for (int sig : {SIGTERM, SIGINT})
+    std::signal(sig, [](int s) {
+      isotope::remove_temporaries_now();
+      _exit(128 + s);
+    });
   const bool speaks = speaking_rank();
   CLI::App app{"isotope " ISOTOPE_VERSION_STRING
                ": multiresolution isosurface extraction with topology control\n"

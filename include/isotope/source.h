@@ -5,13 +5,16 @@
 // eps 0 a window of z-layers at a time, marched while the next is read (memory: a few windows plus
 // the mesh, so a file larger than memory works). The first extraction that needs its hierarchy
 // (eps > 0 or a triangle budget) converts the volume into a store of its own, as convert would,
-// in the temporary directory (TMPDIR, else /tmp; unlinked once opened, so nothing is left behind),
-// and every later one pages it like any store: memory within convert's budget and the cache's,
-// not the volume's. Only where that directory cannot take the store is the hierarchy built in
-// memory instead (16 bytes a node). A triangle budget that the full-resolution mesh may fit reads
-// the volume whole to count it, and keeps it. NRRD and an array handed over are held in memory
-// from the start. Either way extract() can run many times, from several threads at once, and gives
-// the same mesh, byte for byte, for the same volume.
+// in a folder of its own in the system's temporary directory (TMPDIR, else /tmp), unlinked with
+// its folder as soon as it is opened (removed too when the build fails or is stopped, and by the
+// isotope command when Ctrl-C or SIGTERM ends it meanwhile; a host program killed while the store
+// is written leaves that folder, isotope-XXXXXX), and every later one pages it like any store: memory within
+// convert's budget and the cache's, not the volume's; the cache's statistics, and the store's size,
+// in SourceInfo. Only where that directory cannot take the store, or for a volume thinner than a
+// brick along an axis, is the hierarchy built in memory instead (16 bytes a node). A triangle budget that the
+// full-resolution mesh may fit reads the volume whole to count it, and keeps it. NRRD and an array handed over are held
+// in memory from the start. Either way extract() can run many times, from several threads at once, and gives the same
+// mesh, byte for byte, for the same volume.
 //
 //   isotope::Source scan = isotope::open_volume({"scan_512x512x300_uint16.raw"});
 //   isotope::ExtractOptions o;

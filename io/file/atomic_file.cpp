@@ -148,11 +148,12 @@ AtomicFile::AtomicFile(std::string path, Appends appends) : path_(std::move(path
     }
   }
   if (file_ == nullptr) throw IoError(path_ + ": cannot find a free temporary name in '" + dir + "'");
+  // At once: a signal that ends the process between the file's creation and this leaves it behind.
+  registered_ = register_temporary(temp_path_);
   // Appends of a few KB each (a store's brick sections, a mesh's rows) in few calls: stdio's own
   // buffer is a page, a call for every 4 KB (and glibc takes a size only with a buffer).
   buffer_ = std::make_unique_for_overwrite<char[]>(kBufferBytes);
   std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferBytes);
-  registered_ = register_temporary(temp_path_);
   if (appends == Appends::direct) {
     // Where the file system refuses O_DIRECT, the writer thread writes the same buffers through
     // the page cache; where no thread can start, the appends go to stdio, as any other output's.

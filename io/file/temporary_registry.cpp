@@ -38,6 +38,9 @@ void unregister_temporary(int slot) noexcept {
 void remove_temporaries_now() noexcept {
   for (Slot& s : g_slots)
     if (s.state.load() == kReady) ::unlink(s.path);
+  // Then the folders, emptied of the files above (unlink refuses a folder).
+  for (Slot& s : g_slots)
+    if (s.state.load() == kReady) ::rmdir(s.path);
 }
 
 }  // namespace isotope

@@ -1,8 +1,10 @@
 #pragma once
-// The temporary files a process has open (an AtomicFile's, a distributed convert's hand-over), so
-// that a process told to end at once can remove them first: under mpirun, a rank that fails or is
-// killed makes mpirun end every other rank with SIGTERM, then SIGKILL, and a rank blocked in a
-// collective cannot unwind to its destructors (tools/main.cpp). Removal is async-signal-safe.
+// The temporary files a process has open (an AtomicFile's, a distributed convert's hand-over, a
+// volume's hierarchy store and its folder), so that a process told to end at once can remove them
+// first: under mpirun, a rank that fails or is killed makes mpirun end every other rank with
+// SIGTERM, then SIGKILL, and a rank blocked in a collective cannot unwind to its destructors; the
+// isotope command's Ctrl-C ends it at once outside a convert (tools/main.cpp). Removal is
+// async-signal-safe.
 #include <string>
 
 namespace isotope {
@@ -11,7 +13,8 @@ namespace isotope {
 // removed by its owner's destructor, as always).
 int register_temporary(const std::string& path) noexcept;
 void unregister_temporary(int slot) noexcept;
-// Unlinks every registered file. Async-signal-safe: for a signal handler.
+// Unlinks every registered file, then removes every registered folder that this left empty.
+// Async-signal-safe: for a signal handler.
 void remove_temporaries_now() noexcept;
 
 }  // namespace isotope

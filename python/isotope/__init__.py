@@ -102,10 +102,11 @@ class Store:
     reaches, through a cache of ``cache_mb``), a volume file (raw ``NAME_XxYxZ_TYPE.raw`` or any
     raw with ``dims=(x, y, z)`` and ``type``, ``FILE.h5:/dataset``, NRRD, a TIFF stack) or a numpy
     array ``a[z, y, x]``. A raw, HDF5 or TIFF file is streamed at eps 0, a window of layers at a
-    time, so a file larger than memory extracts at full resolution; the first extraction that
-    needs more (eps > 0, a triangle budget) reads it whole and keeps it. An array or NRRD is held in
-    memory. The hierarchy is built on the first extraction that needs one, reporting to
-    ``progress(fraction)``.
+    time, so a file larger than memory extracts at full resolution. An array or NRRD is held in
+    memory. The first extraction that needs a hierarchy (eps > 0, a triangle budget) converts the
+    volume into a store of its own in the temporary directory (unlinked once opened) and pages it
+    through a cache of ``cache_mb``, reporting to ``progress(fraction)``; only where that directory
+    cannot take the store is the hierarchy built in memory (the volume read whole, 16 bytes a node).
     """
 
     def __init__(self, input, *, dims=None, type=None, spacing=None, origin=None, cache_mb=512, progress=None):
