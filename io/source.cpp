@@ -194,9 +194,9 @@ struct Source::Impl {
     try {
       if (held_volume) {
         validate_volume(*held_volume);  // a borrowed array may have changed since it was checked
-        convert_to_store(VolumeBoxReader(*held_volume), name, options);
+        convert_to_store(VolumeBoxReader(*held_volume), name, options, StoreLife::transient);
       } else {
-        convert_to_store(*file, name, options);
+        convert_to_store(*file, name, options, StoreLife::transient);
       }
       built->store = std::make_unique<StoreReader>(name);
     } catch (const IoError& e) {

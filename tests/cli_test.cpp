@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
 
 namespace {
@@ -813,6 +814,33 @@ TEST_F(Cli, ReportSaysWhetherAStoresReadsWaitedForTheDisk) {
   }
   EXPECT_GT(cold["cache"]["read_waits"].get<int64_t>(), 0) << cold["cache"];
   EXPECT_GT(cold["cache"]["read_hints"].get<int64_t>(), 0) << cold["cache"];
+}
+
+// A volume's coarse extraction pages its hierarchy from a store converted into the temporary
+// directory: the report says what that store's cache read, beside the values the volume gave; at
+// eps 0 (streamed) and with the hierarchy built in memory there is no cache to report.
+TEST_F(Cli, ReportSaysWhatAVolumesHierarchyStoreRead) {
+  const std::string vol = generate("noise", 65, "n_65x65x65_float32.raw");
+  const uint64_t values = uint64_t{65} * 65 * 65 * sizeof(float);
+  const std::string tmp = in_work("tmp");
+  fs::create_directory(tmp);
+  isotope::testing::TemporaryDirectoryIs in(tmp);
+  const nlohmann::json coarse = extract_report(quote(vol) + " --iso 0.2 --eps 0.05");
+  ASSERT_TRUE(coarse.contains("cache")) << coarse;
+  EXPECT_EQ(coarse["bytes_read"].get<uint64_t>(), values);
+  EXPECT_GT(coarse["bricks_read"].get<int64_t>(), 0);
+  EXPECT_EQ(coarse["cache"]["budget_mb"].get<int64_t>(), 512);
+  EXPECT_GT(coarse["cache"]["store_bytes"].get<uint64_t>(), 0u);
+  EXPECT_GT(coarse["cache"]["peak_decoded_mb"].get<double>(), 0.0);
+  EXPECT_TRUE(fs::is_empty(tmp));
+  const nlohmann::json full = extract_report(quote(vol) + " --iso 0.2");
+  EXPECT_FALSE(full.contains("cache")) << full;
+  EXPECT_EQ(full["bytes_read"].get<uint64_t>(), values);
+  isotope::testing::TemporaryDirectoryIs nowhere(in_work("missing"));
+  const nlohmann::json in_memory = extract_report(quote(vol) + " --iso 0.2 --eps 0.05");
+  EXPECT_FALSE(in_memory.contains("cache")) << in_memory;
+  EXPECT_EQ(in_memory["bytes_read"].get<uint64_t>(), values);
+  EXPECT_EQ(in_memory["triangles"], coarse["triangles"]);
 }
 
 TEST_F(Cli, TriangleBudgetPicksTheFinestEpsWithinIt) {

@@ -942,6 +942,42 @@ TEST_F(SourceOfAFile, AHierarchyIsAStoreInTheTemporaryDirectoryThatLeavesNothing
   EXPECT_TRUE(std::filesystem::is_empty(scratch));
 }
 
+// A hierarchy's store lives as long as its source and is never made durable: its pages go
+// through the page cache and are dropped unwritten when the source ends (the convert of the same
+// volume to a store that is kept, whose scratch hand-overs are dropped alike, drops a store's size
+// less). Where the file system does not count what it drops, skipped, saying so.
+TEST_F(SourceOfAFile, AHierarchysStoreIsNeverWrittenToTheDisk) {
+  const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
+  const std::string scratch = path("scratch");
+  std::filesystem::create_directory(scratch);
+  const testing::TemporaryDirectoryIs tmp(scratch);
+  std::vector<char> plain(size_t{4} << 20, 'x');
+  const int64_t plain_from = testing::cancelled_write_bytes();
+  std::ofstream(path("plain.bin"), std::ios::binary).write(plain.data(), static_cast<std::streamsize>(plain.size()));
+  std::filesystem::remove(path("plain.bin"));
+  if (plain_from < 0 || testing::cancelled_write_bytes() - plain_from < static_cast<int64_t>(plain.size() * 9 / 10))
+    GTEST_SKIP() << "the file system of " << scratch << " does not count the unwritten pages it drops";
+  const int64_t kept_from = testing::cancelled_write_bytes();
+  convert(spec_of(raw), path("kept.isotope"));
+  std::filesystem::remove(path("kept.isotope"));
+  const int64_t kept_dropped = testing::cancelled_write_bytes() - kept_from;
+  uint64_t store_bytes = 0;
+  const int64_t source_from = testing::cancelled_write_bytes();
+  {
+    const Source source = open_volume(spec_of(raw));
+    ExtractOptions o;
+    o.iso = 64.5f;
+    o.eps = 2;
+    EXPECT_GT(source.extract(o).triangles.size(), 100u);
+    store_bytes = source.info().store_bytes;
+  }
+  const int64_t source_dropped = testing::cancelled_write_bytes() - source_from;
+  ASSERT_GT(store_bytes, 0u);
+  EXPECT_GE(source_dropped - kept_dropped, static_cast<int64_t>(store_bytes * 9 / 10))
+      << "dropped " << source_dropped << " bytes against " << kept_dropped << " for a kept store of " << store_bytes;
+  EXPECT_TRUE(std::filesystem::is_empty(scratch));
+}
+
 // Where the temporary directory cannot take the store (missing; refusing files, as /proc does even
 // to root; a file size limit the store's writes meet), and for a volume so thin that a store's
 // bricks would be mostly padding, the hierarchy is built in memory, to the same mesh, and nothing

@@ -24,6 +24,7 @@
 #include <functional>
 #include <iterator>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -47,6 +48,7 @@
 #include "tests/child_process.h"
 #include "tests/io_error_of.h"
 #include "tests/temp_dir_test.h"
+#include "tests/test_support.h"
 
 namespace isotope {
 namespace {
@@ -1003,6 +1005,40 @@ TEST_F(IoTest, AtomicFileWithDirectAppendsHoldsWhatABufferedOneHolds) {
   EXPECT_EQ(read_bytes(path("buffered.bin")), expected);
   EXPECT_EQ(read_bytes(path("direct.bin")), expected);
   EXPECT_EQ(entries(), (std::vector<std::string>{"buffered.bin", "direct.bin"}));
+}
+
+// A transient file (a volume's hierarchy store, read back and removed by the process that wrote
+// it) holds the same bytes and is committed the same way, but is never synced: removed, its pages
+// are dropped unwritten, while a kept file's were written to the disk by its commit.
+TEST_F(IoTest, AtomicFileTransientIsNeverSyncedAndHoldsTheSameBytes) {
+  std::vector<unsigned char> bytes(size_t{8} << 20);
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<unsigned char>(i * 13 + i / 4093);
+  std::map<AtomicFile::Appends, int64_t> dropped;
+  for (const AtomicFile::Appends appends : {AtomicFile::Appends::buffered, AtomicFile::Appends::transient}) {
+    const std::string p = path("file.bin");
+    AtomicFile f(p, appends);
+    f.write(bytes.data(), 100);
+    f.write(bytes.data() + 100, bytes.size() - 100);
+    f.write_at(0, "header", 6);
+    f.commit();
+    std::vector<unsigned char> expected = bytes;
+    std::memcpy(expected.data(), "header", 6);
+    EXPECT_EQ(read_bytes(p), expected);
+    EXPECT_EQ(entries(), std::vector<std::string>{"file.bin"});
+    const int64_t before = testing::cancelled_write_bytes();
+    std::filesystem::remove(p);
+    dropped[appends] = testing::cancelled_write_bytes() - before;
+    if (before < 0) GTEST_SKIP() << "/proc/self/io does not say what writes were cancelled";
+  }
+  // Whether the file system says so at all: a file written through the page cache and removed.
+  const std::string plain = path("plain.bin");
+  write_bytes(plain, bytes.data(), bytes.size());
+  const int64_t before = testing::cancelled_write_bytes();
+  std::filesystem::remove(plain);
+  if (testing::cancelled_write_bytes() - before < static_cast<int64_t>(bytes.size() * 9 / 10))
+    GTEST_SKIP() << "the file system of " << path("") << " does not count the unwritten pages it drops (in memory?)";
+  EXPECT_EQ(dropped[AtomicFile::Appends::buffered], 0);
+  EXPECT_GE(dropped[AtomicFile::Appends::transient], static_cast<int64_t>(bytes.size() * 9 / 10));
 }
 
 // The output policy (io/file/atomic_file.h): what is not a regular file is never replaced, and

@@ -162,4 +162,14 @@ bool drop_from_page_cache(const std::string& file) {
   return dropped;
 }
 
+int64_t cancelled_write_bytes() {
+  std::ifstream in("/proc/self/io");
+  for (std::string key; in >> key;) {
+    int64_t value = 0;
+    if (!(in >> value)) break;
+    if (key == "cancelled_write_bytes:") return value;
+  }
+  return -1;
+}
+
 }  // namespace isotope::testing

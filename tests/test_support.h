@@ -57,5 +57,8 @@ void read_into_page_cache(const std::string& file);
 // Writes the file's dirty pages and asks the kernel to drop the file from the page cache. False
 // when either fails; a file system in memory may keep the pages all the same (page_cached tells).
 bool drop_from_page_cache(const std::string& file);
+// This process's bytes written into the page cache and dropped before they reached the disk (a
+// file removed before its writeback), from /proc/self/io; -1 where the kernel does not say.
+int64_t cancelled_write_bytes();
 
 }  // namespace isotope::testing

@@ -154,6 +154,7 @@ AtomicFile::AtomicFile(std::string path, Appends appends) : path_(std::move(path
   // buffer is a page, a call for every 4 KB (and glibc takes a size only with a buffer).
   buffer_ = std::make_unique_for_overwrite<char[]>(kBufferBytes);
   std::setvbuf(file_, buffer_.get(), _IOFBF, kBufferBytes);
+  transient_ = appends == Appends::transient;
   if (appends == Appends::direct) {
     // Where the file system refuses O_DIRECT, the writer thread writes the same buffers through
     // the page cache; where no thread can start, the appends go to stdio, as any other output's.
@@ -209,7 +210,7 @@ uint64_t AtomicFile::append_region(uint64_t bytes) {
   const uint64_t at = size_;
   continue_at(at + bytes);
   // Opened once, on the first large region: a small mesh's file never asks for it.
-  if (bytes >= kDirectRegionBytes && region_fd_ < 0 && regions_direct_.load(std::memory_order_relaxed)) {
+  if (bytes >= kDirectRegionBytes && region_fd_ < 0 && !transient_ && regions_direct_.load(std::memory_order_relaxed)) {
     region_fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
     if (region_fd_ < 0) regions_direct_ = false;
   }
@@ -253,6 +254,7 @@ void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) c
   }
   if (const int err = pwrite_all(buffered, data, bytes, offset))
     throw IoError(path_ + ": write failed: " + errno_text(err));
+  if (transient_) return;
   // The disk's writeback of these bytes starts now, on this thread, while the other threads still
   // encode theirs: finish()'s fsync then waits for less (a hint; what fails shows at the fsync).
   static_cast<void>(
@@ -276,7 +278,7 @@ void AtomicFile::finish() {
   region_fd_ = -1;
   // Buffered data may only meet a full disk here, so flush and close are checked too.
   errno = 0;
-  const bool flushed = std::fflush(file_) == 0 && ::fsync(::fileno(file_)) == 0;
+  const bool flushed = std::fflush(file_) == 0 && (transient_ || ::fsync(::fileno(file_)) == 0);
   const int flush_err = errno;
   const bool closed = std::fclose(file_) == 0;
   const int close_err = errno;
@@ -307,7 +309,7 @@ void AtomicFile::commit() {
   committed_ = true;
   unregister_temporary(registered_);
   registered_ = -1;
-  sync_directory(directory_of(target_));
+  if (!transient_) sync_directory(directory_of(target_));
 }
 
 }  // namespace isotope

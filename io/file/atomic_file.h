@@ -41,7 +41,10 @@ class AtomicFile {
   // How appends reach the disk: through the page cache, or, for a large output written once from
   // start to end (a store), past it from a writer thread (io/file/direct_appends.h). Where the
   // file system takes no direct writes, they go through the page cache; the bytes are the same.
-  enum class Appends { buffered, direct };
+  // Transient: through the page cache and never made durable (no fsync of the file or of its
+  // directory), for a file this process reads back and removes, whose pages the kernel may then
+  // drop unwritten; write errors (a full disk, a file size limit) still throw.
+  enum class Appends { buffered, direct, transient };
   // Throws IoError when the directory is not writable.
   explicit AtomicFile(std::string path, Appends appends = Appends::buffered);
   ~AtomicFile();
@@ -88,6 +91,7 @@ class AtomicFile {
   int direct_fd_ = -1;                              // the temporary opened with O_DIRECT, or -1
   int region_fd_ = -1;                              // opened with O_DIRECT at the first large region, or -1
   mutable std::atomic<bool> regions_direct_{true};  // until a direct write is refused
+  bool transient_ = false;                          // Appends::transient
   bool finished_ = false, committed_ = false;
   int registered_ = -1;  // io/file/temporary_registry.h
   uint64_t size_ = 0;

@@ -1,8 +1,11 @@
 #include "io/file/temporary_registry.h"
 
+#include <dirent.h>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <cstring>
 
 namespace isotope {
@@ -35,12 +38,41 @@ void unregister_temporary(int slot) noexcept {
   if (slot >= 0 && slot < kSlots) g_slots[slot].state.store(kFree);
 }
 
+namespace {
+
+bool dot_or_dot_dot(const char* name) {
+  return name[0] == '.' && (name[1] == '\0' || (name[1] == '.' && name[2] == '\0'));
+}
+
+// Unlinks the files in FOLDER, one level down: a registered folder is the process's own (a
+// volume's hierarchy store, mode 0700), and holds files only, its store's temporary and the
+// scratch files beside it, some of which the signal may have met made but not yet registered, or
+// not yet unlinked as scratch files are at once. System calls only (getdents64, unlinkat):
+// async-signal-safe.
+void empty_folder(const char* folder) noexcept {
+  const int fd = ::open(folder, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return;
+  alignas(dirent64) char entries[4096];
+  for (ssize_t n; (n = ::getdents64(fd, entries, sizeof entries)) > 0;)
+    for (ssize_t at = 0; at < n;) {
+      const auto* entry = reinterpret_cast<const dirent64*>(entries + at);
+      if (!dot_or_dot_dot(entry->d_name)) ::unlinkat(fd, entry->d_name, 0);
+      at += entry->d_reclen;
+    }
+  ::close(fd);
+}
+
+}  // namespace
+
 void remove_temporaries_now() noexcept {
   for (Slot& s : g_slots)
     if (s.state.load() == kReady) ::unlink(s.path);
-  // Then the folders, emptied of the files above (unlink refuses a folder).
-  for (Slot& s : g_slots)
-    if (s.state.load() == kReady) ::rmdir(s.path);
+  // Then the folders (unlink refuses a folder), emptied first of what the files above left there.
+  for (Slot& s : g_slots) {
+    // Again while the other threads, still running, make files there (a few times at most).
+    for (int tries = 0; s.state.load() == kReady && ::rmdir(s.path) != 0 && errno == ENOTEMPTY && tries < 4; ++tries)
+      empty_folder(s.path);
+  }
 }
 
 }  // namespace isotope

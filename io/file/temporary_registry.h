@@ -13,8 +13,8 @@ namespace isotope {
 // removed by its owner's destructor, as always).
 int register_temporary(const std::string& path) noexcept;
 void unregister_temporary(int slot) noexcept;
-// Unlinks every registered file, then removes every registered folder that this left empty.
-// Async-signal-safe: for a signal handler.
+// Unlinks every registered file, then removes every registered folder with the files still in it
+// (one level: a registered folder holds files only). Async-signal-safe: for a signal handler.
 void remove_temporaries_now() noexcept;
 
 }  // namespace isotope

@@ -294,9 +294,10 @@ struct BandShare {
 
 class Converter {
  public:
-  Converter(const BoxReader& input, const std::string& output, const ConvertOptions& options)
+  Converter(const BoxReader& input, const std::string& output, const ConvertOptions& options, StoreLife life)
       : input_(quantized_or(input, options)),
         options_(options),
+        life_(life),
         layout_(input.info().dims, options.brick_bits),
         output_(output),
         scratch_dir_(std::filesystem::absolute(output).parent_path().string()) {}
@@ -371,7 +372,8 @@ class Converter {
   int64_t sink_brick_bytes() const { return layout_.brick_nodes() * 30; }
 
   BandedBuildStats run_alone() {
-    out_.emplace(output_, AtomicFile::Appends::direct);  // written once, start to end
+    // Written once, start to end.
+    out_.emplace(output_, life_ == StoreLife::kept ? AtomicFile::Appends::direct : AtomicFile::Appends::transient);
     const std::array<uint8_t, kHeaderBytes> blank{};
     out_->write(blank.data(), blank.size());
     FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_);
@@ -707,6 +709,7 @@ class Converter {
   std::unique_ptr<QuantizingReader> quantized_;
   const BoxReader& input_;
   const ConvertOptions& options_;
+  StoreLife life_;  // a distributed store is always kept
   StoreLayout layout_;
   std::string output_;
   std::optional<AtomicFile> out_;  // alone, or rank 0
@@ -716,7 +719,8 @@ class Converter {
 
 }  // namespace
 
-ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options) {
+ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
+                              StoreLife life) {
   if (options.zstd_level < 1 || options.zstd_level > 19) throw OptionError("zstd-level", "must be 1..19");
   if (options.memory_mb < 1) throw OptionError("memory-mb", "must be at least 1");
   if (options.quantize_bits != 0 && options.quantize_bits != 8 && options.quantize_bits != 16)
@@ -727,7 +731,7 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
   // Distributed, the quantizer's pass over the input runs under settle_together: a rank whose
   // read fails stops every rank.
   std::optional<Converter> converter;
-  auto make = [&] { converter.emplace(input, output, options); };
+  auto make = [&] { converter.emplace(input, output, options, life); };
   if (options.distribution)
     settle_together(*options.distribution, make);
   else

@@ -11,8 +11,15 @@
 
 namespace isotope {
 
+// Whether a store outlives the process that writes it: durable once convert returns (fsynced,
+// its bricks written past the page cache), or read back and removed by that process (a volume's
+// hierarchy store, docs/METHOD.md "One-shot extraction through a store"): through the page cache
+// and never synced, the same bytes.
+enum class StoreLife { kept, transient };
+
 // Writes OUTPUT atomically (temporary name, renamed when complete); on any error or
 // cancellation nothing is left behind. Throws IoError.
-ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options);
+ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
+                              StoreLife life = StoreLife::kept);
 
 }  // namespace isotope

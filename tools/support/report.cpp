@@ -96,7 +96,8 @@ void describe(const SourceInfo& info, ExtractionRun& run) {
     run.preprocess.critical_exact[t] = info.critical_exact[t];
   }
   run.preprocess.seconds = info.preprocess_seconds;
-  if (!info.store) return;
+  // A store's cache, or the cache of the store a volume's hierarchy was converted into.
+  if (info.cache_mb == 0) return;
   run.cache = {.bricks_read = info.bricks_read,
                .bytes_read = info.bytes_read,
                .hits = info.cache_hits,
@@ -148,7 +149,8 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   j["seconds"] = run.total_seconds();
   j["threads"] = run.threads;
   j["peak_rss_mb"] = run.peak_rss_mb;
-  j["bytes_read"] = run.cache_mb > 0 ? run.cache.bytes_read : run.input_bytes;
+  // A volume's extraction reads its values (its hierarchy's store, if any, is in the cache block).
+  j["bytes_read"] = run.input_bytes > 0 ? run.input_bytes : run.cache.bytes_read;
   j["bricks_read"] = run.cache.bricks_read;
   j["cache_hits"] = run.cache.hits;
 

@@ -34,19 +34,20 @@ struct ExtractionRun {
   double compare_seconds = 0;  // --compare-full: the full-resolution extraction and the matching
   int threads = 1;
   double peak_rss_mb = 0;
-  BrickCacheStats cache;            // store input: what the brick cache read and served
-  int64_t cache_mb = 0;             // store input: its budget (0: not a store)
-  uint64_t cache_budget_bytes = 0;  // store input: the budget in effect (BrickCache::kMinBricks)
-  uint64_t cache_brick_bytes = 0;   // store input: a brick decoded whole, the cache's largest entry
-  uint64_t store_bytes = 0;         // store input: the file's size
+  // A store's brick cache, or that of the store a volume's hierarchy was converted into.
+  BrickCacheStats cache;            // what the brick cache read and served
+  int64_t cache_mb = 0;             // its budget (0: no cache)
+  uint64_t cache_budget_bytes = 0;  // the budget in effect (BrickCache::kMinBricks)
+  uint64_t cache_brick_bytes = 0;   // a brick decoded whole, the cache's largest entry
+  uint64_t store_bytes = 0;         // the store's size
   uint64_t input_bytes = 0;         // other input: the values read (as float)
   double read_seconds = 0, preprocess_seconds = 0, extract_seconds = 0, measure_seconds = 0;
   double total_seconds() const { return read_seconds + preprocess_seconds + extract_seconds + measure_seconds; }
 };
 
 // Fills what the run's report says of the input (SourceInfo, isotope/source.h): dimensions,
-// spacing, lattice, preprocessing and its timings, and for a store the cache's budget and what it
-// has read so far.
+// spacing, lattice, preprocessing and its timings, and for a store, or a volume whose hierarchy
+// went into a store of its own, the cache's budget and what it has read so far.
 void describe(const SourceInfo& info, ExtractionRun& run);
 
 // The report: the counts the issue asks for at top level, then inputs, timings, engine stats.
