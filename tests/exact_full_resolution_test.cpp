@@ -4,8 +4,12 @@
 // is eps 0 streamed from a file a window of layers at a time.
 #include <gtest/gtest.h>
 #include <hdf5.h>
+#include <linux/perf_event.h>
+#include <sys/ioctl.h>
 #include <sys/resource.h>
+#include <sys/syscall.h>
 #include <tbb/global_control.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -390,6 +394,50 @@ TEST(FullResolutionSlabs, AnyThreadCountGivesTheOneWalkMeshBitForBit) {
   ASSERT_GT(slab_count(noise), 1);
   for (float iso : {-0.3f, 0.2f}) expect_same_mesh_on_any_threads(noise, iso, "noise 97x90x75");
   expect_same_mesh_on_any_threads(testing::crop(generate_noise(70, 4), {37, 70, 23}), 0.0f, "noise 37x70x23");
+}
+
+// Page faults taken by this thread's own accesses while F runs (the faults of MADV_POPULATE_WRITE
+// are the kernel's, not counted here, unlike getrusage's), or -1 where the kernel refuses to say.
+template <class F>
+int64_t page_faults_of(const F& f) {
+  perf_event_attr attr{};
+  attr.size = sizeof attr;
+  attr.type = PERF_TYPE_SOFTWARE;
+  attr.config = PERF_COUNT_SW_PAGE_FAULTS;
+  attr.disabled = 1;
+  attr.exclude_kernel = 1;
+  const int fd = static_cast<int>(::syscall(SYS_perf_event_open, &attr, 0, -1, -1, 0));
+  if (fd < 0) {
+    f();
+    return -1;
+  }
+  ::ioctl(fd, PERF_EVENT_IOC_ENABLE, 0);
+  f();
+  ::ioctl(fd, PERF_EVENT_IOC_DISABLE, 0);
+  int64_t count = -1;
+  if (::read(fd, &count, sizeof count) != sizeof count) count = -1;
+  ::close(fd);
+  return count;
+}
+
+// The mesh's room is faulted in a slab's stretch at a time before the slab is copied there, in
+// one call (a page faulted in by its first write costs about twice its share of such a call,
+// docs/METHOD.md "Fresh memory"): the extraction's own accesses fault in few of the mesh's pages.
+TEST(FullResolutionSlabs, TheMeshIsFaultedInBeforeTheSlabsAreCopiedThere) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "a sanitizer's writes fault in its own shadow memory";
+#else
+  const Volume noise = generate_noise(193, 7);
+  ASSERT_GT(slab_count(noise), 4);
+  const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);  // all on this thread
+  Mesh m;
+  const int64_t faults = page_faults_of([&] { m = extract_full_resolution(noise, 0.0f); });
+  if (faults < 0) GTEST_SKIP() << "perf_event_open refused (kernel.perf_event_paranoid)";
+  const auto pages = static_cast<int64_t>(
+      (m.positions.size() * sizeof(m.positions[0]) + m.triangles.size() * sizeof(m.triangles[0])) / 4096);
+  ASSERT_GT(pages, 2000);
+  EXPECT_LT(faults, pages / 3) << "of " << pages << " pages";  // by the copies: more than PAGES
+#endif
 }
 
 // Each slab is joined as soon as the slabs before it are, into room reserved as address space for
