@@ -182,11 +182,11 @@ struct Source::Impl {
     const std::string name = folder + "/hierarchy.isotope";
     // Removed by the command's handler of SIGINT and SIGTERM as well, should the process be told
     // to end while the store is written (the convert's own temporary name is registered by it).
-    const int folder_slot = register_temporary(folder), name_slot = register_temporary(name);
+    const int folder_slot = register_temporary_folder(folder), name_slot = register_temporary(name);
     auto remove_folder = [&] {
-      fs::remove_all(folder, failed);
       unregister_temporary(name_slot);
       unregister_temporary(folder_slot);
+      fs::remove_all(folder, failed);
     };
     ConvertOptions options;
     options.progress = progress;

@@ -831,6 +831,8 @@ TEST_F(Cli, ReportSaysWhatAVolumesHierarchyStoreRead) {
   EXPECT_GT(coarse["bricks_read"].get<int64_t>(), 0);
   EXPECT_EQ(coarse["cache"]["budget_mb"].get<int64_t>(), 512);
   EXPECT_GT(coarse["cache"]["store_bytes"].get<uint64_t>(), 0u);
+  EXPECT_GT(coarse["cache"]["bytes_read"].get<uint64_t>(), 0u);
+  EXPECT_LE(coarse["cache"]["bytes_read"].get<uint64_t>(), coarse["cache"]["store_bytes"].get<uint64_t>());
   EXPECT_GT(coarse["cache"]["peak_decoded_mb"].get<double>(), 0.0);
   EXPECT_TRUE(fs::is_empty(tmp));
   const nlohmann::json full = extract_report(quote(vol) + " --iso 0.2");

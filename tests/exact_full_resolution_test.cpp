@@ -6,6 +6,7 @@
 #include <hdf5.h>
 #include <linux/perf_event.h>
 #include <sys/ioctl.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <tbb/global_control.h>
@@ -427,12 +428,27 @@ TEST(FullResolutionSlabs, TheMeshIsFaultedInBeforeTheSlabsAreCopiedThere) {
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
   GTEST_SKIP() << "a sanitizer's writes fault in its own shadow memory";
 #else
+  // What the count can tell here: fresh pages written one by one take a fault each (not where the
+  // kernel maps a huge page at a fault, transparent huge pages `always`).
+  constexpr size_t kProbeBytes = size_t{8} << 20;
+  void* probe = ::mmap(nullptr, kProbeBytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  ASSERT_NE(probe, MAP_FAILED);
+  const int64_t probe_faults = page_faults_of([&] {
+    for (size_t at = 0; at < kProbeBytes; at += 4096) static_cast<volatile char*>(probe)[at] = 1;
+  });
+  ::munmap(probe, kProbeBytes);
+  if (probe_faults < 0) GTEST_SKIP() << "perf_event_open refused (kernel.perf_event_paranoid)";
+  if (probe_faults < static_cast<int64_t>(kProbeBytes / 4096 / 2))
+    GTEST_SKIP() << "fresh pages took " << probe_faults << " faults for " << kProbeBytes / 4096
+                 << " pages (huge pages?)";
   const Volume noise = generate_noise(193, 7);
   ASSERT_GT(slab_count(noise), 4);
   const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);  // all on this thread
+  // Fresh memory, as in a process's first extraction: none kept by the extractions before.
+  give_back_slab_memory();
+  detail::give_back_huge_blocks(0);
   Mesh m;
   const int64_t faults = page_faults_of([&] { m = extract_full_resolution(noise, 0.0f); });
-  if (faults < 0) GTEST_SKIP() << "perf_event_open refused (kernel.perf_event_paranoid)";
   const auto pages = static_cast<int64_t>(
       (m.positions.size() * sizeof(m.positions[0]) + m.triangles.size() * sizeof(m.triangles[0])) / 4096);
   ASSERT_GT(pages, 2000);
@@ -996,18 +1012,20 @@ TEST_F(SourceOfAFile, AHierarchyIsAStoreInTheTemporaryDirectoryThatLeavesNothing
 // less). Where the file system does not count what it drops, skipped, saying so.
 TEST_F(SourceOfAFile, AHierarchysStoreIsNeverWrittenToTheDisk) {
   const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
-  const std::string scratch = path("scratch");
+  const testing::FolderOnDisk folder("hierarchy_store");
+  const std::string scratch = folder.path() + "/scratch";
   std::filesystem::create_directory(scratch);
   const testing::TemporaryDirectoryIs tmp(scratch);
   std::vector<char> plain(size_t{4} << 20, 'x');
   const int64_t plain_from = testing::cancelled_write_bytes();
-  std::ofstream(path("plain.bin"), std::ios::binary).write(plain.data(), static_cast<std::streamsize>(plain.size()));
-  std::filesystem::remove(path("plain.bin"));
-  if (plain_from < 0 || testing::cancelled_write_bytes() - plain_from < static_cast<int64_t>(plain.size() * 9 / 10))
+  std::ofstream(folder.path() + "/plain.bin", std::ios::binary)
+      .write(plain.data(), static_cast<std::streamsize>(plain.size()));
+  std::filesystem::remove(folder.path() + "/plain.bin");
+  if (plain_from < 0 || testing::cancelled_write_bytes() - plain_from < static_cast<int64_t>(plain.size() / 2))
     GTEST_SKIP() << "the file system of " << scratch << " does not count the unwritten pages it drops";
   const int64_t kept_from = testing::cancelled_write_bytes();
-  convert(spec_of(raw), path("kept.isotope"));
-  std::filesystem::remove(path("kept.isotope"));
+  convert(spec_of(raw), folder.path() + "/kept.isotope");
+  std::filesystem::remove(folder.path() + "/kept.isotope");
   const int64_t kept_dropped = testing::cancelled_write_bytes() - kept_from;
   uint64_t store_bytes = 0;
   const int64_t source_from = testing::cancelled_write_bytes();
@@ -1021,7 +1039,8 @@ TEST_F(SourceOfAFile, AHierarchysStoreIsNeverWrittenToTheDisk) {
   }
   const int64_t source_dropped = testing::cancelled_write_bytes() - source_from;
   ASSERT_GT(store_bytes, 0u);
-  EXPECT_GE(source_dropped - kept_dropped, static_cast<int64_t>(store_bytes * 9 / 10))
+  // Half at least: a writeback that the kernel starts meanwhile may take some of the pages.
+  EXPECT_GE(source_dropped - kept_dropped, static_cast<int64_t>(store_bytes / 2))
       << "dropped " << source_dropped << " bytes against " << kept_dropped << " for a kept store of " << store_bytes;
   EXPECT_TRUE(std::filesystem::is_empty(scratch));
 }

@@ -37,6 +37,7 @@
 #include "engine/mesh/vertex_normals.h"
 #include "io/file/atomic_file.h"
 #include "io/file/direct_appends.h"
+#include "io/file/temporary_registry.h"
 #include "io/mesh/mesh_writer.h"
 #include "io/store/store_reader.h"
 #include "io/volume/hdf5_reader.h"
@@ -1007,15 +1008,63 @@ TEST_F(IoTest, AtomicFileWithDirectAppendsHoldsWhatABufferedOneHolds) {
   EXPECT_EQ(entries(), (std::vector<std::string>{"buffered.bin", "direct.bin"}));
 }
 
+// What a signal's cleanup removes: registered files, and registered folders with every file in
+// them (registered or not) where the folder is still a private one of this user's; never a folder
+// registered as a file, nor the files of a folder another mode makes shared, nor what is no longer
+// registered.
+TEST_F(IoTest, TemporariesRemovedAtOnceAreTheRegisteredOnesAndTheFilesOfPrivateFolders) {
+  namespace fs = std::filesystem;
+  const auto make_folder = [&](const std::string& name, fs::perms mode) {
+    const std::string dir = path(name);
+    fs::create_directory(dir);
+    fs::permissions(dir, mode);
+    write_bytes(dir + "/a", "a", 1);
+    write_bytes(dir + "/b", "b", 1);
+    return dir;
+  };
+  const std::string mine = make_folder("mine", fs::perms::owner_all);
+  const std::string shared =
+      make_folder("shared", fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec);
+  const std::string as_file = make_folder("as_file", fs::perms::owner_all);
+  const std::string gone = make_folder("gone", fs::perms::owner_all);
+  write_bytes(path("file"), "f", 1);
+  write_bytes(path("left"), "l", 1);
+  const std::vector<int> slots{register_temporary_folder(mine),   register_temporary(mine + "/a"),
+                               register_temporary_folder(shared), register_temporary(as_file),
+                               register_temporary(path("file")),  register_temporary(path("left")),
+                               register_temporary_folder(gone)};
+  for (const int slot : slots) ASSERT_GE(slot, 0);
+  unregister_temporary(slots[5]);
+  unregister_temporary(slots[6]);
+  remove_temporaries_now();
+  for (const int slot : slots) unregister_temporary(slot);
+  EXPECT_FALSE(fs::exists(mine));
+  EXPECT_FALSE(fs::exists(path("file")));
+  EXPECT_TRUE(fs::exists(shared + "/a") && fs::exists(shared + "/b")) << "a folder not private to this user";
+  EXPECT_TRUE(fs::exists(as_file + "/a") && fs::exists(as_file + "/b")) << "registered as a file";
+  EXPECT_TRUE(fs::exists(path("left")));
+  EXPECT_TRUE(fs::exists(gone + "/a") && fs::exists(gone + "/b"));
+}
+
 // A transient file (a volume's hierarchy store, read back and removed by the process that wrote
 // it) holds the same bytes and is committed the same way, but is never synced: removed, its pages
-// are dropped unwritten, while a kept file's were written to the disk by its commit.
+// are dropped unwritten, while a kept file's were written to the disk by its commit. (What this
+// sees is the file's own sync: a sync of its folder alone writes none of its pages.)
 TEST_F(IoTest, AtomicFileTransientIsNeverSyncedAndHoldsTheSameBytes) {
+  const testing::FolderOnDisk folder("transient");
   std::vector<unsigned char> bytes(size_t{8} << 20);
   for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<unsigned char>(i * 13 + i / 4093);
+  // Whether the file system says so at all: a file written through the page cache and removed.
+  const std::string plain = folder.path() + "/plain.bin";
+  write_bytes(plain, bytes.data(), bytes.size());
+  const int64_t plain_from = testing::cancelled_write_bytes();
+  std::filesystem::remove(plain);
+  const int64_t plain_dropped = testing::cancelled_write_bytes() - plain_from;
+  if (plain_from < 0 || plain_dropped < static_cast<int64_t>(bytes.size() / 2))
+    GTEST_SKIP() << "the file system of " << folder.path() << " does not count the unwritten pages it drops";
   std::map<AtomicFile::Appends, int64_t> dropped;
   for (const AtomicFile::Appends appends : {AtomicFile::Appends::buffered, AtomicFile::Appends::transient}) {
-    const std::string p = path("file.bin");
+    const std::string p = folder.path() + "/file.bin";
     AtomicFile f(p, appends);
     f.write(bytes.data(), 100);
     f.write(bytes.data() + 100, bytes.size() - 100);
@@ -1024,21 +1073,15 @@ TEST_F(IoTest, AtomicFileTransientIsNeverSyncedAndHoldsTheSameBytes) {
     std::vector<unsigned char> expected = bytes;
     std::memcpy(expected.data(), "header", 6);
     EXPECT_EQ(read_bytes(p), expected);
-    EXPECT_EQ(entries(), std::vector<std::string>{"file.bin"});
     const int64_t before = testing::cancelled_write_bytes();
     std::filesystem::remove(p);
     dropped[appends] = testing::cancelled_write_bytes() - before;
-    if (before < 0) GTEST_SKIP() << "/proc/self/io does not say what writes were cancelled";
   }
-  // Whether the file system says so at all: a file written through the page cache and removed.
-  const std::string plain = path("plain.bin");
-  write_bytes(plain, bytes.data(), bytes.size());
-  const int64_t before = testing::cancelled_write_bytes();
-  std::filesystem::remove(plain);
-  if (testing::cancelled_write_bytes() - before < static_cast<int64_t>(bytes.size() * 9 / 10))
-    GTEST_SKIP() << "the file system of " << path("") << " does not count the unwritten pages it drops (in memory?)";
+  EXPECT_TRUE(std::filesystem::is_empty(folder.path()));
   EXPECT_EQ(dropped[AtomicFile::Appends::buffered], 0);
-  EXPECT_GE(dropped[AtomicFile::Appends::transient], static_cast<int64_t>(bytes.size() * 9 / 10));
+  // Half at least: a writeback that the kernel starts meanwhile may take some of the pages.
+  EXPECT_GE(dropped[AtomicFile::Appends::transient], static_cast<int64_t>(bytes.size() / 2))
+      << "a plain file dropped " << plain_dropped;
 }
 
 // The output policy (io/file/atomic_file.h): what is not a regular file is never replaced, and

@@ -69,4 +69,26 @@ class TemporaryDirectoryIs {
   std::optional<std::string> was_;
 };
 
+// A fresh folder in the working directory (the build tree, on a disk) for as long as it lives,
+// removed with what it holds: for files whose writeback a test watches, which a temporary
+// directory in memory (tmpfs) would never do.
+class FolderOnDisk {
+ public:
+  explicit FolderOnDisk(const std::string& name)
+      : path_((std::filesystem::current_path() / (name + "." + std::to_string(::getpid()))).string()) {
+    std::filesystem::remove_all(path_);
+    std::filesystem::create_directory(path_);
+  }
+  ~FolderOnDisk() {
+    std::error_code ignored;
+    std::filesystem::remove_all(path_, ignored);
+  }
+  FolderOnDisk(const FolderOnDisk&) = delete;
+  FolderOnDisk& operator=(const FolderOnDisk&) = delete;
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
 }  // namespace isotope::testing

@@ -136,6 +136,7 @@ class SlabNumbering {
   static constexpr uint32_t kAbsent = EdgeVertexMap::kAbsent;
   struct Place {
     uint32_t first_vertex = 0;  // the output index of the slab's first new vertex
+    size_t new_vertices = 0;    // the slab's vertices less those the slab below gave
     size_t first_triangle = 0;
     std::vector<uint32_t> bottom;  // per bottom vertex: its index in the slab below, or kAbsent
   };
@@ -161,7 +162,8 @@ class SlabNumbering {
       top.find_or_insert(v.key, static_cast<uint32_t>(vertices_ + v.local - found_before));
     }
     below_ = std::move(top);
-    vertices_ += slab.mesh.positions.size() - found;
+    place.new_vertices = slab.mesh.positions.size() - found;
+    vertices_ += place.new_vertices;
     triangles_ += slab.mesh.triangles.size();
     if (vertices_ >= kAbsent)
       throw std::length_error("the mesh has " + std::to_string(vertices_) +
@@ -179,12 +181,10 @@ class SlabNumbering {
 // Copies SLAB where PLACE says into the mesh's arrays, which have room up to the place's end.
 void copy_slab(const Slab& slab, const SlabNumbering::Place& place, std::array<float, 3>* positions,
                std::array<uint32_t, 3>* triangles) {
-  // The slab's stretch of the mesh in one call before it is written (docs/METHOD.md, "Fresh
-  // memory"): its pages are fresh, and faulted in one by one by the copies they took a fifth of
-  // a one-shot eps 0's processor time.
-  const size_t found = static_cast<size_t>(
-      std::count_if(place.bottom.begin(), place.bottom.end(), [](uint32_t i) { return i != SlabNumbering::kAbsent; }));
-  detail::prefault(positions + place.first_vertex, (slab.mesh.positions.size() - found) * sizeof(positions[0]));
+  // The slab's stretch of the mesh is faulted in by one call before it is written (docs/METHOD.md,
+  // "Fresh memory"): its pages are fresh, and their faults one at a time in the copies below took
+  // a fifth of a one-shot eps 0's processor time.
+  detail::prefault(positions + place.first_vertex, place.new_vertices * sizeof(positions[0]));
   detail::prefault(triangles + place.first_triangle, slab.mesh.triangles.size() * sizeof(triangles[0]));
   std::vector<uint32_t> remap(slab.mesh.positions.size());
   uint32_t next = place.first_vertex;

@@ -43,7 +43,8 @@ class AtomicFile {
   // file system takes no direct writes, they go through the page cache; the bytes are the same.
   // Transient: through the page cache and never made durable (no fsync of the file or of its
   // directory), for a file this process reads back and removes, whose pages the kernel may then
-  // drop unwritten; write errors (a full disk, a file size limit) still throw.
+  // drop unwritten. Errors the writes meet (a full disk, a file size limit) still throw; one that
+  // only a writeback would meet (a failing disk) shows, if ever, as a read of the file that fails.
   enum class Appends { buffered, direct, transient };
   // Throws IoError when the directory is not writable.
   explicit AtomicFile(std::string path, Appends appends = Appends::buffered);
@@ -62,7 +63,8 @@ class AtomicFile {
   // In a region of at least kDirectRegionBytes, a piece's whole pages go past the page cache
   // (O_DIRECT, from this thread's page-aligned bounce buffer) and the partial pages at its two ends
   // through it; a small piece, a small region, or a file system that takes no direct writes goes
-  // all through the page cache, its writeback started at once. The bytes on disk are the same.
+  // all through the page cache, its writeback started at once (not for a transient file). The
+  // bytes on disk are the same.
   void write_region(uint64_t offset, const void* data, size_t bytes) const;
   static constexpr uint64_t kDirectRegionBytes = uint64_t{1} << 20;
   // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
@@ -70,7 +72,8 @@ class AtomicFile {
   // end here: all writes after it go through the page cache.
   void continue_at(uint64_t offset);
   uint64_t size() const { return size_; }  // bytes written so far
-  // Flushes, fsyncs and closes the temporary file: what can fail for lack of disk fails here.
+  // Flushes, fsyncs (not a transient file) and closes the temporary file: what can fail for lack
+  // of disk fails here.
   // Several outputs of one command are all finished before the first is committed, so that a
   // failure leaves every target as it was (tools/command_extract.cpp).
   void finish();  // throws IoError; a second call does nothing

@@ -12,9 +12,13 @@ namespace isotope {
 // Returns a slot for unregister_temporary, or -1 when all slots are taken (the file is then only
 // removed by its owner's destructor, as always).
 int register_temporary(const std::string& path) noexcept;
+// The same for a folder of this process's own (mkdtemp, mode 0700) that holds files only: removed
+// with the files in it, which need not be registered.
+int register_temporary_folder(const std::string& path) noexcept;
 void unregister_temporary(int slot) noexcept;
 // Unlinks every registered file, then removes every registered folder with the files still in it
-// (one level: a registered folder holds files only). Async-signal-safe: for a signal handler.
+// (one level, and only where the folder is still this user's with mode 0700). Async-signal-safe:
+// for a signal handler.
 void remove_temporaries_now() noexcept;
 
 }  // namespace isotope

@@ -233,6 +233,7 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
                   {"brick_mb", static_cast<double>(run.cache_brick_bytes) / (1 << 20)},
                   {"peak_decoded_mb", static_cast<double>(run.cache.peak_bytes) / (1 << 20)},
                   {"store_bytes", run.store_bytes},
+                  {"bytes_read", run.cache.bytes_read},
                   {"read_waits", run.cache.read_waits},
                   {"read_hints", run.cache.read_hints}};
   return j;
