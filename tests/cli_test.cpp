@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -114,6 +115,55 @@ class Cli : public ::testing::Test {
       EXPECT_NE(r.err.find(message_part), std::string::npos) << r.err;
     }
     EXPECT_EQ(listing(), before) << "a file was left behind by: " << args;
+  }
+
+  // A command stopped by Ctrl-C while it works: whether it was seen at work, and its exit code (-1
+  // when it did not exit).
+  struct Interrupted {
+    bool seen = false;
+    int code = -1;
+  };
+  // Starts `isotope ARGS` (stdout, and stderr too with QUIET, to /dev/null; TMPDIR set where given),
+  // polls SEEN every POLL_MS milliseconds, at most TRIES times, until it says the work began, then
+  // sends SIGINT and waits for the process to end.
+  Interrupted interrupt_at_work(const std::vector<std::string>& args, const std::function<bool()>& seen, int tries,
+                                int poll_ms, bool quiet = false, const std::string& tmpdir = "") {
+    std::vector<char*> argv{const_cast<char*>(ISOTOPE_BINARY)};
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    const pid_t pid = fork();
+    if (pid < 0) return {};
+    if (pid == 0) {
+      const int null = open("/dev/null", O_WRONLY);
+      dup2(null, STDOUT_FILENO);
+      if (quiet) dup2(null, STDERR_FILENO);
+      if (!tmpdir.empty()) setenv("TMPDIR", tmpdir.c_str(), 1);
+      execv(ISOTOPE_BINARY, argv.data());
+      _exit(127);
+    }
+    Interrupted r;
+    for (int i = 0; i < tries && !(r.seen = seen()); ++i) usleep(static_cast<useconds_t>(poll_ms) * 1000);
+    kill(pid, SIGINT);
+    int status = 0;
+    if (waitpid(pid, &status, 0) == pid && WIFEXITED(status)) r.code = WEXITSTATUS(status);
+    return r;
+  }
+
+  // Whether a file under DIR (and its folders, with RECURSIVE) has a name that begins with PREFIX;
+  // any regular file for an empty PREFIX. The tree may change while it is read.
+  static bool file_under(const std::string& dir, const std::string& prefix, bool recursive) {
+    std::error_code ec;
+    const auto matches = [&](const fs::directory_entry& e) {
+      return prefix.empty() ? e.is_regular_file(ec) : e.path().filename().string().rfind(prefix, 0) == 0;
+    };
+    if (recursive) {
+      for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+        if (matches(*it)) return true;
+    } else {
+      for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+        if (matches(*it)) return true;
+    }
+    return false;
   }
 
   std::string outputs() const { return " -o " + quote(in_work("out.ply")) + " --report " + quote(in_work("out.json")); }
@@ -685,29 +735,12 @@ TEST_F(Cli, InterruptedHierarchyStoreLeavesNothing) {
   const std::string vol = generate("noise", 225, "n_225x225x225_float32.raw");
   const std::string tmp = in_work("tmp");
   fs::create_directory(tmp);
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int null = open("/dev/null", O_WRONLY);
-    dup2(null, STDOUT_FILENO);
-    setenv("TMPDIR", tmp.c_str(), 1);
-    execl(ISOTOPE_BINARY, ISOTOPE_BINARY, "extract", vol.c_str(), "--iso", "0.2", "--eps", "0.01", "-o",
-          in_work("n.ply").c_str(), "--threads", "1", static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  bool writing = false;
-  for (int i = 0; i < 20000 && !writing; ++i) {  // at most 20 s
-    std::error_code ec;
-    for (fs::recursive_directory_iterator it(tmp, ec), end; !ec && it != end; it.increment(ec))
-      writing = writing || it->path().filename().string().rfind(".hierarchy.isotope.tmp.", 0) == 0;
-    if (!writing) usleep(1000);
-  }
-  EXPECT_TRUE(writing) << "the extraction never began its hierarchy's store";
-  kill(pid, SIGINT);
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGINT) << "the extraction finished before the signal, or failed otherwise";
+  const Interrupted r = interrupt_at_work(
+      {"extract", vol, "--iso", "0.2", "--eps", "0.01", "-o", in_work("n.ply"), "--threads", "1"},
+      [&] { return file_under(tmp, ".hierarchy.isotope.tmp.", true); }, 20000, 1, false, tmp);  // at most 20 s
+  EXPECT_TRUE(r.seen) << "the extraction never began its hierarchy's store";
+  ASSERT_GE(r.code, 0) << "the extraction did not exit";
+  EXPECT_EQ(r.code, 128 + SIGINT) << "the extraction finished before the signal, or failed otherwise";
   std::string left;
   for (const auto& e : fs::recursive_directory_iterator(tmp)) left += " " + e.path().string();
   EXPECT_EQ(left, "");
@@ -717,28 +750,13 @@ TEST_F(Cli, InterruptedHierarchyStoreLeavesNothing) {
 TEST_F(Cli, InterruptedConvertLeavesNothing) {
   const std::string vol = generate("noise", 225, "n_225x225x225_float32.raw");
   const std::set<std::string> before = listing();
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int null = open("/dev/null", O_WRONLY);
-    dup2(null, STDOUT_FILENO);
-    execl(ISOTOPE_BINARY, ISOTOPE_BINARY, "convert", vol.c_str(), in_work("n.isotope").c_str(), "--threads", "1",
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  bool writing = false;
-  for (int i = 0; i < 20000 && !writing; ++i) {  // at most 20 s
-    std::error_code ec;
-    for (fs::directory_iterator it(work(), ec), end; !ec && it != end; it.increment(ec))
-      writing = writing || it->path().filename().string().rfind(".n.isotope.tmp.", 0) == 0;
-    if (!writing) usleep(1000);
-  }
-  EXPECT_TRUE(writing) << "the convert never opened its temporary output";
-  kill(pid, SIGINT);
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 1) << "the convert finished before the signal, or failed otherwise";
+  const Interrupted r = interrupt_at_work(
+      {"convert", vol, in_work("n.isotope"), "--threads", "1"},
+      [&] { return file_under(work(), ".n.isotope.tmp.", false); }, 20000,
+      1);  // at most 20 s
+  EXPECT_TRUE(r.seen) << "the convert never opened its temporary output";
+  ASSERT_GE(r.code, 0) << "the convert did not exit";
+  EXPECT_EQ(r.code, 1) << "the convert finished before the signal, or failed otherwise";
   EXPECT_EQ(listing(), before);
 }
 
@@ -1236,29 +1254,12 @@ TEST_F(Cli, BenchScaleTimesTheBudgetBesideEpsZeroFromTheRawFile) {
 // Ctrl-C while bench converts its store (or, if that was quick, at its next run): exit 1, and
 // neither the store nor its folder is left.
 TEST_F(Cli, InterruptedBenchLeavesNothing) {
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const int null = open("/dev/null", O_WRONLY);
-    dup2(null, STDOUT_FILENO);
-    dup2(null, STDERR_FILENO);
-    execl(ISOTOPE_BINARY, ISOTOPE_BINARY, "bench", "--dataset", "algebraic65", "--work-dir", work().c_str(),
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
   // Wait for a file inside bench's folder: the store being written.
-  bool converting = false;
-  for (int i = 0; i < 12000 && !converting; ++i) {
-    std::error_code ec;  // bench may remove its folder while we look
-    for (fs::recursive_directory_iterator it(work(), ec), end; !ec && it != end; it.increment(ec))
-      converting = converting || it->is_regular_file(ec);
-    if (!converting) usleep(10 * 1000);
-  }
-  kill(pid, SIGINT);
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(converting) << "no store appeared within 120 s";
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 1);
+  const Interrupted r = interrupt_at_work(
+      {"bench", "--dataset", "algebraic65", "--work-dir", work()}, [&] { return file_under(work(), "", true); }, 12000,
+      10, true);
+  ASSERT_TRUE(r.seen) << "no store appeared within 120 s";
+  ASSERT_GE(r.code, 0) << "bench did not exit";
+  EXPECT_EQ(r.code, 1);
   EXPECT_TRUE(listing().empty());
 }
