@@ -26,6 +26,7 @@
 #include "io/file/temporary_registry.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
+#include "io/store/store_format.h"
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
@@ -69,11 +70,16 @@ void describe_cache(const StoreReader& store, const BrickCache& cache, int64_t c
 }
 
 // A volume's hierarchy as convert makes it, in a store of its own in the temporary directory
-// (isotope/source.h), paged like any store.
+// (isotope/source.h), paged like any store: its records' core alone while every extraction so
+// far read no more (StoreRecords).
 struct ScratchStore {
   std::unique_ptr<StoreReader> store;
   std::unique_ptr<BrickCache> cache;
   std::unique_ptr<PagedVolume> paged;
+  StoreRecords records = StoreRecords::all;
+  bool serves(const RecordFields& fields) const {
+    return records == StoreRecords::all || sections_for(fields) == kCoreSection;
+  }
 };
 
 }  // namespace
@@ -101,8 +107,9 @@ struct Source::Impl {
   // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
   // that reads more fields builds the next (Source::extract may run on several threads at once).
   mutable std::shared_ptr<const Hierarchy> memory;
-  // The hierarchy in a scratch store, which extractions share as they share `memory`; `memory` is
-  // built only where the scratch store could not be written.
+  // The hierarchy in a scratch store, which extractions share as they share `memory` (and, as
+  // `memory`, made again with every field once an extraction reads more than its records' core);
+  // `memory` is built only where the scratch store could not be written.
   mutable std::shared_ptr<const ScratchStore> scratch;
   mutable bool hierarchy_in_memory = false;  // the scratch store not made, or not made again
   bool tune_allocator = false;
@@ -161,9 +168,12 @@ struct Source::Impl {
   // built in memory as before, where the temporary directory cannot take the store (missing, not
   // writable, full), and for a volume so thin along an axis that a store's bricks would be mostly
   // padding (StoreLayout::memory_brick_bits: the hierarchy in memory takes bricks of 4^3 there).
-  std::shared_ptr<const ScratchStore> paged_hierarchy() const {
+  // With the records' core alone where FIELDS need no more (StoreRecords), else with all.
+  std::shared_ptr<const ScratchStore> paged_hierarchy(const RecordFields& fields) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
-    if (scratch || hierarchy_in_memory) return scratch;
+    if (hierarchy_in_memory || (scratch && scratch->serves(fields))) return scratch;
+    const StoreRecords records = sections_for(fields) == kCoreSection ? StoreRecords::core : StoreRecords::all;
+    if (scratch) budgets.clear();  // made again from the volume, as hierarchy() would
     const auto start = std::chrono::steady_clock::now();
     const Volume* held_volume = in_memory();
     const bool thin =
@@ -191,12 +201,13 @@ struct Source::Impl {
     ConvertOptions options;
     options.progress = progress;
     auto built = std::make_shared<ScratchStore>();
+    built->records = records;
     try {
       if (held_volume) {
         validate_volume(*held_volume);  // a borrowed array may have changed since it was checked
-        convert_to_store(VolumeBoxReader(*held_volume), name, options, StoreLife::transient);
+        convert_to_store(VolumeBoxReader(*held_volume), name, options, StoreLife::transient, records);
       } else {
-        convert_to_store(*file, name, options, StoreLife::transient);
+        convert_to_store(*file, name, options, StoreLife::transient, records);
       }
       built->store = std::make_unique<StoreReader>(name);
     } catch (const IoError& e) {
@@ -215,7 +226,7 @@ struct Source::Impl {
     if (tune_allocator) keep_freed_brick_memory();
     built->cache = std::make_unique<BrickCache>(*built->store, static_cast<uint64_t>(cache_mb) << 20);
     built->paged = std::make_unique<PagedVolume>(*built->cache);
-    scratch = std::move(built);
+    scratch = std::move(built);  // an extraction still reading the one before keeps it
     preprocess_seconds += seconds_since(start);
     return scratch;
   }
@@ -307,7 +318,7 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
     return volume.borrowed.data() ? isotope::extract(volume, extracted, stats)
                                   : extract_validated(volume, extracted, stats);
   }
-  if (const std::shared_ptr<const ScratchStore> scratch = impl_->paged_hierarchy())
+  if (const std::shared_ptr<const ScratchStore> scratch = impl_->paged_hierarchy(fields_for(extracted)))
     return isotope::extract(*scratch->paged, extracted, stats, &impl_->budgets);
   const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(extracted));
   return isotope::extract(*hierarchy, extracted, stats, &impl_->budgets);
@@ -324,7 +335,7 @@ void Source::prepare(const std::vector<ExtractOptions>& planned) const {
     needed = needed || hierarchy;
     whole = whole || (!hierarchy && !impl_->streams(o));  // eps 0 from the volume held whole
   }
-  if (needed && !impl_->paged_hierarchy()) impl_->hierarchy(fields);  // reads the volume whole
+  if (needed && !impl_->paged_hierarchy(fields)) impl_->hierarchy(fields);  // reads the volume whole
   if (whole) impl_->whole();
 }
 
@@ -354,16 +365,19 @@ SourceInfo Source::info() const {
     info.preprocess_seconds = s.preprocess_seconds;
     info.hierarchy_built = s.memory != nullptr || s.scratch != nullptr;
     if (s.scratch) {
+      info.critical_counted = s.scratch->records == StoreRecords::all;
       for (int t = 0; t < 3; ++t) {
         info.critical_paper[t] = s.scratch->store->header().critical_paper[t];
         info.critical_exact[t] = s.scratch->store->header().critical_exact[t];
       }
       describe_cache(*s.scratch->store, *s.scratch->cache, s.cache_mb, info);
-    } else if (s.memory)
+    } else if (s.memory) {
+      info.critical_counted = s.memory->fields().topology();
       for (int t = 0; t < 3; ++t) {
         info.critical_paper[t] = s.memory->stats().critical_paper[t];
         info.critical_exact[t] = s.memory->stats().critical_exact[t];
       }
+    }
     return info;
   }
   // A store was preprocessed by convert; its header keeps the critical-point counts.
@@ -371,6 +385,7 @@ SourceInfo Source::info() const {
   info.store = true;
   info.read_seconds = s.read_seconds;
   info.hierarchy_built = true;
+  info.critical_counted = true;
   info.dims = h.dims;
   info.spacing = h.spacing;
   info.origin = h.origin;

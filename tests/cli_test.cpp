@@ -853,6 +853,12 @@ TEST_F(Cli, ReportSaysWhatAVolumesHierarchyStoreRead) {
   EXPECT_LE(coarse["cache"]["bytes_read"].get<uint64_t>(), coarse["cache"]["store_bytes"].get<uint64_t>());
   EXPECT_GT(coarse["cache"]["peak_decoded_mb"].get<double>(), 0.0);
   EXPECT_TRUE(fs::is_empty(tmp));
+  EXPECT_GT(coarse["preprocess"]["critical_exact"]["cube"].get<int64_t>(), 0) << coarse;
+  // Mode none: a store of the records' core alone, whose critical points nobody counted.
+  const nlohmann::json none = extract_report(quote(vol) + " --iso 0.2 --eps 0.05 --topology none");
+  EXPECT_TRUE(none["preprocess"]["critical_exact"].is_null()) << none;
+  EXPECT_TRUE(none["preprocess"]["critical_paper"].is_null()) << none;
+  EXPECT_LT(none["cache"]["store_bytes"].get<uint64_t>(), coarse["cache"]["store_bytes"].get<uint64_t>());
   const nlohmann::json full = extract_report(quote(vol) + " --iso 0.2");
   EXPECT_FALSE(full.contains("cache")) << full;
   EXPECT_EQ(full["bytes_read"].get<uint64_t>(), values);
@@ -861,6 +867,10 @@ TEST_F(Cli, ReportSaysWhatAVolumesHierarchyStoreRead) {
   EXPECT_FALSE(in_memory.contains("cache")) << in_memory;
   EXPECT_EQ(in_memory["bytes_read"].get<uint64_t>(), values);
   EXPECT_EQ(in_memory["triangles"], coarse["triangles"]);
+  EXPECT_EQ(in_memory["preprocess"]["critical_exact"], coarse["preprocess"]["critical_exact"]);
+  const nlohmann::json none_in_memory = extract_report(quote(vol) + " --iso 0.2 --eps 0.05 --topology none");
+  EXPECT_TRUE(none_in_memory["preprocess"]["critical_exact"].is_null()) << none_in_memory;
+  EXPECT_EQ(none_in_memory["triangles"], none["triangles"]);
 }
 
 TEST_F(Cli, TriangleBudgetPicksTheFinestEpsWithinIt) {

@@ -1006,6 +1006,46 @@ TEST_F(SourceOfAFile, AHierarchyIsAStoreInTheTemporaryDirectoryThatLeavesNothing
   EXPECT_TRUE(std::filesystem::is_empty(scratch));
 }
 
+// An extraction that reads its records' range and error bound alone (mode none, the bound error)
+// has the volume converted into a store of that core (StoreRecords::core): smaller, the records'
+// topology neither computed nor counted, the mesh of a kept store. The first extraction that
+// reads more has it converted again with every field, to the kept store's bytes and critical
+// points; mode none then keeps that store. So from a file and from an array.
+TEST_F(SourceOfAFile, ModeNoneConvertsTheRecordsCoreAloneAndAModeThatReadsMoreConvertsAgain) {
+  const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
+  const std::string scratch = path("scratch");
+  std::filesystem::create_directory(scratch);
+  const testing::TemporaryDirectoryIs tmp(scratch);
+  const std::string store = path("bolt.isotope");
+  convert(spec_of(raw), store);
+  const Source converted = open_volume(spec_of(store));
+  const SourceInfo kept = converted.info();
+  ExtractOptions none, preserve;
+  none.iso = preserve.iso = 64.5f;
+  none.eps = preserve.eps = 2;
+  none.topology = TopologyMode::none;
+  for (const bool from_array : {false, true}) {
+    const Source source = from_array ? open_volume(read_volume(spec_of(raw))) : open_volume(spec_of(raw));
+    EXPECT_TRUE(same_mesh(source.extract(none), converted.extract(none))) << from_array;
+    const SourceInfo core = source.info();
+    EXPECT_TRUE(core.hierarchy_built);
+    EXPECT_FALSE(core.critical_counted);
+    EXPECT_GT(core.store_bytes, 0u);
+    EXPECT_LT(core.store_bytes, kept.store_bytes * 3 / 4) << "the core section of every brick alone";
+    EXPECT_TRUE(same_mesh(source.extract(preserve), converted.extract(preserve))) << from_array;
+    const SourceInfo all = source.info();
+    EXPECT_TRUE(all.critical_counted);
+    EXPECT_EQ(all.store_bytes, kept.store_bytes);
+    EXPECT_EQ(all.critical_exact, kept.critical_exact);
+    EXPECT_EQ(all.critical_paper, kept.critical_paper);
+    EXPECT_GT(all.preprocess_seconds, core.preprocess_seconds);
+    EXPECT_TRUE(same_mesh(source.extract(none), converted.extract(none))) << from_array;
+    EXPECT_EQ(source.info().store_bytes, kept.store_bytes) << "the store of every field, kept";
+    EXPECT_EQ(source.info().preprocess_seconds, all.preprocess_seconds);
+    EXPECT_TRUE(std::filesystem::is_empty(scratch));
+  }
+}
+
 // A hierarchy's store lives as long as its source and is never made durable: its pages go
 // through the page cache and are dropped unwritten when the source ends (the convert of the same
 // volume to a store that is kept, whose scratch hand-overs are dropped alike, drops a store's size

@@ -32,6 +32,7 @@
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
+#include "io/volume/volume_box_reader.h"
 #include "isotope/convert.h"
 #include "isotope/error.h"
 #include "tbb/global_control.h"
@@ -483,6 +484,50 @@ TEST_F(Store, ExtractionFromStoreEqualsInMemory) {
           }
   }
   EXPECT_GE(compared, 300);
+}
+
+// A store of the records' core alone (StoreRecords::core: a volume's hierarchy store for
+// extractions in mode none with the bound error) holds each brick's core section, the same bytes
+// as a store of every field's, and no other: it gives such an extraction the mesh of a store of
+// every field, and stops one that reads more at the missing section instead of taking its
+// records as critical nowhere.
+TEST_F(Store, AStoreOfTheRecordsCoreGivesModeNoneItsMeshAndStopsAnyOtherMode) {
+  const Volume v = testing::load_shared(testing::shared_volumes()[1]);  // neghip
+  const std::string all = convert(v, "all"), core = path("core.isotope");
+  convert_to_store(VolumeBoxReader(v), core, {}, StoreLife::kept, StoreRecords::core);
+  const StoreReader all_reader(all), core_reader(core);
+  ASSERT_EQ(core_reader.layout().brick_count(), all_reader.layout().brick_count());
+  int64_t with_records = 0;
+  for (int64_t i = 0; i < all_reader.layout().brick_count(); ++i) {
+    const BrickEntry &a = all_reader.entry(i), &c = core_reader.entry(i);
+    EXPECT_EQ(c.bytes[0], a.bytes[0]) << "brick " << i;
+    for (int s = 1; s < kSections; ++s) EXPECT_EQ(c.bytes[static_cast<size_t>(s)], 0u) << "brick " << i;
+    with_records += a.bytes[1] > 0;
+  }
+  EXPECT_GT(with_records, 0);
+  BrickCache all_cache(all_reader, uint64_t{1} << 30), core_cache(core_reader, uint64_t{1} << 30);
+  const PagedVolume from_all(all_cache), from_core(core_cache);
+  ExtractOptions o;
+  o.iso = testing::shared_volumes()[1].isovalues[0];
+  o.topology = TopologyMode::none;
+  for (const double eps : {0.5, 4.0, 16.0}) {
+    o.eps = eps;
+    const Mesh a = extract(from_all, o), c = extract(from_core, o);
+    EXPECT_GT(a.triangles.size(), 100u);
+    EXPECT_EQ(a.positions, c.positions) << "eps " << eps;
+    EXPECT_EQ(a.triangles, c.triangles) << "eps " << eps;
+  }
+  o.eps = 4;
+  for (const TopologyMode mode : {TopologyMode::paper, TopologyMode::preserve, TopologyMode::simplify}) {
+    o.topology = mode;
+    if (mode == TopologyMode::simplify) o.delta = 8;
+    EXPECT_CONTAINS(io_error_of([&] { extract(from_core, o); }), "a section is missing") << to_string(mode);
+  }
+  o.topology = TopologyMode::none;
+  o.delta = 0;
+  o.error = ErrorIndicator::surplus;
+  EXPECT_CONTAINS(io_error_of([&] { extract(from_core, o); }), "a section is missing");
+  EXPECT_CONTAINS(io_error_of([&] { verify_store(core); }), "a section is missing") << "not a store convert writes";
 }
 
 // A chunked, gzip-compressed HDF5 dataset (chunks that do not align with the tiles) converts to

@@ -72,7 +72,10 @@ struct SourceInfo {
   // does not stream has read it); a file at eps 0 is streamed instead.
   bool values_in_memory = false;
   // Critical points per diamond type (cube, octahedron, diamond): the paper's rule at f(v), and
-  // the exact rule for some isovalue. A store's header keeps them; a volume has them once built.
+  // the exact rule for some isovalue. A store's header keeps them; a volume has them once its
+  // hierarchy is built with its records' topology, which extractions that read only the range
+  // and the error bound (mode none) do without: then critical_counted is false.
+  bool critical_counted = false;
   std::array<int64_t, 3> critical_paper{0, 0, 0}, critical_exact{0, 0, 0};
   uint64_t input_bytes = 0;  // a volume: its values as float (what an extraction reads)
   // A store: its size, the cache's budget as asked and in effect, a decoded brick's bytes, and

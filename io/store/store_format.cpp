@@ -367,7 +367,7 @@ BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& bric
 }
 
 std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
-                                                         int zstd_level) {
+                                                         int zstd_level, const std::array<bool, kSections>& which) {
   const bool records = stores_records(layout, band);
   auto field_of = [&](Field f) -> const std::vector<float>& {
     switch (f) {
@@ -390,7 +390,7 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
   thread_local std::vector<uint8_t> raw, frame;
   for (int s = 0; s < kSections; ++s) {
     const auto fields = fields_of(static_cast<Section>(s), records);
-    if (fields.empty()) continue;
+    if (fields.empty() || !which[static_cast<size_t>(s)]) continue;
     raw.clear();
     size_t bits = 0;  // bytes of float fields (not bfloat16) written as their bit patterns
     for (const Field f : fields) {

@@ -105,9 +105,13 @@ struct BrickFields {
 BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick);
 
 // The sections of a brick, each ready to be written: an XXH64 of the zstd frame, then the frame.
-// Sections the band does not store are empty.
+// Sections the band does not store are empty, and so are those `which` leaves out (a store of the
+// records' core alone: io/store/store_writer.h, StoreRecords), whose fields `brick` need not hold.
+inline constexpr std::array<bool, kSections> kAllSections{true, true, true, true},
+    kCoreSection{true, false, false, false};
 std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
-                                                         int zstd_level);
+                                                         int zstd_level,
+                                                         const std::array<bool, kSections>& which = kAllSections);
 
 // Checks a section's checksum, inflates it and decodes its fields into the brick's arrays (those
 // the section holds must be present). Throws IoError starting with `where` ("FILE: brick 12 (band

@@ -207,8 +207,6 @@ struct FullBrick {
   std::vector<uint64_t> weights;
 };
 
-constexpr std::array<bool, kSections> kAllSections{true, true, true, true};
-
 // The format's invariants inside one decoded brick; returns what is wrong, or "".
 std::string check_brick(const StoreReader& store, int64_t index, FullBrick& brick) {
   const StoreLayout& layout = store.layout();

@@ -9,6 +9,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -87,7 +88,8 @@ class QuantizingReader : public BoxReader {
 // (engine/hierarchy/compact_record.h). Band 0 and the corners: values only. Into `f`, a thread's
 // own, whose arrays keep their size from brick to brick: a brick within the band's grid writes
 // every entry, so that only one past it (nodes beyond the grid: 0 in every field) fills them first.
-void brick_fields(const BandTile& tile, const Box3& origin, BrickFields& f) {
+// Without `topology`, the records' core fields alone (lo, hi, bound; StoreRecords::core).
+void brick_fields(const BandTile& tile, const Box3& origin, BrickFields& f, bool topology) {
   const StoreLayout& layout = tile.layout();
   const int j = tile.band();
   const Band& band = layout.band(j);
@@ -120,7 +122,8 @@ void brick_fields(const BandTile& tile, const Box3& origin, BrickFields& f) {
   // memory order), each written at its place among the brick's nodes with records: Morton order
   // without the nodes whose three coordinates are even (m & 7 == 0), i = m - m / 8 - 1.
   std::array<float*, BrickFields::count> out;
-  for (size_t k = 0; k < out.size(); ++k) {
+  const size_t held = topology ? out.size() : BrickFields::bound + 1;
+  for (size_t k = 0; k < held; ++k) {
     size(f.records[k], nodes - nodes / 8);
     out[k] = f.records[k].data();
   }
@@ -134,10 +137,11 @@ void brick_fields(const BandTile& tile, const Box3& origin, BrickFields& f) {
         const size_t i = m - m / 8 - 1;
         const Record& r = row[x];
         const PackedBounds b = pack_bounds(r.bounds);
-        const PackedTopology p = pack_topology(r.topology, r.bounds.error_surplus);
         out[BrickFields::lo][i] = bf16_to_float(b.lo);
         out[BrickFields::hi][i] = bf16_to_float(b.hi);
         out[BrickFields::bound][i] = b.bound;
+        if (!topology) continue;
+        const PackedTopology p = pack_topology(r.topology, r.bounds.error_surplus);
         out[BrickFields::exact_lo][i] = bf16_to_float(p.exact_lo);
         out[BrickFields::exact_hi][i] = bf16_to_float(p.exact_hi);
         for (int w = 0; w < 3; ++w) out[BrickFields::w0 + w][i] = bf16_to_float(p.weight[w]);
@@ -181,19 +185,21 @@ class ScratchOut {
 template <class Out>
 class FileSink {
  public:
-  FileSink(const StoreLayout& layout, Out& out, int zstd_level, std::string scratch_dir)
+  FileSink(const StoreLayout& layout, Out& out, int zstd_level, std::string scratch_dir,
+           StoreRecords records = StoreRecords::all)
       : layout_(layout),
         out_(out),
         zstd_level_(zstd_level),
         scratch_dir_(std::move(scratch_dir)),
+        topology_(records == StoreRecords::all),
         entries_(static_cast<size_t>(layout.brick_count())) {}
 
   using Sections = std::array<std::vector<uint8_t>, kSections>;
   Sections process(int band, const Box3& b, const BandTile& tile) const {
     const int64_t t = layout_.brick_width();
     thread_local BrickFields fields;
-    brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}, fields);
-    return encode_brick(layout_, band, fields, zstd_level_);
+    brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}, fields, topology_);
+    return encode_brick(layout_, band, fields, zstd_level_, topology_ ? kAllSections : kCoreSection);
   }
   void commit(int band, const Box3& b, Sections&& sections) {
     BrickEntry& e = entries_[static_cast<size_t>(layout_.brick_index(band, b))];
@@ -256,6 +262,7 @@ class FileSink {
   Out& out_;
   int zstd_level_;
   std::string scratch_dir_;
+  bool topology_;
   std::vector<BrickEntry> entries_;
   std::optional<ScratchFile> held_file_;
   uint64_t held_bytes_ = 0;
@@ -294,10 +301,12 @@ struct BandShare {
 
 class Converter {
  public:
-  Converter(const BoxReader& input, const std::string& output, const ConvertOptions& options, StoreLife life)
+  Converter(const BoxReader& input, const std::string& output, const ConvertOptions& options, StoreLife life,
+            StoreRecords records)
       : input_(quantized_or(input, options)),
         options_(options),
         life_(life),
+        records_(records),
         layout_(input.info().dims, options.brick_bits),
         output_(output),
         scratch_dir_(std::filesystem::absolute(output).parent_path().string()) {}
@@ -339,6 +348,7 @@ class Converter {
     // whether staged or not).
     build.staged = !input_.reads_box_alone();
     build.fuse = true;  // a hand-over that would be a scratch file: built beside instead
+    build.topology = records_ == StoreRecords::all;
     build.progress = options_.progress;
     build.check_cancel = [this] {
       if (options_.cancel && options_.cancel->load()) throw IoError("interrupted");
@@ -376,7 +386,7 @@ class Converter {
     out_.emplace(output_, life_ == StoreLife::kept ? AtomicFile::Appends::direct : AtomicFile::Appends::transient);
     const std::array<uint8_t, kHeaderBytes> blank{};
     out_->write(blank.data(), blank.size());
-    FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_);
+    FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_, records_);
     const BandedBuildStats built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build_options());
     finish(sink.entries(), built);
     return built;
@@ -709,7 +719,8 @@ class Converter {
   std::unique_ptr<QuantizingReader> quantized_;
   const BoxReader& input_;
   const ConvertOptions& options_;
-  StoreLife life_;  // a distributed store is always kept
+  StoreLife life_;        // a distributed store is always kept
+  StoreRecords records_;  // and holds all
   StoreLayout layout_;
   std::string output_;
   std::optional<AtomicFile> out_;  // alone, or rank 0
@@ -720,7 +731,7 @@ class Converter {
 }  // namespace
 
 ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
-                              StoreLife life) {
+                              StoreLife life, StoreRecords records) {
   if (options.zstd_level < 1 || options.zstd_level > 19) throw OptionError("zstd-level", "must be 1..19");
   if (options.memory_mb < 1) throw OptionError("memory-mb", "must be at least 1");
   if (options.quantize_bits != 0 && options.quantize_bits != 8 && options.quantize_bits != 16)
@@ -731,7 +742,9 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
   // Distributed, the quantizer's pass over the input runs under settle_together: a rank whose
   // read fails stops every rank.
   std::optional<Converter> converter;
-  auto make = [&] { converter.emplace(input, output, options, life); };
+  if (options.distribution && (life != StoreLife::kept || records != StoreRecords::all))
+    throw std::logic_error("convert_to_store: a distributed store is kept, with all its records' fields");
+  auto make = [&] { converter.emplace(input, output, options, life, records); };
   if (options.distribution)
     settle_together(*options.distribution, make);
   else

@@ -17,9 +17,17 @@ namespace isotope {
 // and never synced, the same bytes.
 enum class StoreLife { kept, transient };
 
+// What a store's records hold: every field a mode reads (what `isotope convert` writes), or the
+// core alone, their range and error bound (docs/FORMAT.md, "Sections"): for a volume's hierarchy
+// store whose extractions all read no more (mode none with the bound error, sections_for), whose
+// records' topology is then neither computed nor written (a quarter of embryo's build). The
+// bricks of such a store have their core section only, and an extraction that reads another
+// stops at "a section is missing". Not under a distribution, whose stores are kept.
+enum class StoreRecords { all, core };
+
 // Writes OUTPUT atomically (temporary name, renamed when complete); on any error or
 // cancellation nothing is left behind. Throws IoError.
 ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
-                              StoreLife life = StoreLife::kept);
+                              StoreLife life = StoreLife::kept, StoreRecords records = StoreRecords::all);
 
 }  // namespace isotope

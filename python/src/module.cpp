@@ -278,8 +278,9 @@ py::dict info_dict(const SourceInfo& i) {
   d["preprocess_seconds"] = i.preprocess_seconds;
   d["hierarchy_built"] = i.hierarchy_built;
   d["values_in_memory"] = i.values_in_memory;
-  d["critical_paper"] = i.critical_paper;
-  d["critical_exact"] = i.critical_exact;
+  d["critical_counted"] = i.critical_counted;
+  d["critical_paper"] = i.critical_counted ? py::cast(i.critical_paper) : py::none();
+  d["critical_exact"] = i.critical_counted ? py::cast(i.critical_exact) : py::none();
   d["input_bytes"] = i.input_bytes;
   d["store_bytes"] = i.store_bytes;
   d["cache_mb"] = i.cache_mb;

@@ -156,6 +156,13 @@ def test_options_reach_the_library(data):
     assert not store.info["hierarchy_built"]
     store.extract(iso=64.5, max_triangles=len(full.faces) - 1)
     assert store.info["hierarchy_built"]
+    # mode none builds the records' core alone, its critical points not counted; preserve counts them
+    source = isotope.Store(volume)
+    source.extract(iso=64.5, eps=8, topology="none")
+    assert source.info["hierarchy_built"] and not source.info["critical_counted"]
+    assert source.info["critical_exact"] is None and source.info["critical_paper"] is None
+    source.extract(iso=64.5, eps=8)
+    assert source.info["critical_counted"] and sum(source.info["critical_exact"]) > 0
     simplified = isotope.extract(volume, iso=64.5, eps=32, topology="simplify", delta=50)
     preserved = isotope.extract(volume, iso=64.5, eps=32)
     assert len(simplified.faces) <= len(preserved.faces)

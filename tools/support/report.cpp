@@ -91,6 +91,7 @@ void describe(const SourceInfo& info, ExtractionRun& run) {
   run.preprocess_seconds = info.preprocess_seconds;
   run.input_bytes = info.input_bytes;
   run.hierarchy_built = info.hierarchy_built;
+  run.critical_counted = info.critical_counted;
   for (int t = 0; t < 3; ++t) {
     run.preprocess.critical_paper[t] = info.critical_paper[t];
     run.preprocess.critical_exact[t] = info.critical_exact[t];
@@ -196,6 +197,8 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   const PreprocessStats& p = run.preprocess;
   if (!run.hierarchy_built)
     j["preprocess"] = nullptr;
+  else if (!run.critical_counted)
+    j["preprocess"] = {{"seconds", p.seconds}, {"critical_paper", nullptr}, {"critical_exact", nullptr}};
   else
     j["preprocess"] = {
         {"seconds", p.seconds},

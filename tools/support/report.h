@@ -25,7 +25,8 @@ struct ExtractionRun {
   std::array<double, 3> spacing{1, 1, 1};
   int lattice_k = 0;
   PreprocessStats preprocess;
-  bool hierarchy_built = true;  // raw input at eps 0 needs none (isotope/source.h)
+  bool hierarchy_built = true;   // raw input at eps 0 needs none (isotope/source.h)
+  bool critical_counted = true;  // not by a hierarchy of the records' core alone (SourceInfo)
   ExtractStats extract;
   MeshTopology topology;
   std::vector<ComponentStats> components;         // with --report
