@@ -70,15 +70,18 @@ void describe_cache(const StoreReader& store, const BrickCache& cache, int64_t c
 }
 
 // A volume's hierarchy as convert makes it, in a store of its own in the temporary directory
-// (isotope/source.h), paged like any store: its records' core alone while every extraction so
-// far read no more (StoreRecords).
+// (isotope/source.h), paged like any store: with the sections its first extraction read alone
+// (StoreSections), then with all.
 struct ScratchStore {
   std::unique_ptr<StoreReader> store;
   std::unique_ptr<BrickCache> cache;
   std::unique_ptr<PagedVolume> paged;
-  StoreRecords records = StoreRecords::all;
+  StoreSections sections = kAllSections;
   bool serves(const RecordFields& fields) const {
-    return records == StoreRecords::all || sections_for(fields) == kCoreSection;
+    const StoreSections needed = sections_for(fields);
+    for (size_t s = 0; s < needed.size(); ++s)
+      if (needed[s] && !sections[s]) return false;
+    return true;
   }
 };
 
@@ -108,7 +111,7 @@ struct Source::Impl {
   // that reads more fields builds the next (Source::extract may run on several threads at once).
   mutable std::shared_ptr<const Hierarchy> memory;
   // The hierarchy in a scratch store, which extractions share as they share `memory` (and, as
-  // `memory`, made again with every field once an extraction reads more than its records' core);
+  // `memory`, made again, with every section, once an extraction reads one it lacks);
   // `memory` is built only where the scratch store could not be written.
   mutable std::shared_ptr<const ScratchStore> scratch;
   mutable bool hierarchy_in_memory = false;  // the scratch store not made, or not made again
@@ -168,11 +171,12 @@ struct Source::Impl {
   // built in memory as before, where the temporary directory cannot take the store (missing, not
   // writable, full), and for a volume so thin along an axis that a store's bricks would be mostly
   // padding (StoreLayout::memory_brick_bits: the hierarchy in memory takes bricks of 4^3 there).
-  // With the records' core alone where FIELDS need no more (StoreRecords), else with all.
+  // With the sections FIELDS need alone (StoreSections) the first time, with all when made again:
+  // a source whose extractions change modes converts its volume twice at most.
   std::shared_ptr<const ScratchStore> paged_hierarchy(const RecordFields& fields) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (hierarchy_in_memory || (scratch && scratch->serves(fields))) return scratch;
-    const StoreRecords records = sections_for(fields) == kCoreSection ? StoreRecords::core : StoreRecords::all;
+    const StoreSections sections = scratch ? kAllSections : sections_for(fields);
     if (scratch) budgets.clear();  // made again from the volume, as hierarchy() would
     const auto start = std::chrono::steady_clock::now();
     const Volume* held_volume = in_memory();
@@ -201,13 +205,13 @@ struct Source::Impl {
     ConvertOptions options;
     options.progress = progress;
     auto built = std::make_shared<ScratchStore>();
-    built->records = records;
+    built->sections = sections;
     try {
       if (held_volume) {
         validate_volume(*held_volume);  // a borrowed array may have changed since it was checked
-        convert_to_store(VolumeBoxReader(*held_volume), name, options, StoreLife::transient, records);
+        convert_to_store(VolumeBoxReader(*held_volume), name, options, StoreLife::transient, sections);
       } else {
-        convert_to_store(*file, name, options, StoreLife::transient, records);
+        convert_to_store(*file, name, options, StoreLife::transient, sections);
       }
       built->store = std::make_unique<StoreReader>(name);
     } catch (const IoError& e) {
@@ -365,7 +369,7 @@ SourceInfo Source::info() const {
     info.preprocess_seconds = s.preprocess_seconds;
     info.hierarchy_built = s.memory != nullptr || s.scratch != nullptr;
     if (s.scratch) {
-      info.critical_counted = s.scratch->records == StoreRecords::all;
+      info.critical_counted = with_topology(s.scratch->sections);
       for (int t = 0; t < 3; ++t) {
         info.critical_paper[t] = s.scratch->store->header().critical_paper[t];
         info.critical_exact[t] = s.scratch->store->header().critical_exact[t];

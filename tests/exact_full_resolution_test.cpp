@@ -1006,12 +1006,14 @@ TEST_F(SourceOfAFile, AHierarchyIsAStoreInTheTemporaryDirectoryThatLeavesNothing
   EXPECT_TRUE(std::filesystem::is_empty(scratch));
 }
 
-// An extraction that reads its records' range and error bound alone (mode none, the bound error)
-// has the volume converted into a store of that core (StoreRecords::core): smaller, the records'
-// topology neither computed nor counted, the mesh of a kept store. The first extraction that
-// reads more has it converted again with every field, to the kept store's bytes and critical
-// points; mode none then keeps that store. So from a file and from an array.
-TEST_F(SourceOfAFile, ModeNoneConvertsTheRecordsCoreAloneAndAModeThatReadsMoreConvertsAgain) {
+// A volume's hierarchy store holds the sections its first extraction reads alone (StoreSections):
+// for mode none the records' core, their topology neither computed nor counted; for preserve the
+// exact intervals too, the critical points counted, without the simplification weights and the
+// paper's intervals. Each gives the mesh of a kept store. The first extraction that reads a
+// section the store lacks has the volume converted again with every section, to the kept store's
+// bytes and critical points, and that store serves every mode after it. So from a file and from
+// an array.
+TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEveryOne) {
   const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
   const std::string scratch = path("scratch");
   std::filesystem::create_directory(scratch);
@@ -1020,30 +1022,43 @@ TEST_F(SourceOfAFile, ModeNoneConvertsTheRecordsCoreAloneAndAModeThatReadsMoreCo
   convert(spec_of(raw), store);
   const Source converted = open_volume(spec_of(store));
   const SourceInfo kept = converted.info();
-  ExtractOptions none, preserve;
-  none.iso = preserve.iso = 64.5f;
-  none.eps = preserve.eps = 2;
+  ExtractOptions none, preserve, simplify;
+  none.iso = preserve.iso = simplify.iso = 64.5f;
+  none.eps = preserve.eps = simplify.eps = 2;
   none.topology = TopologyMode::none;
-  for (const bool from_array : {false, true}) {
-    const Source source = from_array ? open_volume(read_volume(spec_of(raw))) : open_volume(spec_of(raw));
-    EXPECT_TRUE(same_mesh(source.extract(none), converted.extract(none))) << from_array;
-    const SourceInfo core = source.info();
-    EXPECT_TRUE(core.hierarchy_built);
-    EXPECT_FALSE(core.critical_counted);
-    EXPECT_GT(core.store_bytes, 0u);
-    EXPECT_LT(core.store_bytes, kept.store_bytes * 3 / 4) << "the core section of every brick alone";
-    EXPECT_TRUE(same_mesh(source.extract(preserve), converted.extract(preserve))) << from_array;
-    const SourceInfo all = source.info();
-    EXPECT_TRUE(all.critical_counted);
-    EXPECT_EQ(all.store_bytes, kept.store_bytes);
-    EXPECT_EQ(all.critical_exact, kept.critical_exact);
-    EXPECT_EQ(all.critical_paper, kept.critical_paper);
-    EXPECT_GT(all.preprocess_seconds, core.preprocess_seconds);
-    EXPECT_TRUE(same_mesh(source.extract(none), converted.extract(none))) << from_array;
-    EXPECT_EQ(source.info().store_bytes, kept.store_bytes) << "the store of every field, kept";
-    EXPECT_EQ(source.info().preprocess_seconds, all.preprocess_seconds);
-    EXPECT_TRUE(std::filesystem::is_empty(scratch));
-  }
+  simplify.topology = TopologyMode::simplify;
+  simplify.delta = 20;
+  uint64_t core_bytes = 0;
+  for (const bool from_array : {false, true})
+    for (const ExtractOptions& first : {none, preserve}) {
+      const bool counted = first.topology == TopologyMode::preserve;
+      const Source source = from_array ? open_volume(read_volume(spec_of(raw))) : open_volume(spec_of(raw));
+      EXPECT_TRUE(same_mesh(source.extract(first), converted.extract(first))) << from_array;
+      const SourceInfo some = source.info();
+      EXPECT_TRUE(some.hierarchy_built);
+      EXPECT_EQ(some.critical_counted, counted);
+      if (counted) {
+        EXPECT_EQ(some.critical_exact, kept.critical_exact);
+        EXPECT_EQ(some.critical_paper, kept.critical_paper);
+        EXPECT_GT(some.store_bytes, core_bytes) << "the exact intervals' sections too";
+      } else {
+        core_bytes = some.store_bytes;
+      }
+      EXPECT_GT(some.store_bytes, 0u);
+      EXPECT_LT(some.store_bytes, kept.store_bytes * (counted ? 9 : 3) / (counted ? 10 : 4));
+      EXPECT_TRUE(same_mesh(source.extract(simplify), converted.extract(simplify))) << from_array;
+      const SourceInfo all = source.info();
+      EXPECT_TRUE(all.critical_counted);
+      EXPECT_EQ(all.store_bytes, kept.store_bytes);
+      EXPECT_EQ(all.critical_exact, kept.critical_exact);
+      EXPECT_EQ(all.critical_paper, kept.critical_paper);
+      EXPECT_GT(all.preprocess_seconds, some.preprocess_seconds);
+      for (const ExtractOptions& o : {none, preserve})
+        EXPECT_TRUE(same_mesh(source.extract(o), converted.extract(o))) << from_array;
+      EXPECT_EQ(source.info().store_bytes, kept.store_bytes) << "the store of every section, kept";
+      EXPECT_EQ(source.info().preprocess_seconds, all.preprocess_seconds);
+      EXPECT_TRUE(std::filesystem::is_empty(scratch));
+    }
 }
 
 // A hierarchy's store lives as long as its source and is never made durable: its pages go

@@ -486,48 +486,60 @@ TEST_F(Store, ExtractionFromStoreEqualsInMemory) {
   EXPECT_GE(compared, 300);
 }
 
-// A store of the records' core alone (StoreRecords::core: a volume's hierarchy store for
-// extractions in mode none with the bound error) holds each brick's core section, the same bytes
-// as a store of every field's, and no other: it gives such an extraction the mesh of a store of
-// every field, and stops one that reads more at the missing section instead of taking its
-// records as critical nowhere.
-TEST_F(Store, AStoreOfTheRecordsCoreGivesModeNoneItsMeshAndStopsAnyOtherMode) {
+// A store of some sections (StoreSections: a volume's hierarchy store, with those its extractions
+// read) holds those of a store of every section, byte for byte, and no other: an extraction that
+// reads no more gets the mesh of a store of every section, in any mode and for either error, and
+// one that reads more stops at the missing section instead of taking its records as critical
+// nowhere; verify refuses the store.
+TEST_F(Store, AStoreOfSomeSectionsServesTheExtractionsThatReadThemAndStopsTheOthers) {
   const Volume v = testing::load_shared(testing::shared_volumes()[1]);  // neghip
-  const std::string all = convert(v, "all"), core = path("core.isotope");
-  convert_to_store(VolumeBoxReader(v), core, {}, StoreLife::kept, StoreRecords::core);
-  const StoreReader all_reader(all), core_reader(core);
-  ASSERT_EQ(core_reader.layout().brick_count(), all_reader.layout().brick_count());
-  int64_t with_records = 0;
-  for (int64_t i = 0; i < all_reader.layout().brick_count(); ++i) {
-    const BrickEntry &a = all_reader.entry(i), &c = core_reader.entry(i);
-    EXPECT_EQ(c.bytes[0], a.bytes[0]) << "brick " << i;
-    for (int s = 1; s < kSections; ++s) EXPECT_EQ(c.bytes[static_cast<size_t>(s)], 0u) << "brick " << i;
-    with_records += a.bytes[1] > 0;
+  const std::string all = convert(v, "all");
+  const StoreReader all_reader(all);
+  BrickCache all_cache(all_reader, uint64_t{1} << 30);
+  const PagedVolume from_all(all_cache);
+  const float iso = testing::shared_volumes()[1].isovalues[0];
+  int served = 0, stopped = 0;
+  for (const StoreSections& sections :
+       {StoreSections{true, false, false, false}, StoreSections{true, true, false, false},
+        StoreSections{true, true, true, false}}) {
+    const std::string some = path("some.isotope");
+    convert_to_store(VolumeBoxReader(v), some, {}, StoreLife::kept, sections);
+    const StoreReader reader(some);
+    ASSERT_EQ(reader.layout().brick_count(), all_reader.layout().brick_count());
+    int64_t with_records = 0;
+    for (int64_t i = 0; i < all_reader.layout().brick_count(); ++i)
+      for (size_t s = 0; s < sections.size(); ++s) {
+        EXPECT_EQ(reader.entry(i).bytes[s], sections[s] ? all_reader.entry(i).bytes[s] : 0u) << "brick " << i;
+        with_records += s == 1 && all_reader.entry(i).bytes[s] > 0;
+      }
+    EXPECT_GT(with_records, 0);
+    BrickCache cache(reader, uint64_t{1} << 30);
+    const PagedVolume from_some(cache);
+    for (const TopologyMode mode :
+         {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve, TopologyMode::simplify})
+      for (const ErrorIndicator error : {ErrorIndicator::bound, ErrorIndicator::surplus}) {
+        ExtractOptions o;
+        o.iso = iso, o.eps = 4, o.topology = mode, o.error = error;
+        if (mode == TopologyMode::simplify) o.delta = 8;
+        const StoreSections needed = sections_for(fields_for(o));
+        bool held = true;
+        for (size_t s = 0; s < needed.size(); ++s) held = held && (!needed[s] || sections[s]);
+        if (held) {
+          const Mesh a = extract(from_all, o), b = extract(from_some, o);
+          EXPECT_GT(a.triangles.size(), 100u);
+          EXPECT_EQ(a.positions, b.positions) << to_string(mode) << " " << to_string(error);
+          EXPECT_EQ(a.triangles, b.triangles) << to_string(mode) << " " << to_string(error);
+          ++served;
+        } else {
+          EXPECT_CONTAINS(io_error_of([&] { extract(from_some, o); }), "a section is missing")
+              << to_string(mode) << " " << to_string(error);
+          ++stopped;
+        }
+      }
+    EXPECT_CONTAINS(io_error_of([&] { verify_store(some); }), "a section is missing") << "not a store convert writes";
   }
-  EXPECT_GT(with_records, 0);
-  BrickCache all_cache(all_reader, uint64_t{1} << 30), core_cache(core_reader, uint64_t{1} << 30);
-  const PagedVolume from_all(all_cache), from_core(core_cache);
-  ExtractOptions o;
-  o.iso = testing::shared_volumes()[1].isovalues[0];
-  o.topology = TopologyMode::none;
-  for (const double eps : {0.5, 4.0, 16.0}) {
-    o.eps = eps;
-    const Mesh a = extract(from_all, o), c = extract(from_core, o);
-    EXPECT_GT(a.triangles.size(), 100u);
-    EXPECT_EQ(a.positions, c.positions) << "eps " << eps;
-    EXPECT_EQ(a.triangles, c.triangles) << "eps " << eps;
-  }
-  o.eps = 4;
-  for (const TopologyMode mode : {TopologyMode::paper, TopologyMode::preserve, TopologyMode::simplify}) {
-    o.topology = mode;
-    if (mode == TopologyMode::simplify) o.delta = 8;
-    EXPECT_CONTAINS(io_error_of([&] { extract(from_core, o); }), "a section is missing") << to_string(mode);
-  }
-  o.topology = TopologyMode::none;
-  o.delta = 0;
-  o.error = ErrorIndicator::surplus;
-  EXPECT_CONTAINS(io_error_of([&] { extract(from_core, o); }), "a section is missing");
-  EXPECT_CONTAINS(io_error_of([&] { verify_store(core); }), "a section is missing") << "not a store convert writes";
+  EXPECT_EQ(served, 1 + 2 + 3);  // none; and preserve; and simplify
+  EXPECT_EQ(stopped, 3 * 8 - served);
 }
 
 // A chunked, gzip-compressed HDF5 dataset (chunks that do not align with the tiles) converts to

@@ -258,7 +258,8 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
   }
 #endif
   const Saturation sat = fold.finish(range);
-  records_[static_cast<size_t>(base)] = finish_record(dv, t.shape, true, range, sat, counts, topology, &t.gradients);
+  records_[static_cast<size_t>(base)] =
+      finish_record(dv, t.shape, true, range, sat, counts, topology, &t.gradients, weights_);
 }
 
 void BandTile::find_constant_blocks() {
@@ -303,9 +304,10 @@ void BandTile::find_constant_blocks() {
       }
 }
 
-void BandTile::build(CriticalCounts& counts, bool topology) {
+void BandTile::build(CriticalCounts& counts, bool topology, bool weights) {
   const Lattice& l = layout_.lattice();
   if (j_ >= l.k) return;  // the corners: no records
+  weights_ = weights;
   templates_ = shared_templates(l.k, j_, size_, cells_);
   const Band& band = layout_.band(j_);
   // Band 0 where the values around a node are all one value c: its record is range [c, c], errors
@@ -404,7 +406,8 @@ void BandTile::build(CriticalCounts& counts, bool topology) {
         // x steps by 2. The nodes inside the data box, a range of the row, take templates, of
         // two classes alternately (x mod 4); the few at either end, the general builder.
         auto general = [&](int64_t x) {
-          if (!constant(x, index({x, y, z}, size_))) builder.build({x << j_, y << j_, z << j_}, counts_of(x), topology);
+          if (!constant(x, index({x, y, z}, size_)))
+            builder.build({x << j_, y << j_, z << j_}, counts_of(x), topology, weights);
         };
         int64_t fast_first = last[0] + 2, fast_last = last[0];
         if (box_yz) {

@@ -57,9 +57,10 @@ class BandTile {
   // Computes the records of the core's scale-j nodes (and of the halo nodes they depend on).
   // Without `topology`, their range and errors only (critical intervals empty, weights 0, no
   // critical point counted): what an extraction in mode none reads, for a fraction of the work.
+  // Without `weights`, no simplification weights (0): what every mode but simplify reads.
   // The critical points counted are those of the core, or of the part of it set by count_only
   // (a core widened to hand a fused band its halo, whose nodes other tiles count).
-  void build(CriticalCounts& counts, bool topology = true);
+  void build(CriticalCounts& counts, bool topology = true, bool weights = true);
   void count_only(const Box3& lo, const Box3& hi) { count_lo_ = lo, count_hi_ = hi; }
   const Box3& count_lo() const { return count_lo_; }
   const Box3& count_hi() const { return count_hi_; }
@@ -117,6 +118,7 @@ class BandTile {
   void build_fast(int64_t base, int64_t cell, const DiamondTemplate& t, CriticalCounts& counts, bool topology);
   // This thread's templates for windows of this tile's band and size, made as first asked for.
   static DiamondTemplate* shared_templates(int k, int j, const Box3& size, const Box3& cells);
+  bool weights_ = true;  // this build's (build())
   DiamondTemplate* templates_ = nullptr;
   // Band 0: per 4^3 block of the window, whether every value within 4 nodes of it is one and the
   // same (most of a CT scan's background). Such a block's records are known without computing.

@@ -125,6 +125,7 @@ class MemoryHandover : public BandHandover {
 struct BandedBuildOptions {
   uint64_t memory_bytes = uint64_t{1} << 30;  // tiles in flight; a hand-over beyond a quarter of it may go elsewhere
   bool topology = true;                       // false: the records' range and errors only (BandTile::build)
+  bool weights = true;                        // false: no simplification weights (BandTile::build)
   ProgressCallback progress;
   std::function<void()> check_cancel;  // called between batches; throws to stop
   // Where a band's hand-over goes; by default (or when this returns null) into memory.
@@ -509,7 +510,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
                 own.fill(tile);
               }
             }
-            tile.build(r.counts, options.topology);
+            tile.build(r.counts, options.topology, options.weights);
             if (j == 0) value_range(tile, layout, r.lo, r.hi);
             // A tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
             // the band's bricks are committed in Morton order whatever the tile size.
@@ -525,7 +526,7 @@ BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sin
               beside.emplace(layout, j + 1, ulo, uhi, std::move(upper_buffers[slot]));
               handed[slot].take_next(tile, *beside);
               handed[slot].fill(*beside);
-              beside->build(r.counts, options.topology);
+              beside->build(r.counts, options.topology, options.weights);
               // Its bricks: those whose first node is in its core (at the far faces, beyond c/2).
               Box3 first_brick, bricks;
               for (int a = 0; a < 3; ++a) {

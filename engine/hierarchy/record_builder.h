@@ -592,8 +592,9 @@ class RecordBuilder {
   explicit RecordBuilder(Grid& grid, int scale = -1)
       : grid_(grid), lattice_(grid.lattice()), classes_(grid.lattice(), scale) {}
 
-  // Without `topology`, the range and errors alone (engine/hierarchy/band_tile.h, build).
-  void build(const Coord& v, CriticalCounts& counts, bool topology = true) const {
+  // Without `topology`, the range and errors alone; without `weights`, no simplification weights
+  // (engine/hierarchy/band_tile.h, build).
+  void build(const Coord& v, CriticalCounts& counts, bool topology = true, bool weights = true) const {
     const int j = scale_of(v, lattice_);
     const Diamond d = classes_.diamond(v, j);
 #ifndef NDEBUG
@@ -619,8 +620,8 @@ class RecordBuilder {
       if (grid_.child(u, c)) fold.add(c, topology);
     });
     const Saturation sat = fold.finish(range);
-    grid_.store(v, finish_record(dv, shape_for_weights(d, lattice_, dv, inside_box, topology), inside_box, range, sat,
-                                 counts, topology));
+    grid_.store(v, finish_record(dv, shape_for_weights(d, lattice_, dv, inside_box, topology, weights), inside_box,
+                                 range, sat, counts, topology, nullptr, weights));
   }
 
  private:

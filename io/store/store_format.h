@@ -34,6 +34,11 @@ enum class Section : int { core = 0, exact = 1, weights = 2, extra = 3 };
 inline constexpr int kSections = 4;
 // Which sections an extraction reading these fields needs besides the core.
 std::array<bool, kSections> sections_for(const RecordFields& f);
+inline constexpr std::array<bool, kSections> kAllSections{true, true, true, true};
+// Whether bricks of these sections hold a field of their records' topology (any but the core's).
+inline bool with_topology(const std::array<bool, kSections>& sections) {
+  return sections[1] || sections[2] || sections[3];
+}
 
 struct BandDirectory {
   uint64_t offset = 0, bytes = 0, checksum = 0;  // XXH64 (seed 0) of the directory's bytes
@@ -107,8 +112,6 @@ BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& bric
 // The sections of a brick, each ready to be written: an XXH64 of the zstd frame, then the frame.
 // Sections the band does not store are empty, and so are those `which` leaves out (a store of the
 // records' core alone: io/store/store_writer.h, StoreRecords), whose fields `brick` need not hold.
-inline constexpr std::array<bool, kSections> kAllSections{true, true, true, true},
-    kCoreSection{true, false, false, false};
 std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
                                                          int zstd_level,
                                                          const std::array<bool, kSections>& which = kAllSections);

@@ -88,7 +88,8 @@ class QuantizingReader : public BoxReader {
 // (engine/hierarchy/compact_record.h). Band 0 and the corners: values only. Into `f`, a thread's
 // own, whose arrays keep their size from brick to brick: a brick within the band's grid writes
 // every entry, so that only one past it (nodes beyond the grid: 0 in every field) fills them first.
-// Without `topology`, the records' core fields alone (lo, hi, bound; StoreRecords::core).
+// Without `topology`, the records' core fields alone (lo, hi, bound: a store without sections of
+// their topology, StoreSections).
 void brick_fields(const BandTile& tile, const Box3& origin, BrickFields& f, bool topology) {
   const StoreLayout& layout = tile.layout();
   const int j = tile.band();
@@ -186,12 +187,13 @@ template <class Out>
 class FileSink {
  public:
   FileSink(const StoreLayout& layout, Out& out, int zstd_level, std::string scratch_dir,
-           StoreRecords records = StoreRecords::all)
+           const StoreSections& sections = kAllSections)
       : layout_(layout),
         out_(out),
         zstd_level_(zstd_level),
         scratch_dir_(std::move(scratch_dir)),
-        topology_(records == StoreRecords::all),
+        sections_(sections),
+        topology_(with_topology(sections)),
         entries_(static_cast<size_t>(layout.brick_count())) {}
 
   using Sections = std::array<std::vector<uint8_t>, kSections>;
@@ -199,7 +201,7 @@ class FileSink {
     const int64_t t = layout_.brick_width();
     thread_local BrickFields fields;
     brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}, fields, topology_);
-    return encode_brick(layout_, band, fields, zstd_level_, topology_ ? kAllSections : kCoreSection);
+    return encode_brick(layout_, band, fields, zstd_level_, sections_);
   }
   void commit(int band, const Box3& b, Sections&& sections) {
     BrickEntry& e = entries_[static_cast<size_t>(layout_.brick_index(band, b))];
@@ -262,6 +264,7 @@ class FileSink {
   Out& out_;
   int zstd_level_;
   std::string scratch_dir_;
+  StoreSections sections_;
   bool topology_;
   std::vector<BrickEntry> entries_;
   std::optional<ScratchFile> held_file_;
@@ -302,11 +305,11 @@ struct BandShare {
 class Converter {
  public:
   Converter(const BoxReader& input, const std::string& output, const ConvertOptions& options, StoreLife life,
-            StoreRecords records)
+            const StoreSections& sections)
       : input_(quantized_or(input, options)),
         options_(options),
         life_(life),
-        records_(records),
+        sections_(sections),
         layout_(input.info().dims, options.brick_bits),
         output_(output),
         scratch_dir_(std::filesystem::absolute(output).parent_path().string()) {}
@@ -348,7 +351,8 @@ class Converter {
     // whether staged or not).
     build.staged = !input_.reads_box_alone();
     build.fuse = true;  // a hand-over that would be a scratch file: built beside instead
-    build.topology = records_ == StoreRecords::all;
+    build.topology = with_topology(sections_);
+    build.weights = sections_[static_cast<size_t>(Section::weights)];
     build.progress = options_.progress;
     build.check_cancel = [this] {
       if (options_.cancel && options_.cancel->load()) throw IoError("interrupted");
@@ -386,7 +390,7 @@ class Converter {
     out_.emplace(output_, life_ == StoreLife::kept ? AtomicFile::Appends::direct : AtomicFile::Appends::transient);
     const std::array<uint8_t, kHeaderBytes> blank{};
     out_->write(blank.data(), blank.size());
-    FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_, records_);
+    FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_, sections_);
     const BandedBuildStats built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build_options());
     finish(sink.entries(), built);
     return built;
@@ -719,8 +723,8 @@ class Converter {
   std::unique_ptr<QuantizingReader> quantized_;
   const BoxReader& input_;
   const ConvertOptions& options_;
-  StoreLife life_;        // a distributed store is always kept
-  StoreRecords records_;  // and holds all
+  StoreLife life_;          // a distributed store is always kept
+  StoreSections sections_;  // and holds all
   StoreLayout layout_;
   std::string output_;
   std::optional<AtomicFile> out_;  // alone, or rank 0
@@ -731,7 +735,7 @@ class Converter {
 }  // namespace
 
 ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
-                              StoreLife life, StoreRecords records) {
+                              StoreLife life, const StoreSections& sections) {
   if (options.zstd_level < 1 || options.zstd_level > 19) throw OptionError("zstd-level", "must be 1..19");
   if (options.memory_mb < 1) throw OptionError("memory-mb", "must be at least 1");
   if (options.quantize_bits != 0 && options.quantize_bits != 8 && options.quantize_bits != 16)
@@ -742,9 +746,9 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
   // Distributed, the quantizer's pass over the input runs under settle_together: a rank whose
   // read fails stops every rank.
   std::optional<Converter> converter;
-  if (options.distribution && (life != StoreLife::kept || records != StoreRecords::all))
+  if (options.distribution && (life != StoreLife::kept || sections != kAllSections))
     throw std::logic_error("convert_to_store: a distributed store is kept, with all its records' fields");
-  auto make = [&] { converter.emplace(input, output, options, life, records); };
+  auto make = [&] { converter.emplace(input, output, options, life, sections); };
   if (options.distribution)
     settle_together(*options.distribution, make);
   else

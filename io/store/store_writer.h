@@ -1,11 +1,13 @@
 #pragma once
 // `isotope convert`: a volume on disk -> a store (docs/FORMAT.md), band by band and tile by
 // tile (engine/hierarchy/band_tile.h), so that memory stays within a budget whatever the volume's size.
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <string>
 
 #include "engine/hierarchy/store_layout.h"
+#include "io/store/store_format.h"
 #include "io/volume/box_reader.h"
 #include "isotope/convert.h"
 
@@ -17,17 +19,18 @@ namespace isotope {
 // and never synced, the same bytes.
 enum class StoreLife { kept, transient };
 
-// What a store's records hold: every field a mode reads (what `isotope convert` writes), or the
-// core alone, their range and error bound (docs/FORMAT.md, "Sections"): for a volume's hierarchy
-// store whose extractions all read no more (mode none with the bound error, sections_for), whose
-// records' topology is then neither computed nor written (a quarter of embryo's build). The
-// bricks of such a store have their core section only, and an extraction that reads another
-// stops at "a section is missing". Not under a distribution, whose stores are kept.
-enum class StoreRecords { all, core };
+// Which sections a store's bricks hold (docs/FORMAT.md, "Sections"): every one (kAllSections,
+// what `isotope convert` writes), or those its extractions read (sections_for): a volume's
+// hierarchy store, whose records' fields that no section holds are then not computed either: their
+// topology without the exact, weights and extra sections (a quarter of embryo's build), their
+// simplification weights without the weights section (a seventh). A brick's sections left out are
+// 0 bytes, and an extraction that reads one stops at "a section is missing". Not under a
+// distribution, whose stores are kept.
+using StoreSections = std::array<bool, kSections>;
 
 // Writes OUTPUT atomically (temporary name, renamed when complete); on any error or
 // cancellation nothing is left behind. Throws IoError.
 ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
-                              StoreLife life = StoreLife::kept, StoreRecords records = StoreRecords::all);
+                              StoreLife life = StoreLife::kept, const StoreSections& sections = kAllSections);
 
 }  // namespace isotope
