@@ -70,8 +70,8 @@ void describe_cache(const StoreReader& store, const BrickCache& cache, int64_t c
 }
 
 // A volume's hierarchy as convert makes it, in a store of its own in the temporary directory
-// (isotope/source.h), paged like any store: with the sections its first extraction read alone
-// (StoreSections), then with all.
+// (isotope/source.h), paged like any store: with the sections the first extraction (or the
+// extractions prepared) read alone (StoreSections), then, made again, with all.
 struct ScratchStore {
   std::unique_ptr<StoreReader> store;
   std::unique_ptr<BrickCache> cache;
@@ -191,6 +191,7 @@ struct Source::Impl {
     std::string folder = (tmp / "isotope-XXXXXX").string();
     if (failed || thin || ::mkdtemp(folder.data()) == nullptr) {
       hierarchy_in_memory = true;
+      scratch.reset();  // a store of some sections, made before, serves no extraction after this one
       return nullptr;
     }
     const std::string name = folder + "/hierarchy.isotope";
@@ -221,6 +222,7 @@ struct Source::Impl {
       // callback that throws, as a host's cancel does), are the caller's.
       if (std::string_view(e.what()).find(folder) == std::string_view::npos) throw;
       hierarchy_in_memory = true;
+      scratch.reset();  // a store of some sections, made before, serves no extraction after this one
       return nullptr;
     } catch (...) {
       remove_folder();

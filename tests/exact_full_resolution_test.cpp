@@ -1009,10 +1009,9 @@ TEST_F(SourceOfAFile, AHierarchyIsAStoreInTheTemporaryDirectoryThatLeavesNothing
 // A volume's hierarchy store holds the sections its first extraction reads alone (StoreSections):
 // for mode none the records' core, their topology neither computed nor counted; for preserve the
 // exact intervals too, the critical points counted, without the simplification weights and the
-// paper's intervals. Each gives the mesh of a kept store. The first extraction that reads a
-// section the store lacks has the volume converted again with every section, to the kept store's
-// bytes and critical points, and that store serves every mode after it. So from a file and from
-// an array.
+// paper's intervals; for the surplus error the extra section. Each gives the mesh of a kept store. The first extraction
+// that reads a section the store lacks has the volume converted again with every section, to the kept store's bytes and
+// critical points, and that store serves every mode after it. So from a file and from an array.
 TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEveryOne) {
   const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
   const std::string scratch = path("scratch");
@@ -1028,10 +1027,12 @@ TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEv
   none.topology = TopologyMode::none;
   simplify.topology = TopologyMode::simplify;
   simplify.delta = 20;
+  ExtractOptions surplus = none;
+  surplus.error = ErrorIndicator::surplus;
   uint64_t core_bytes = 0;
   for (const bool from_array : {false, true})
-    for (const ExtractOptions& first : {none, preserve}) {
-      const bool counted = first.topology == TopologyMode::preserve;
+    for (const ExtractOptions& first : {none, preserve, surplus}) {
+      const bool counted = first.topology != TopologyMode::none || first.error == ErrorIndicator::surplus;
       const Source source = from_array ? open_volume(read_volume(spec_of(raw))) : open_volume(spec_of(raw));
       EXPECT_TRUE(same_mesh(source.extract(first), converted.extract(first))) << from_array;
       const SourceInfo some = source.info();
@@ -1040,7 +1041,7 @@ TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEv
       if (counted) {
         EXPECT_EQ(some.critical_exact, kept.critical_exact);
         EXPECT_EQ(some.critical_paper, kept.critical_paper);
-        EXPECT_GT(some.store_bytes, core_bytes) << "the exact intervals' sections too";
+        EXPECT_GT(some.store_bytes, core_bytes) << "another section too";
       } else {
         core_bytes = some.store_bytes;
       }
@@ -1059,6 +1060,37 @@ TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEv
       EXPECT_EQ(source.info().preprocess_seconds, all.preprocess_seconds);
       EXPECT_TRUE(std::filesystem::is_empty(scratch));
     }
+}
+
+// Where the volume's second store, of every section, cannot be written (the temporary directory
+// gone meanwhile), the hierarchy is built in memory for that extraction and every one after it:
+// the store of some sections made before serves none of them, not even those it could.
+TEST_F(SourceOfAFile, WithoutRoomForItsSecondStoreAHierarchyIsBuiltInMemory) {
+  const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
+  const std::string scratch = path("scratch");
+  std::filesystem::create_directory(scratch);
+  const std::string store = path("bolt.isotope");
+  convert(spec_of(raw), store);
+  const Source converted = open_volume(spec_of(store));
+  ExtractOptions none, simplify;
+  none.iso = simplify.iso = 64.5f;
+  none.eps = simplify.eps = 2;
+  none.topology = TopologyMode::none;
+  simplify.topology = TopologyMode::simplify;
+  simplify.delta = 20;
+  const Source source = open_volume(spec_of(raw));
+  {
+    const testing::TemporaryDirectoryIs tmp(scratch);
+    EXPECT_TRUE(same_mesh(source.extract(none), converted.extract(none)));
+  }
+  EXPECT_GT(source.info().store_bytes, 0u);
+  const testing::TemporaryDirectoryIs gone(path("missing"));
+  for (const ExtractOptions& o : {simplify, simplify, none})
+    EXPECT_TRUE(same_mesh(source.extract(o), converted.extract(o))) << to_string(o.topology);
+  EXPECT_TRUE(source.info().values_in_memory);
+  EXPECT_EQ(source.info().store_bytes, 0u) << "no store serves it now";
+  EXPECT_TRUE(source.info().critical_counted);
+  EXPECT_TRUE(std::filesystem::is_empty(scratch));
 }
 
 // A hierarchy's store lives as long as its source and is never made durable: its pages go
@@ -1205,6 +1237,41 @@ TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {
     EXPECT_FALSE(source.info().values_in_memory);
     EXPECT_TRUE(source.info().hierarchy_built);
     EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "streamed again";
+  }
+}
+
+// Extractions on several threads at once that read different sections of the volume's store
+// (mode none its core alone, simplify every section): each gets its mesh, whichever converts the
+// volume first, and whether the other waits for that store or for the one made again after it.
+TEST_F(SourceOfAFile, ExtractionsThatReadDifferentSectionsAtOnceEachGetTheirMesh) {
+  const std::string raw = copy_of("neghip_66x66x66_uint8.raw");
+  const std::string store = path("neghip.isotope");
+  convert(spec_of(raw), store);
+  const Source converted = open_volume(spec_of(store));
+  ExtractOptions none, simplify;
+  none.iso = simplify.iso = 128.5f;
+  none.eps = simplify.eps = 4;
+  none.topology = TopologyMode::none;
+  simplify.topology = TopologyMode::simplify;
+  simplify.delta = 10;
+  const Mesh none_mesh = converted.extract(none), simplify_mesh = converted.extract(simplify);
+  for (int round = 0; round < 3; ++round) {
+    const Source source = open_volume(spec_of(raw));
+    std::atomic<int> right{0};
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+      threads.emplace_back([&, t] {
+        const bool reads_all = (t + round) % 2 == 1;
+        try {
+          if (same_mesh(source.extract(reads_all ? simplify : none), reads_all ? simplify_mesh : none_mesh)) ++right;
+        } catch (const std::exception& e) {
+          ADD_FAILURE() << e.what();
+        }
+      });
+    for (std::thread& t : threads) t.join();
+    EXPECT_EQ(right, 4) << "round " << round;
+    EXPECT_GT(source.info().store_bytes, 0u) << "round " << round;
+    EXPECT_LE(source.info().store_bytes, converted.info().store_bytes) << "round " << round;
   }
 }
 

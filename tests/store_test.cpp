@@ -499,8 +499,11 @@ TEST_F(Store, AStoreOfSomeSectionsServesTheExtractionsThatReadThemAndStopsTheOth
   const PagedVolume from_all(all_cache);
   const float iso = testing::shared_volumes()[1].isovalues[0];
   int served = 0, stopped = 0;
+  // Those a volume's store is made of: mode none's core; paper's, or none's with the surplus,
+  // extra section; preserve's exact one; and with the surplus; and simplify's weights.
   for (const StoreSections& sections :
-       {StoreSections{true, false, false, false}, StoreSections{true, true, false, false},
+       {StoreSections{true, false, false, false}, StoreSections{true, false, false, true},
+        StoreSections{true, true, false, false}, StoreSections{true, true, false, true},
         StoreSections{true, true, true, false}}) {
     const std::string some = path("some.isotope");
     convert_to_store(VolumeBoxReader(v), some, {}, StoreLife::kept, sections);
@@ -538,8 +541,9 @@ TEST_F(Store, AStoreOfSomeSectionsServesTheExtractionsThatReadThemAndStopsTheOth
       }
     EXPECT_CONTAINS(io_error_of([&] { verify_store(some); }), "a section is missing") << "not a store convert writes";
   }
-  EXPECT_EQ(served, 1 + 2 + 3);  // none; and preserve; and simplify
-  EXPECT_EQ(stopped, 3 * 8 - served);
+  // none; none and paper, either error; none and preserve; the three, either error; and simplify
+  EXPECT_EQ(served, 1 + 4 + 2 + 6 + 3);
+  EXPECT_EQ(stopped, 5 * 8 - served);
 }
 
 // A chunked, gzip-compressed HDF5 dataset (chunks that do not align with the tiles) converts to

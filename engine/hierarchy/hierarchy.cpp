@@ -128,6 +128,7 @@ Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int
   options.memory_bytes = uint64_t{256} << 20;  // tiles in flight: the hierarchy itself is already in memory
   options.progress = progress;
   options.topology = fields.topology();  // mode none reads no interval nor weight: none computed
+  options.weights = fields.weights;      // only simplify reads them
   MemorySink sink{h};
   const BandedBuildStats built = build_bands(h.layout(), read, sink, 0, options);
   for (int t = 0; t < 3; ++t) {

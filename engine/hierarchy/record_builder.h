@@ -401,7 +401,8 @@ inline LocalWeights local_weights(const DiamondValues& dv, const DiamondShape& s
 // the topology without its simplification weights (0), the rest the same bits as with them: a
 // store's band 0 computed for an extraction that reads no weights (docs/FORMAT.md, "Band 0's
 // records"), where the weights' gradients and sizes were a tenth of the CPU time of embryo's
-// first `preserve` extraction at eps 120 (profiled).
+// first `preserve` extraction at eps 120 (profiled), and a build for a store or a hierarchy that
+// keeps none (BandedBuildOptions::weights).
 inline Record finish_record(const DiamondValues& dv, const DiamondShape& shape, bool inside_box,
                             const DiamondBounds& range, Saturation sat, CriticalCounts& counts, bool topology = true,
                             const ShapeGradients* gradients = nullptr, bool weights = true) {

@@ -8,7 +8,9 @@
 // in a folder of its own in the system's temporary directory (TMPDIR, else /tmp), unlinked with
 // its folder as soon as it is opened (removed too when the build fails or is stopped, and by the
 // isotope command when Ctrl-C or SIGTERM ends it meanwhile; a host program killed while the store
-// is written leaves that folder, isotope-XXXXXX), and every later one pages it like any store: memory within
+// is written leaves that folder, isotope-XXXXXX), and every later one pages it like any store (the store holds
+// the sections of its records that the first extraction reads, docs/FORMAT.md "Sections"; the first later
+// one that reads another has the volume converted again with all of them): memory within
 // convert's budget and the cache's, not the volume's; the cache's statistics, and the store's size,
 // in SourceInfo. Only where that directory cannot take the store, or for a volume thinner than a
 // brick along an axis, is the hierarchy built in memory instead (16 bytes a node). A triangle budget that the

@@ -110,8 +110,9 @@ struct BrickFields {
 BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick);
 
 // The sections of a brick, each ready to be written: an XXH64 of the zstd frame, then the frame.
-// Sections the band does not store are empty, and so are those `which` leaves out (a store of the
-// records' core alone: io/store/store_writer.h, StoreRecords), whose fields `brick` need not hold.
+// Sections the band does not store are empty, and so are those `which` leaves out (a volume's
+// hierarchy store of some sections: io/store/store_writer.h, StoreSections), whose fields `brick`
+// need not hold.
 std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
                                                          int zstd_level,
                                                          const std::array<bool, kSections>& which = kAllSections);

@@ -491,12 +491,12 @@ class Converter {
         };
         if (root) {
           out_->continue_at(end);
-          FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_);
+          FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_, sections_);
           run(sink);
           share.bytes = out_->size() - end;
         } else {
           scratch.emplace(scratch_dir_);
-          FileSink<ScratchOut> sink(layout_, *scratch, options_.zstd_level, scratch_dir_);
+          FileSink<ScratchOut> sink(layout_, *scratch, options_.zstd_level, scratch_dir_, sections_);
           run(sink);
           share.bytes = scratch->size();
         }

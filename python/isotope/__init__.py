@@ -116,7 +116,12 @@ class Store:
 
     @property
     def info(self):
-        """What the input is (dims in x, y, z; shape as numpy indexes it) and what was read so far."""
+        """What the input is (dims in x, y, z; shape as numpy indexes it) and what was read so far.
+
+        ``critical_paper`` and ``critical_exact`` (per cube, octahedron, diamond) are None until
+        counted (``critical_counted``): a store's always are; a volume's once a hierarchy with its
+        records' topology is built (an extraction in mode ``"none"`` builds one without).
+        """
         return self._source.info
 
     def extract(self, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
