@@ -929,6 +929,21 @@ class SourceOfAFile : public testing::TempDirTest {
     r.coarse_mesh = extract(v, r.coarse);
     return r;
   }
+  // A coarse extraction in MODE (simplify with DELTA).
+  static ExtractOptions coarse_in(TopologyMode mode, float iso, double eps, double delta = 0) {
+    ExtractOptions o;
+    o.iso = iso;
+    o.eps = eps;
+    o.topology = mode;
+    if (mode == TopologyMode::simplify) o.delta = delta;
+    return o;
+  }
+  // The file RAW converted into a kept store, opened: what the store a Source makes of it must give.
+  Source converted(const std::string& raw) {
+    const std::string store = path("kept.isotope");
+    convert({raw, std::nullopt, std::nullopt}, store);
+    return open_volume({store, std::nullopt, std::nullopt});
+  }
 };
 
 VolumeSpec spec_of(const std::string& file) { return {file, std::nullopt, std::nullopt}; }
@@ -1017,16 +1032,11 @@ TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEv
   const std::string scratch = path("scratch");
   std::filesystem::create_directory(scratch);
   const testing::TemporaryDirectoryIs tmp(scratch);
-  const std::string store = path("bolt.isotope");
-  convert(spec_of(raw), store);
-  const Source converted = open_volume(spec_of(store));
-  const SourceInfo kept = converted.info();
-  ExtractOptions none, preserve, simplify;
-  none.iso = preserve.iso = simplify.iso = 64.5f;
-  none.eps = preserve.eps = simplify.eps = 2;
-  none.topology = TopologyMode::none;
-  simplify.topology = TopologyMode::simplify;
-  simplify.delta = 20;
+  const Source kept_store = converted(raw);
+  const SourceInfo kept = kept_store.info();
+  const ExtractOptions none = coarse_in(TopologyMode::none, 64.5f, 2),
+                       preserve = coarse_in(TopologyMode::preserve, 64.5f, 2),
+                       simplify = coarse_in(TopologyMode::simplify, 64.5f, 2, 20);
   ExtractOptions surplus = none;
   surplus.error = ErrorIndicator::surplus;
   uint64_t core_bytes = 0;
@@ -1034,7 +1044,7 @@ TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEv
     for (const ExtractOptions& first : {none, preserve, surplus}) {
       const bool counted = first.topology != TopologyMode::none || first.error == ErrorIndicator::surplus;
       const Source source = from_array ? open_volume(read_volume(spec_of(raw))) : open_volume(spec_of(raw));
-      EXPECT_TRUE(same_mesh(source.extract(first), converted.extract(first))) << from_array;
+      EXPECT_TRUE(same_mesh(source.extract(first), kept_store.extract(first))) << from_array;
       const SourceInfo some = source.info();
       EXPECT_TRUE(some.hierarchy_built);
       EXPECT_EQ(some.critical_counted, counted);
@@ -1047,7 +1057,7 @@ TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEv
       }
       EXPECT_GT(some.store_bytes, 0u);
       EXPECT_LT(some.store_bytes, kept.store_bytes * (counted ? 9 : 3) / (counted ? 10 : 4));
-      EXPECT_TRUE(same_mesh(source.extract(simplify), converted.extract(simplify))) << from_array;
+      EXPECT_TRUE(same_mesh(source.extract(simplify), kept_store.extract(simplify))) << from_array;
       const SourceInfo all = source.info();
       EXPECT_TRUE(all.critical_counted);
       EXPECT_EQ(all.store_bytes, kept.store_bytes);
@@ -1055,7 +1065,7 @@ TEST_F(SourceOfAFile, AVolumesStoreHoldsTheSectionsItsFirstExtractionReadsThenEv
       EXPECT_EQ(all.critical_paper, kept.critical_paper);
       EXPECT_GT(all.preprocess_seconds, some.preprocess_seconds);
       for (const ExtractOptions& o : {none, preserve})
-        EXPECT_TRUE(same_mesh(source.extract(o), converted.extract(o))) << from_array;
+        EXPECT_TRUE(same_mesh(source.extract(o), kept_store.extract(o))) << from_array;
       EXPECT_EQ(source.info().store_bytes, kept.store_bytes) << "the store of every section, kept";
       EXPECT_EQ(source.info().preprocess_seconds, all.preprocess_seconds);
       EXPECT_TRUE(std::filesystem::is_empty(scratch));
@@ -1069,24 +1079,18 @@ TEST_F(SourceOfAFile, WithoutRoomForItsSecondStoreAHierarchyIsBuiltInMemory) {
   const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
   const std::string scratch = path("scratch");
   std::filesystem::create_directory(scratch);
-  const std::string store = path("bolt.isotope");
-  convert(spec_of(raw), store);
-  const Source converted = open_volume(spec_of(store));
-  ExtractOptions none, simplify;
-  none.iso = simplify.iso = 64.5f;
-  none.eps = simplify.eps = 2;
-  none.topology = TopologyMode::none;
-  simplify.topology = TopologyMode::simplify;
-  simplify.delta = 20;
+  const Source kept_store = converted(raw);
+  const ExtractOptions none = coarse_in(TopologyMode::none, 64.5f, 2),
+                       simplify = coarse_in(TopologyMode::simplify, 64.5f, 2, 20);
   const Source source = open_volume(spec_of(raw));
   {
     const testing::TemporaryDirectoryIs tmp(scratch);
-    EXPECT_TRUE(same_mesh(source.extract(none), converted.extract(none)));
+    EXPECT_TRUE(same_mesh(source.extract(none), kept_store.extract(none)));
   }
   EXPECT_GT(source.info().store_bytes, 0u);
   const testing::TemporaryDirectoryIs gone(path("missing"));
   for (const ExtractOptions& o : {simplify, simplify, none})
-    EXPECT_TRUE(same_mesh(source.extract(o), converted.extract(o))) << to_string(o.topology);
+    EXPECT_TRUE(same_mesh(source.extract(o), kept_store.extract(o))) << to_string(o.topology);
   EXPECT_TRUE(source.info().values_in_memory);
   EXPECT_EQ(source.info().store_bytes, 0u) << "no store serves it now";
   EXPECT_TRUE(source.info().critical_counted);
@@ -1245,16 +1249,10 @@ TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {
 // volume first, and whether the other waits for that store or for the one made again after it.
 TEST_F(SourceOfAFile, ExtractionsThatReadDifferentSectionsAtOnceEachGetTheirMesh) {
   const std::string raw = copy_of("neghip_66x66x66_uint8.raw");
-  const std::string store = path("neghip.isotope");
-  convert(spec_of(raw), store);
-  const Source converted = open_volume(spec_of(store));
-  ExtractOptions none, simplify;
-  none.iso = simplify.iso = 128.5f;
-  none.eps = simplify.eps = 4;
-  none.topology = TopologyMode::none;
-  simplify.topology = TopologyMode::simplify;
-  simplify.delta = 10;
-  const Mesh none_mesh = converted.extract(none), simplify_mesh = converted.extract(simplify);
+  const Source kept_store = converted(raw);
+  const ExtractOptions none = coarse_in(TopologyMode::none, 128.5f, 4),
+                       simplify = coarse_in(TopologyMode::simplify, 128.5f, 4, 10);
+  const Mesh none_mesh = kept_store.extract(none), simplify_mesh = kept_store.extract(simplify);
   for (int round = 0; round < 3; ++round) {
     const Source source = open_volume(spec_of(raw));
     std::atomic<int> right{0};
@@ -1271,7 +1269,7 @@ TEST_F(SourceOfAFile, ExtractionsThatReadDifferentSectionsAtOnceEachGetTheirMesh
     for (std::thread& t : threads) t.join();
     EXPECT_EQ(right, 4) << "round " << round;
     EXPECT_GT(source.info().store_bytes, 0u) << "round " << round;
-    EXPECT_LE(source.info().store_bytes, converted.info().store_bytes) << "round " << round;
+    EXPECT_LE(source.info().store_bytes, kept_store.info().store_bytes) << "round " << round;
   }
 }
 
