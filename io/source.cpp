@@ -177,6 +177,13 @@ struct Source::Impl {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (hierarchy_in_memory || (scratch && scratch->serves(fields))) return scratch;
     const StoreSections sections = scratch ? kAllSections : sections_for(fields);
+    // Where no store can be made: the hierarchy in memory, for this extraction and every one after
+    // it, which a store of some sections made before would not serve.
+    auto in_memory_from_now = [this] {
+      hierarchy_in_memory = true;
+      scratch.reset();
+      return nullptr;
+    };
     if (scratch) budgets.clear();  // made again from the volume, as hierarchy() would
     const auto start = std::chrono::steady_clock::now();
     const Volume* held_volume = in_memory();
@@ -190,9 +197,7 @@ struct Source::Impl {
     // we would choose) is written through or read.
     std::string folder = (tmp / "isotope-XXXXXX").string();
     if (failed || thin || ::mkdtemp(folder.data()) == nullptr) {
-      hierarchy_in_memory = true;
-      scratch.reset();  // a store of some sections, made before, serves no extraction after this one
-      return nullptr;
+      return in_memory_from_now();
     }
     const std::string name = folder + "/hierarchy.isotope";
     // Removed by the command's handler of SIGINT and SIGTERM as well, should the process be told
@@ -221,9 +226,7 @@ struct Source::Impl {
       // hierarchy in memory instead. The input's errors, and whatever stopped the build (a progress
       // callback that throws, as a host's cancel does), are the caller's.
       if (std::string_view(e.what()).find(folder) == std::string_view::npos) throw;
-      hierarchy_in_memory = true;
-      scratch.reset();  // a store of some sections, made before, serves no extraction after this one
-      return nullptr;
+      return in_memory_from_now();
     } catch (...) {
       remove_folder();
       throw;

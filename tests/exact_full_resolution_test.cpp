@@ -906,6 +906,8 @@ TEST(Streamed, OnlyFullResolutionIsStreamed) {
   EXPECT_TRUE(layers.reads.empty());
 }
 
+bool same_mesh(const Mesh& a, const Mesh& b) { return a.positions == b.positions && a.triangles == b.triangles; }
+
 // A Source opened on a volume file streams it at eps 0, every time, and reads
 // it whole once for the first extraction that needs its hierarchy. A file cut short after the open
 // shows which: a streamed extraction fails, one from the volume held in memory does not.
@@ -938,6 +940,24 @@ class SourceOfAFile : public testing::TempDirTest {
     if (mode == TopologyMode::simplify) o.delta = delta;
     return o;
   }
+  // Four extractions from SOURCE at once, each on a thread of its own, alternately A and B (B
+  // first with B_FIRST): how many gave their mesh. What one throws fails the test.
+  static int right_at_once(const Source& source, const ExtractOptions& a, const Mesh& a_mesh, const ExtractOptions& b,
+                           const Mesh& b_mesh, bool b_first = false) {
+    std::atomic<int> right{0};
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+      threads.emplace_back([&, t] {
+        const bool is_b = (t + (b_first ? 1 : 0)) % 2 == 1;
+        try {
+          if (same_mesh(source.extract(is_b ? b : a), is_b ? b_mesh : a_mesh)) ++right;
+        } catch (const std::exception& e) {
+          ADD_FAILURE() << e.what();
+        }
+      });
+    for (std::thread& t : threads) t.join();
+    return right;
+  }
   // The file RAW converted into a kept store, opened: what the store a Source makes of it must give.
   Source converted(const std::string& raw) {
     const std::string store = path("kept.isotope");
@@ -947,8 +967,6 @@ class SourceOfAFile : public testing::TempDirTest {
 };
 
 VolumeSpec spec_of(const std::string& file) { return {file, std::nullopt, std::nullopt}; }
-
-bool same_mesh(const Mesh& a, const Mesh& b) { return a.positions == b.positions && a.triangles == b.triangles; }
 
 TEST_F(SourceOfAFile, EpsZeroStreamsTheFileEveryTimeAndAHierarchyIsAStoreOfItsOwn) {
   const std::string raw = copy_of("bolt_70x123x66_uint8.raw");
@@ -1225,19 +1243,7 @@ TEST_F(SourceOfAFile, ExtractionsOnSeveralThreadsAtOnceEachGetTheirMesh) {
   const auto [fine, coarse, fine_mesh, coarse_mesh] = fine_and_coarse(read_volume(spec_of(raw)), 128.5f, 4);
   for (int round = 0; round < 3; ++round) {
     const Source source = open_volume(spec_of(raw));
-    std::atomic<int> right{0};
-    std::vector<std::thread> threads;
-    for (int t = 0; t < 4; ++t)
-      threads.emplace_back([&, t] {
-        const bool is_coarse = t % 2 == 1;
-        try {
-          if (same_mesh(source.extract(is_coarse ? coarse : fine), is_coarse ? coarse_mesh : fine_mesh)) ++right;
-        } catch (const std::exception& e) {
-          ADD_FAILURE() << e.what();
-        }
-      });
-    for (std::thread& t : threads) t.join();
-    EXPECT_EQ(right, 4) << "round " << round;
+    EXPECT_EQ(right_at_once(source, fine, fine_mesh, coarse, coarse_mesh), 4) << "round " << round;
     EXPECT_FALSE(source.info().values_in_memory);
     EXPECT_TRUE(source.info().hierarchy_built);
     EXPECT_TRUE(same_mesh(source.extract(fine), fine_mesh)) << "streamed again";
@@ -1255,19 +1261,7 @@ TEST_F(SourceOfAFile, ExtractionsThatReadDifferentSectionsAtOnceEachGetTheirMesh
   const Mesh none_mesh = kept_store.extract(none), simplify_mesh = kept_store.extract(simplify);
   for (int round = 0; round < 3; ++round) {
     const Source source = open_volume(spec_of(raw));
-    std::atomic<int> right{0};
-    std::vector<std::thread> threads;
-    for (int t = 0; t < 4; ++t)
-      threads.emplace_back([&, t] {
-        const bool reads_all = (t + round) % 2 == 1;
-        try {
-          if (same_mesh(source.extract(reads_all ? simplify : none), reads_all ? simplify_mesh : none_mesh)) ++right;
-        } catch (const std::exception& e) {
-          ADD_FAILURE() << e.what();
-        }
-      });
-    for (std::thread& t : threads) t.join();
-    EXPECT_EQ(right, 4) << "round " << round;
+    EXPECT_EQ(right_at_once(source, none, none_mesh, simplify, simplify_mesh, round % 2 == 1), 4) << "round " << round;
     EXPECT_GT(source.info().store_bytes, 0u) << "round " << round;
     EXPECT_LE(source.info().store_bytes, kept_store.info().store_bytes) << "round " << round;
   }

@@ -117,7 +117,7 @@ void BrickCache::require(CachedBrick& brick, int64_t index, const RecordFields& 
   const bool stored = stores_records(layout, brick.band_);
   const bool band0 = brick.band_ == 0;
   // Arrays for the sections needed and missing; the extra section holds paper and surplus.
-  std::array<bool, kSections> which{false, false, false, false};
+  StoreSections which{false, false, false, false};
   uint16_t* surplus = brick.surplus();
   uint32_t *exact = brick.exact(), *paper = brick.paper();
   uint64_t* weights = brick.weights();

@@ -111,9 +111,7 @@ ZSTD_DCtx* decompression_context() {
 
 }  // namespace
 
-std::array<bool, kSections> sections_for(const RecordFields& f) {
-  return {true, f.exact, f.weights, f.paper || f.surplus};
-}
+StoreSections sections_for(const RecordFields& f) { return {true, f.exact, f.weights, f.paper || f.surplus}; }
 
 uint64_t store_checksum(const void* data, size_t bytes) { return XXH64(data, bytes, 0); }
 
@@ -367,7 +365,7 @@ BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& bric
 }
 
 std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
-                                                         int zstd_level, const std::array<bool, kSections>& which) {
+                                                         int zstd_level, const StoreSections& which) {
   const bool records = stores_records(layout, band);
   auto field_of = [&](Field f) -> const std::vector<float>& {
     switch (f) {

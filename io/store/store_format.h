@@ -32,13 +32,14 @@ inline constexpr int kMinBrickBits = 3, kMaxBrickBits = 6;
 // A brick's sections, in file order.
 enum class Section : int { core = 0, exact = 1, weights = 2, extra = 3 };
 inline constexpr int kSections = 4;
+// A set of a brick's sections, by Section: those a read takes, or those a store holds (every one,
+// kAllSections, but for a volume's hierarchy store: io/store/store_writer.h).
+using StoreSections = std::array<bool, kSections>;
+inline constexpr StoreSections kAllSections{true, true, true, true};
 // Which sections an extraction reading these fields needs besides the core.
-std::array<bool, kSections> sections_for(const RecordFields& f);
-inline constexpr std::array<bool, kSections> kAllSections{true, true, true, true};
+StoreSections sections_for(const RecordFields& f);
 // Whether bricks of these sections hold a field of their records' topology (any but the core's).
-inline bool with_topology(const std::array<bool, kSections>& sections) {
-  return sections[1] || sections[2] || sections[3];
-}
+inline bool with_topology(const StoreSections& sections) { return sections[1] || sections[2] || sections[3]; }
 
 struct BandDirectory {
   uint64_t offset = 0, bytes = 0, checksum = 0;  // XXH64 (seed 0) of the directory's bytes
@@ -114,8 +115,7 @@ BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& bric
 // hierarchy store of some sections: io/store/store_writer.h, StoreSections), whose fields `brick`
 // need not hold.
 std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
-                                                         int zstd_level,
-                                                         const std::array<bool, kSections>& which = kAllSections);
+                                                         int zstd_level, const StoreSections& which = kAllSections);
 
 // Checks a section's checksum, inflates it and decodes its fields into the brick's arrays (those
 // the section holds must be present). Throws IoError starting with `where` ("FILE: brick 12 (band

@@ -32,7 +32,7 @@ void read_span(int fd, void* data, size_t bytes, uint64_t offset, const std::str
 
 // Runs of consecutive sections that `which` names, as (first, end) section indices.
 template <class F>
-void for_each_run(const std::array<bool, kSections>& which, F f) {
+void for_each_run(const StoreSections& which, F f) {
   for (int s = 0; s < kSections;) {
     if (!which[static_cast<size_t>(s)]) {
       ++s;
@@ -151,7 +151,7 @@ void StoreReader::read_range(uint8_t* data, uint64_t begin, uint64_t stop, int64
   read_span(fd_, data, bytes, begin, describe_brick(index));
 }
 
-void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& which) const {
+void StoreReader::prefetch(int64_t index, const StoreSections& which) const {
   if (!hints_pay()) return;
   const BrickEntry& e = entry(index);
   for_each_run(which, [&](int s, int end) {
@@ -164,8 +164,8 @@ void StoreReader::prefetch(int64_t index, const std::array<bool, kSections>& whi
   });
 }
 
-uint64_t StoreReader::read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out,
-                                 float* values, const NarrowBrick* narrow) const {
+uint64_t StoreReader::read_brick(int64_t index, const StoreSections& which, const BrickView& out, float* values,
+                                 const NarrowBrick* narrow) const {
   const BrickEntry& e = entry(index);
   const int band = locate_brick(index).first;
   uint64_t read = 0;

@@ -43,12 +43,12 @@ class StoreReader {
   // `values`). Returns the bytes read. Throws IoError naming the brick.
   // `narrow`: a one-byte store's values into bytes and core words into 32 bits instead
   // (decode_section).
-  uint64_t read_brick(int64_t index, const std::array<bool, kSections>& which, const BrickView& out, float* values,
+  uint64_t read_brick(int64_t index, const StoreSections& which, const BrickView& out, float* values,
                       const NarrowBrick* narrow = nullptr) const;
   // Asks the kernel to start reading those sections in the background, with their read window:
   // a hint that costs no thread and pays when the file is not in the page cache. Nothing until
   // hints_pay().
-  void prefetch(int64_t index, const std::array<bool, kSections>& which) const;
+  void prefetch(int64_t index, const StoreSections& which) const;
   // Whether hints pay: some read has found the page cache without its bytes. A store read wholly
   // from the page cache would pay a system call per hint for nothing (thousands in an
   // extraction). Once true, true for the reader's life: a store kept open (a server) that was read

@@ -193,14 +193,13 @@ class FileSink {
         zstd_level_(zstd_level),
         scratch_dir_(std::move(scratch_dir)),
         sections_(sections),
-        topology_(with_topology(sections)),
         entries_(static_cast<size_t>(layout.brick_count())) {}
 
   using Sections = std::array<std::vector<uint8_t>, kSections>;
   Sections process(int band, const Box3& b, const BandTile& tile) const {
     const int64_t t = layout_.brick_width();
     thread_local BrickFields fields;
-    brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}, fields, topology_);
+    brick_fields(tile, {b[0] * t, b[1] * t, b[2] * t}, fields, with_topology(sections_));
     return encode_brick(layout_, band, fields, zstd_level_, sections_);
   }
   void commit(int band, const Box3& b, Sections&& sections) {
@@ -265,7 +264,6 @@ class FileSink {
   int zstd_level_;
   std::string scratch_dir_;
   StoreSections sections_;
-  bool topology_;
   std::vector<BrickEntry> entries_;
   std::optional<ScratchFile> held_file_;
   uint64_t held_bytes_ = 0;

@@ -1,7 +1,6 @@
 #pragma once
 // `isotope convert`: a volume on disk -> a store (docs/FORMAT.md), band by band and tile by
 // tile (engine/hierarchy/band_tile.h), so that memory stays within a budget whatever the volume's size.
-#include <array>
 #include <atomic>
 #include <cstdint>
 #include <string>
@@ -19,17 +18,15 @@ namespace isotope {
 // and never synced, the same bytes.
 enum class StoreLife { kept, transient };
 
-// Which sections a store's bricks hold (docs/FORMAT.md, "Sections"): every one (kAllSections,
-// what `isotope convert` writes), or those its extractions read (sections_for): a volume's
-// hierarchy store, whose records' fields that no section holds are then not computed either: their
-// topology without the exact, weights and extra sections (a quarter of embryo's build), their
+// Writes OUTPUT atomically (temporary name, renamed when complete); on any error or
+// cancellation nothing is left behind. Throws IoError.
+// SECTIONS: those its bricks hold (docs/FORMAT.md, "Sections"): every one (kAllSections, what
+// `isotope convert` writes), or those its extractions read (sections_for): a volume's hierarchy
+// store, whose records' fields that no section holds are then not computed either: their topology
+// without the exact, weights and extra sections (a quarter of embryo's build), their
 // simplification weights without the weights section (a seventh). A brick's sections left out are
 // 0 bytes, and an extraction that reads one stops at "a section is missing". Not under a
 // distribution, whose stores are kept.
-using StoreSections = std::array<bool, kSections>;
-
-// Writes OUTPUT atomically (temporary name, renamed when complete); on any error or
-// cancellation nothing is left behind. Throws IoError.
 ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
                               StoreLife life = StoreLife::kept, const StoreSections& sections = kAllSections);
 

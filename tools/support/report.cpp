@@ -197,16 +197,18 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   const PreprocessStats& p = run.preprocess;
   if (!run.hierarchy_built)
     j["preprocess"] = nullptr;
-  else if (!run.critical_counted)
-    j["preprocess"] = {{"seconds", p.seconds}, {"critical_paper", nullptr}, {"critical_exact", nullptr}};
-  else
+  else {
+    // Per diamond type; null where nobody counted them.
+    auto counts = [&](const int64_t(&c)[3]) -> nlohmann::ordered_json {
+      if (!run.critical_counted) return nullptr;
+      return {{"cube", c[0]}, {"octahedron", c[1]}, {"diamond", c[2]}};
+    };
     j["preprocess"] = {
         {"seconds", p.seconds},
-        {"critical_paper",
-         {{"cube", p.critical_paper[0]}, {"octahedron", p.critical_paper[1]}, {"diamond", p.critical_paper[2]}}},
-        {"critical_exact",
-         {{"cube", p.critical_exact[0]}, {"octahedron", p.critical_exact[1]}, {"diamond", p.critical_exact[2]}}},
+        {"critical_paper", counts(p.critical_paper)},
+        {"critical_exact", counts(p.critical_exact)},
     };
+  }
   j["extract"] = {
       {"seconds", run.extract.seconds},
       {"tets_visited", run.extract.tets_visited},

@@ -26,7 +26,7 @@ struct ExtractionRun {
   int lattice_k = 0;
   PreprocessStats preprocess;
   bool hierarchy_built = true;   // raw input at eps 0 needs none (isotope/source.h)
-  bool critical_counted = true;  // not by a hierarchy of the records' core alone (SourceInfo)
+  bool critical_counted = true;  // not by a hierarchy built without its records' topology (SourceInfo)
   ExtractStats extract;
   MeshTopology topology;
   std::vector<ComponentStats> components;         // with --report
