@@ -1237,6 +1237,65 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
                  "neghip_66x66x66_uint8.raw: not found");
 }
 
+// isotope bench beside a reference executable (this one here, so the ratios are about 1): convert and
+// the one-shot coarse surfaces of the dataset as whole processes in alternation, each ratio the
+// reference's median over ours, each one a target with its verdict; convert on one thread against
+// two beside them. A reference that is not an isotope executable is refused before anything runs.
+TEST_F(Cli, BenchTimesConvertAndOneShotsBesideAReference) {
+  const std::string json = in_work("bench.json");
+  const Result r = run("bench -q --quick --dataset neghip --threads 2 --data " + quote(kData) + " --json " +
+                       quote(json) + " --work-dir " + quote(work().string()) + " --reference " + quote(ISOTOPE_BINARY));
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("the reference: " + std::string(ISOTOPE_BINARY) + " (isotope "), std::string::npos) << r.out;
+  EXPECT_EQ(listing(), std::set<std::string>{json}) << "the outputs of the runs must be gone";
+  const nlohmann::json j = nlohmann::json::parse(slurp(json));
+  EXPECT_EQ(j["reference"]["executable"], ISOTOPE_BINARY);
+  EXPECT_EQ(j["reference"]["version"], j["isotope_version"].get<std::string>().insert(0, "isotope "));
+  ASSERT_EQ(j["datasets"].size(), 1u);
+  const nlohmann::json& d = j["datasets"][0];
+  std::vector<std::string> cases;
+  for (const auto& v : d["against_reference"]) {
+    cases.push_back(v["case"]);
+    EXPECT_EQ(v["threads"], 2) << v;
+    EXPECT_EQ(v["rounds"], 3) << v;
+    EXPECT_GT(v["seconds"].get<double>(), 0) << v;
+    EXPECT_GT(v["reference_seconds"].get<double>(), 0) << v;
+    EXPECT_NEAR(v["ratio"].get<double>(), v["reference_seconds"].get<double>() / v["seconds"].get<double>(), 1e-12);
+    EXPECT_GT(v["peak_rss_mb"].get<double>(), 1) << v;
+    EXPECT_GT(v["reference_peak_rss_mb"].get<double>(), 1) << v;
+  }
+  EXPECT_EQ(cases, (std::vector<std::string>{"convert", "one-shot preserve", "one-shot none"}));
+  const nlohmann::json& threads = d["convert_threads"];
+  EXPECT_EQ(threads["threads"], 2);
+  EXPECT_GT(threads["one_thread_seconds"].get<double>(), 0);
+  EXPECT_NEAR(threads["ratio"].get<double>(),
+              threads["one_thread_seconds"].get<double>() / threads["seconds"].get<double>(), 1e-12);
+  // One target a case, met where the ratio is 3 or more.
+  std::vector<double> ratios;
+  for (const auto& t : j["targets"]) {
+    const std::string what = t["target"];
+    if (what.find("the reference") == std::string::npos) continue;
+    EXPECT_EQ(t["dataset"], "neghip");
+    const std::string value = t["value"];
+    ratios.push_back(std::stod(value));
+    EXPECT_EQ(t["met"].get<bool>(), ratios.back() >= 3) << t;
+  }
+  ASSERT_EQ(ratios.size(), 3u) << j["targets"];
+  for (size_t i = 0; i < 3; ++i)
+    EXPECT_NEAR(ratios[i], d["against_reference"][i]["ratio"].get<double>(), 0.01) << d["against_reference"][i];
+
+  const std::string quick = "bench -q --quick --dataset neghip --data " + quote(kData) + " --reference ";
+  expect_failure(quick + quote(in_work("nothing")), 2,
+                 "--reference: '" + in_work("nothing") + "' is not an isotope executable (its --version did not run)");
+  const std::string other = in_work("other");
+  {
+    std::ofstream script(other);
+    script << "#!/bin/sh\necho 'other 1.0'\n";
+  }
+  fs::permissions(other, fs::perms::owner_all);
+  expect_failure(quick + quote(other), 2, "is not an isotope executable (its --version printed 'other 1.0')");
+}
+
 // The large-volume row on a small volume: a coarse budget from the cold store (here the whole
 // surface fits in it, so it is the eps-0 mesh) beside eps 0 in one process from the raw file,
 // each a process timed whole, and the temporary files gone.

@@ -39,6 +39,12 @@ Command add_bench_command(CLI::App& app) {
   cmd->add_option("--scale-size", a->scale_size, "With --scale: nodes per axis")
       ->check(CLI::Range(int64_t{65}, int64_t{8193}))
       ->capture_default_str();
+  cmd->add_option(
+         "--reference", a->reference,
+         "Another isotope executable (another commit's: bench/build_reference.sh builds one): convert and the\n"
+         "one-shot coarse surfaces of each dataset timed with it and with this one, whole processes in\n"
+         "alternation, against the targets")
+      ->type_name("FILE");
   cmd->add_flag("-q,--quiet", a->quiet, "No progress lines on stderr");
   return [a] { return bench::run_suite(*a); };  // an unknown --dataset: OptionError, a usage error
 }

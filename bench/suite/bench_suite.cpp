@@ -129,6 +129,12 @@ struct Row {
   std::string note;
 };
 
+// The volumes the speed targets name; the small ones run in milliseconds, where a process's start-up
+// is most of what is measured.
+bool names_a_target(const std::string& dataset) {
+  return dataset == "algebraic257" || dataset == "embryo" || dataset == "noise513";
+}
+
 // The row of DATASET, INPUT and MODE on THREADS, at a coarse eps or at 0; null where none ran.
 const Row* find_row(const std::vector<Row>& rows, const std::string& dataset, const std::string& input,
                     const std::string& mode, bool coarse, int threads) {
@@ -174,14 +180,29 @@ void measure(const Policy& p, Row& row, const std::function<int64_t(uint64_t& by
   row.peak_rss = peak_rss_bytes();
 }
 
-// One child run of this executable; throws with its output when it fails.
-ChildRun child(const std::vector<std::string>& args, const fs::path& work) {
-  std::vector<std::string> argv = {self_executable()};
+// One child run of EXECUTABLE (an isotope); throws with its output when it fails.
+ChildRun child_of(const std::string& executable, const std::vector<std::string>& args, const fs::path& work) {
+  std::vector<std::string> argv = {executable};
   argv.insert(argv.end(), args.begin(), args.end());
   const ChildRun r = run_child(argv, (work / "child.log").string());
   if (InterruptGuard::interrupted()) throw IoError("interrupted");
-  if (r.code != 0) throw IoError("isotope " + args.front() + " failed in the benchmark: " + r.output);
+  if (r.code != 0) throw IoError(executable + " " + args.front() + " failed in the benchmark: " + r.output);
   return r;
+}
+// One child run of this executable.
+ChildRun child(const std::vector<std::string>& args, const fs::path& work) {
+  return child_of(self_executable(), args, work);
+}
+
+// What `EXECUTABLE --version` prints ("isotope 0.1.0"), or an OptionError for --reference where it
+// is not an isotope executable that runs.
+std::string reference_version(const std::string& executable, const fs::path& work) {
+  const ChildRun r = run_child({executable, "--version"}, (work / "child.log").string());
+  std::string version = r.output.substr(0, r.output.find('\n'));
+  if (r.code != 0 || version.rfind("isotope ", 0) != 0)
+    throw OptionError("reference", "'" + executable + "' is not an isotope executable (its --version " +
+                                       (r.code == -1 ? std::string("did not run") : "printed '" + version + "'") + ")");
+  return version;
 }
 
 // What `isotope extract` prints on stdout when it ends (tools/support/report.cpp, summary_line): the
@@ -228,6 +249,17 @@ struct DatasetResult {
     int pairs = 0;
   };
   std::vector<Paired> warm_over_memory;
+  // A case run as whole processes of two executables in alternation, with the same arguments but
+  // one: each one's median wall time and greatest peak memory over the rounds.
+  struct Versus {
+    std::string what;  // convert, one-shot preserve, one-shot none
+    int threads = 1;   // ours
+    double ours = 0, theirs = 0;
+    int64_t ours_rss_kb = 0, theirs_rss_kb = 0;
+    int rounds = 0;
+  };
+  std::vector<Versus> against_reference;  // theirs: --reference's, on as many threads
+  Versus convert_threads;                 // theirs: ours on one thread; rounds 0 where not run
   const Paired* paired(const std::string& mode, bool coarse, int threads) const {
     for (const Paired& p : warm_over_memory)
       if (p.mode == mode && p.coarse == coarse && p.threads == threads) return &p;
@@ -337,6 +369,7 @@ class Suite {
     }
     cold_rows(spec, d, store);
     process_rows(spec, d, raw_file);
+    versus_rows(spec, d, raw_file);
     if (spec.name == std::string("embryo")) d.preview = preview(spec, d, store);
     peer_rows(spec, d, raw_file);
     fs::remove(store);
@@ -691,6 +724,65 @@ class Suite {
     finish(r);
   }
 
+  // Whole processes in alternation, the raw file in the page cache: convert and the one-shot coarse
+  // surfaces (preserve and none) of this executable and of --reference, as many rounds each; and
+  // convert on all threads against one.
+  void versus_rows(const DatasetSpec& spec, DatasetResult& d, const std::string& raw) {
+    const std::string self = self_executable(), threads = std::to_string(threads_);
+    const int rounds = a_.quick ? 3 : 5;
+    // ARGS and OTHER_ARGS hold OUT where the output goes: each executable writes a file of its own.
+    auto versus = [&](const std::string& what, const std::string& other, std::vector<std::string> args,
+                      std::vector<std::string> other_args, const std::string& out) {
+      DatasetResult::Versus v;
+      v.what = what;
+      v.threads = threads_;
+      v.rounds = rounds;
+      std::vector<double> ours, theirs;
+      const std::string our_out = (work_ / ("ours-" + out)).string(), their_out = (work_ / ("theirs-" + out)).string();
+      std::replace(args.begin(), args.end(), out, our_out);
+      std::replace(other_args.begin(), other_args.end(), out, their_out);
+      for (int i = 0; i < rounds; ++i)
+        for (int k = 0; k < 2; ++k) {  // each first in every other round
+          const bool mine = (i + k) % 2 == 0;
+          const ChildRun r = child_of(mine ? self : other, mine ? args : other_args, work_);
+          (mine ? ours : theirs).push_back(r.seconds);
+          int64_t& rss = mine ? v.ours_rss_kb : v.theirs_rss_kb;
+          rss = std::max(rss, r.max_rss_kb);
+        }
+      fs::remove(our_out);
+      fs::remove(their_out);
+      v.ours = median(ours);
+      v.theirs = median(theirs);
+      return v;
+    };
+    const std::vector<std::string> convert = {"convert", raw, "out.isotope", "--threads", threads, "-q"};
+    if (!a_.reference.empty()) {
+      say(spec, "beside the reference: convert");
+      d.against_reference.push_back(versus("convert", a_.reference, convert, convert, "out.isotope"));
+      for (const TopologyMode mode : {TopologyMode::preserve, TopologyMode::none}) {
+        say(spec, "beside the reference: one shot, coarse");
+        const std::vector<std::string> args = {"extract",
+                                               raw,
+                                               "--iso=" + number(spec.iso),
+                                               "--eps=" + number(d.coarse_eps),
+                                               "--topology=" + std::string(to_string(mode)),
+                                               "--threads",
+                                               threads,
+                                               "-q",
+                                               "-o",
+                                               "out.ply"};
+        d.against_reference.push_back(
+            versus("one-shot " + std::string(to_string(mode)), a_.reference, args, args, "out.ply"));
+      }
+    }
+    if (threads_ > 1) {
+      say(spec, "convert on one thread and on all");
+      std::vector<std::string> one = convert;
+      one[4] = "1";
+      d.convert_threads = versus("convert", self, convert, one, "out.isotope");
+    }
+  }
+
   // A triangle budget of 10% in simplify mode, delta chosen (ExtractOptions::auto_delta): the
   // preview a user of a noisy scan asks for first, from the cold store.
   json preview(const DatasetSpec& spec, const DatasetResult& d, const std::string& store) {
@@ -967,9 +1059,7 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
   char buf[256];
   for (const DatasetResult& d : ds) {
     const std::string name = d.spec->name;
-    // The volumes the speed targets name; the small ones run in milliseconds,
-    // where a process's start-up is most of what is measured.
-    const bool named = name == "algebraic257" || name == "embryo" || name == "noise513";
+    const bool named = names_a_target(name);
     for (const int n : !named ? std::vector<int>{} : threads > 1 ? std::vector<int>{1, threads} : std::vector<int>{1}) {
       const Row* cold = find_row(rows, name, "store-cold", "none", true, n);
       const Row* cold0 = find_row(rows, name, "store-cold", "preserve", false, n);
@@ -1077,6 +1167,22 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
                       threads, ms(in_all->seconds + written / write_rate).c_str(), written / 1e6, write_rate / 1e6);
         add("one-shot eps 0, quiet, within 1.25x the extraction in memory", name, buf, x <= 1.25);
       }
+    }
+    // Against another commit's executable: convert and the one-shot coarse surfaces, on every
+    // volume the speed targets name and every shared one (a volume of a file).
+    for (const DatasetResult::Versus& v : d.against_reference) {
+      if (!named && d.spec->file == nullptr) continue;
+      const double x = v.theirs / v.ours;
+      std::snprintf(buf, sizeof buf, "%s (%s: %s ms, the reference's %s ms, %d thr)", ratio(x).c_str(), v.what.c_str(),
+                    ms(v.ours).c_str(), ms(v.theirs).c_str(), v.threads);
+      add(v.what == "convert" ? "convert >= 3x the reference's speed" : "one-shot coarse >= 3x the reference's speed",
+          name, buf, x >= 3);
+    }
+    if (const DatasetResult::Versus& v = d.convert_threads; named && v.rounds > 0) {
+      const double x = v.theirs / v.ours;
+      std::snprintf(buf, sizeof buf, "%s (%s ms on 1 thread, %s ms on %d)", ratio(x).c_str(), ms(v.theirs).c_str(),
+                    ms(v.ours).c_str(), v.threads);
+      add("convert: all threads >= 1.8x one", name, buf, x >= 1.8);
     }
     // Convert at 50% of its ceiling; the store no larger than format 2's.
     if (named) {
@@ -1216,6 +1322,27 @@ void print_previews(const std::vector<DatasetResult>& ds) {
   }
 }
 
+// Whole processes of this executable beside --reference's, and convert on one thread beside all.
+void print_versus(const std::vector<DatasetResult>& ds, const std::string& reference, const std::string& version) {
+  bool any = false;
+  for (const DatasetResult& d : ds) any = any || !d.against_reference.empty() || d.convert_threads.rounds > 0;
+  if (!any) return;
+  std::printf("\nWhole processes in alternation, the raw file in the page cache (median of the rounds)%s%s%s\n",
+              reference.empty() ? "" : "; the reference: ", reference.c_str(),
+              version.empty() ? "" : (" (" + version + ")").c_str());
+  std::printf("%-13s %-18s %4s %10s %10s %7s %8s %8s\n", "dataset", "case", "thr", "ours ms", "theirs ms", "ratio",
+              "ours MB", "their MB");
+  auto line = [](const DatasetResult& d, const DatasetResult::Versus& v, const std::string& what) {
+    std::printf("%-13s %-18s %4d %10s %10s %7s %8.0f %8.0f\n", d.spec->name, what.c_str(), v.threads,
+                ms(v.ours).c_str(), ms(v.theirs).c_str(), ratio(v.theirs / v.ours).c_str(),
+                static_cast<double>(v.ours_rss_kb) / 1024, static_cast<double>(v.theirs_rss_kb) / 1024);
+  };
+  for (const DatasetResult& d : ds) {
+    for (const DatasetResult::Versus& v : d.against_reference) line(d, v, v.what);
+    if (d.convert_threads.rounds > 0) line(d, d.convert_threads, "convert vs 1 thr");
+  }
+}
+
 void print_table1(const json& t) {
   if (t.empty()) return;
   std::printf("\nPaper's Table 1 (algebraic function 65^3, iso 0, error indicator: bound; one thread)\n");
@@ -1286,6 +1413,18 @@ json datasets_json(const std::vector<DatasetResult>& ds) {
     for (const DatasetResult::Paired& p : d.warm_over_memory)
       j["warm_over_memory"].push_back(
           {{"mode", p.mode}, {"coarse", p.coarse}, {"threads", p.threads}, {"ratio", p.ratio}, {"pairs", p.pairs}});
+    auto versus = [](const DatasetResult::Versus& v, const char* theirs) {
+      return json{{"case", v.what},
+                  {"threads", v.threads},
+                  {"seconds", v.ours},
+                  {std::string(theirs) + "_seconds", v.theirs},
+                  {"ratio", v.theirs / v.ours},
+                  {"peak_rss_mb", static_cast<double>(v.ours_rss_kb) / 1024},
+                  {std::string(theirs) + "_peak_rss_mb", static_cast<double>(v.theirs_rss_kb) / 1024},
+                  {"rounds", v.rounds}};
+    };
+    for (const DatasetResult::Versus& v : d.against_reference) j["against_reference"].push_back(versus(v, "reference"));
+    if (d.convert_threads.rounds > 0) j["convert_threads"] = versus(d.convert_threads, "one_thread");
     out.push_back(j);
   }
   return out;
@@ -1435,6 +1574,7 @@ int run_suite(const SuiteOptions& a) {
     if (spec->file && !fs::is_regular_file(fs::path(a.data) / spec->file))
       throw IoError((fs::path(a.data) / spec->file).string() +
                     ": not found (pass --data DIR, or --dataset to choose others)");
+  const std::string reference = a.reference.empty() ? "" : reference_version(a.reference, work.path());
   Suite suite(a, work.path(), progress);
   const auto start = std::chrono::steady_clock::now();
   for (const DatasetSpec* spec : specs) {
@@ -1477,6 +1617,7 @@ int run_suite(const SuiteOptions& a) {
   print_rows(suite.rows());
   print_peers(suite.peers(), suite.rows(), suite.threads());
   print_previews(suite.datasets());
+  print_versus(suite.datasets(), a.reference, reference);
   const json fe = flying_edges(suite.peers(), suite.rows(), suite.threads());
   print_table1(suite.table1());
   const std::vector<Target> targets =
@@ -1499,6 +1640,7 @@ int run_suite(const SuiteOptions& a) {
                    {"statistic", "median"},
                    {"cache_mb", a.cache_mb}};
     j["seconds"] = total;
+    if (!a.reference.empty()) j["reference"] = {{"executable", a.reference}, {"version", reference}};
     j["datasets"] = datasets_json(suite.datasets());
     j["rows"] = rows_json(suite.rows());
     j["targets"] = target_json;

@@ -20,6 +20,9 @@ struct SuiteOptions {
   bool quiet = false;
   bool scale = false;
   int64_t scale_size = 2048;
+  // Another isotope executable (another commit's: bench/build_reference.sh builds one): convert and
+  // the one-shot coarse surfaces of each dataset timed with it and with this one, in alternation.
+  std::string reference;
 };
 
 // Runs the suite (or, with `scale`, the large-volume row) and prints its tables; writes `json`.
