@@ -1257,7 +1257,8 @@ TEST_F(Cli, BenchTimesConvertAndOneShotsBesideAReference) {
   for (const auto& v : d["against_reference"]) {
     cases.push_back(v["case"]);
     EXPECT_EQ(v["threads"], 2) << v;
-    EXPECT_EQ(v["rounds"], 3) << v;
+    EXPECT_GE(v["rounds"], 3) << v;  // and until our runs add up to half a second
+    EXPECT_LE(v["rounds"], 15) << v;
     EXPECT_GT(v["seconds"].get<double>(), 0) << v;
     EXPECT_GT(v["reference_seconds"].get<double>(), 0) << v;
     EXPECT_NEAR(v["ratio"].get<double>(), v["reference_seconds"].get<double>() / v["seconds"].get<double>(), 1e-12);

@@ -729,23 +729,27 @@ class Suite {
   // convert on all threads against one.
   void versus_rows(const DatasetSpec& spec, DatasetResult& d, const std::string& raw) {
     const std::string self = self_executable(), threads = std::to_string(threads_);
-    const int rounds = a_.quick ? 3 : 5;
+    // A small volume's processes take tens of milliseconds, which one slow start moves by a third:
+    // rounds until this executable's runs add up to a second (half with --quick), 15 at most.
+    const int min_rounds = a_.quick ? 3 : 5, max_rounds = 15;
+    const double min_seconds = a_.quick ? 0.5 : 1.0;
     // ARGS and OTHER_ARGS hold OUT where the output goes: each executable writes a file of its own.
     auto versus = [&](const std::string& what, const std::string& other, std::vector<std::string> args,
                       std::vector<std::string> other_args, const std::string& out) {
       DatasetResult::Versus v;
       v.what = what;
       v.threads = threads_;
-      v.rounds = rounds;
       std::vector<double> ours, theirs;
       const std::string our_out = (work_ / ("ours-" + out)).string(), their_out = (work_ / ("theirs-" + out)).string();
       std::replace(args.begin(), args.end(), out, our_out);
       std::replace(other_args.begin(), other_args.end(), out, their_out);
-      for (int i = 0; i < rounds; ++i)
+      double total = 0;
+      for (int i = 0; i < min_rounds || (total < min_seconds && i < max_rounds); ++i, ++v.rounds)
         for (int k = 0; k < 2; ++k) {  // each first in every other round
           const bool mine = (i + k) % 2 == 0;
           const ChildRun r = child_of(mine ? self : other, mine ? args : other_args, work_);
           (mine ? ours : theirs).push_back(r.seconds);
+          if (mine) total += r.seconds;
           int64_t& rss = mine ? v.ours_rss_kb : v.theirs_rss_kb;
           rss = std::max(rss, r.max_rss_kb);
         }
@@ -1561,6 +1565,9 @@ std::vector<const DatasetSpec*> selected(const SuiteOptions& a) {
 }  // namespace
 
 int run_suite(const SuiteOptions& a) {
+  // Before this process holds any volume: the peak memory of each process it times is then the
+  // process's own (tools/support/child_run.h).
+  spawn_children_from_here();
   const std::vector<const DatasetSpec*> specs = selected(a);
   if (!a.json.empty()) AtomicFile check(a.json);  // a bad --json directory fails now, not after the suite
   const bool progress = progress_enabled(a.quiet);

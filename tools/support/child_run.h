@@ -19,6 +19,15 @@ struct ChildRun {
 // the caller removes), and waits for it. Never throws for the child's failure: see `code`.
 ChildRun run_child(const std::vector<std::string>& argv, const std::string& log);
 
+// From now on, run_child's children are spawned by a copy of this process made now (a fork that
+// does nothing else), so that the peak memory reported is a child's own: the kernel's count for a
+// child includes what the process it was spawned from held at that moment (a child is a copy of
+// its parent until its exec), which for a benchmark holding a volume and a hierarchy was hundreds
+// of MB more than the child ever used. Call it while this process is small; a no-op where it has
+// more than one thread already (a fork would copy their locks in any state) or where called
+// before. The copy ends when this process does.
+void spawn_children_from_here();
+
 // The path of this process's own executable (/proc/self/exe).
 std::string self_executable();
 
