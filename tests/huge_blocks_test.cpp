@@ -9,11 +9,16 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <initializer_list>
 #include <new>
+#include <sstream>
+#include <string>
 #include <thread>
 #include <vector>
 
+#include "io/volume/raw_reader.h"
 #include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope::detail {
@@ -382,6 +387,61 @@ TEST_F(HugeBlocks, AReservationFreedLeavesItsPagesToTheNextOfItsPurpose) {
   shrink_reservation(too_large, kWarmReservationBytes + kMB);
   free_huge(too_large);
   EXPECT_EQ(warm_reservation_bytes(), 0u) << "more than the bound: given back";
+}
+
+// The kernel's flags of the mapping that holds P (/proc/self/smaps, VmFlags: " hg" once advised
+// for huge pages, " nh" once advised against them); empty where none holds it.
+std::string vm_flags_of(const void* p) {
+  std::ifstream smaps("/proc/self/smaps");
+  const auto at = reinterpret_cast<uintptr_t>(p);
+  bool holds = false;
+  for (std::string line; std::getline(smaps, line);) {
+    uintptr_t begin = 0, end = 0;
+    char dash = 0;
+    std::istringstream head(line);
+    if (head >> std::hex >> begin >> dash >> end && dash == '-') {
+      holds = at >= begin && at < end;
+    } else if (holds && line.starts_with("VmFlags:")) {
+      return line.substr(8) + " ";
+    }
+  }
+  return "";
+}
+
+// The large arrays ask for transparent huge pages (docs/METHOD.md, "Fresh memory"), however their
+// block comes: from malloc, from the store's own mappings, as a reservation; and so does a volume's
+// array read whole from a file, over the huge pages it spans. (Where the kernel has no transparent
+// huge pages at all, there is nothing to ask.)
+TEST_F(HugeBlocks, LargeArraysAreAdvisedForHugePages) {
+  if (!std::filesystem::exists("/sys/kernel/mm/transparent_hugepage/enabled"))
+    GTEST_SKIP() << "this kernel has no transparent huge pages";
+  auto check = [](const void* p, const char* what) {
+    const std::string flags = vm_flags_of(p);
+    EXPECT_NE(flags.find(" hg "), std::string::npos) << what << ": VmFlags" << flags;
+  };
+  void* from_malloc = allocate_huge(6 * kMB);
+  check(from_malloc, "a block from malloc");
+  free_huge(from_malloc);
+
+  keep_freed_huge_blocks(64 * kMB);
+  void* own = allocate_huge(6 * kMB);
+  check(own, "a block of the store's own");
+  free_huge(own);
+  void* again = allocate_huge(4 * kMB);  // a kept block handed out again
+  check(again, "a kept block");
+  free_huge(again);
+  keep_freed_huge_blocks(0);
+
+  {
+    const AddressSpaceOnly reserve;
+    void* reservation = allocate_huge(64 * kMB);
+    check(static_cast<char*>(reservation) + 40 * kMB, "a reservation");
+    free_huge(reservation);
+  }
+
+  std::vector<float> values;
+  size_volume_values(values, 4 * kMB);  // 16 MB: whole huge pages inside, wherever malloc put it
+  check(values.data() + values.size() / 2, "a volume's values");
 }
 
 // The pages a range touches, and only those, are in memory once it is prefaulted, on this thread

@@ -31,6 +31,7 @@ void* map_aligned(size_t bytes, int flags = 0) {
   const uintptr_t first = (begin + kHugeMask) & ~kHugeMask, end = first + bytes;
   if (first > begin) munmap(m, first - begin);
   if (begin + span > end) munmap(reinterpret_cast<void*>(end), begin + span - end);
+  advise_huge_pages(reinterpret_cast<void*>(first), bytes);
   return reinterpret_cast<void*>(first);
 }
 
@@ -226,6 +227,12 @@ size_t warm_reservation_bytes() noexcept {
   return b.warm_bytes;
 }
 
+void advise_huge_pages(void* p, size_t bytes) noexcept {
+  const auto begin = reinterpret_cast<uintptr_t>(p);
+  const uintptr_t first = (begin + kHugeMask) & ~kHugeMask, end = (begin + bytes) & ~kHugeMask;
+  if (end > first) madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
+}
+
 void prefault_in_parallel(void* p, size_t bytes) noexcept {
   if (bytes == 0) return;
   // Chunks aligned to whole huge pages, so that no two tasks split one; a chunk is 16 faults of
@@ -309,6 +316,7 @@ void* allocate_huge(size_t bytes) {
   }
   void* p = std::aligned_alloc(kHugePage, rounded);
   if (!p) throw std::bad_alloc();
+  advise_huge_pages(p, rounded);
   return p;
 }
 

@@ -215,6 +215,7 @@ void check_finite(const float* values, const std::array<int64_t, 3>& lo, const s
 
 void size_volume_values(std::vector<float>& values, size_t count) {
   values.reserve(count);
+  detail::advise_huge_pages(values.data(), count * sizeof(float));
   detail::prefault_in_parallel(values.data(), count * sizeof(float));
   values.resize(count);
 }

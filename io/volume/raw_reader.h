@@ -41,8 +41,8 @@ void check_finite(const float* values, const std::array<int64_t, 3>& lo, const s
                   const std::string& file);
 // Sizes a volume's values to COUNT nodes. The values are written once, right after, and the first
 // touch of fresh memory is the kernel's page faults (docs/METHOD.md, "Fresh memory"): the pages are
-// faulted in on all threads before the vector's zero-fill, which would take them on one (540 MB:
-// 0.48-1.2 s -> 0.23-0.44 s here). Throws std::bad_alloc.
+// asked for as huge pages and faulted in on all threads before the vector's zero-fill, which would
+// take them on one (540 MB: 0.48-1.2 s -> 0.23-0.44 s here). Throws std::bad_alloc.
 void size_volume_values(std::vector<float>& values, size_t count);
 // COUNT values stored as TYPE in the given byte order at IN, converted to float. A float64 beyond
 // float range becomes infinite, so check_finite reports it instead of the conversion being undefined.

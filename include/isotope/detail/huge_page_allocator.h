@@ -1,10 +1,10 @@
 #pragma once
 // Allocator for the engine's large arrays (values, records, meshes): blocks aligned to 2 MB (a huge
-// page), which a process that repeats its work can keep and take again already faulted in. It does
-// not ask the kernel for transparent huge pages (the kernel's own policy decides): where a virtual
-// machine's host takes freed memory back, a fresh huge page costs about five times a fresh 4 KB
-// page per byte, more than the TLB misses it spares, and every extraction and convert measured
-// here ran as fast or faster without it (docs/METHOD.md, "Fresh memory").
+// page), advised for transparent huge pages (advise_huge_pages), which a process that repeats its
+// work can keep and take again already faulted in. On the reference machine a fresh 4 KB page's
+// first touch costs 12-14 us, a fresh huge page's a quarter of that per byte or less, and every
+// extraction and convert measured ran as fast or faster on huge pages (docs/METHOD.md, "Fresh
+// memory", where an earlier machine measured the other way).
 
 #include <algorithm>
 #include <cstddef>
@@ -18,6 +18,11 @@
 namespace isotope::detail {
 
 inline constexpr size_t kHugePage = size_t{2} << 20;
+
+// Asks the kernel for transparent huge pages over the whole 2 MB pages inside [p, p + bytes): a
+// hint, whose refusal only costs speed (a kernel whose policy is `never` ignores it, one whose
+// policy is `always` needs it not).
+void advise_huge_pages(void* p, size_t bytes) noexcept;
 
 // Faults in the pages of [p, p + bytes) for writing, on all threads at once, a chunk a task
 // (MADV_POPULATE_WRITE): for an array about to be written whole by one thread (a std::vector's
@@ -36,7 +41,7 @@ void prefault_in_parallel(void* p, size_t bytes) noexcept;
 void prefault(void* p, size_t bytes) noexcept;
 inline constexpr size_t kPrefaultMinBytes = size_t{64} << 10;
 
-// A block of at least BYTES, aligned to 2 MB; throws std::bad_alloc.
+// A block of at least BYTES, aligned to 2 MB and advised for huge pages; throws std::bad_alloc.
 // By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
 // store's own, outside malloc's heap: a freed block is kept (up to the bytes given) and handed out
 // again whole or in part, so a process that repeats the same work (a server answering the same
