@@ -42,13 +42,6 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-// The brick cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
-// return each to the kernel and fault fresh zeroed pages in for the next. This keeps them.
-void keep_freed_brick_memory() {
-  mallopt(M_MMAP_THRESHOLD, 64 << 20);
-  mallopt(M_TRIM_THRESHOLD, 128 << 20);
-}
-
 void check_cache_mb(const OpenOptions& options) {
   if (options.cache_mb < 1 || options.cache_mb > (int64_t{1} << 30))
     throw OptionError("cache-mb", "must be 1 .. " + std::to_string(int64_t{1} << 30) + " (MB)");
@@ -86,6 +79,13 @@ struct ScratchStore {
 };
 
 }  // namespace
+
+// The brick cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
+// return each to the kernel and fault fresh zeroed pages in for the next.
+void keep_freed_memory() {
+  mallopt(M_MMAP_THRESHOLD, kKeptBlockBytes);
+  mallopt(M_TRIM_THRESHOLD, kKeptTopBytes);
+}
 
 struct Source::Impl {
   // A store, paged:
@@ -232,7 +232,7 @@ struct Source::Impl {
       throw;
     }
     remove_folder();  // the reader keeps its descriptor
-    if (tune_allocator) keep_freed_brick_memory();
+    if (tune_allocator) keep_freed_memory();
     built->cache = std::make_unique<BrickCache>(*built->store, static_cast<uint64_t>(cache_mb) << 20);
     built->paged = std::make_unique<PagedVolume>(*built->cache);
     scratch = std::move(built);  // an extraction still reading the one before keeps it
@@ -270,7 +270,7 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
   // reader says so, not a raw volume whose name lacks its dimensions (tests/reject/zeros.isotope).
   if (is_store_file(spec.path) || spec.path.ends_with(".isotope")) {
     if (spec.dims || spec.type) throw OptionError(spec.dims ? "dims" : "type", "does not apply to a store");
-    if (options.tune_allocator) keep_freed_brick_memory();
+    if (options.tune_allocator) keep_freed_memory();
     impl->store = std::make_unique<StoreReader>(spec.path);
     impl->cache = std::make_unique<BrickCache>(*impl->store, static_cast<uint64_t>(options.cache_mb) << 20);
     impl->paged = std::make_unique<PagedVolume>(*impl->cache);

@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "isotope/source.h"
 #include "tests/temp_dir_test.h"
 #include "tests/test_support.h"
 
@@ -1176,6 +1177,8 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
     EXPECT_GT(p["skimage"]["triangles"].get<int64_t>(), 0) << p;
     EXPECT_LT(p["skimage"]["triangles"].get<int64_t>(), dataset[p["dataset"]]["full_triangles"].get<int64_t>()) << p;
     EXPECT_GT(p["skimage"]["load_and_march_seconds"].get<double>(), 0) << p;
+    // The peers run under our extractions' allocator policy (isotope/source.h, keep_freed_memory).
+    EXPECT_EQ(p["skimage"]["malloc_mmap_threshold"], std::to_string(isotope::kKeptBlockBytes)) << p;
     // VTK's Flying Edges on the same array, on one thread and on the two ours use: marching cubes
     // too, the same triangles as scikit-image where no value equals the isovalue (float data).
     const auto& fe = p["flying_edges"];
@@ -1183,6 +1186,7 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
     EXPECT_EQ(fe["threads"], 2) << p;
     EXPECT_GT(fe["march_seconds_one_thread"].get<double>(), 0) << p;
     EXPECT_GT(fe["march_seconds_all_threads"].get<double>(), 0) << p;
+    EXPECT_EQ(fe["malloc_mmap_threshold"], std::to_string(isotope::kKeptBlockBytes)) << p;
     if (p["dataset"] == "algebraic65") {
       EXPECT_EQ(fe["triangles"], p["skimage"]["triangles"]) << p;
     }

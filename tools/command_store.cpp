@@ -1,5 +1,4 @@
 // isotope convert | info | verify: making, describing and checking stores (docs/FORMAT.md).
-#include <malloc.h>
 #include <oneapi/tbb/global_control.h>
 
 #include <CLI/CLI.hpp>
@@ -22,6 +21,7 @@
 #include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
 #include "isotope/error.h"
+#include "isotope/source.h"
 #include "tools/commands.h"
 #include "tools/support/interrupt_guard.h"
 
@@ -42,8 +42,7 @@ int run_convert(const ConvertArgs& a) {
   // Every tile allocates and frees buffers of the same few sizes; glibc would hand the large
   // ones back to the kernel at once and fault fresh zeroed pages in for the next tile. Kept
   // instead, they are reused: the peak stays what it was, the page faults go.
-  mallopt(M_MMAP_THRESHOLD, 64 << 20);
-  mallopt(M_TRIM_THRESHOLD, 128 << 20);
+  keep_freed_memory();
   std::optional<tbb::global_control> threads;
   if (a.threads > 0) threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(a.threads));
   VolumeSpec input;

@@ -824,7 +824,7 @@ class Suite {
       return named ? *named : RawLayout{d.dims, ScalarType::float32};
     }();
     const std::string script =
-        "import sys, time, numpy\n"
+        "import os, sys, time, numpy\n"
         "from skimage import measure\n"
         "path, nx, ny, nz, dtype, iso, runs = sys.argv[1:]\n"
         "times = []\n"
@@ -834,7 +834,7 @@ class Suite {
         "    v, f, n, _ = measure.marching_cubes(a, float(iso))\n"
         "    times.append(time.perf_counter() - t)\n"
         "times.sort()\n"
-        "print(times[len(times) // 2], len(f))\n";
+        "print(times[len(times) // 2], len(f), os.environ.get('MALLOC_MMAP_THRESHOLD_', '-'))\n";
     const std::string dtype = layout.type == ScalarType::uint8     ? "uint8"
                               : layout.type == ScalarType::uint16  ? "<u2"
                               : layout.type == ScalarType::int16   ? "<i2"
@@ -845,22 +845,37 @@ class Suite {
     // pyenv or a virtual environment, may not have it).
     const std::string python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
     const ChildRun r =
-        run_child({python, "-c", script, raw, std::to_string(layout.dims[0]), std::to_string(layout.dims[1]),
-                   std::to_string(layout.dims[2]), dtype, number(spec.iso), runs},
+        run_child(peer({python, "-c", script, raw, std::to_string(layout.dims[0]), std::to_string(layout.dims[1]),
+                        std::to_string(layout.dims[2]), dtype, number(spec.iso), runs}),
                   (work_ / "peer.log").string());
     fs::remove(work_ / "peer.log");
     json j = {{"dataset", spec.name}};
     double seconds = 0;
     long long triangles = 0;
-    if (r.code != 0 || std::sscanf(r.output.c_str(), "%lf %lld", &seconds, &triangles) != 2) {
+    char threshold[32] = {};
+    if (r.code != 0 || std::sscanf(r.output.c_str(), "%lf %lld %31s", &seconds, &triangles, threshold) != 3) {
       j["skimage"] = nullptr;
       skipped_.push_back(std::string(spec.name) + " scikit-image: not run (" + why_not(r) +
                          "; scripts/install-deps.sh --tests installs python3-skimage)");
     } else {
-      j["skimage"] = {{"load_and_march_seconds", seconds}, {"triangles", triangles}, {"process_seconds", r.seconds}};
+      j["skimage"] = {{"load_and_march_seconds", seconds},
+                      {"triangles", triangles},
+                      {"process_seconds", r.seconds},
+                      {"malloc_mmap_threshold", threshold}};
     }
     j["flying_edges"] = flying_edges_run(spec, layout, raw, dtype, python, runs);
     peers_.push_back(j);
+  }
+
+  // A peer's command, run with the allocator policy this process's own extractions run under
+  // (keep_freed_memory, isotope/source.h): without it each of a peer's runs faults fresh pages in
+  // for its output, which on the reference machine made Flying Edges' march on embryo 180 ms on one
+  // thread instead of 35 ms, while ours reuse their memory (docs/METHOD.md, "Fresh memory"). The
+  // peer prints what it saw of it.
+  static std::vector<std::string> peer(std::vector<std::string> argv) {
+    argv.insert(argv.begin(), {"/usr/bin/env", "MALLOC_MMAP_THRESHOLD_=" + std::to_string(kKeptBlockBytes),
+                               "MALLOC_TRIM_THRESHOLD_=" + std::to_string(kKeptTopBytes)});
+    return argv;
   }
 
   static std::string why_not(const ChildRun& r) {
@@ -874,7 +889,7 @@ class Suite {
                         const std::string& dtype, const std::string& python, const std::string& runs) {
     say(spec, "VTK Flying Edges");
     const std::string script =
-        "import sys, time, numpy, vtk\n"
+        "import os, sys, time, numpy, vtk\n"
         "from vtk.util import numpy_support\n"
         "path, nx, ny, nz, dtype, iso, runs, threads = sys.argv[1:]\n"
         "image = vtk.vtkImageData()\n"
@@ -895,15 +910,17 @@ class Suite {
         "        times.append(time.perf_counter() - start)\n"
         "    times.sort()\n"
         "    medians.append(times[len(times) // 2])\n"
-        "print(medians[0], medians[1], fe.GetOutput().GetNumberOfPolys())\n";
+        "print(medians[0], medians[1], fe.GetOutput().GetNumberOfPolys(),\n"
+        "      os.environ.get('MALLOC_MMAP_THRESHOLD_', '-'))\n";
     const ChildRun r =
-        run_child({python, "-c", script, raw, std::to_string(layout.dims[0]), std::to_string(layout.dims[1]),
-                   std::to_string(layout.dims[2]), dtype, number(spec.iso), runs, std::to_string(threads_)},
+        run_child(peer({python, "-c", script, raw, std::to_string(layout.dims[0]), std::to_string(layout.dims[1]),
+                        std::to_string(layout.dims[2]), dtype, number(spec.iso), runs, std::to_string(threads_)}),
                   (work_ / "peer.log").string());
     fs::remove(work_ / "peer.log");
     double one = 0, all = 0;
     long long triangles = 0;
-    if (r.code != 0 || std::sscanf(r.output.c_str(), "%lf %lf %lld", &one, &all, &triangles) != 3) {
+    char threshold[32] = {};
+    if (r.code != 0 || std::sscanf(r.output.c_str(), "%lf %lf %lld %31s", &one, &all, &triangles, threshold) != 4) {
       skipped_.push_back(std::string(spec.name) + " VTK Flying Edges: not run (" + why_not(r) +
                          "; scripts/install-deps.sh --tests installs python3-vtk9)");
       return nullptr;
@@ -911,7 +928,8 @@ class Suite {
     return {{"march_seconds_one_thread", one},
             {"march_seconds_all_threads", all},
             {"threads", threads_},
-            {"triangles", triangles}};
+            {"triangles", triangles},
+            {"malloc_mmap_threshold", threshold}};
   }
 
   // The paper's Table 1 on the same hierarchy: triangles per eps without and with topology

@@ -54,11 +54,21 @@ struct OpenOptions {
   int64_t cache_mb = 512;
   // A volume's hierarchy being built (on the first extraction that needs it).
   ProgressCallback preprocess_progress;
-  // Process-wide: keep freed brick memory for reuse (glibc's mallopt) instead of returning it to the
-  // kernel and faulting fresh pages in for the next brick. What the isotope command does; a host
-  // program with its own allocator policy leaves it off.
+  // Process-wide: keep freed brick memory for reuse (keep_freed_memory) instead of returning it to
+  // the kernel and faulting fresh pages in for the next brick. What the isotope command does; a
+  // host program with its own allocator policy leaves it off.
   bool tune_allocator = false;
 };
+
+// What OpenOptions::tune_allocator does, and the isotope command's convert: glibc (mallopt) keeps
+// freed blocks under kKeptBlockBytes in its heap, and up to kKeptTopBytes free at the heap's top,
+// for the next allocations, instead of handing them back to the kernel and faulting fresh zeroed
+// pages in for them (docs/METHOD.md, "Fresh memory"). For a process that frees and allocates large
+// buffers over and over: the brick cache's bricks, a convert's tiles. The environment variables
+// MALLOC_MMAP_THRESHOLD_ and MALLOC_TRIM_THRESHOLD_ set the same for another program (the bench
+// runs its peers so).
+inline constexpr int kKeptBlockBytes = 64 << 20, kKeptTopBytes = 128 << 20;
+void keep_freed_memory();
 
 // What a source is, and what it has read and built so far (for reports).
 struct SourceInfo {
