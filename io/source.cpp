@@ -210,6 +210,9 @@ struct Source::Impl {
     };
     ConvertOptions options;
     options.progress = progress;
+    // Before the build, as `isotope convert` sets it: its tiles' buffers, freed and allocated
+    // again tile after tile, then serve the bricks and the mesh from memory already faulted in.
+    if (tune_allocator) keep_freed_memory();
     auto built = std::make_shared<ScratchStore>();
     built->sections = sections;
     try {
@@ -232,7 +235,6 @@ struct Source::Impl {
       throw;
     }
     remove_folder();  // the reader keeps its descriptor
-    if (tune_allocator) keep_freed_memory();
     built->cache = std::make_unique<BrickCache>(*built->store, static_cast<uint64_t>(cache_mb) << 20);
     built->paged = std::make_unique<PagedVolume>(*built->cache);
     scratch = std::move(built);  // an extraction still reading the one before keeps it
