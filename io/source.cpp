@@ -80,8 +80,9 @@ struct ScratchStore {
 
 }  // namespace
 
-// The brick cache frees and allocates decoded bricks of a few fixed sizes all the time; glibc would
-// return each to the kernel and fault fresh zeroed pages in for the next.
+// Its users (the brick cache's decoded bricks, a convert's tiles) free and allocate buffers of a few
+// fixed sizes all the time; glibc would return each to the kernel and fault fresh zeroed pages in
+// for the next (isotope/source.h).
 void keep_freed_memory() {
   mallopt(M_MMAP_THRESHOLD, kKeptBlockBytes);
   mallopt(M_TRIM_THRESHOLD, kKeptTopBytes);

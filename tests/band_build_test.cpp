@@ -381,18 +381,21 @@ TEST(BandBuild, LargeVolumesTakeLargerFusedTilesWhereEveryThreadHasManyOfThem) {
   }
 }
 
-// A band too small for four full tiles a thread takes smaller tiles, so that the coarse bands, or
-// band 0 of a small volume, are not one thread's work; on one thread, the tiles chosen.
+// A band too small for sixteen full tiles a thread takes smaller tiles, so that the coarse bands, or
+// band 0 of a small volume, are not one thread's work and fault in less memory; on one thread, the
+// tiles chosen.
 TEST(BandBuild, SmallBandsTakeSmallerTilesOnSeveralThreads) {
-  const StoreLayout embryo({256, 256, 256}, 4), neghip({66, 66, 66}, 4), hundred({100, 100, 100}, 4);
+  const StoreLayout embryo({256, 256, 256}, 4), neghip({66, 66, 66}, 4), hundred({100, 100, 100}, 4),
+      mid({128, 128, 128}, 4);
   {
     const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
-    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(0), 2), 2);    // 257^3 nodes: 8 tiles of 32^3 a thread
-    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(2), 2), 2);    // 65^3: 4.2 a thread
+    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(0), 2), 2);    // 257^3 nodes: 259 tiles of 32^3 a thread
+    EXPECT_EQ(band_tile_bricks(mid, mid.band(0), 2), 2);          // 129^3: 33 a thread
+    EXPECT_EQ(band_tile_bricks(embryo, embryo.band(2), 2), 1);    // 65^3: 4.2 a thread: tiles of 16^3
     EXPECT_EQ(band_tile_bricks(embryo, embryo.band(3), 2), 1);    // 33^3: tiles of 16^3
     EXPECT_EQ(band_tile_bricks(embryo, embryo.band(5), 2), 1);    // a brick: no smaller tile
-    EXPECT_EQ(band_tile_bricks(neghip, neghip.band(0), 4), 2);    // 66^3: one tile of 64^3 and thin ones
-    EXPECT_EQ(band_tile_bricks(hundred, hundred.band(0), 4), 2);  // 100^3: 3.9 tiles of 64^3, 1.9 a thread
+    EXPECT_EQ(band_tile_bricks(neghip, neghip.band(0), 4), 1);    // 66^3: 4.4 tiles of 32^3 a thread
+    EXPECT_EQ(band_tile_bricks(hundred, hundred.band(0), 4), 1);  // 101^3: 15.7 tiles of 32^3 a thread
   }
   {
     const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);

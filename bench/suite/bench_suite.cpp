@@ -29,6 +29,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -850,18 +851,15 @@ class Suite {
                   (work_ / "peer.log").string());
     fs::remove(work_ / "peer.log");
     json j = {{"dataset", spec.name}};
-    double seconds = 0;
-    long long triangles = 0;
-    char threshold[32] = {};
-    if (r.code != 0 || std::sscanf(r.output.c_str(), "%lf %lld %31s", &seconds, &triangles, threshold) != 3) {
+    if (const auto line = peer_line(r, 2); !line) {
       j["skimage"] = nullptr;
       skipped_.push_back(std::string(spec.name) + " scikit-image: not run (" + why_not(r) +
                          "; scripts/install-deps.sh --tests installs python3-skimage)");
     } else {
-      j["skimage"] = {{"load_and_march_seconds", seconds},
-                      {"triangles", triangles},
+      j["skimage"] = {{"load_and_march_seconds", line->numbers[0]},
+                      {"triangles", static_cast<long long>(line->numbers[1])},
                       {"process_seconds", r.seconds},
-                      {"malloc_mmap_threshold", threshold}};
+                      {"malloc_mmap_threshold", line->threshold}};
     }
     j["flying_edges"] = flying_edges_run(spec, layout, raw, dtype, python, runs);
     peers_.push_back(j);
@@ -876,6 +874,22 @@ class Suite {
     argv.insert(argv.begin(), {"/usr/bin/env", "MALLOC_MMAP_THRESHOLD_=" + std::to_string(kKeptBlockBytes),
                                "MALLOC_TRIM_THRESHOLD_=" + std::to_string(kKeptTopBytes)});
     return argv;
+  }
+
+  // A peer's answer, its first line: COUNT numbers, then the MALLOC_MMAP_THRESHOLD_ it saw (peer()).
+  // Nothing where it failed or said something else.
+  struct PeerLine {
+    std::vector<double> numbers;
+    std::string threshold;
+  };
+  static std::optional<PeerLine> peer_line(const ChildRun& r, size_t count) {
+    if (r.code != 0) return std::nullopt;
+    std::istringstream in(r.output.substr(0, r.output.find('\n')));
+    PeerLine line{std::vector<double>(count), {}};
+    for (double& x : line.numbers)
+      if (!(in >> x)) return std::nullopt;
+    if (!(in >> line.threshold)) return std::nullopt;
+    return line;
   }
 
   static std::string why_not(const ChildRun& r) {
@@ -917,19 +931,17 @@ class Suite {
                         std::to_string(layout.dims[2]), dtype, number(spec.iso), runs, std::to_string(threads_)}),
                   (work_ / "peer.log").string());
     fs::remove(work_ / "peer.log");
-    double one = 0, all = 0;
-    long long triangles = 0;
-    char threshold[32] = {};
-    if (r.code != 0 || std::sscanf(r.output.c_str(), "%lf %lf %lld %31s", &one, &all, &triangles, threshold) != 4) {
+    const auto line = peer_line(r, 3);
+    if (!line) {
       skipped_.push_back(std::string(spec.name) + " VTK Flying Edges: not run (" + why_not(r) +
                          "; scripts/install-deps.sh --tests installs python3-vtk9)");
       return nullptr;
     }
-    return {{"march_seconds_one_thread", one},
-            {"march_seconds_all_threads", all},
+    return {{"march_seconds_one_thread", line->numbers[0]},
+            {"march_seconds_all_threads", line->numbers[1]},
             {"threads", threads_},
-            {"triangles", triangles},
-            {"malloc_mmap_threshold", threshold}};
+            {"triangles", static_cast<long long>(line->numbers[2])},
+            {"malloc_mmap_threshold", line->threshold}};
   }
 
   // The paper's Table 1 on the same hierarchy: triangles per eps without and with topology

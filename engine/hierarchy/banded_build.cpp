@@ -82,7 +82,7 @@ int64_t band_tile_bricks(const StoreLayout& layout, const Band& band, int64_t c)
       static_cast<double>(band.nodes[0]) * static_cast<double>(band.nodes[1]) * static_cast<double>(band.nodes[2]);
   for (; c > 1; c /= 2) {
     const auto side = static_cast<double>(c * layout.brick_width());
-    if (nodes >= 4.0 * static_cast<double>(threads) * side * side * side) break;
+    if (nodes >= kFullTilesAThread * static_cast<double>(threads) * side * side * side) break;
   }
   return c;
 }

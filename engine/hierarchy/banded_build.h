@@ -188,10 +188,17 @@ int64_t tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uin
 // count of at least kFusedSide nodes a side; else 0.
 int64_t fused_tile_bricks_for(const StoreLayout& layout, int64_t sink_brick_bytes, uint64_t memory_bytes);
 // A band's own tile side, at most c bricks (a power of two): halved while the band's nodes would
-// make fewer than four full tiles a thread, so that a small band (the coarse bands, or band 0 of a
-// small volume, whose grid is one tile of c and thin ones at its far faces) is not one thread's
-// work while the others wait. On one thread, c.
+// make fewer than kFullTilesAThread full tiles a thread, so that a small band (the coarse bands, or
+// band 0 of a small volume, whose grid is one tile of c and thin ones at its far faces) is not one
+// thread's work while the others wait, and its tiles in flight fault in less fresh memory. On one
+// thread, c.
 int64_t band_tile_bricks(const StoreLayout& layout, const Band& band, int64_t c);
+// Sixteen: a band of 66^3-123^3 nodes (the shared volumes' band 0) takes tiles of 16^3 nodes, not
+// 32^3, whose windows' records (20^3 against 36^3 of them, 44 bytes each, in each of the tiles in
+// flight) cost more to fault in than the halo records the smaller tiles compute twice: their
+// converts 5-11% faster on two threads, a quarter less peak memory; larger volumes unchanged
+// within the noise (docs/METHOD.md, "Per-vertex records").
+inline constexpr double kFullTilesAThread = 16;
 // Tiles per side of a staged group (below: a power of two, aligned, so that a group is a run of
 // the band's Morton order) whose stage fits in `room` bytes; 0 when not even two a side fit.
 int64_t stage_tiles_for(const StoreLayout& layout, int band, int64_t c, uint64_t room, bool fused = false);
