@@ -531,6 +531,27 @@ TEST(BandBuild, AHierarchysArraysAreFaultedInBeforeItsBuildWritesThem) {
 #endif
 }
 
+// What a hierarchy in memory will take is known before it is built (Hierarchy::memory_bytes of the
+// dimensions and fields), for a cube and for thin volumes, whose bricks build() takes smaller
+// (memory_brick_bits), with every field, none, or some.
+TEST(BandBuild, AHierarchysMemoryIsKnownBeforeItIsBuilt) {
+  const std::array<std::array<int64_t, 3>, 3> shapes = {{{33, 30, 35}, {300, 2, 3}, {60, 50, 2}}};
+  const RecordFields some{/*exact=*/true, /*paper=*/false, /*weights=*/false, /*surplus=*/true};
+  const RecordFields none{false, false, false, false};
+  for (const auto& dims : shapes)
+    for (const RecordFields& fields : {RecordFields{}, some, none}) {
+      Volume v;
+      v.dims = dims;
+      v.values.resize(static_cast<size_t>(v.node_count()));
+      for (size_t i = 0; i < v.values.size(); ++i) v.values[i] = static_cast<float>(i % 7);
+      const Hierarchy h = Hierarchy::build(v, fields);
+      EXPECT_EQ(Hierarchy::memory_bytes(dims, fields), h.memory_bytes())
+          << dims[0] << "x" << dims[1] << "x" << dims[2] << ", " << fields.exact << fields.paper << fields.weights
+          << fields.surplus;
+      EXPECT_GT(h.memory_bytes(), 0);
+    }
+}
+
 TEST(BandBuild, ASlowTileHoldsUpOnlyTheCommitsAfterIt) {
   const tbb::global_control two(tbb::global_control::max_allowed_parallelism, 2);
   if (thread_count() < 2) GTEST_FAIL() << "needs two threads";

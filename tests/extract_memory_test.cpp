@@ -29,6 +29,7 @@
 #include "engine/extract/options.h"
 #include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/hierarchy.h"
+#include "engine/hierarchy/store_layout.h"
 #include "tests/child_process.h"
 #include "tests/temp_dir_test.h"
 
@@ -312,9 +313,10 @@ TEST_F(ExtractMemory, EpsZeroFromAVolumeFileHoldsWindowsAndTheMeshNotTheVolume) 
 // byte); long 2.46, 244 MB, 333 MB (1.36); flat 1.47, 82 MB, 131 MB (1.60). An earlier form of this
 // test bounded the peaks' ratios (long under 4 times the cube), which held only while the cube's
 // tiles in flight weighed enough in its peak (86 MB then; 4.15 times with the smaller tiles of
-// docs/METHOD.md, "Per-vertex records"). The hierarchies here hold the fields the one-shot's do
-// (fields_for), built in this process after the one-shots, whose peaks would otherwise start at
-// this process's (a spawned child's peak counts its parent's until its exec).
+// docs/METHOD.md, "Per-vertex records"). The hierarchies' bytes are those of the fields the
+// one-shot's hold (fields_for), known without building them (Hierarchy::memory_bytes): one built
+// here would raise this process's peak, which a child spawned from it counts as its own until its
+// exec, in this test and the next.
 TEST_F(ExtractMemory, ThinVolumesTakeMemoryInProportionToTheirBandNodes) {
   auto wave = [](std::array<int64_t, 3> dims) {
     std::vector<uint8_t> v(static_cast<size_t>(dims[0] * dims[1] * dims[2]));
@@ -344,16 +346,12 @@ TEST_F(ExtractMemory, ThinVolumesTakeMemoryInProportionToTheirBandNodes) {
   o.eps = 1;
   double hierarchy[3] = {};
   for (size_t i = 0; i < shapes.size(); ++i) {
-    const std::vector<uint8_t> v = wave(shapes[i]);
-    Volume volume;
-    volume.dims = shapes[i];
-    volume.values.assign(v.begin(), v.end());
-    const Hierarchy h = Hierarchy::build(volume, fields_for(o));
+    const StoreLayout layout(shapes[i], StoreLayout::memory_brick_bits(shapes[i]));
     int64_t band_nodes = 0;
-    for (const Band& b : h.layout().bands()) band_nodes += b.nodes[0] * b.nodes[1] * b.nodes[2];
+    for (const Band& b : layout.bands()) band_nodes += b.nodes[0] * b.nodes[1] * b.nodes[2];
     const double slots =
-        static_cast<double>(h.layout().brick_count() * h.layout().brick_nodes()) / static_cast<double>(band_nodes);
-    hierarchy[i] = static_cast<double>(h.memory_bytes()) / (1 << 20);
+        static_cast<double>(layout.brick_count() * layout.brick_nodes()) / static_cast<double>(band_nodes);
+    hierarchy[i] = static_cast<double>(Hierarchy::memory_bytes(shapes[i], fields_for(o))) / (1 << 20);
     report(std::string("thin_") + names[i] + "_slots_per_band_node", slots);
     report(std::string("thin_") + names[i] + "_hierarchy_mb", hierarchy[i]);
     EXPECT_LE(slots, 4.0) << names[i];

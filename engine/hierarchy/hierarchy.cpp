@@ -86,10 +86,25 @@ Hierarchy Hierarchy::allocate(const std::array<int64_t, 3>& dims, int brick_bits
   return h;
 }
 
+namespace {
+
+// A slot's bytes over the arrays allocate() makes for these fields.
+int64_t slot_bytes(const RecordFields& fields) {
+  return static_cast<int64_t>(sizeof(float) + sizeof(uint64_t) + (fields.surplus ? sizeof(uint16_t) : 0) +
+                              (fields.exact ? sizeof(uint32_t) : 0) + (fields.paper ? sizeof(uint32_t) : 0) +
+                              (fields.weights ? sizeof(uint64_t) : 0));
+}
+
+}  // namespace
+
 int64_t Hierarchy::memory_bytes() const {
-  const int64_t n = layout_->brick_count() * layout_->brick_nodes();
-  return n * static_cast<int64_t>(sizeof(float) + sizeof(uint64_t) + (surplus_ ? 2 : 0) + (exact_ ? 4 : 0) +
-                                  (paper_ ? 4 : 0) + (weights_ ? 8 : 0));
+  return layout_->brick_count() * layout_->brick_nodes() * slot_bytes(fields_);
+}
+
+int64_t Hierarchy::memory_bytes(const std::array<int64_t, 3>& dims, const RecordFields& fields, int brick_bits) {
+  validate_dims(dims);
+  const StoreLayout layout(dims, brick_bits == kMemoryBrickBits ? StoreLayout::memory_brick_bits(dims) : brick_bits);
+  return layout.brick_count() * layout.brick_nodes() * slot_bytes(fields);
 }
 
 namespace {

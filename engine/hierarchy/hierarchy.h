@@ -124,6 +124,10 @@ class Hierarchy {
   void set_value_map(double offset, double scale) { value_offset_ = offset, value_scale_ = scale; }
   void set_stats(const PreprocessStats& s) { stats_ = s; }
   int64_t memory_bytes() const;
+  // What build() would take for a volume of these dimensions, before it allocates anything: the
+  // memory_bytes() of the hierarchy it returns.
+  static int64_t memory_bytes(const std::array<int64_t, 3>& dims, const RecordFields& fields = {},
+                              int brick_bits = kMemoryBrickBits);
 
   BrickView brick(int64_t index) const {
     const auto at = static_cast<size_t>(index * indexer_->brick_nodes());
