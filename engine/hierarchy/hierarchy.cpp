@@ -88,6 +88,12 @@ Hierarchy Hierarchy::allocate(const std::array<int64_t, 3>& dims, int brick_bits
 
 namespace {
 
+// The brick size build() takes: BRICK_BITS, or for kMemoryBrickBits the one the store layout
+// chooses for these dimensions.
+int resolved_brick_bits(const std::array<int64_t, 3>& dims, int brick_bits) {
+  return brick_bits == Hierarchy::kMemoryBrickBits ? StoreLayout::memory_brick_bits(dims) : brick_bits;
+}
+
 // A slot's bytes over the arrays allocate() makes for these fields.
 int64_t slot_bytes(const RecordFields& fields) {
   return static_cast<int64_t>(sizeof(float) + sizeof(uint64_t) + (fields.surplus ? sizeof(uint16_t) : 0) +
@@ -103,7 +109,7 @@ int64_t Hierarchy::memory_bytes() const {
 
 int64_t Hierarchy::memory_bytes(const std::array<int64_t, 3>& dims, const RecordFields& fields, int brick_bits) {
   validate_dims(dims);
-  const StoreLayout layout(dims, brick_bits == kMemoryBrickBits ? StoreLayout::memory_brick_bits(dims) : brick_bits);
+  const StoreLayout layout(dims, resolved_brick_bits(dims, brick_bits));
   return layout.brick_count() * layout.brick_nodes() * slot_bytes(fields);
 }
 
@@ -129,8 +135,7 @@ Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int
                            const ProgressCallback& progress) {
   validate_volume(volume);
   const auto start = std::chrono::steady_clock::now();
-  if (brick_bits == kMemoryBrickBits) brick_bits = StoreLayout::memory_brick_bits(volume.dims);
-  Hierarchy h = allocate(volume.dims, brick_bits, fields);
+  Hierarchy h = allocate(volume.dims, resolved_brick_bits(volume.dims, brick_bits), fields);
   h.set_geometry(volume.origin, volume.spacing);
   const ReadBox read = [&](const Box3& lo, const Box3& size, float* out) {
     for (int64_t z = 0; z < size[2]; ++z)
