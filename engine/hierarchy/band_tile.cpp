@@ -1,11 +1,14 @@
 #include "engine/hierarchy/band_tile.h"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cassert>
 #include <cmath>
 #include <cstddef>
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <tuple>
 #include <type_traits>
 
@@ -143,7 +146,7 @@ BandTile::DiamondTemplate* BandTile::shared_templates(int k, int j, const Box3& 
   };
   // Eight, in turn: a fused pass's tiles of bands j and j + 1 take turns on a thread, and the
   // tiles at the grid's far faces are thinner (one window size for each face, edge and corner).
-  // On the heap: 114 KB each.
+  // On the heap: 15 KB each.
   constexpr size_t kSets = 8;
   thread_local std::unique_ptr<std::array<Set, kSets>> sets;
   thread_local size_t next = 0;
@@ -157,16 +160,40 @@ BandTile::DiamondTemplate* BandTile::shared_templates(int k, int j, const Box3& 
   return set.templates;
 }
 
+const BandTile::DiamondGeometry& BandTile::geometry_of(const Lattice& l, int j, int parity, const Diamond& d) {
+  // Per (k, j), 64 classes, published once each: a thread that finds a class empty makes it from
+  // its own vertex of the class (every one gives the same bits) and the first to publish wins.
+  // Kept for the process's life: at most 64 x 1.6 KB a band of each lattice size built.
+  constexpr int kMaxK = 40;  // a lattice of 2^40 cells a side: far beyond any volume's
+  using Classes = std::array<std::atomic<const DiamondGeometry*>, 64>;
+  static std::atomic<Classes*> bands[kMaxK + 1][kMaxK + 1];
+  if (l.k > kMaxK) throw std::length_error("lattice of 2^" + std::to_string(l.k) + " cells a side");
+  std::atomic<Classes*>& band = bands[l.k][j];
+  Classes* classes = band.load(std::memory_order_acquire);
+  if (!classes) {
+    auto made = std::make_unique<Classes>();  // value-initialized: null pointers
+    if (band.compare_exchange_strong(classes, made.get(), std::memory_order_acq_rel)) classes = made.release();
+  }
+  std::atomic<const DiamondGeometry*>& slot = (*classes)[static_cast<size_t>(parity)];
+  const DiamondGeometry* geometry = slot.load(std::memory_order_acquire);
+  if (geometry) return *geometry;
+  auto made = std::make_unique<DiamondGeometry>();
+  made->shape = shape_of(d, l);
+  made->gradients = gradients_of(made->shape);
+  if (slot.compare_exchange_strong(geometry, made.get(), std::memory_order_acq_rel)) geometry = made.release();
+  return *geometry;
+}
+
 const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
-  DiamondTemplate& t = templates_[(g[0] & 3) | (g[1] & 3) << 2 | (g[2] & 3) << 4];
+  const int parity = static_cast<int>((g[0] & 3) | (g[1] & 3) << 2 | (g[2] & 3) << 4);
+  DiamondTemplate& t = templates_[parity];
   if (t.ready) return t;
   const Lattice& l = layout_.lattice();
   const Diamond d = diamond_of({g[0] << j_, g[1] << j_, g[2] << j_}, l);
   const int64_t base = index(g, size_), cell_base = index(g, cells_);
   auto value_offset = [&](const Coord& p) { return index({p[0] >> j_, p[1] >> j_, p[2] >> j_}, size_) - base; };
   t.type = d.type;
-  t.shape = shape_of(d, l);
-  t.gradients = gradients_of(t.shape);
+  t.geometry = &geometry_of(l, j_, parity, d);
   t.ring_count = d.ring_count;
   t.a = value_offset(d.a);
   t.b = value_offset(d.b);
@@ -259,7 +286,7 @@ const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
 #endif
   const Saturation sat = fold.finish(range);
   records_[static_cast<size_t>(base)] =
-      finish_record(dv, t.shape, true, range, sat, counts, topology, &t.gradients, weights_);
+      finish_record(dv, t.geometry->shape, true, range, sat, counts, topology, &t.geometry->gradients, weights_);
 }
 
 void BandTile::find_constant_blocks() {

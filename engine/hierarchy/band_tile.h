@@ -101,17 +101,25 @@ class BandTile {
   // scale-j vertex depends only on its G_j coordinates mod 4 (engine/hierarchy/diamond.cpp), so one
   // template per class serves every vertex whose diamond lies inside the data box: no
   // coordinates, no mirroring, no existence checks. The offsets depend on the window's size
-  // alone, so the tiles of a band, most of one size, share their templates (per thread).
+  // alone, so the tiles of a band, most of one size, share their templates (per thread). The
+  // shape and its gradients (1.6 KB a class, nine tenths of a template) depend on neither the
+  // window nor the thread: made once a process (geometry_of), each template points to them.
+  struct DiamondGeometry {
+    DiamondShape shape;
+    ShapeGradients gradients;
+  };
+  static const DiamondGeometry& geometry_of(const Lattice& l, int j, int parity, const Diamond& d);
   struct DiamondTemplate {
     bool ready = false;
     PolyhedronType type = PolyhedronType::cube;
-    DiamondShape shape;
-    ShapeGradients gradients;
+    const DiamondGeometry* geometry = nullptr;
     int ring_count = 0, same_count = 0, cube_count = 0;
     int64_t a = 0, b = 0, ring[8] = {};  // into values_
     int64_t same[8] = {};                // into records_: children of scale j
     int64_t cube[8] = {};                // into children_: scale j-1 cube centres
   };
+  // A thread's eight sets of 64 (shared_templates) in 4 pages each, not 28.
+  static_assert(sizeof(DiamondTemplate) <= 256, "a template holds offsets; its geometry is shared");
   const DiamondTemplate& template_for(const Box3& g);
   bool inside_data_box(const Box3& g) const;
   // The record of the node at `base` in the window's arrays (index()), `cell` its cell's index.
