@@ -235,9 +235,10 @@ void advise_huge_pages(void* p, size_t bytes) noexcept {
 
 void prefault_in_parallel(void* p, size_t bytes) noexcept {
   if (bytes == 0) return;
-  // Chunks aligned to whole huge pages, so that no two tasks split one; a chunk is 16 faults of
-  // 2 MB, or thousands of 4 KB, enough to outweigh a task.
-  constexpr uintptr_t kChunk = 16 * kHugePage;
+  // Chunks of one huge page, so that no two tasks split one: a fault of 2 MB, or 512 of 4 KB, each
+  // far more than a task costs, and an array of a few MB (a small band's hand-over) is shared
+  // among the threads too.
+  constexpr uintptr_t kChunk = kHugePage;
   const auto begin = reinterpret_cast<uintptr_t>(p), end = begin + bytes;
   const uintptr_t base = begin & ~(kChunk - 1);
   const auto chunks = static_cast<int64_t>((end - base + kChunk - 1) / kChunk);
