@@ -163,7 +163,7 @@ BandTile::DiamondTemplate* BandTile::shared_templates(int k, int j, const Box3& 
 const BandTile::DiamondGeometry& BandTile::geometry_of(const Lattice& l, int j, int parity, const Diamond& d) {
   // Per (k, j), 64 classes, published once each: a thread that finds a class empty makes it from
   // its own vertex of the class (every one gives the same bits) and the first to publish wins.
-  // Kept for the process's life: at most 64 x 1.6 KB a band of each lattice size built.
+  // Kept for the process's life: at most 64 x 1.5 KB a band of each lattice size built.
   constexpr int kMaxK = 40;  // a lattice of 2^40 cells a side: far beyond any volume's
   using Classes = std::array<std::atomic<const DiamondGeometry*>, 64>;
   static std::atomic<Classes*> bands[kMaxK + 1][kMaxK + 1];

@@ -102,7 +102,7 @@ class BandTile {
   // template per class serves every vertex whose diamond lies inside the data box: no
   // coordinates, no mirroring, no existence checks. The offsets depend on the window's size
   // alone, so the tiles of a band, most of one size, share their templates (per thread). The
-  // shape and its gradients (1.6 KB a class, nine tenths of a template) depend on neither the
+  // shape and its gradients (1.5 KB a class, most of a template) depend on neither the
   // window nor the thread: made once a process (geometry_of), each template points to them.
   struct DiamondGeometry {
     DiamondShape shape;
@@ -118,7 +118,7 @@ class BandTile {
     int64_t same[8] = {};                // into records_: children of scale j
     int64_t cube[8] = {};                // into children_: scale j-1 cube centres
   };
-  // A thread's eight sets of 64 (shared_templates) in 4 pages each, not 28.
+  // A thread's eight sets of 64 (shared_templates) in about 4 pages each, not 28.
   static_assert(sizeof(DiamondTemplate) <= 256, "a template holds offsets; its geometry is shared");
   const DiamondTemplate& template_for(const Box3& g);
   bool inside_data_box(const Box3& g) const;

@@ -241,9 +241,8 @@ inline double exact_reciprocal(double d) {
 // or degenerate. Where every det is a power of two and the offsets are at most 2^12 lattice
 // steps (every scale up to 12), M's inverse is exact too, and for integer values up to 2^24 both
 // Cramer's quotients and the inverse's sums are exact: the same gradient bit for bit, from a
-// third of the work. A band's tiles compute it once per shape. Left uninitialized until
-// gradients_of fills it: a band tile holds one for each of its 64 shapes, and tiles of one
-// brick are many.
+// third of the work. Made once a process per class of diamonds (a band tile's templates point to
+// it); left uninitialized until gradients_of fills it.
 struct ShapeGradients {
   bool inverse;       // inv holds the exact inverse for every tetrahedron (above)
   double det[16];     // of tetrahedron t = e * ring_count + i
