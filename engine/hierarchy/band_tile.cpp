@@ -160,6 +160,21 @@ BandTile::DiamondTemplate* BandTile::shared_templates(int k, int j, const Box3& 
   return set.templates;
 }
 
+namespace {
+
+// What SLOT points to, made by MAKE (a unique_ptr) and published there if it points to nothing
+// yet: of threads that race, the first to publish wins and the others free what they made.
+template <class T, class Make>
+T& publish_once(std::atomic<T*>& slot, const Make& make) {
+  T* p = slot.load(std::memory_order_acquire);
+  if (p) return *p;
+  std::unique_ptr<T> made = make();
+  if (slot.compare_exchange_strong(p, made.get(), std::memory_order_acq_rel)) p = made.release();
+  return *p;
+}
+
+}  // namespace
+
 const BandTile::DiamondGeometry& BandTile::geometry_of(const Lattice& l, int j, int parity, const Diamond& d) {
   // Per (k, j), 64 classes, published once each: a thread that finds a class empty makes it from
   // its own vertex of the class (every one gives the same bits) and the first to publish wins.
@@ -168,20 +183,11 @@ const BandTile::DiamondGeometry& BandTile::geometry_of(const Lattice& l, int j, 
   using Classes = std::array<std::atomic<const DiamondGeometry*>, 64>;
   static std::atomic<Classes*> bands[kMaxK + 1][kMaxK + 1];
   if (l.k > kMaxK) throw std::length_error("lattice of 2^" + std::to_string(l.k) + " cells a side");
-  std::atomic<Classes*>& band = bands[l.k][j];
-  Classes* classes = band.load(std::memory_order_acquire);
-  if (!classes) {
-    auto made = std::make_unique<Classes>();  // value-initialized: null pointers
-    if (band.compare_exchange_strong(classes, made.get(), std::memory_order_acq_rel)) classes = made.release();
-  }
-  std::atomic<const DiamondGeometry*>& slot = (*classes)[static_cast<size_t>(parity)];
-  const DiamondGeometry* geometry = slot.load(std::memory_order_acquire);
-  if (geometry) return *geometry;
-  auto made = std::make_unique<DiamondGeometry>();
-  made->shape = shape_of(d, l);
-  made->gradients = gradients_of(made->shape);
-  if (slot.compare_exchange_strong(geometry, made.get(), std::memory_order_acq_rel)) geometry = made.release();
-  return *geometry;
+  Classes& classes = publish_once(bands[l.k][j], [] { return std::make_unique<Classes>(); });  // null pointers
+  return publish_once(classes[static_cast<size_t>(parity)], [&] {
+    const DiamondShape shape = shape_of(d, l);
+    return std::unique_ptr<const DiamondGeometry>(new DiamondGeometry{shape, gradients_of(shape)});
+  });
 }
 
 const BandTile::DiamondTemplate& BandTile::template_for(const Box3& g) {
