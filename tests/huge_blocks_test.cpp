@@ -207,6 +207,20 @@ TEST_F(HugeBlocks, TheAllocatorSendsLargeArraysThroughTheStoreAndSmallOnesToMall
   EXPECT_EQ(kept_huge_block_bytes(), kHugePage) << "the large array's block kept, the small one freed by malloc";
 }
 
+// A huge array, of any size, starts on a huge page (so at a page, as a direct read or write needs)
+// and goes back through the store when it ends, where a kept block is reused.
+TEST_F(HugeBlocks, AHugeArrayStartsOnAHugePageAndEndsThroughTheStore) {
+  keep_freed_huge_blocks(64 * kMB);
+  {
+    const HugeArray<float> small = make_huge_array<float>(3);
+    const HugeArray<unsigned char> large = make_huge_array<unsigned char>(2 * kMB + 1);
+    EXPECT_TRUE(on_huge_page_boundary(small.get()));
+    EXPECT_TRUE(on_huge_page_boundary(large.get()));
+    EXPECT_EQ(kept_huge_block_bytes(), 0u);
+  }
+  EXPECT_EQ(kept_huge_block_bytes(), 3 * kHugePage) << "one huge page for the small array, two for the large one";
+}
+
 // A reservation of address space only: far larger than the memory it will take, handed out
 // however much is kept, never kept itself (though the store would keep a block of its size), and
 // refused beyond an eighth of a `ulimit -v`.

@@ -67,11 +67,16 @@ class LayerRing {
     const int64_t windows = std::max<int64_t>(0, (end - first + layers - 1) / layers);
     marched_.assign(static_cast<size_t>(windows), 0);
     const auto values = static_cast<size_t>(source.dims[0] * source.dims[1] * window_nodes(source.dims, layers));
-    // Written whole by each read before any of it is used: not zero-filled first. Page-aligned, as
-    // a window's first node is in the file whenever the values start at a page: the kernel's copy
-    // from the page cache into a buffer a few bytes past its source's place in a page runs several
-    // times slower (docs/METHOD.md, "Reading and writing files").
-    for (int64_t b = 0; b < std::min(held, windows); ++b) buffers_.push_back(detail::make_page_aligned<T>(values));
+    // Written whole by each read before any of it is used: not zero-filled first. Each buffer starts
+    // at a page, as a window's first node is in the file whenever the values start at a page: the
+    // kernel's copy from the page cache into a buffer a few bytes past its source's place in a page
+    // runs several times slower (docs/METHOD.md, "Reading and writing files"). All of them in one
+    // block of huge pages, each faulted in by the reader just before its first read: into fresh 4
+    // KB pages, the first reads cost several times the rest (docs/METHOD.md, "Fresh memory").
+    stride_ = (values * sizeof(T) + detail::kPageBytes - 1) / detail::kPageBytes * detail::kPageBytes / sizeof(T);
+    const auto count = static_cast<size_t>(std::min(held, windows));
+    block_ = detail::make_huge_array<T>(stride_ * count);
+    held_ = static_cast<int64_t>(count);
     reader_ = std::thread([this] { fill(); });
   }
   ~LayerRing() {
@@ -99,7 +104,7 @@ class LayerRing {
       changed_.notify_all();  // the reader too, when the cancellation was seen here
       std::rethrow_exception(error_);
     }
-    return buffers_[static_cast<size_t>(w) % buffers_.size()].get();
+    return buffer(w);
   }
   // One slab of window w is marched.
   void release(int64_t w) {
@@ -124,9 +129,10 @@ class LayerRing {
   bool cancelled() const { return options_.cancel && options_.cancel->load(std::memory_order_relaxed); }
   int64_t cells_in(int64_t w) const { return std::min(layers_, end_ - first_layer(w)); }
   int64_t slabs_in(int64_t w) const { return (cells_in(w) + slab_layers_ - 1) / slab_layers_; }
+  T* buffer(int64_t w) const { return block_.get() + static_cast<size_t>(w % held_) * stride_; }
 
   void fill() {
-    const auto held = static_cast<int64_t>(buffers_.size());
+    const int64_t held = held_;
     for (int64_t w = 0; w < static_cast<int64_t>(marched_.size()); ++w) {
       {
         std::unique_lock<std::mutex> lock(mutex_);
@@ -136,7 +142,8 @@ class LayerRing {
       }
       try {
         throw_if_cancelled(options_);
-        read_(first_layer(w), cells_in(w) + 1, buffers_[static_cast<size_t>(w % held)].get());
+        if (w < held) detail::prefault(buffer(w), stride_ * sizeof(T));
+        read_(first_layer(w), cells_in(w) + 1, buffer(w));
       } catch (const ExtractionCancelled&) {
         fail(std::current_exception());
         return;
@@ -156,7 +163,9 @@ class LayerRing {
   const std::function<void(int64_t, int64_t, T*)>& read_;
   const ExtractOptions& options_;
   const int64_t first_, end_, layers_, slab_layers_;
-  std::vector<detail::PageAlignedArray<T>> buffers_;
+  size_t stride_ = 0;  // values from a buffer's start to the next's: whole pages
+  int64_t held_ = 0;   // buffers
+  detail::HugeArray<T> block_;
   std::mutex mutex_;
   std::condition_variable changed_;
   int64_t filled_ = 0;            // windows [0, filled_) are in their buffers
