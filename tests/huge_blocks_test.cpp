@@ -213,7 +213,7 @@ TEST_F(HugeBlocks, AHugeArrayStartsOnAHugePageAndEndsThroughTheStore) {
   keep_freed_huge_blocks(64 * kMB);
   {
     const HugeArray<float> small = make_huge_array<float>(3);
-    const HugeArray<unsigned char> large = make_huge_array<unsigned char>(2 * kMB + 1);
+    const HugeArray<float> large = make_huge_array<float>(kMB / 2 + 1);  // a float past 2 MB
     EXPECT_TRUE(on_huge_page_boundary(small.get()));
     EXPECT_TRUE(on_huge_page_boundary(large.get()));
     EXPECT_EQ(kept_huge_block_bytes(), 0u);

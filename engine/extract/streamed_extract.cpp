@@ -25,8 +25,8 @@ namespace {
 
 // What a window aims to hold: sixteen windows on a 256^3 volume, so that reading one overlaps
 // marching the others from the start, and each read is of whole layers, in file order. Small,
-// since every buffer of the ring is fresh memory, which costs more to touch than the march that
-// reads it (docs/METHOD.md, "eps = 0 from a file").
+// since every buffer of the ring is fresh memory, which on 4 KB pages cost more to touch than the
+// march that reads it (docs/METHOD.md, "eps = 0 from a file"; the ring is on huge pages since).
 constexpr int64_t kWindowBytes = int64_t{4} << 20;
 // How often a worker waiting for a window looks at the cancel flag: a cold read of a window may
 // take a while.
@@ -73,10 +73,10 @@ class LayerRing {
     // runs several times slower (docs/METHOD.md, "Reading and writing files"). All of them in one
     // block of huge pages, each faulted in by the reader just before its first read: into fresh 4
     // KB pages, the first reads cost several times the rest (docs/METHOD.md, "Fresh memory").
+    static_assert(detail::kPageBytes % sizeof(T) == 0, "a whole number of values a page");
     stride_ = (values * sizeof(T) + detail::kPageBytes - 1) / detail::kPageBytes * detail::kPageBytes / sizeof(T);
-    const auto count = static_cast<size_t>(std::min(held, windows));
-    block_ = detail::make_huge_array<T>(stride_ * count);
-    held_ = static_cast<int64_t>(count);
+    held_ = std::min(held, windows);
+    if (held_ > 0) block_ = detail::make_huge_array<T>(stride_ * static_cast<size_t>(held_));
     reader_ = std::thread([this] { fill(); });
   }
   ~LayerRing() {
@@ -132,17 +132,17 @@ class LayerRing {
   T* buffer(int64_t w) const { return block_.get() + static_cast<size_t>(w % held_) * stride_; }
 
   void fill() {
-    const int64_t held = held_;
     for (int64_t w = 0; w < static_cast<int64_t>(marched_.size()); ++w) {
       {
         std::unique_lock<std::mutex> lock(mutex_);
-        changed_.wait(
-            lock, [&] { return error_ || w < held || marched_[static_cast<size_t>(w - held)] == slabs_in(w - held); });
+        changed_.wait(lock, [&] {
+          return error_ || w < held_ || marched_[static_cast<size_t>(w - held_)] == slabs_in(w - held_);
+        });
         if (error_) return;
       }
       try {
         throw_if_cancelled(options_);
-        if (w < held) detail::prefault(buffer(w), stride_ * sizeof(T));
+        if (w < held_) detail::prefault(buffer(w), stride_ * sizeof(T));
         read_(first_layer(w), cells_in(w) + 1, buffer(w));
       } catch (const ExtractionCancelled&) {
         fail(std::current_exception());
@@ -164,7 +164,7 @@ class LayerRing {
   const ExtractOptions& options_;
   const int64_t first_, end_, layers_, slab_layers_;
   size_t stride_ = 0;  // values from a buffer's start to the next's: whole pages
-  int64_t held_ = 0;   // buffers
+  int64_t held_ = 0;   // buffers: none where no window is ours
   detail::HugeArray<T> block_;
   std::mutex mutex_;
   std::condition_variable changed_;

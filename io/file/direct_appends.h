@@ -64,8 +64,8 @@ class DirectAppends {
   void writer();
   void syncer();
 
-  // Both buffers in one huge page: a store's every byte passes through them, and their first
-  // touch on 4 KB pages cost 512 page faults (docs/METHOD.md, "Fresh memory").
+  // Both buffers in one huge page: a store's every byte passes through them, and fresh 4 KB pages
+  // cost more to touch first than to fill again (docs/METHOD.md, "Fresh memory").
   detail::HugeArray<unsigned char> block_;
   unsigned char* buffers_[2];
   std::atomic<int> direct_;  // the writer thread may give it up

@@ -222,12 +222,11 @@ PageAlignedArray<T> make_page_aligned(size_t count) {
   return PageAlignedArray<T>(new (std::align_val_t{kPageBytes}) T[count]);
 }
 
-// Arrays on huge pages (allocate_huge), aligned to one and not zero-filled: for buffers of a MB or
-// more that reads or copies fill again and again (a ring of windows read from a file, a writer's
-// buffers). On the reference machine (a virtual machine) a fresh 4 KB page first written by the
-// kernel's copy of a read costs about 16 us: 8 MB read into fresh 4 KB pages took 34 ms, into huge
-// pages faulted in first (prefault) 3.5 ms, and again into the same pages 2.5 ms (docs/METHOD.md,
-// "Fresh memory").
+// Arrays on huge pages (allocate_huge: at least one, whole ones), aligned to one and not
+// zero-filled: for buffers of a MB or more filled again and again (a ring of windows read from a
+// file, a writer's buffers), whose first touch on fresh 4 KB pages costs several times what their
+// later fills do (docs/METHOD.md, "Fresh memory": 8 MB read from a cached file into fresh 4 KB
+// pages 34 ms, into huge pages faulted in first 0.6 + 2.9 ms).
 struct FreeHuge {
   template <class T>
   void operator()(T* p) const {
@@ -239,7 +238,7 @@ using HugeArray = std::unique_ptr<T[], FreeHuge>;
 template <class T>
 HugeArray<T> make_huge_array(size_t count) {
   static_assert(std::is_trivially_default_constructible_v<T> && std::is_trivially_destructible_v<T>);
-  return HugeArray<T>(static_cast<T*>(allocate_huge(std::max<size_t>(1, count) * sizeof(T))));
+  return HugeArray<T>(static_cast<T*>(allocate_huge(count * sizeof(T))));
 }
 
 }  // namespace isotope::detail
