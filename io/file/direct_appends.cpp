@@ -11,10 +11,7 @@
 namespace isotope {
 
 DirectAppends::DirectAppends(int direct, int buffered)
-    : block_(detail::make_huge_array<unsigned char>(2 * kBufferBytes)),
-      buffers_{block_.get(), block_.get() + kBufferBytes},
-      direct_(direct),
-      buffered_(buffered) {
+    : block_(detail::make_huge_array<unsigned char>(2 * kBufferBytes)), direct_(direct), buffered_(buffered) {
   thread_ = std::thread([this] { writer(); });
   try {
     syncer_ = std::thread([this] { syncer(); });
@@ -53,7 +50,7 @@ void DirectAppends::writer() {
   for (;;) {
     changed_.wait(lock, [&] { return pending_ >= 0 || stop_; });
     if (pending_ < 0) return;  // stopped, nothing held
-    const unsigned char* data = buffers_[pending_];
+    const unsigned char* data = buffer(pending_);
     const uint64_t offset = pending_offset_;
     const size_t bytes = pending_bytes_;
     lock.unlock();
@@ -99,7 +96,7 @@ int DirectAppends::append(const void* data, size_t bytes) {
   const auto* p = static_cast<const unsigned char*>(data);
   while (bytes > 0) {
     const size_t piece = std::min(bytes, kBufferBytes - used_);
-    std::memcpy(buffers_[fill_] + used_, p, piece);
+    std::memcpy(buffer(fill_) + used_, p, piece);
     used_ += piece, p += piece, bytes -= piece;
     if (used_ < kBufferBytes) break;
     // Full: to the writer, once it is done with the other buffer, which this one then becomes.
@@ -127,13 +124,13 @@ int DirectAppends::overwrite(uint64_t offset, const void* data, size_t bytes) {
     if (const int err = pwrite_all(buffered_, p, before, offset)) return err;
     p += before, offset += before, bytes -= before;
   }
-  if (bytes > 0) std::memcpy(buffers_[fill_] + (offset - written_), p, bytes);
+  if (bytes > 0) std::memcpy(buffer(fill_) + (offset - written_), p, bytes);
   return 0;
 }
 
 int DirectAppends::drain() {
   if (const int err = wait_idle()) return err;
-  const unsigned char* data = buffers_[fill_];
+  const unsigned char* data = buffer(fill_);
   const size_t whole = used_ / kAlign * kAlign;
   if (const int err = write_out(data, whole, written_)) return err;
   if (const int err = pwrite_all(buffered_, data + whole, used_ - whole, written_ + whole)) return err;

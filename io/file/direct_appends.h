@@ -67,7 +67,7 @@ class DirectAppends {
   // Both buffers in one huge page: a store's every byte passes through them, and fresh 4 KB pages
   // cost more to touch first than to fill again (docs/METHOD.md, "Fresh memory").
   detail::HugeArray<unsigned char> block_;
-  unsigned char* buffers_[2];
+  unsigned char* buffer(int i) const { return block_.get() + static_cast<size_t>(i) * kBufferBytes; }
   std::atomic<int> direct_;  // the writer thread may give it up
   int buffered_;
   int fill_ = 0;          // the buffer being filled
