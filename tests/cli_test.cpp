@@ -811,10 +811,20 @@ TEST_F(Cli, ReportSaysWhetherAStoresReadsWaitedForTheDisk) {
   // Byte 1024: the first brick's, past the header (docs/FORMAT.md).
   if (isotope::testing::page_cached(store, 1024) != 1)
     GTEST_SKIP() << "the file system refuses RWF_NOWAIT, or does not keep " << store << " in the page cache";
-  // Two threads: on many, every slab could begin before a read waited, and find the bricks it
-  // would have asked for read by then.
-  const nlohmann::json warm = extract_report(quote(store) + " --iso 0 --threads 2");
-  ASSERT_TRUE(warm.contains("cache")) << warm;
+  // The warm half, up to three tries, each from a store read whole into the page cache again:
+  // once, in a CI run under ASan+UBSan with another test beside it, one read of the warm store
+  // waited (a page of it dropped under memory pressure, as far as can be told). A try in which a
+  // read waited is taken again; a reader that always waits, or says so of reads that did not,
+  // fails all three. Two threads: on many, every slab could begin before a read waited, and find
+  // the bricks it would have asked for read by then.
+  nlohmann::json warm;
+  for (int tries = 0; tries < 3; ++tries) {
+    if (!isotope::testing::read_into_page_cache(store)) continue;
+    warm = extract_report(quote(store) + " --iso 0 --threads 2");
+    ASSERT_TRUE(warm.contains("cache")) << warm;
+    if (warm["cache"]["read_waits"].get<int64_t>() == 0) break;
+  }
+  if (warm.empty()) GTEST_SKIP() << "the page cache did not keep " << store << " whole in three tries";
   EXPECT_GT(warm["bricks_read"].get<int64_t>(), 0);
   EXPECT_EQ(warm["cache"]["read_waits"].get<int64_t>(), 0) << warm["cache"];
   EXPECT_EQ(warm["cache"]["read_hints"].get<int64_t>(), 0) << warm["cache"];

@@ -16,6 +16,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <random>
 #include <set>
 #include <span>
@@ -999,11 +1000,20 @@ TEST_F(PagedExtract, ReadHintsOnlyOnceReadsWaitForTheDisk) {
   o.iso = 0.0f;
   o.topology = TopologyMode::none;
   {
-    const StoreReader store(file);
-    const PagedRun warm = run_paged(store, kHugeBudget, o);
-    EXPECT_GT(warm.cache.bricks_read, 0);
-    EXPECT_EQ(warm.cache.read_waits, 0);
-    EXPECT_EQ(warm.cache.read_hints, 0);
+    // Up to three tries, each from the file read whole into the page cache again: under memory
+    // pressure the kernel may drop a page of it before the extraction reads it (seen once in
+    // CI, by the command's twin of this test). A reader that always waits fails all three.
+    std::optional<PagedRun> warm;
+    for (int tries = 0; tries < 3; ++tries) {
+      if (!testing::read_into_page_cache(file)) continue;
+      const StoreReader store(file);
+      warm = run_paged(store, kHugeBudget, o);
+      if (warm->cache.read_waits == 0) break;
+    }
+    if (!warm) GTEST_SKIP() << "the page cache did not keep " << file << " whole in three tries";
+    EXPECT_GT(warm->cache.bricks_read, 0);
+    EXPECT_EQ(warm->cache.read_waits, 0);
+    EXPECT_EQ(warm->cache.read_hints, 0);
   }
   ASSERT_TRUE(testing::drop_from_page_cache(file)) << file << ": fdatasync or posix_fadvise failed";
   if (testing::page_cached(file, kHeaderBytes) != 0)

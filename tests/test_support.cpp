@@ -147,11 +147,24 @@ int page_cached(const std::string& file, uint64_t offset) {
   return got == 1 ? 1 : (got < 0 && error == EAGAIN) ? 0 : -1;
 }
 
-void read_into_page_cache(const std::string& file) {
-  std::ifstream in(file, std::ios::binary);
-  std::vector<char> chunk(size_t{1} << 20);
-  while (in.read(chunk.data(), static_cast<std::streamsize>(chunk.size())) || in.gcount() > 0) {
+bool read_into_page_cache(const std::string& file) {
+  {
+    std::ifstream in(file, std::ios::binary);
+    std::vector<char> chunk(size_t{1} << 20);
+    while (in.read(chunk.data(), static_cast<std::streamsize>(chunk.size())) || in.gcount() > 0) {
+    }
   }
+  // Then whether every page stayed: under memory pressure the kernel may drop what was just read.
+  const int fd = ::open(file.c_str(), O_RDONLY);
+  if (fd < 0) return false;
+  const auto bytes = static_cast<size_t>(::lseek(fd, 0, SEEK_END));
+  void* map = bytes > 0 ? ::mmap(nullptr, bytes, PROT_READ, MAP_SHARED, fd, 0) : MAP_FAILED;
+  ::close(fd);
+  if (map == MAP_FAILED) return false;
+  std::vector<unsigned char> resident((bytes + 4095) / 4096);
+  const bool known = ::mincore(map, bytes, resident.data()) == 0;
+  ::munmap(map, bytes);
+  return known && std::all_of(resident.begin(), resident.end(), [](unsigned char r) { return (r & 1) != 0; });
 }
 
 bool drop_from_page_cache(const std::string& file) {

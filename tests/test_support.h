@@ -52,8 +52,9 @@ Volume crop(const Volume& v, std::array<int64_t, 3> dims);
 // Whether the page cache holds the byte at `offset` of `file`, without reading it in: 1 it does, 0 it does not, -1 this
 // cannot be told (the file does not open, or its file system refuses RWF_NOWAIT reads).
 int page_cached(const std::string& file, uint64_t offset);
-// Reads the file whole, so that the page cache holds it (as far as it keeps what was read).
-void read_into_page_cache(const std::string& file);
+// Reads the file whole, so that the page cache holds it, and says whether it then holds every
+// page (mincore; false too when that cannot be told).
+bool read_into_page_cache(const std::string& file);
 // Writes the file's dirty pages and asks the kernel to drop the file from the page cache. False
 // when either fails; a file system in memory may keep the pages all the same (page_cached tells).
 bool drop_from_page_cache(const std::string& file);
