@@ -832,59 +832,86 @@ std::vector<unsigned char> pages_in_cache(const std::string& file, size_t bytes)
   return resident;
 }
 
-// A large region's whole pages go past the page cache (O_DIRECT) and its partial pages through it:
-// filled on several threads, out of order, in pieces of odd sizes at odd offsets (large ones, ones
-// of about 64 KB whose whole pages may or may not be enough for a direct write, small ones), the
-// file holds every byte in its place, and where the file system takes direct writes, most of its
-// pages are not in the page cache once it is finished (the direct writes never put them there).
-TEST_F(IoTest, AtomicFileLargeRegionsGoPastThePageCacheWithTheSameBytes) {
-  const std::string p = path("large_regions.bin");
-  const size_t n = (size_t{5} << 20) + 4099;
-  std::vector<unsigned char> bytes(n);
-  for (size_t i = 0; i < n; ++i) bytes[i] = static_cast<unsigned char>(i * 11 + i / 4091);
-  std::vector<std::pair<size_t, size_t>> pieces;  // [begin, end)
-  for (size_t at = 0, k = 0; at < n; ++k) {
-    const size_t length = std::min(n - at, k % 3 == 0 ? 852001 + 37 * k : k % 3 == 1 ? 70001 - 7 * k : 1000 + k);
-    pieces.emplace_back(at, at + length);
-    at += length;
-  }
-  std::vector<unsigned char> expected{'h', 'e', 'a', 'd', 'e', 'r'};  // the region starts 6 bytes into a page
-  std::vector<unsigned char> resident;
-  {
-    AtomicFile f(p);
-    f.write("header", 6);
-    const uint64_t at = f.append_region(n);
-    std::atomic<size_t> taken{0};
-    std::vector<std::thread> threads;
-    for (int t = 0; t < 3; ++t)
-      threads.emplace_back([&] {
-        for (size_t i; (i = taken++) < pieces.size();) {
-          const auto [begin, end] = pieces[pieces.size() - 1 - i];  // the last piece first
-          f.write_region(at + begin, bytes.data() + begin, end - begin);
-        }
-      });
-    for (std::thread& th : threads) th.join();
-    f.write("tail", 4);
-    f.finish();
-    resident = pages_in_cache(f.temp_path(), 6 + n + 4);
-    f.commit();
-  }
-  expected.insert(expected.end(), bytes.begin(), bytes.end());
-  expected.insert(expected.end(), {'t', 'a', 'i', 'l'});
-  EXPECT_EQ(read_bytes(p), expected);
-  // Whether this file system's direct writes leave the page cache alone: 64 KB written so, then looked for.
-  const std::string probe = path("probe.bin");
+// Why direct writes into DIR would not leave its page cache alone ("" where they do): 64 KB written
+// so, then looked for.
+std::string no_direct_writes_in(const std::string& dir) {
+  const std::string probe = dir + "/probe.bin";
   const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_DIRECT | O_CLOEXEC, 0644);
-  if (fd < 0) GTEST_SKIP() << "the file system of " << dir_ << " takes no O_DIRECT: " << std::strerror(errno);
+  if (fd < 0) return "the file system of " + dir + " takes no O_DIRECT: " + std::strerror(errno);
   const auto block = detail::make_page_aligned<unsigned char>(size_t{64} << 10);
   std::memset(block.get(), 7, size_t{64} << 10);
   const bool written = ::pwrite(fd, block.get(), size_t{64} << 10, 0) == (ssize_t{64} << 10);
   ::close(fd);
   const std::vector<unsigned char> probed = pages_in_cache(probe, size_t{64} << 10);
+  std::filesystem::remove(probe);
   if (!written || std::any_of(probed.begin(), probed.end(), [](unsigned char r) { return (r & 1) != 0; }))
-    GTEST_SKIP() << "the file system of " << dir_ << " takes no direct write past its page cache";
-  const auto cached = std::count_if(resident.begin(), resident.end(), [](unsigned char r) { return (r & 1) != 0; });
-  EXPECT_LT(cached, static_cast<std::ptrdiff_t>(resident.size() / 10)) << "of " << resident.size() << " pages";
+    return "the file system of " + dir + " takes no direct write past its page cache";
+  return "";
+}
+
+// A large region's whole pages go past the page cache (O_DIRECT) and its partial pages through it,
+// whether a piece is copied from the caller's bytes (write_region) or encoded in place
+// (fill_region): filled on several threads, out of order, in pieces of odd sizes at odd offsets
+// (large ones, ones of about 64 KB whose whole pages may or may not be enough for a direct write,
+// small ones), the file holds every byte in its place, and where the file system takes direct
+// writes, most of its pages are not in the page cache once it is finished (the direct writes never
+// put them there). A piece larger than fill_region takes is refused.
+TEST_F(IoTest, AtomicFileLargeRegionsGoPastThePageCacheWithTheSameBytes) {
+  const size_t n = (size_t{9} << 20) + 4099;
+  std::vector<unsigned char> bytes(n);
+  for (size_t i = 0; i < n; ++i) bytes[i] = static_cast<unsigned char>(i * 11 + i / 4091);
+  std::vector<std::pair<size_t, size_t>> pieces;  // [begin, end): at most one region piece each
+  for (size_t at = 0, k = 0; at < n; ++k) {
+    const size_t length = std::min({n - at, AtomicFile::kRegionPieceBytes - k % 2,
+                                    k % 4 == 0   ? AtomicFile::kRegionPieceBytes - k
+                                    : k % 4 == 1 ? 852001 + 37 * k
+                                    : k % 4 == 2 ? 70001 - 7 * k
+                                                 : 1000 + k});
+    pieces.emplace_back(at, at + length);
+    at += length;
+  }
+  std::vector<unsigned char> expected{'h', 'e', 'a', 'd', 'e', 'r'};  // the region starts 6 bytes into a page
+  expected.insert(expected.end(), bytes.begin(), bytes.end());
+  expected.insert(expected.end(), {'t', 'a', 'i', 'l'});
+  const std::string no_direct = no_direct_writes_in(dir_.string());
+  for (const bool fill : {false, true}) {
+    SCOPED_TRACE(fill ? "fill_region" : "write_region");
+    const std::string p = path(fill ? "filled_regions.bin" : "large_regions.bin");
+    std::vector<unsigned char> resident;
+    {
+      AtomicFile f(p);
+      f.write("header", 6);
+      const uint64_t at = f.append_region(n);
+      std::atomic<size_t> taken{0};
+      std::vector<std::thread> threads;
+      for (int t = 0; t < 3; ++t)
+        threads.emplace_back([&] {
+          for (size_t i; (i = taken++) < pieces.size();) {
+            const auto [begin, end] = pieces[pieces.size() - 1 - i];  // the last piece first
+            if (fill)
+              f.fill_region(at + begin, end - begin, [&, begin = begin, end = end](unsigned char* out) {
+                std::copy(bytes.begin() + static_cast<std::ptrdiff_t>(begin),
+                          bytes.begin() + static_cast<std::ptrdiff_t>(end), out);
+              });
+            else
+              f.write_region(at + begin, bytes.data() + begin, end - begin);
+          }
+        });
+      for (std::thread& th : threads) th.join();
+      if (fill) {
+        EXPECT_THROW(f.fill_region(at, AtomicFile::kRegionPieceBytes + 1, [](unsigned char*) {}), std::logic_error);
+      }
+      f.write("tail", 4);
+      f.finish();
+      resident = pages_in_cache(f.temp_path(), 6 + n + 4);
+      f.commit();
+    }
+    EXPECT_TRUE(read_bytes(p) == expected) << p << " differs from the bytes written";
+    if (!no_direct.empty()) continue;
+    const auto cached = std::count_if(resident.begin(), resident.end(), [](unsigned char r) { return (r & 1) != 0; });
+    EXPECT_LT(cached, static_cast<std::ptrdiff_t>(resident.size() / 10)) << "of " << resident.size() << " pages";
+  }
+  if (!no_direct.empty()) GTEST_SKIP() << no_direct;
 }
 
 // Direct appends (io/file/direct_appends.h) write the bytes they were given, past the page cache

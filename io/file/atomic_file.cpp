@@ -9,8 +9,11 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <functional>
+#include <stdexcept>
 #include <system_error>
 #include <utility>
+#include <vector>
 
 #include "io/file/direct_appends.h"
 #include "io/file/positioned_io.h"
@@ -232,17 +235,23 @@ void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) c
     // "Reading and writing files").
     if (const int err = pwrite_all(buffered, p, first - offset, offset))
       throw IoError(path_ + ": write failed: " + errno_text(err));
-    unsigned char* bounce = positioned_detail::bounce_buffer();
+    // Bytes placed as the file's pages are (fill_region's) go as they are; others through this
+    // thread's bounce buffer, a piece at a time.
+    const bool in_place = ((reinterpret_cast<uintptr_t>(p) - offset) & (kPage - 1)) == 0;
+    unsigned char* bounce = in_place ? nullptr : positioned_detail::bounce_buffer();
     for (uint64_t at = first; at < last;) {
-      const size_t piece = static_cast<size_t>(std::min<uint64_t>(last - at, positioned_detail::kBounceBytes));
+      static_assert(kRegionPieceBytes <= positioned_detail::kBounceBytes, "a piece is one bounce");
+      const size_t piece = static_cast<size_t>(std::min<uint64_t>(last - at, kRegionPieceBytes));
       const unsigned char* from = p + (at - offset);
       int err = EINVAL;
-      if (bounce != nullptr && regions_direct_.load(std::memory_order_relaxed)) {
+      if (in_place && regions_direct_.load(std::memory_order_relaxed)) {
+        err = pwrite_all(region_fd_, from, piece, at);
+      } else if (bounce != nullptr && regions_direct_.load(std::memory_order_relaxed)) {
         std::memcpy(bounce, from, piece);
         err = pwrite_all(region_fd_, bounce, piece, at);
       }
       if (err == EINVAL) {  // refused (or no bounce buffer): through the page cache, from here on
-        if (bounce != nullptr) regions_direct_ = false;
+        if (in_place || bounce != nullptr) regions_direct_ = false;
         err = pwrite_all(buffered, from, piece, at);
       }
       if (err != 0) throw IoError(path_ + ": write failed: " + errno_text(err));
@@ -259,6 +268,21 @@ void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) c
   // encode theirs: finish()'s fsync then waits for less (a hint; what fails shows at the fsync).
   static_cast<void>(
       ::sync_file_range(buffered, static_cast<off_t>(offset), static_cast<off_t>(bytes), SYNC_FILE_RANGE_WRITE));
+}
+
+void AtomicFile::fill_region(uint64_t offset, size_t bytes, const std::function<void(unsigned char*)>& fill) const {
+  if (bytes > kRegionPieceBytes) throw std::logic_error("fill_region: more than a piece");
+  // This thread's bounce buffer has a page beyond kBounceBytes: room for the piece at the file
+  // offset's place in its page.
+  if (unsigned char* bounce = positioned_detail::bounce_buffer()) {
+    unsigned char* p = positioned_detail::bounce_at(bounce, offset);
+    fill(p);
+    write_region(offset, p, bytes);  // in place: the bounce buffer is not copied into again
+    return;
+  }
+  std::vector<unsigned char> own(bytes);  // no bounce buffer (memory is out): a buffer of its own
+  fill(own.data());
+  write_region(offset, own.data(), bytes);
 }
 
 void AtomicFile::continue_at(uint64_t offset) {

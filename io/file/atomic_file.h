@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cstdint>
 #include <cstdio>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -66,7 +67,15 @@ class AtomicFile {
   // all through the page cache, its writeback started at once (not for a transient file). The
   // bytes on disk are the same.
   void write_region(uint64_t offset, const void* data, size_t bytes) const;
+  // Writes BYTES at OFFSET inside a region as write_region() does, from what FILL puts at the
+  // pointer it is given: placed as the file's pages are, they go to the disk with no copy (a
+  // record encoded straight into its place). At most kRegionPieceBytes. Safe on several threads.
+  void fill_region(uint64_t offset, size_t bytes, const std::function<void(unsigned char*)>& fill) const;
   static constexpr uint64_t kDirectRegionBytes = uint64_t{1} << 20;
+  // The most of a piece that goes to the disk in one direct write: a caller that writes a region
+  // in pieces of this size pays one request each. Requests of 4 MB moved twice what 1 MB moved
+  // (docs/METHOD.md, "Reading and writing files").
+  static constexpr size_t kRegionPieceBytes = size_t{4} << 20;
   // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
   // into temp_path() meanwhile (a distributed convert, io/store/store_writer.cpp). Direct appends
   // end here: all writes after it go through the page cache.

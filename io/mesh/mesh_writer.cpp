@@ -16,7 +16,6 @@
 #include <utility>
 #include <vector>
 
-#include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_normals.h"
 #include "io/file/extension.h"
@@ -28,6 +27,10 @@ namespace {
 
 constexpr size_t kBlockItems = size_t{1} << 16;  // items per buffered write
 constexpr size_t kWindowBlocks = 8;              // blocks encoded at once, in parallel
+
+// Records of RECORD_BYTES per block of a region (AtomicFile::append_region): a block that large
+// reaches the disk in one direct write (AtomicFile::kRegionPieceBytes).
+constexpr size_t region_block_items(size_t record_bytes) { return AtomicFile::kRegionPieceBytes / record_bytes; }
 
 using Bytes = std::vector<unsigned char>;
 
@@ -100,23 +103,15 @@ void write_blocks(AtomicFile& out, size_t count, Encode encode) {
   }
 }
 
-// Buffers of a block of records, lent from block to block (not zero-filled: each is written
-// whole first).
-using BlockBuffer = std::unique_ptr<unsigned char[]>;
-using BlockBuffers = LendingPool<BlockBuffer>;
-
-// Records ITEMS[0..) of RECORD_BYTES each (at most kBlockItems), the first being record FIRST of
+// Records ITEMS[0..) of RECORD_BYTES each (at most region_block_items), the first being record FIRST of
 // a region append_region() made at AT: PUT(p, item) writes one at p and returns the end. Encoded
-// into a lent buffer and written by the calling thread.
+// straight into the place the calling thread writes them from (AtomicFile::fill_region).
 template <typename Item, typename Put>
-void write_record_block(AtomicFile& out, uint64_t at, size_t first, std::span<const Item> items, size_t record_bytes,
-                        BlockBuffers& buffers, Put put) {
-  std::unique_ptr<BlockBuffer> buffer =
-      buffers.take([&] { return std::make_unique<BlockBuffer>(new unsigned char[kBlockItems * record_bytes]); });
-  unsigned char* p = buffer->get();
-  for (const Item& item : items) p = put(p, item);
-  out.write_region(at + first * record_bytes, buffer->get(), items.size() * record_bytes);
-  buffers.give(std::move(buffer));
+void write_record_block(const AtomicFile& out, uint64_t at, size_t first, std::span<const Item> items,
+                        size_t record_bytes, Put put) {
+  out.fill_region(at + first * record_bytes, items.size() * record_bytes, [&](unsigned char* p) {
+    for (const Item& item : items) p = put(p, item);
+  });
 }
 
 // Items of RECORD_BYTES each: PUT(p, item) writes one at p and returns the end. Every block's
@@ -126,10 +121,10 @@ template <typename Items, typename Put>
 void write_records(AtomicFile& out, const Items& items, size_t record_bytes, Put put) {
   const size_t count = items.size();
   const uint64_t at = out.append_region(count * record_bytes);
-  BlockBuffers buffers;
-  parallel_for(int64_t{0}, static_cast<int64_t>((count + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
-    const size_t begin = static_cast<size_t>(b) * kBlockItems, end = std::min(count, begin + kBlockItems);
-    write_record_block(out, at, begin, std::span(items.data() + begin, end - begin), record_bytes, buffers, put);
+  const size_t block = region_block_items(record_bytes);
+  parallel_for(int64_t{0}, static_cast<int64_t>((count + block - 1) / block), [&](int64_t b) {
+    const size_t begin = static_cast<size_t>(b) * block, end = std::min(count, begin + block);
+    write_record_block(out, at, begin, std::span(items.data() + begin, end - begin), record_bytes, put);
   });
 }
 
@@ -150,8 +145,9 @@ void write_as_stored(AtomicFile& out, const Items& items) {
   if constexpr (std::endian::native == std::endian::little) {
     const size_t count = items.size();
     const uint64_t at = out.append_region(count * sizeof(Item));
-    parallel_for(int64_t{0}, static_cast<int64_t>((count + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
-      const size_t begin = static_cast<size_t>(b) * kBlockItems, end = std::min(count, begin + kBlockItems);
+    const size_t block = region_block_items(sizeof(Item));
+    parallel_for(int64_t{0}, static_cast<int64_t>((count + block - 1) / block), [&](int64_t b) {
+      const size_t begin = static_cast<size_t>(b) * block, end = std::min(count, begin + block);
       out.write_region(at + begin * sizeof(Item), items.data() + begin, (end - begin) * sizeof(Item));
     });
   } else {
@@ -181,16 +177,16 @@ unsigned char* put_ply_face(unsigned char* p, const std::array<uint32_t, 3>& t) 
 void write_ply_faces(AtomicFile& out, const Mesh& mesh) {
   const size_t count = mesh.triangles.size(), n = mesh.positions.size();
   const uint64_t at = out.append_region(count * 13);
-  BlockBuffers buffers;
   std::atomic<bool> bad{false};
-  parallel_for(int64_t{0}, static_cast<int64_t>((count + kBlockItems - 1) / kBlockItems), [&](int64_t b) {
-    const size_t begin = static_cast<size_t>(b) * kBlockItems, end = std::min(count, begin + kBlockItems);
+  const size_t block_items = region_block_items(13);
+  parallel_for(int64_t{0}, static_cast<int64_t>((count + block_items - 1) / block_items), [&](int64_t b) {
+    const size_t begin = static_cast<size_t>(b) * block_items, end = std::min(count, begin + block_items);
     const std::span<const std::array<uint32_t, 3>> block(mesh.triangles.data() + begin, end - begin);
     if (greatest_index(block) >= n) {
       bad = true;
       return;
     }
-    write_record_block(out, at, begin, block, 13, buffers, put_ply_face);
+    write_record_block(out, at, begin, block, 13, put_ply_face);
   });
   if (bad) check_indices(mesh, out.path());
 }
@@ -279,11 +275,10 @@ void encode_stl(const Mesh& mesh, AtomicFile& out) {
 // gets NONE: glTF requires unit length, so its writer gives +z, which no shading of a zero-area
 // triangle can show; VTK's takes 0, as isotope::vertex_normals gives.
 void write_normals(AtomicFile& out, const Mesh& mesh, const std::array<float, 3>& none) {
-  static_assert(kNormalsPerRun <= kBlockItems, "a run of normals is written as one block");
+  static_assert(kNormalsPerRun <= region_block_items(12), "a run of normals is written as one block");
   const uint64_t at = out.append_region(mesh.positions.size() * 12);
-  BlockBuffers buffers;
   for_each_vertex_normals_run(mesh, none, [&](uint32_t first, std::span<const std::array<float, 3>> normals) {
-    write_record_block(out, at, first, normals, 12, buffers, put_vec3);
+    write_record_block(out, at, first, normals, 12, put_vec3);
   });
 }
 
