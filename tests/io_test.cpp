@@ -37,6 +37,7 @@
 #include "engine/mesh/vertex_normals.h"
 #include "io/file/atomic_file.h"
 #include "io/file/direct_appends.h"
+#include "io/file/region_writes.h"
 #include "io/file/temporary_registry.h"
 #include "io/mesh/mesh_writer.h"
 #include "io/store/store_reader.h"
@@ -977,6 +978,67 @@ TEST_F(IoTest, DirectAppendsReportAFailedWriteByTheirWriterThread) {
     EXPECT_EQ(append_and_drain(appends, 3), EBADF);
   }
   ::close(read_only);
+}
+
+// A region's writer thread (io/file/region_writes.h) writes what it is handed: a write it fails
+// (here: a descriptor not open for writing) is reported by the next take() and by drain(), with
+// its errno, and what is handed over after it is dropped; a direct write the kernel refuses
+// (EINVAL: here bytes not aligned in memory) goes through the page cache with the same bytes, as
+// every write after it; a writer destroyed with writes not made drops them.
+TEST_F(IoTest, RegionWritesReportAFailureAndFallBackWhereDirectWritesAreRefused) {
+  constexpr size_t kPiece = size_t{256} << 10;
+  const std::string p = path("region_writes.bin");
+  write_values(p, std::vector<uint8_t>{1});
+  {
+    const int read_only = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+    ASSERT_GE(read_only, 0);
+    {
+      RegionWrites writes(read_only, read_only, kPiece);
+      int err = 0;
+      unsigned char* buffer = writes.take(err);
+      ASSERT_NE(buffer, nullptr);
+      std::memset(buffer, 3, kPiece);
+      writes.submit(buffer, buffer, kPiece, 0);
+      EXPECT_EQ(writes.drain(), EBADF);
+      EXPECT_EQ(writes.take(err), nullptr);
+      EXPECT_EQ(err, EBADF);
+    }
+    ::close(read_only);
+  }
+  const int buffered = ::open(p.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
+  const int direct = ::open(p.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
+  ASSERT_GE(buffered, 0);
+  if (direct < 0) {
+    ::close(buffered);
+    GTEST_SKIP() << "the file system of " << dir_ << " takes no O_DIRECT: " << std::strerror(errno);
+  }
+  std::vector<unsigned char> expected(3 * kPiece);
+  {
+    RegionWrites writes(direct, buffered, kPiece);
+    for (size_t k = 0; k < 3; ++k) {  // the second from one byte into its buffer: refused direct
+      int err = 0;
+      unsigned char* buffer = writes.take(err);
+      ASSERT_NE(buffer, nullptr) << err;
+      unsigned char* from = buffer + (k == 1 ? 1 : 0);
+      for (size_t i = 0; i < kPiece; ++i) from[i] = expected[k * kPiece + i] = static_cast<unsigned char>(i * 5 + k);
+      writes.submit(buffer, from, kPiece, k * kPiece);
+    }
+    EXPECT_EQ(writes.drain(), 0);
+  }
+  EXPECT_TRUE(read_bytes(p) == expected) << p << " differs from the bytes handed over";
+  {
+    RegionWrites writes(direct, buffered, kPiece);
+    for (int k = 0; k < 2; ++k) {
+      int err = 0;
+      unsigned char* buffer = writes.take(err);
+      ASSERT_NE(buffer, nullptr) << err;
+      std::memset(buffer, 9, kPiece);
+      writes.submit(buffer, buffer, kPiece, (3 + k) * kPiece);
+    }
+  }  // destroyed without a drain: ends, whatever it wrote of the two
+  ::close(direct);
+  ::close(buffered);
+  EXPECT_TRUE(std::equal(expected.begin(), expected.end(), read_bytes(p).begin()));
 }
 
 // Every few MB written, the appends' own thread makes them durable while the caller goes on: a

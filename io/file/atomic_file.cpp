@@ -17,6 +17,7 @@
 
 #include "io/file/direct_appends.h"
 #include "io/file/positioned_io.h"
+#include "io/file/region_writes.h"
 #include "io/file/temporary_registry.h"
 #include "isotope/error.h"
 
@@ -172,6 +173,7 @@ AtomicFile::AtomicFile(std::string path, Appends appends) : path_(std::move(path
 
 AtomicFile::~AtomicFile() {
   end_direct();
+  region_writes_.reset();
   if (region_fd_ >= 0) ::close(region_fd_);
   if (file_ != nullptr) std::fclose(file_);
   if (!committed_ && !temp_path_.empty()) std::remove(temp_path_.c_str());
@@ -212,55 +214,63 @@ void AtomicFile::write_at(uint64_t offset, const void* data, size_t bytes) {
 uint64_t AtomicFile::append_region(uint64_t bytes) {
   const uint64_t at = size_;
   continue_at(at + bytes);
-  // Opened once, on the first large region: a small mesh's file never asks for it.
-  if (bytes >= kDirectRegionBytes && region_fd_ < 0 && !transient_ && regions_direct_.load(std::memory_order_relaxed)) {
+  // Opened once, on the first large region: a small mesh's file never asks for it. Without the
+  // descriptor, or memory and a thread for the writes, regions go through the page cache.
+  if (bytes >= kDirectRegionBytes && !region_tried_ && !transient_) {
+    region_tried_ = true;
     region_fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
-    if (region_fd_ < 0) regions_direct_ = false;
+    if (region_fd_ >= 0) {
+      try {
+        region_writes_ = std::make_unique<RegionWrites>(region_fd_, ::fileno(file_), kRegionPieceBytes);
+      } catch (const std::exception&) {
+      }
+    }
   }
   return at;
 }
 
-void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) const {
+void AtomicFile::check_region(uint64_t offset, size_t bytes) const {
   if (file_ == nullptr) throw IoError(path_ + ": write after finish");
   if (offset + bytes > size_) throw IoError(path_ + ": write_region past the regions appended");
-  const int buffered = ::fileno(file_);
-  const auto* p = static_cast<const unsigned char*>(data);
+}
+
+bool AtomicFile::write_region_direct(uint64_t offset, const unsigned char* p, size_t bytes,
+                                     unsigned char* in_buffer) const {
   // The whole pages of the piece: [first, last).
   constexpr uint64_t kPage = detail::kPageBytes;
   const uint64_t first = (offset + kPage - 1) & ~(kPage - 1), last = (offset + bytes) & ~(kPage - 1);
-  if (region_fd_ >= 0 && last > first && last - first >= kMinDirectBytes &&
-      regions_direct_.load(std::memory_order_relaxed)) {
-    // Through the page cache, a mesh's copy into fresh pages took a third of a one-shot eps 0's
-    // processor time, and parallel buffered writes queued on the file's lock (docs/METHOD.md,
-    // "Reading and writing files").
-    if (const int err = pwrite_all(buffered, p, first - offset, offset))
-      throw IoError(path_ + ": write failed: " + errno_text(err));
-    // Bytes placed as the file's pages are (fill_region's) go as they are; others through this
-    // thread's bounce buffer, a piece at a time.
-    const bool in_place = ((reinterpret_cast<uintptr_t>(p) - offset) & (kPage - 1)) == 0;
-    unsigned char* bounce = in_place ? nullptr : positioned_detail::bounce_buffer();
-    for (uint64_t at = first; at < last;) {
-      static_assert(kRegionPieceBytes <= positioned_detail::kBounceBytes, "a piece is one bounce");
-      const size_t piece = static_cast<size_t>(std::min<uint64_t>(last - at, kRegionPieceBytes));
-      const unsigned char* from = p + (at - offset);
-      int err = EINVAL;
-      if (in_place && regions_direct_.load(std::memory_order_relaxed)) {
-        err = pwrite_all(region_fd_, from, piece, at);
-      } else if (bounce != nullptr && regions_direct_.load(std::memory_order_relaxed)) {
-        std::memcpy(bounce, from, piece);
-        err = pwrite_all(region_fd_, bounce, piece, at);
-      }
-      if (err == EINVAL) {  // refused (or no bounce buffer): through the page cache, from here on
-        if (in_place || bounce != nullptr) regions_direct_ = false;
-        err = pwrite_all(buffered, from, piece, at);
-      }
-      if (err != 0) throw IoError(path_ + ": write failed: " + errno_text(err));
-      at += piece;
-    }
-    if (const int err = pwrite_all(buffered, p + (last - offset), offset + bytes - last, last))
-      throw IoError(path_ + ": write failed: " + errno_text(err));
-    return;
+  if (!region_writes_ || last <= first || last - first < kMinDirectBytes) return false;
+  // Through the page cache, a mesh's copy into fresh pages took a third of a one-shot eps 0's
+  // processor time, and parallel buffered writes queued on the file's lock; a direct write made
+  // by the thread that encoded the piece held it back from encoding the next (docs/METHOD.md,
+  // "Reading and writing files"). So the partial pages at the two ends go through the page cache
+  // here, and the whole pages to the writer thread, in a buffer of its own.
+  const int buffered = ::fileno(file_);
+  int err = pwrite_all(buffered, p, first - offset, offset);
+  if (err == 0) err = pwrite_all(buffered, p + (last - offset), offset + bytes - last, last);
+  if (err != 0) {
+    if (in_buffer != nullptr) region_writes_->give_back(in_buffer);
+    throw IoError(path_ + ": write failed: " + errno_text(err));
   }
+  if (in_buffer != nullptr) {  // placed as the file's pages are: handed over as it is
+    region_writes_->submit(in_buffer, p + (first - offset), last - first, first);
+    return true;
+  }
+  for (uint64_t at = first; at < last;) {
+    const size_t piece = static_cast<size_t>(std::min<uint64_t>(last - at, kRegionPieceBytes));
+    unsigned char* buffer = region_writes_->take(err);
+    if (buffer == nullptr) throw IoError(path_ + ": write failed: " + errno_text(err));
+    std::memcpy(buffer, p + (at - offset), piece);
+    region_writes_->submit(buffer, buffer, piece, at);
+    at += piece;
+  }
+  return true;
+}
+
+void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) const {
+  check_region(offset, bytes);
+  if (write_region_direct(offset, static_cast<const unsigned char*>(data), bytes, nullptr)) return;
+  const int buffered = ::fileno(file_);
   if (const int err = pwrite_all(buffered, data, bytes, offset))
     throw IoError(path_ + ": write failed: " + errno_text(err));
   if (transient_) return;
@@ -272,17 +282,34 @@ void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) c
 
 void AtomicFile::fill_region(uint64_t offset, size_t bytes, const std::function<void(unsigned char*)>& fill) const {
   if (bytes > kRegionPieceBytes) throw std::logic_error("fill_region: more than a piece");
-  // This thread's bounce buffer has a page beyond kBounceBytes: room for the piece at the file
-  // offset's place in its page.
-  if (unsigned char* bounce = positioned_detail::bounce_buffer()) {
-    unsigned char* p = positioned_detail::bounce_at(bounce, offset);
-    fill(p);
-    write_region(offset, p, bytes);  // in place: the bounce buffer is not copied into again
+  check_region(offset, bytes);
+  if (region_writes_) {
+    // A buffer of the writer's holds a piece and a page: room for the piece at the file offset's
+    // place in its page, so that its whole pages are handed over with no copy.
+    int err = 0;
+    unsigned char* buffer = region_writes_->take(err);
+    if (buffer == nullptr) throw IoError(path_ + ": write failed: " + errno_text(err));
+    unsigned char* p = positioned_detail::bounce_at(buffer, offset);
+    try {
+      fill(p);
+    } catch (...) {
+      region_writes_->give_back(buffer);
+      throw;
+    }
+    if (write_region_direct(offset, p, bytes, buffer)) return;
+    const int e = pwrite_all(::fileno(file_), p, bytes, offset);  // too few whole pages to go direct
+    region_writes_->give_back(buffer);
+    if (e != 0) throw IoError(path_ + ": write failed: " + errno_text(e));
     return;
   }
-  std::vector<unsigned char> own(bytes);  // no bounce buffer (memory is out): a buffer of its own
-  fill(own.data());
-  write_region(offset, own.data(), bytes);
+  // Through the page cache: into this thread's bounce buffer where the piece fits (no fresh memory
+  // for each piece), placed as the file's pages are, so that the write needs no bounce of its own.
+  unsigned char* bounce = bytes <= positioned_detail::kBounceBytes ? positioned_detail::bounce_buffer() : nullptr;
+  std::unique_ptr<unsigned char[]> own;
+  if (bounce == nullptr) own = std::make_unique_for_overwrite<unsigned char[]>(bytes);
+  unsigned char* p = bounce != nullptr ? positioned_detail::bounce_at(bounce, offset) : own.get();
+  fill(p);
+  write_region(offset, p, bytes);
 }
 
 void AtomicFile::continue_at(uint64_t offset) {
@@ -298,6 +325,11 @@ void AtomicFile::finish() {
   if (finished_) return;
   if (file_ == nullptr) throw IoError(path_ + ": finish after commit");
   drain_direct();
+  if (region_writes_) {
+    const int err = region_writes_->drain();
+    region_writes_.reset();
+    if (err != 0) throw IoError(path_ + ": write failed: " + errno_text(err));
+  }
   if (region_fd_ >= 0) ::close(region_fd_);  // its writes are done: each returned when the disk had it
   region_fd_ = -1;
   // Buffered data may only meet a full disk here, so flush and close are checked too.

@@ -20,6 +20,8 @@
 
 namespace isotope {
 
+class RegionWrites;
+
 // The file that writing PATH replaces: PATH with every symbolic link followed (a relative link
 // resolved from its own directory, at most 40 links). Throws IoError when that file exists and
 // is not a regular file, or the links loop.
@@ -61,15 +63,17 @@ class AtomicFile {
   // write on one thread alone held the others back). Returns where the bytes start.
   uint64_t append_region(uint64_t bytes);
   // Writes BYTES at OFFSET inside a region append_region() made. Safe on several threads at once.
-  // In a region of at least kDirectRegionBytes, a piece's whole pages go past the page cache
-  // (O_DIRECT, from this thread's page-aligned bounce buffer) and the partial pages at its two ends
-  // through it; a small piece, a small region, or a file system that takes no direct writes goes
-  // all through the page cache, its writeback started at once (not for a transient file). The
-  // bytes on disk are the same.
+  // In a region of at least kDirectRegionBytes, a piece's whole pages are copied into a buffer of
+  // the file's writer thread (io/file/region_writes.h), which writes them past the page cache
+  // (O_DIRECT) while the caller goes on, and the partial pages at its two ends go through the page
+  // cache; a small piece, a small region, or a file without that thread goes all through the
+  // page cache, its writeback started at once (not for a transient file). The bytes on disk are
+  // the same. A direct write that failed is reported by a later region write or by finish().
   void write_region(uint64_t offset, const void* data, size_t bytes) const;
   // Writes BYTES at OFFSET inside a region as write_region() does, from what FILL puts at the
-  // pointer it is given: placed as the file's pages are, they go to the disk with no copy (a
-  // record encoded straight into its place). At most kRegionPieceBytes. Safe on several threads.
+  // pointer it is given: in the writer thread's buffer, placed as the file's pages are, so that
+  // they are handed over with no copy (records encoded straight into their place). At most
+  // kRegionPieceBytes. Safe on several threads.
   void fill_region(uint64_t offset, size_t bytes, const std::function<void(unsigned char*)>& fill) const;
   static constexpr uint64_t kDirectRegionBytes = uint64_t{1} << 20;
   // The most of a piece that goes to the disk in one direct write: a caller that writes a region
@@ -92,18 +96,24 @@ class AtomicFile {
 
  private:
   void drain_direct();  // what direct appends hold, to the file; then stdio's (throws IoError)
-  void end_direct();    // no more direct appends; nothing written
+  void check_region(uint64_t offset, size_t bytes) const;  // throws IoError
+  // Writes a region's piece at P: its whole pages handed to region_writes_ (from IN_BUFFER, one
+  // of its buffers holding P, or copied into its buffers), its partial pages through the page
+  // cache. False, having written nothing, where the piece goes all through the page cache.
+  bool write_region_direct(uint64_t offset, const unsigned char* p, size_t bytes, unsigned char* in_buffer) const;
+  void end_direct();  // no more direct appends; nothing written
   static constexpr size_t kBufferBytes = size_t{256} << 10;
   // The whole pages a piece of a region needs to be written direct (fewer go through the page cache).
   static constexpr uint64_t kMinDirectBytes = uint64_t{64} << 10;
   std::unique_ptr<char[]> buffer_;         // stdio's, for file_ (closed before this is freed)
   std::string path_, target_, temp_path_;  // as named; the file replaced (output_target); temporary
   std::FILE* file_ = nullptr;
-  std::unique_ptr<DirectAppends> direct_;           // Appends::direct, until continue_at or finish
-  int direct_fd_ = -1;                              // the temporary opened with O_DIRECT, or -1
-  int region_fd_ = -1;                              // opened with O_DIRECT at the first large region, or -1
-  mutable std::atomic<bool> regions_direct_{true};  // until a direct write is refused
-  bool transient_ = false;                          // Appends::transient
+  std::unique_ptr<DirectAppends> direct_;        // Appends::direct, until continue_at or finish
+  int direct_fd_ = -1;                           // the temporary opened with O_DIRECT, or -1
+  int region_fd_ = -1;                           // opened with O_DIRECT at the first large region, or -1
+  bool region_tried_ = false;                    // region_fd_ opened (or refused) already
+  std::unique_ptr<RegionWrites> region_writes_;  // the writer of region_fd_'s direct writes, or null
+  bool transient_ = false;                       // Appends::transient
   bool finished_ = false, committed_ = false;
   int registered_ = -1;  // io/file/temporary_registry.h
   uint64_t size_ = 0;

@@ -28,9 +28,9 @@ namespace isotope {
 namespace positioned_detail {
 
 inline constexpr size_t kPage = detail::kPageBytes;
-inline constexpr size_t kAliasWindow = 64;               // distances of 1 to 63 bytes go through the bounce
-inline constexpr size_t kBounceMinBytes = 4096;          // below, the copy is too short to matter
-inline constexpr size_t kBounceBytes = size_t{4} << 20;  // a region's direct piece (AtomicFile::kRegionPieceBytes)
+inline constexpr size_t kAliasWindow = 64;       // distances of 1 to 63 bytes go through the bounce
+inline constexpr size_t kBounceMinBytes = 4096;  // below, the copy is too short to matter
+inline constexpr size_t kBounceBytes = size_t{1} << 20;
 
 // Whether a copy from SOURCE to DESTINATION puts the destination 1 to 63 bytes ahead of the source
 // modulo a page (addresses; a file's offset stands for its page cache's place: the destination of

@@ -1,0 +1,61 @@
+#pragma once
+// The whole pages of a file's regions written past the page cache (O_DIRECT) by a thread of their
+// own, from its buffers that the callers filled, while the callers go on encoding the next pieces
+// (AtomicFile::write_region, fill_region). A direct write holds the thread that makes it until the
+// disk has the bytes: made by the thread that encoded the piece, it kept that thread from
+// encoding the next (docs/METHOD.md, "Reading and writing files").
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "isotope/detail/huge_page_allocator.h"
+
+namespace isotope {
+
+class RegionWrites {
+ public:
+  // DIRECT: the file opened with O_DIRECT; BUFFERED: the same file without it (a piece the disk
+  // refuses direct goes there, as every one after it). Neither is closed here. Throws
+  // std::bad_alloc without memory for the buffers, std::system_error when no thread can start.
+  RegionWrites(int direct, int buffered, size_t piece_bytes);
+  ~RegionWrites();  // waits for the writes under way; an error not yet reported is dropped
+  RegionWrites(const RegionWrites&) = delete;
+  RegionWrites& operator=(const RegionWrites&) = delete;
+
+  // A free buffer of piece_bytes and a page, page-aligned; waits for one. Null when a write failed
+  // (`error` says which).
+  unsigned char* take(int& error);
+  // Hands BUFFER (from take) over: its BYTES at FROM (page-aligned, within it) go to OFFSET.
+  void submit(unsigned char* buffer, const unsigned char* from, size_t bytes, uint64_t offset);
+  void give_back(unsigned char* buffer);  // unused
+  // Waits for every write handed over; 0, or the errno of the first that failed (after which the
+  // others are dropped).
+  int drain();
+
+ private:
+  struct Job {
+    unsigned char* buffer;
+    const unsigned char* from;
+    size_t bytes;
+    uint64_t offset;
+  };
+  void run();
+
+  const int direct_, buffered_;
+  const size_t stride_;
+  detail::HugeArray<unsigned char> block_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  std::vector<unsigned char*> free_;
+  std::deque<Job> jobs_;
+  size_t busy_ = 0;  // jobs taken by the thread, not finished
+  int error_ = 0;
+  bool direct_refused_ = false, stop_ = false;
+  std::thread thread_;
+};
+
+}  // namespace isotope
