@@ -7,7 +7,6 @@
 #include <linux/perf_event.h>
 #include <sys/ioctl.h>
 #include <sys/mman.h>
-#include <sys/resource.h>
 #include <sys/syscall.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
@@ -17,7 +16,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <csignal>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -1173,23 +1171,8 @@ TEST_F(SourceOfAFile, WithoutARoomForItsStoreAHierarchyIsBuiltInMemory) {
   std::filesystem::create_directory(scratch);
   const testing::TemporaryDirectoryIs tmp(scratch);
   {
-    // Writes past 64 KB fail (EFBIG; the signal that would end the process ignored meanwhile).
-    struct FileSizeLimit {
-      rlimit was{};
-      void (*signal_was)(int) = std::signal(SIGXFSZ, SIG_IGN);
-      FileSizeLimit() {
-        getrlimit(RLIMIT_FSIZE, &was);
-        rlimit limit = was;
-        limit.rlim_cur = 64 << 10;
-        setrlimit(RLIMIT_FSIZE, &limit);
-      }
-      ~FileSizeLimit() {
-        setrlimit(RLIMIT_FSIZE, &was);
-        std::signal(SIGXFSZ, signal_was);
-      }
-    };
     const Source source = open_volume(spec_of(raw));
-    std::optional<FileSizeLimit> limit(std::in_place);
+    std::optional<testing::FileSizeLimit> limit(std::in_place, 64 << 10);  // writes past 64 KB fail
     const Mesh m = source.extract(coarse);
     limit.reset();
     EXPECT_TRUE(same_mesh(m, coarse_mesh));

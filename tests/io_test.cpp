@@ -861,16 +861,20 @@ TEST_F(IoTest, AtomicFileLargeRegionsGoPastThePageCacheWithTheSameBytes) {
   const size_t n = (size_t{9} << 20) + 4099;
   std::vector<unsigned char> bytes(n);
   for (size_t i = 0; i < n; ++i) bytes[i] = static_cast<unsigned char>(i * 11 + i / 4091);
-  std::vector<std::pair<size_t, size_t>> pieces;  // [begin, end): at most one region piece each
-  for (size_t at = 0, k = 0; at < n; ++k) {
-    const size_t length = std::min({n - at, AtomicFile::kRegionPieceBytes - k % 2,
-                                    k % 4 == 0   ? AtomicFile::kRegionPieceBytes - k
-                                    : k % 4 == 1 ? 852001 + 37 * k
-                                    : k % 4 == 2 ? 70001 - 7 * k
-                                                 : 1000 + k});
-    pieces.emplace_back(at, at + length);
-    at += length;
-  }
+  // [begin, end): at most one region piece each for fill_region; write_region's first is more
+  // than two (copied into the writer's buffers a piece at a time).
+  std::vector<std::pair<size_t, size_t>> pieces[2];
+  for (const bool fill : {false, true})
+    for (size_t at = 0, k = 0; at < n; ++k) {
+      const size_t most = k == 0 && !fill ? 2 * AtomicFile::kRegionPieceBytes + 12345 : AtomicFile::kRegionPieceBytes;
+      const size_t length = std::min({n - at, most - k % 2,
+                                      k % 4 == 0   ? most - k
+                                      : k % 4 == 1 ? 852001 + 37 * k
+                                      : k % 4 == 2 ? 70001 - 7 * k
+                                                   : 1000 + k});
+      pieces[fill].emplace_back(at, at + length);
+      at += length;
+    }
   std::vector<unsigned char> expected{'h', 'e', 'a', 'd', 'e', 'r'};  // the region starts 6 bytes into a page
   expected.insert(expected.end(), bytes.begin(), bytes.end());
   expected.insert(expected.end(), {'t', 'a', 'i', 'l'});
@@ -887,8 +891,8 @@ TEST_F(IoTest, AtomicFileLargeRegionsGoPastThePageCacheWithTheSameBytes) {
       std::vector<std::thread> threads;
       for (int t = 0; t < 3; ++t)
         threads.emplace_back([&] {
-          for (size_t i; (i = taken++) < pieces.size();) {
-            const auto [begin, end] = pieces[pieces.size() - 1 - i];  // the last piece first
+          for (size_t i; (i = taken++) < pieces[fill].size();) {
+            const auto [begin, end] = pieces[fill][pieces[fill].size() - 1 - i];  // the last piece first
             if (fill)
               f.fill_region(at + begin, end - begin, [&, begin = begin, end = end](unsigned char* out) {
                 std::copy(bytes.begin() + static_cast<std::ptrdiff_t>(begin),
@@ -1002,6 +1006,7 @@ TEST_F(IoTest, RegionWritesReportAFailureAndFallBackWhereDirectWritesAreRefused)
       EXPECT_EQ(writes.drain(), EBADF);
       EXPECT_EQ(writes.take(err), nullptr);
       EXPECT_EQ(err, EBADF);
+      EXPECT_EQ(writes.drain(), EBADF) << "reported once only";
     }
     ::close(read_only);
   }
@@ -1013,6 +1018,7 @@ TEST_F(IoTest, RegionWritesReportAFailureAndFallBackWhereDirectWritesAreRefused)
     GTEST_SKIP() << "the file system of " << dir_ << " takes no O_DIRECT: " << std::strerror(errno);
   }
   std::vector<unsigned char> expected(3 * kPiece);
+  bool refused = false;
   {
     RegionWrites writes(direct, buffered, kPiece);
     for (size_t k = 0; k < 3; ++k) {  // the second from one byte into its buffer: refused direct
@@ -1024,6 +1030,7 @@ TEST_F(IoTest, RegionWritesReportAFailureAndFallBackWhereDirectWritesAreRefused)
       writes.submit(buffer, from, kPiece, k * kPiece);
     }
     EXPECT_EQ(writes.drain(), 0);
+    refused = !writes.direct();
   }
   EXPECT_TRUE(read_bytes(p) == expected) << p << " differs from the bytes handed over";
   {
@@ -1039,6 +1046,32 @@ TEST_F(IoTest, RegionWritesReportAFailureAndFallBackWhereDirectWritesAreRefused)
   ::close(direct);
   ::close(buffered);
   EXPECT_TRUE(std::equal(expected.begin(), expected.end(), read_bytes(p).begin()));
+  if (!refused) GTEST_SKIP() << "the file system of " << dir_ << " took a direct write from memory one byte off a page";
+}
+
+// A region's direct write that fails on the writer thread (here: past a file size limit, EFBIG)
+// fails the file's finish() and every commit() after it: the target is never made from a file
+// missing those bytes.
+TEST_F(IoTest, AFailedRegionWriteFailsEveryCommitAfterIt) {
+  const std::string p = path("limited.bin");
+  const size_t n = size_t{8} << 20, piece = size_t{1} << 20;
+  const std::vector<unsigned char> bytes(piece, 5);
+  {
+    AtomicFile f(p);
+    const uint64_t at = f.append_region(n);  // at 0: every piece whole pages, all handed over
+    {
+      const testing::FileSizeLimit limit(2 << 20);  // writes past 2 MB fail
+      try {
+        for (size_t k = 0; k < n / piece; ++k) f.write_region(at + k * piece, bytes.data(), piece);
+      } catch (const IoError&) {  // a piece handed over after the failure was seen
+      }
+      EXPECT_CONTAINS(io_error_of([&] { f.finish(); }), "write failed");
+    }
+    EXPECT_CONTAINS(io_error_of([&] { f.commit(); }), "write failed");
+    EXPECT_CONTAINS(io_error_of([&] { f.commit(); }), "write failed");
+  }
+  EXPECT_FALSE(std::filesystem::exists(p));
+  EXPECT_EQ(entries(), std::vector<std::string>{}) << "the temporary is left behind";
 }
 
 // Every few MB written, the appends' own thread makes them durable while the caller goes on: a

@@ -1,6 +1,9 @@
 #pragma once
 // Shared fixtures of the engine tests: volumes, sweeps, and mesh comparisons.
+#include <sys/resource.h>
+
 #include <array>
+#include <csignal>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -48,6 +51,28 @@ std::string write_store(const Volume& v, const std::string& dir, const std::stri
 
 // Cuts a sub-box out of a volume (for dimensions that are not 2^k + 1).
 Volume crop(const Volume& v, std::array<int64_t, 3> dims);
+
+// While it lives, this process's writes past BYTES of a file fail (EFBIG), the signal that would
+// end the process (SIGXFSZ) ignored: a file size limit, as a full disk, in a test.
+class FileSizeLimit {
+ public:
+  explicit FileSizeLimit(rlim_t bytes) : signal_was_(std::signal(SIGXFSZ, SIG_IGN)) {
+    getrlimit(RLIMIT_FSIZE, &was_);
+    rlimit limit = was_;
+    limit.rlim_cur = bytes;
+    setrlimit(RLIMIT_FSIZE, &limit);
+  }
+  ~FileSizeLimit() {
+    setrlimit(RLIMIT_FSIZE, &was_);
+    std::signal(SIGXFSZ, signal_was_);
+  }
+  FileSizeLimit(const FileSizeLimit&) = delete;
+  FileSizeLimit& operator=(const FileSizeLimit&) = delete;
+
+ private:
+  rlimit was_{};
+  void (*signal_was_)(int);
+};
 
 // Whether the page cache holds the byte at `offset` of `file`, without reading it in: 1 it does, 0 it does not, -1 this
 // cannot be told (the file does not open, or its file system refuses RWF_NOWAIT reads).

@@ -270,14 +270,19 @@ bool AtomicFile::write_region_direct(uint64_t offset, const unsigned char* p, si
 void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) const {
   check_region(offset, bytes);
   if (write_region_direct(offset, static_cast<const unsigned char*>(data), bytes, nullptr)) return;
-  const int buffered = ::fileno(file_);
-  if (const int err = pwrite_all(buffered, data, bytes, offset))
+  if (const int err = write_region_buffered(offset, data, bytes))
     throw IoError(path_ + ": write failed: " + errno_text(err));
-  if (transient_) return;
+}
+
+int AtomicFile::write_region_buffered(uint64_t offset, const void* data, size_t bytes) const {
+  const int buffered = ::fileno(file_);
+  if (const int err = pwrite_all(buffered, data, bytes, offset)) return err;
+  if (transient_) return 0;
   // The disk's writeback of these bytes starts now, on this thread, while the other threads still
   // encode theirs: finish()'s fsync then waits for less (a hint; what fails shows at the fsync).
   static_cast<void>(
       ::sync_file_range(buffered, static_cast<off_t>(offset), static_cast<off_t>(bytes), SYNC_FILE_RANGE_WRITE));
+  return 0;
 }
 
 void AtomicFile::fill_region(uint64_t offset, size_t bytes, const std::function<void(unsigned char*)>& fill) const {
@@ -297,7 +302,7 @@ void AtomicFile::fill_region(uint64_t offset, size_t bytes, const std::function<
       throw;
     }
     if (write_region_direct(offset, p, bytes, buffer)) return;
-    const int e = pwrite_all(::fileno(file_), p, bytes, offset);  // too few whole pages to go direct
+    const int e = write_region_buffered(offset, p, bytes);  // too few whole pages to go direct
     region_writes_->give_back(buffer);
     if (e != 0) throw IoError(path_ + ": write failed: " + errno_text(e));
     return;
@@ -326,9 +331,10 @@ void AtomicFile::finish() {
   if (file_ == nullptr) throw IoError(path_ + ": finish after commit");
   drain_direct();
   if (region_writes_) {
-    const int err = region_writes_->drain();
+    // Kept after a failure, which it reports again: a second finish() or commit() must not
+    // commit a file missing the bytes that failed.
+    if (const int err = region_writes_->drain()) throw IoError(path_ + ": write failed: " + errno_text(err));
     region_writes_.reset();
-    if (err != 0) throw IoError(path_ + ": write failed: " + errno_text(err));
   }
   if (region_fd_ >= 0) ::close(region_fd_);  // its writes are done: each returned when the disk had it
   region_fd_ = -1;

@@ -66,9 +66,11 @@ class AtomicFile {
   // In a region of at least kDirectRegionBytes, a piece's whole pages are copied into a buffer of
   // the file's writer thread (io/file/region_writes.h), which writes them past the page cache
   // (O_DIRECT) while the caller goes on, and the partial pages at its two ends go through the page
-  // cache; a small piece, a small region, or a file without that thread goes all through the
-  // page cache, its writeback started at once (not for a transient file). The bytes on disk are
-  // the same. A direct write that failed is reported by a later region write or by finish().
+  // cache. A piece with fewer than kMinDirectBytes of whole pages, and every piece of a file whose
+  // regions have no such thread (none of kDirectRegionBytes yet, a transient file, a file system
+  // that refuses O_DIRECT at open) goes all through the page cache, its writeback started at once
+  // (not for a transient file). The bytes on disk are the same. A direct write that failed is
+  // reported by a later region write or by finish() (by every finish() and commit() after it).
   void write_region(uint64_t offset, const void* data, size_t bytes) const;
   // Writes BYTES at OFFSET inside a region as write_region() does, from what FILL puts at the
   // pointer it is given: in the writer thread's buffer, placed as the file's pages are, so that
@@ -96,7 +98,8 @@ class AtomicFile {
 
  private:
   void drain_direct();  // what direct appends hold, to the file; then stdio's (throws IoError)
-  void check_region(uint64_t offset, size_t bytes) const;  // throws IoError
+  void check_region(uint64_t offset, size_t bytes) const;                            // throws IoError
+  int write_region_buffered(uint64_t offset, const void* data, size_t bytes) const;  // 0 or errno
   // Writes a region's piece at P: its whole pages handed to region_writes_ (from IN_BUFFER, one
   // of its buffers holding P, or copied into its buffers), its partial pages through the page
   // cache. False, having written nothing, where the piece goes all through the page cache.

@@ -17,6 +17,7 @@ RegionWrites::RegionWrites(int direct, int buffered, size_t piece_bytes)
     : direct_(direct), buffered_(buffered), stride_(piece_bytes + detail::kPageBytes) {
   block_ = detail::make_huge_array<unsigned char>(kBuffers * stride_);
   for (size_t i = 0; i < kBuffers; ++i) free_.push_back(block_.get() + i * stride_);
+  jobs_.reserve(kBuffers);
   thread_ = std::thread([this] { run(); });
 }
 
@@ -56,6 +57,11 @@ void RegionWrites::give_back(unsigned char* buffer) {
   changed_.notify_all();
 }
 
+bool RegionWrites::direct() const {
+  std::lock_guard lock(mutex_);
+  return !direct_refused_;
+}
+
 int RegionWrites::drain() {
   std::unique_lock lock(mutex_);
   changed_.wait(lock, [&] { return jobs_.empty() && busy_ == 0; });
@@ -68,7 +74,7 @@ void RegionWrites::run() {
     changed_.wait(lock, [&] { return stop_ || !jobs_.empty(); });
     if (jobs_.empty()) return;
     const Job job = jobs_.front();
-    jobs_.pop_front();
+    jobs_.erase(jobs_.begin());
     ++busy_;
     const bool skip = error_ != 0, direct = !direct_refused_;
     lock.unlock();

@@ -7,7 +7,6 @@
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
-#include <deque>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -31,9 +30,10 @@ class RegionWrites {
   unsigned char* take(int& error);
   // Hands BUFFER (from take) over: its BYTES at FROM (page-aligned, within it) go to OFFSET.
   void submit(unsigned char* buffer, const unsigned char* from, size_t bytes, uint64_t offset);
-  void give_back(unsigned char* buffer);  // unused
-  // Waits for every write handed over; 0, or the errno of the first that failed (after which the
-  // others are dropped).
+  void give_back(unsigned char* buffer);  // taken, and not handed over
+  bool direct() const;                    // false from the first refusal on
+  // Waits for every write handed over; 0, or the errno of the first that failed (the writes
+  // handed over after it are dropped), as often as it is asked.
   int drain();
 
  private:
@@ -48,11 +48,11 @@ class RegionWrites {
   const int direct_, buffered_;
   const size_t stride_;
   detail::HugeArray<unsigned char> block_;
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
   std::condition_variable changed_;
   std::vector<unsigned char*> free_;
-  std::deque<Job> jobs_;
-  size_t busy_ = 0;  // jobs taken by the thread, not finished
+  std::vector<Job> jobs_;  // room for every buffer reserved: submit() allocates nothing
+  size_t busy_ = 0;        // jobs taken by the thread, not finished
   int error_ = 0;
   bool direct_refused_ = false, stop_ = false;
   std::thread thread_;
