@@ -21,7 +21,7 @@ class RegionWrites {
   // refuses direct goes there, as every one after it). Neither is closed here. Throws
   // std::bad_alloc without memory for the buffers, std::system_error when no thread can start.
   RegionWrites(int direct, int buffered, size_t piece_bytes);
-  ~RegionWrites();  // waits for the writes under way; an error not yet reported is dropped
+  ~RegionWrites();  // waits for the write under way, drops those not started and any error
   RegionWrites(const RegionWrites&) = delete;
   RegionWrites& operator=(const RegionWrites&) = delete;
 
