@@ -272,11 +272,17 @@ struct DatasetResult {
 // The disk rates are measured in blocks of this size.
 constexpr size_t kScratchBlock = size_t{1} << 20;
 
+// BYTES of a pattern, for the disk rates' files.
+std::vector<uint8_t> scratch_bytes(size_t bytes) {
+  std::vector<uint8_t> block(bytes);
+  for (size_t i = 0; i < block.size(); ++i) block[i] = static_cast<uint8_t>(i * 2654435761u >> 24);
+  return block;
+}
+
 // BLOCKS blocks of bytes that do not repeat within a block, written to FILE as isotope writes its
 // outputs: into a temporary file, flushed to the disk, renamed into place. Returns the bytes.
 uint64_t write_scratch(const fs::path& file, size_t blocks) {
-  std::vector<uint8_t> block(kScratchBlock);
-  for (size_t i = 0; i < block.size(); ++i) block[i] = static_cast<uint8_t>(i * 2654435761u >> 24);
+  const std::vector<uint8_t> block = scratch_bytes(kScratchBlock);
   AtomicFile out(file.string());
   for (size_t i = 0; i < blocks; ++i) out.write(block.data(), block.size());
   out.commit();
@@ -309,8 +315,7 @@ double sequential_read_rate(const fs::path& dir) {
 double durable_write_rate(const fs::path& dir) {
   const fs::path file = dir / "disk-write-rate.bin";
   const uint64_t bytes = uint64_t{64} << 20;
-  std::vector<uint8_t> piece(AtomicFile::kRegionPieceBytes);
-  for (size_t i = 0; i < piece.size(); ++i) piece[i] = static_cast<uint8_t>(i * 2654435761u >> 24);
+  const std::vector<uint8_t> piece = scratch_bytes(AtomicFile::kRegionPieceBytes);
   const auto start = std::chrono::steady_clock::now();
   {
     AtomicFile out(file.string());

@@ -234,12 +234,21 @@ void AtomicFile::check_region(uint64_t offset, size_t bytes) const {
   if (offset + bytes > size_) throw IoError(path_ + ": write_region past the regions appended");
 }
 
-bool AtomicFile::write_region_direct(uint64_t offset, const unsigned char* p, size_t bytes,
-                                     unsigned char* in_buffer) const {
-  // The whole pages of the piece: [first, last).
+namespace {
+// The whole pages of BYTES at OFFSET: [first, last) (empty where last <= first).
+std::pair<uint64_t, uint64_t> whole_pages(uint64_t offset, size_t bytes) {
   constexpr uint64_t kPage = detail::kPageBytes;
-  const uint64_t first = (offset + kPage - 1) & ~(kPage - 1), last = (offset + bytes) & ~(kPage - 1);
-  if (!region_writes_ || last <= first || last - first < kMinDirectBytes) return false;
+  return {(offset + kPage - 1) & ~(kPage - 1), (offset + bytes) & ~(kPage - 1)};
+}
+}  // namespace
+
+bool AtomicFile::goes_direct(uint64_t offset, size_t bytes) const {
+  const auto [first, last] = whole_pages(offset, bytes);
+  return region_writes_ && last > first && last - first >= kMinDirectBytes;
+}
+
+void AtomicFile::write_direct(uint64_t offset, const unsigned char* p, size_t bytes, unsigned char* in_buffer) const {
+  const auto [first, last] = whole_pages(offset, bytes);
   // Through the page cache, a mesh's copy into fresh pages took a third of a one-shot eps 0's
   // processor time, and parallel buffered writes queued on the file's lock; a direct write made
   // by the thread that encoded the piece held it back from encoding the next (docs/METHOD.md,
@@ -254,7 +263,7 @@ bool AtomicFile::write_region_direct(uint64_t offset, const unsigned char* p, si
   }
   if (in_buffer != nullptr) {  // placed as the file's pages are: handed over as it is
     region_writes_->submit(in_buffer, p + (first - offset), last - first, first);
-    return true;
+    return;
   }
   for (uint64_t at = first; at < last;) {
     const size_t piece = static_cast<size_t>(std::min<uint64_t>(last - at, kRegionPieceBytes));
@@ -264,12 +273,11 @@ bool AtomicFile::write_region_direct(uint64_t offset, const unsigned char* p, si
     region_writes_->submit(buffer, buffer, piece, at);
     at += piece;
   }
-  return true;
 }
 
 void AtomicFile::write_region(uint64_t offset, const void* data, size_t bytes) const {
   check_region(offset, bytes);
-  if (write_region_direct(offset, static_cast<const unsigned char*>(data), bytes, nullptr)) return;
+  if (goes_direct(offset, bytes)) return write_direct(offset, static_cast<const unsigned char*>(data), bytes, nullptr);
   if (const int err = write_region_buffered(offset, data, bytes))
     throw IoError(path_ + ": write failed: " + errno_text(err));
 }
@@ -288,7 +296,7 @@ int AtomicFile::write_region_buffered(uint64_t offset, const void* data, size_t 
 void AtomicFile::fill_region(uint64_t offset, size_t bytes, const std::function<void(unsigned char*)>& fill) const {
   if (bytes > kRegionPieceBytes) throw std::logic_error("fill_region: more than a piece");
   check_region(offset, bytes);
-  if (region_writes_) {
+  if (goes_direct(offset, bytes)) {
     // A buffer of the writer's holds a piece and a page: room for the piece at the file offset's
     // place in its page, so that its whole pages are handed over with no copy.
     int err = 0;
@@ -301,11 +309,7 @@ void AtomicFile::fill_region(uint64_t offset, size_t bytes, const std::function<
       region_writes_->give_back(buffer);
       throw;
     }
-    if (write_region_direct(offset, p, bytes, buffer)) return;
-    const int e = write_region_buffered(offset, p, bytes);  // too few whole pages to go direct
-    region_writes_->give_back(buffer);
-    if (e != 0) throw IoError(path_ + ": write failed: " + errno_text(e));
-    return;
+    return write_direct(offset, p, bytes, buffer);
   }
   // Through the page cache: into this thread's bounce buffer where the piece fits (no fresh memory
   // for each piece), placed as the file's pages are, so that the write needs no bounce of its own.
@@ -314,7 +318,8 @@ void AtomicFile::fill_region(uint64_t offset, size_t bytes, const std::function<
   if (bounce == nullptr) own = std::make_unique_for_overwrite<unsigned char[]>(bytes);
   unsigned char* p = bounce != nullptr ? positioned_detail::bounce_at(bounce, offset) : own.get();
   fill(p);
-  write_region(offset, p, bytes);
+  if (const int err = write_region_buffered(offset, p, bytes))
+    throw IoError(path_ + ": write failed: " + errno_text(err));
 }
 
 void AtomicFile::continue_at(uint64_t offset) {

@@ -100,10 +100,11 @@ class AtomicFile {
   void drain_direct();  // what direct appends hold, to the file; then stdio's (throws IoError)
   void check_region(uint64_t offset, size_t bytes) const;                            // throws IoError
   int write_region_buffered(uint64_t offset, const void* data, size_t bytes) const;  // 0 or errno
-  // Writes a region's piece at P: its whole pages handed to region_writes_ (from IN_BUFFER, one
-  // of its buffers holding P, or copied into its buffers), its partial pages through the page
-  // cache. False, having written nothing, where the piece goes all through the page cache.
-  bool write_region_direct(uint64_t offset, const unsigned char* p, size_t bytes, unsigned char* in_buffer) const;
+  // Whether a region's piece goes past the page cache: a writer thread, and enough whole pages.
+  bool goes_direct(uint64_t offset, size_t bytes) const;
+  // Writes such a piece at P: its whole pages handed to region_writes_ (from IN_BUFFER, one of its
+  // buffers holding P, or copied into its buffers), its partial pages through the page cache.
+  void write_direct(uint64_t offset, const unsigned char* p, size_t bytes, unsigned char* in_buffer) const;
   void end_direct();  // no more direct appends; nothing written
   static constexpr size_t kBufferBytes = size_t{256} << 10;
   // The whole pages a piece of a region needs to be written direct (fewer go through the page cache).
