@@ -74,7 +74,13 @@ class EdgeVertexMap {
     for (size_t i = 0; i <= mask_ && i < slots_.size(); ++i)
       if (slots_[i].stamp == stamp_) moving_.push_back(slots_[i]);
     if (capacity > slots_.size()) {
-      Slots grown(capacity, Slot{0, 0, 0});
+      // Faulted in by one call before the zero-fill writes it: a table grows to megabytes of
+      // fresh memory, whose pages faulted one by one in the fill cost more than the march of a
+      // slab's first layers (docs/METHOD.md, "Fresh memory").
+      Slots grown;
+      grown.reserve(capacity);
+      detail::prefault(grown.data(), capacity * sizeof(Slot));
+      grown.resize(capacity, Slot{0, 0, 0});
       grown.swap(slots_);
       stamp_ = 1;
     } else {
