@@ -33,6 +33,7 @@
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_box_reader.h"
 #include "io/volume/volume_reader.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -153,7 +154,7 @@ struct Source::Impl {
     v->spacing = i.spacing;
     v->origin = i.origin;
     try {
-      size_volume_values(v->values, static_cast<size_t>(v->node_count()));
+      detail::resize_prefaulted_in_parallel(v->values, static_cast<size_t>(v->node_count()));
     } catch (const std::bad_alloc&) {
       throw IoError(path + ": " + std::to_string(i.dims[0]) + "x" + std::to_string(i.dims[1]) + "x" +
                     std::to_string(i.dims[2]) + " volume does not fit in memory");

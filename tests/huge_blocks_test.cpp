@@ -454,7 +454,7 @@ TEST_F(HugeBlocks, LargeArraysAreAdvisedForHugePages) {
   }
 
   std::vector<float> values;
-  size_volume_values(values, 4 * kMB);  // 16 MB: whole huge pages inside, wherever malloc put it
+  detail::resize_prefaulted_in_parallel(values, 4 * kMB);  // 16 MB: whole huge pages inside, wherever malloc put it
   check(values.data() + values.size() / 2, "a volume's values");
 }
 

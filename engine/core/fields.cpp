@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "engine/core/parallel.h"
+#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 namespace {
@@ -32,7 +33,7 @@ Volume grid(int64_t size) {
   const double h = 2.0 / static_cast<double>(size - 1);
   v.spacing = {h, h, h};
   v.origin = {-1.0, -1.0, -1.0};
-  v.values.resize(static_cast<size_t>(v.node_count()));
+  detail::resize_prefaulted_in_parallel(v.values, static_cast<size_t>(v.node_count()));  // written whole below
   return v;
 }
 

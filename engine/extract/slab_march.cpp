@@ -186,7 +186,9 @@ void copy_slab(const Slab& slab, const SlabNumbering::Place& place, std::array<f
   // a fifth of a one-shot eps 0's processor time.
   detail::prefault(positions + place.first_vertex, place.new_vertices * sizeof(positions[0]));
   detail::prefault(triangles + place.first_triangle, slab.mesh.triangles.size() * sizeof(triangles[0]));
-  std::vector<uint32_t> remap(slab.mesh.positions.size());
+  // Kept by the thread from slab to slab: a fresh one per slab took its pages' faults each time.
+  thread_local std::vector<uint32_t> remap;
+  remap.resize(slab.mesh.positions.size());  // every entry written below
   uint32_t next = place.first_vertex;
   size_t b = 0;
   for (size_t k = 0; k < remap.size(); ++k) {

@@ -7,6 +7,7 @@
 
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_parts.h"
+#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 namespace {
@@ -45,7 +46,7 @@ inline void sort8(uint32_t* x) {
 // locked compare-and-swap for every link and every halving step: a tenth of the filing's time.
 class Forest {
  public:
-  explicit Forest(size_t n) : parent_(n) {}
+  explicit Forest(size_t n) { detail::resize_prefaulted_in_parallel(parent_, n); }
   // Makes each vertex of [begin, end) a set of its own; the parts do it for their vertices.
   void reset(uint32_t begin, uint32_t end) {
     for (uint32_t v = begin; v < end; ++v) parent_[v] = v;
@@ -118,8 +119,8 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
   // and files only the edge ends and corners whose vertex is its own, so no add is locked (locked
   // adds over tasks of triangles took a full memory barrier for every edge end: 132 -> 98 ms on two
   // threads for embryo's 2.5 M-triangle eps 0 mesh when they went).
-  e.first.resize(n + 1);  // zero: the counts start there
-  e.used.resize(n);
+  detail::resize_prefaulted_in_parallel(e.first, n + 1);  // zero: the counts start there
+  detail::resize_prefaulted_in_parallel(e.used, n);
   Forest forest(n);
   std::vector<Offset> total(parts + 1, 0);
   parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
@@ -138,7 +139,7 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
   });
   for (size_t p = 0; p < parts; ++p) total[p + 1] += total[p];
   e.first[n] = total[parts];
-  e.upper.resize(static_cast<size_t>(total[parts]));
+  detail::resize_prefaulted_in_parallel(e.upper, static_cast<size_t>(total[parts]));
   std::vector<EdgeCounts> counts(parts);
   std::vector<std::vector<std::array<uint32_t, 2>>> between(parts);  // per part: its edges to later parts
   parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
@@ -177,7 +178,7 @@ FiledEdges<Offset> file_edges(const Mesh& mesh) {
     e.boundary_edges += c.boundary;
     e.nonmanifold_edges += c.nonmanifold;
   }
-  e.root.resize(n);
+  detail::resize_prefaulted_in_parallel(e.root, n);
   parallel_for(int64_t{0}, static_cast<int64_t>(parts), [&](int64_t p) {
     const VertexPart part = plan.parts[static_cast<size_t>(p)];
     for (uint32_t v = part.begin; v < part.end; ++v) e.root[v] = forest.root(v);

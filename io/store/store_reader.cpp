@@ -272,15 +272,26 @@ std::string check_values_against_finer_band(const StoreReader& store, int64_t in
   const Band &band = layout.band(j), &finer = layout.band(j - 1);
   const int bits = layout.brick_bits();
   const int64_t t = layout.brick_width();
-  std::vector<std::pair<int64_t, std::unique_ptr<FullBrick>>> cache;  // the few finer bricks below this one
+  // The few finer bricks below this one (at most eight), the first `used` of the thread's: their
+  // arrays are kept from one brick to the next. Made fresh for each brick, zero-filled, they cost
+  // most of a verify's time in page faults (embryo: 131 k faults, 1.8 s of processor time;
+  // docs/METHOD.md, "Fresh memory").
+  thread_local std::vector<std::pair<int64_t, std::unique_ptr<FullBrick>>> cache;
+  size_t used = 0;
   auto finer_value = [&](const Box3& q) {
     const Box3 fb{q[0] >> bits, q[1] >> bits, q[2] >> bits};
     const int64_t fi = layout.brick_index(j - 1, fb);
-    auto it = std::find_if(cache.begin(), cache.end(), [&](const auto& c) { return c.first == fi; });
-    if (it == cache.end()) {
-      auto fresh = std::make_unique<FullBrick>(layout.brick_nodes());
-      store.read_brick(fi, {true, false, false, false}, fresh->view(), fresh->values.data());
-      it = cache.insert(cache.end(), {fi, std::move(fresh)});
+    const auto mine = cache.begin() + static_cast<std::ptrdiff_t>(used);
+    auto it = std::find_if(cache.begin(), mine, [&](const auto& c) { return c.first == fi; });
+    if (it == mine) {
+      if (used == cache.size()) cache.emplace_back(-1, nullptr);
+      auto& [held, finer_brick] = cache[used];
+      if (!finer_brick || static_cast<int64_t>(finer_brick->values.size()) != layout.brick_nodes())
+        finer_brick = std::make_unique<FullBrick>(layout.brick_nodes());
+      held = -1;  // until read: a read that throws leaves no brick under its index
+      store.read_brick(fi, {true, false, false, false}, finer_brick->view(), finer_brick->values.data());
+      held = fi;
+      it = cache.begin() + static_cast<std::ptrdiff_t>(used++);
     }
     return it->second->values[brick_morton(q[0] - fb[0] * t, q[1] - fb[1] * t, q[2] - fb[2] * t, bits)];
   };

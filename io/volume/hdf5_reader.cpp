@@ -12,6 +12,7 @@
 #include "io/file/input_file.h"
 #include "io/volume/hdf5_handle.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -152,7 +153,7 @@ Volume read_hdf5(const std::string& file, const std::string& dataset) {
   const int64_t count = checked_node_count(volume.dims, static_cast<int>(sizeof(float)), where);
   read_hdf5_geometry(ds.get(), where, volume.spacing, volume.origin);
   try {
-    size_volume_values(volume.values, static_cast<size_t>(count));
+    detail::resize_prefaulted_in_parallel(volume.values, static_cast<size_t>(count));
   } catch (const std::bad_alloc&) {
     throw IoError(where + ": volume does not fit in memory");
   }

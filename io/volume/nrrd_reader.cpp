@@ -22,6 +22,7 @@
 
 #include "io/file/input_file.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -515,7 +516,7 @@ Volume empty_volume(const NrrdLayout& layout, const std::string& path) {
   volume.spacing = layout.spacing;
   volume.origin = layout.origin;
   try {
-    size_volume_values(volume.values, static_cast<size_t>(volume.node_count()));
+    detail::resize_prefaulted_in_parallel(volume.values, static_cast<size_t>(volume.node_count()));
   } catch (const std::bad_alloc&) {
     throw IoError(path + ": volume of " + std::to_string(volume.node_count()) + " nodes does not fit in memory");
   }

@@ -213,13 +213,6 @@ void check_finite(const float* values, const std::array<int64_t, 3>& lo, const s
   throw IoError(msg.str());
 }
 
-void size_volume_values(std::vector<float>& values, size_t count) {
-  values.reserve(count);
-  detail::advise_huge_pages(values.data(), count * sizeof(float));
-  detail::prefault_in_parallel(values.data(), count * sizeof(float));
-  values.resize(count);
-}
-
 void decode_scalars(ScalarType type, bool big_endian, const unsigned char* in, size_t count, float* out) {
   const bool swap = big_endian != (std::endian::native == std::endian::big);
   switch (type) {
@@ -251,7 +244,7 @@ Volume read_raw(const std::string& path, const RawLayout& layout) {
   Volume volume;
   volume.dims = layout.dims;
   try {
-    size_volume_values(volume.values, static_cast<size_t>(count));
+    detail::resize_prefaulted_in_parallel(volume.values, static_cast<size_t>(count));
   } catch (const std::bad_alloc&) {
     throw IoError(path + ": " + dims_text(layout.dims) + " volume does not fit in memory");
   }

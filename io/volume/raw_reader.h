@@ -39,11 +39,6 @@ void check_finite(const Volume& volume, const std::string& file);
 // The same for a box of SIZE nodes at LO (x fastest); the message gives global coordinates.
 void check_finite(const float* values, const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size,
                   const std::string& file);
-// Sizes a volume's values to COUNT nodes. The values are written once, right after, and the first
-// touch of fresh memory is the kernel's page faults (docs/METHOD.md, "Fresh memory"): the pages are
-// asked for as huge pages and faulted in on all threads before the vector's zero-fill, which would
-// take them on one (540 MB: 0.48-1.2 s -> 0.23-0.44 s here). Throws std::bad_alloc.
-void size_volume_values(std::vector<float>& values, size_t count);
 // COUNT values stored as TYPE in the given byte order at IN, converted to float. A float64 beyond
 // float range becomes infinite, so check_finite reports it instead of the conversion being undefined.
 void decode_scalars(ScalarType type, bool big_endian, const unsigned char* in, size_t count, float* out);

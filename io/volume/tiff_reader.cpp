@@ -18,6 +18,7 @@
 #include "io/file/extension.h"
 #include "io/file/input_file.h"
 #include "io/volume/raw_reader.h"
+#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -504,7 +505,7 @@ Volume read_tiff_stack(const std::string& path) {
   v.dims = reader->info().dims;
   v.spacing = reader->info().spacing;
   v.origin = reader->info().origin;
-  size_volume_values(v.values, static_cast<size_t>(v.node_count()));
+  detail::resize_prefaulted_in_parallel(v.values, static_cast<size_t>(v.node_count()));
   reader->read_box({0, 0, 0}, v.dims, v.values.data());
   return v;
 }
