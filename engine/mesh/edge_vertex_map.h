@@ -78,9 +78,7 @@ class EdgeVertexMap {
       // fresh memory, whose pages faulted one by one in the fill cost more than the march of a
       // slab's first layers (docs/METHOD.md, "Fresh memory").
       Slots grown;
-      grown.reserve(capacity);
-      detail::prefault(grown.data(), capacity * sizeof(Slot));
-      grown.resize(capacity, Slot{0, 0, 0});
+      detail::resize_prefaulted(grown, capacity);  // Slot{0, 0, 0}: free under any stamp
       grown.swap(slots_);
       stamp_ = 1;
     } else {

@@ -97,12 +97,9 @@ float get_field(const BrickView& b, Field f, uint32_t m) {
   return 0;
 }
 
-// zstd contexts kept per thread: ZSTD_compress and ZSTD_decompress make and initialize a context
-// per call, which for small bricks cost more than the (de)compression itself (at level 3, hundreds
-// of KB of tables cleared per brick).
-// Their workspaces (hundreds of KB, once a thread) faulted in by one call when zstd allocates them,
-// before its first reset writes them a page at a time (docs/METHOD.md, "Fresh memory"): a small
-// volume's convert took a tenth of its page faults there.
+// The zstd contexts' workspaces (hundreds of KB, once a thread) faulted in by one call when zstd
+// allocates them, before its first reset writes them a page at a time (docs/METHOD.md, "Fresh
+// memory"): a small volume's convert took a tenth of its page faults there.
 void* allocate_prefaulted(void*, size_t bytes) {
   void* p = std::malloc(bytes);
   if (p) detail::prefault(p, bytes);
@@ -111,6 +108,9 @@ void* allocate_prefaulted(void*, size_t bytes) {
 void free_prefaulted(void*, void* p) { std::free(p); }
 constexpr ZSTD_customMem kPrefaultedMemory{allocate_prefaulted, free_prefaulted, nullptr};
 
+// zstd contexts kept per thread: ZSTD_compress and ZSTD_decompress make and initialize a context
+// per call, which for small bricks cost more than the (de)compression itself (at level 3, hundreds
+// of KB of tables cleared per brick).
 ZSTD_CCtx* compression_context() {
   thread_local const std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> context(
       ZSTD_createCCtx_advanced(kPrefaultedMemory), ZSTD_freeCCtx);
