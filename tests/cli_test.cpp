@@ -482,6 +482,22 @@ TEST_F(Cli, ABinaryWithoutMpiRefusesToRunAsOneOfSeveralRanks) {
   EXPECT_TRUE(fs::exists(mesh));
 }
 
+// Where the system's static archives link, the command carries HDF5, libtiff with its codecs,
+// zstd, xxHash and zlib in itself: the dynamic loader maps none of them at its start.
+TEST_F(Cli, CommandLoadsNoLibraryItsArchivesHold) {
+#ifndef ISOTOPE_COMMAND_ARCHIVES
+  GTEST_SKIP() << "the static archives do not link on this system: the command links the shared libraries";
+#endif
+  const std::string loaded_log = in_work("loaded.txt");
+  ASSERT_EQ(std::system(("LD_TRACE_LOADED_OBJECTS=1 " + quote(ISOTOPE_BINARY) + " > " + quote(loaded_log)).c_str()), 0);
+  const std::string loaded = slurp(loaded_log);
+  fs::remove(loaded_log);
+  EXPECT_NE(loaded.find("libtbb"), std::string::npos) << loaded;  // the listing is what it claims to be
+  for (const char* library : {"libhdf5", "libtiff", "libwebp", "libLerc", "libjbig", "libjpeg", "libdeflate", "liblzma",
+                              "libzstd", "libxxhash", "libsz", "libaec", "libz."})
+    EXPECT_EQ(loaded.find(library), std::string::npos) << library << " is loaded at the command's start:\n" << loaded;
+}
+
 // The libraries that only one command needs are loaded by that command alone (cpp-httplib with
 // OpenSSL by serve, PLplot by plots, MPI under an MPI launcher): every other command starts
 // without them. A copy of the program with no modules beside it still extracts, and each command
