@@ -32,6 +32,14 @@ class EdgeVertexMap {
     mask_ = std::min(slots_.size(), kStartSlots) - 1;
   }
 
+  // Empty again, in O(1), over as many slots as it last spanned: for a mesh about as large as the
+  // last (the next slab of a full-resolution march), which would otherwise grow from kStartSlots
+  // through every doubling again, each rehash inserting what it held anew.
+  void clear_at_size() {
+    next_stamp();
+    size_ = 0;
+  }
+
   // The memory the table holds, taken or not.
   size_t bytes() const { return (slots_.capacity() + moving_.capacity()) * sizeof(Slot); }
 

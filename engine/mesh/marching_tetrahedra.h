@@ -150,7 +150,7 @@ class MeshBuilder {
     keys_.clear();
     plane_z2_ = {-1, -1};
     for (auto& k : plane_keys_) k.clear();
-    map_->clear();
+    map_->clear_at_size();
   }
 
  private:
