@@ -32,10 +32,13 @@ class EdgeVertexMap {
     mask_ = std::min(slots_.size(), kStartSlots) - 1;
   }
 
-  // Empty again, in O(1), over as many slots as it last spanned: for a mesh about as large as the
-  // last (the next slab of a full-resolution march), which would otherwise grow from kStartSlots
-  // through every doubling again, each rehash inserting what it held anew.
+  // Empty again, in O(1), spanning the slots the last mesh needed (at least kStartSlots; as it was
+  // when that mesh was empty): for a mesh about as large as the last (the next slab of a
+  // full-resolution march), which from kStartSlots grew through every doubling again, each rehash
+  // inserting what it held anew. Sized by the last mesh, not the largest ever: a builder lent to a
+  // small extraction after a large one keeps to a small span, as clear() does.
   void clear_at_size() {
+    if (size_ > 0) mask_ = std::min(slots_.size(), std::max(kStartSlots, capacity_for(size_))) - 1;
     next_stamp();
     size_ = 0;
   }

@@ -130,8 +130,8 @@ class MeshBuilder {
     mesh_ = std::move(storage);
   }
   // Ready for another mesh on another grid or at another isovalue (as the constructor's), the
-  // memory of its welding table and of its key lists kept: a builder kept from one extraction for
-  // the next.
+  // memory of its welding table and of its key lists kept, the table spanning what the last mesh
+  // needed: a builder kept from one extraction for the next.
   void retarget(float iso, int64_t side, const std::array<double, 3>& origin, const std::array<double, 3>& spacing) {
     reset();
     cutter_ = TetCutter(iso, side, origin, spacing);
@@ -144,7 +144,8 @@ class MeshBuilder {
     for (const auto& k : plane_keys_) b += k.capacity() * sizeof(PlaneVertex);
     return b;
   }
-  // Ready for another mesh with the same isovalue and grid, its welding table kept at its size.
+  // Ready for another mesh with the same isovalue and grid, its welding table kept, spanning what
+  // the last mesh needed (EdgeVertexMap::clear_at_size).
   void reset() {
     mesh_ = Mesh{};
     keys_.clear();
