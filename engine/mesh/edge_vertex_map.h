@@ -26,22 +26,14 @@ class EdgeVertexMap {
   // kStartSlots slots and grows over the rest as it needs: a table lent from one mesh to the next
   // this way is memory already touched, and a small mesh after a large one keeps to a few cache-warm
   // pages instead of scattering its keys over the large one's table.
-  void clear() {
-    next_stamp();
-    size_ = 0;
-    mask_ = std::min(slots_.size(), kStartSlots) - 1;
-  }
+  void clear() { empty_spanning(kStartSlots); }
 
   // Empty again, in O(1), spanning the slots the last mesh needed (at least kStartSlots; as it was
   // when that mesh was empty): for a mesh about as large as the last (the next slab of a
   // full-resolution march), which from kStartSlots grew through every doubling again, each rehash
   // inserting what it held anew. Sized by the last mesh, not the largest ever: a builder lent to a
   // small extraction after a large one keeps to a small span, as clear() does.
-  void clear_at_size() {
-    if (size_ > 0) mask_ = std::min(slots_.size(), std::max(kStartSlots, capacity_for(size_))) - 1;
-    next_stamp();
-    size_ = 0;
-  }
+  void clear_at_size() { empty_spanning(size_ > 0 ? std::max(kStartSlots, capacity_for(size_)) : mask_ + 1); }
 
   // The memory the table holds, taken or not.
   size_t bytes() const { return (slots_.capacity() + moving_.capacity()) * sizeof(Slot); }
@@ -71,6 +63,12 @@ class EdgeVertexMap {
     size_t c = 16;
     while (c < 2 * n) c *= 2;
     return c;
+  }
+  // Empty, over the first `span` slots (at most all there are).
+  void empty_spanning(size_t span) {
+    next_stamp();
+    size_ = 0;
+    mask_ = std::min(slots_.size(), span) - 1;
   }
   size_t slot(uint64_t key) const { return static_cast<size_t>((key * 0x9E3779B97F4A7C15ull) >> 20) & mask_; }
   void next_stamp() {
