@@ -29,8 +29,8 @@
 #include <vector>
 
 #include "bench/bench_support.h"
-#include "engine/core/fields.h"
 #include "engine/hierarchy/store_layout.h"
+#include "engine/synthetic/fields.h"
 #include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
@@ -147,7 +147,7 @@ void append_element_bytes(isotope::ScalarType type, const std::vector<float>& va
   }
 }
 
-constexpr int64_t kBrickWidth = int64_t{1} << isotope::StoreLayout::kDefaultBrickBits;  // 32
+constexpr int64_t kBrickWidth = int64_t{1} << isotope::kDefaultBrickBits;  // 32
 
 // One band-0 tile as the converter reads it: C^3 bricks of 32^3 plus a halo of two nodes, clipped
 // to the volume, in one read_box. Each brick's core is narrowed to the element type and compressed

@@ -27,14 +27,14 @@
 #include <vector>
 
 #include "bench/bench_support.h"
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/options.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/critical_table.h"
 #include "engine/hierarchy/diamond.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/hierarchy/record.h"
+#include "engine/synthetic/fields.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_format.h"

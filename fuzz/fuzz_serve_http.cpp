@@ -16,7 +16,7 @@
 #include <string>
 #include <thread>
 
-#include "engine/core/fields.h"
+#include "engine/synthetic/fields.h"
 #include "fuzz/fuzz_temp_file.h"
 #include "isotope/convert.h"
 #include "tools/serve/viewer_server.h"

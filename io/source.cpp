@@ -18,7 +18,7 @@
 
 #include "engine/core/volume_check.h"
 #include "engine/extract/budget_memo.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"

@@ -13,12 +13,12 @@
 #include <map>
 #include <mutex>
 
-#include "engine/core/fields.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/hierarchy/record_builder.h"
+#include "engine/synthetic/fields.h"
 #include "isotope/distribution.h"
 #include "tests/test_support.h"
 

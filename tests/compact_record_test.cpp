@@ -13,10 +13,10 @@
 #include <limits>
 #include <random>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/synthetic/fields.h"
 #include "isotope/mesh.h"
 #include "tests/test_support.h"
 

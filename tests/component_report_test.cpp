@@ -1,6 +1,6 @@
 // Per-component measures (exact on hand-made meshes, within discretisation error on the analytic
 // fields) and the full-versus-adaptive comparison on meshes whose change is known by construction.
-#include "engine/topology/component_report.h"
+#include "engine/diagnostics/component_report.h"
 
 #include <gtest/gtest.h>
 
@@ -11,9 +11,9 @@
 #include <stdexcept>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/synthetic/fields.h"
 #include "tests/test_support.h"
 
 namespace isotope {
@@ -249,7 +249,7 @@ TEST(MeasureComponents, RejectsTriangleWithMissingVertex) {
 }
 
 TEST(MeasureComponents, SphereMatchesItsRadius) {
-  const double r = 0.6;  // engine/core/fields.cpp
+  const double r = 0.6;  // engine/synthetic/fields.cpp
   const std::vector<ComponentStats> s = measure_components(sphere_mesh(65));
   ASSERT_EQ(s.size(), 1u);
   EXPECT_TRUE(s[0].closed);
@@ -268,7 +268,7 @@ TEST(MeasureComponents, TorusHasGenusOne) {
   EXPECT_EQ(s[0].euler_characteristic, 0);
   EXPECT_EQ(s[0].genus, 1);
   EXPECT_TRUE(s[0].encloses_inside);
-  // Tube radius 0.2 around a circle of radius 0.5 in z = 0 (engine/core/fields.cpp).
+  // Tube radius 0.2 around a circle of radius 0.5 in z = 0 (engine/synthetic/fields.cpp).
   EXPECT_NEAR(s[0].area / (4 * pi * pi * 0.5 * 0.2), 1.0, 0.03);
   EXPECT_NEAR(*s[0].volume / (2 * pi * pi * 0.5 * 0.2 * 0.2), 1.0, 0.03);
   expect_box(s[0], {-0.7, -0.7, -0.2}, {0.7, 0.7, 0.2}, 0.01);
@@ -420,7 +420,7 @@ TEST(CompareComponents, CoarseTorusWithoutTopologyControlSplits) {
 }
 
 // Three beads, the bar moved from the first pair to the second: two components on each side,
-// related many to many, which engine/topology/component_report.h says reads as rearranged. The same
+// related many to many, which engine/diagnostics/component_report.h says reads as rearranged. The same
 // result again, and through the overload the report uses (labels computed once).
 TEST(CompareComponents, AJoinMovedToTheNextPairReadsAsRearrangedTheSameEveryTime) {
   const Mesh a = beads({true, false}), b = beads({false, true});

@@ -6,10 +6,10 @@
 #include <cmath>
 #include <map>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/mesh/box_clip.h"
+#include "engine/synthetic/fields.h"
 #include "tests/test_support.h"
 
 namespace isotope {

@@ -17,12 +17,12 @@
 #include <thread>
 #include <vector>
 
-#include "engine/core/fields.h"
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/extract/adaptive_extract.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/synthetic/fields.h"
 #include "tests/test_support.h"
 
 namespace isotope {

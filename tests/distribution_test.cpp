@@ -22,11 +22,11 @@
 #include <thread>
 #include <vector>
 
-#include "engine/core/fields.h"
 #include "engine/extract/adaptive_extract.h"
 #include "engine/extract/budget_memo.h"
 #include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/hierarchy.h"
+#include "engine/synthetic/fields.h"
 #include "isotope/convert.h"
 #include "isotope/error.h"
 #include "isotope/extract.h"

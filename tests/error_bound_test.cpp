@@ -11,9 +11,9 @@
 #include <numeric>
 #include <string>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/hierarchy.h"
+#include "engine/synthetic/fields.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_reader.h"

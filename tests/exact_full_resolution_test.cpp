@@ -30,9 +30,8 @@
 #include <thread>
 #include <vector>
 
-#include "engine/core/fields.h"
 #include "engine/extract/column_extremes.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/slab_march.h"
 #include "engine/extract/streamed_extract.h"
 #include "engine/extract/traversal.h"
@@ -40,6 +39,7 @@
 #include "engine/hierarchy/kuhn.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/mesh/marching_tetrahedra.h"
+#include "engine/synthetic/fields.h"
 #include "io/volume/box_reader.h"
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"

@@ -32,9 +32,9 @@
 #include <utility>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/mesh/vertex_normals.h"
+#include "engine/synthetic/fields.h"
 #include "io/file/atomic_file.h"
 #include "io/file/direct_appends.h"
 #include "io/file/region_writes.h"

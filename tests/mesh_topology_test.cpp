@@ -9,9 +9,9 @@
 #include <string>
 #include <tuple>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
-#include "engine/topology/component_report.h"
+#include "engine/diagnostics/component_report.h"
+#include "engine/extract/extract_drivers.h"
+#include "engine/synthetic/fields.h"
 #include "engine/topology/filed_edges.h"
 #include "isotope/mesh.h"
 

@@ -26,13 +26,13 @@
 #include <utility>
 #include <vector>
 
-#include "engine/core/fields.h"
 #include "engine/extract/adaptive_extract.h"
 #include "engine/extract/budget_memo.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/finest_extract.h"
 #include "engine/hierarchy/compact_record.h"
 #include "engine/hierarchy/hierarchy.h"
+#include "engine/synthetic/fields.h"
 #include "io/store/brick_cache.h"
 #include "io/store/held_words.h"
 #include "io/store/paged_volume.h"
@@ -169,7 +169,7 @@ DecodedSizes decoded_sizes(const StoreReader& store) {
 class PagedTest : public testing::TempDirTest {
  protected:
   // Writes `v` as float32 raw and converts it (as store_test.cpp does); returns the store's path.
-  std::string convert(const Volume& v, const std::string& name, int brick_bits = StoreLayout::kDefaultBrickBits,
+  std::string convert(const Volume& v, const std::string& name, int brick_bits = kDefaultBrickBits,
                       int quantize_bits = 0) {
     ConvertOptions o;
     o.brick_bits = brick_bits;
@@ -1276,7 +1276,7 @@ TEST(NarrowBounds, TakeEveryRecordOfOneByteValuesExactlyAndNothingElse) {
 // values' bytes, and a refusal where it refuses one, with the corrupt brick's message, wherever the
 // record stands; a value that is not a byte's is refused with the message the cache gives it.
 TEST(NarrowBounds, ACoreSectionDecodesStraightIntoTheWordsNarrowBoundsGives) {
-  const StoreLayout layout({33, 33, 33}, StoreLayout::kDefaultBrickBits);
+  const StoreLayout layout({33, 33, 33}, kDefaultBrickBits);
   constexpr int kBand = 1;
   ASSERT_TRUE(stores_records(layout, kBand));
   const auto nodes = static_cast<size_t>(layout.brick_nodes());

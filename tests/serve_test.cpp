@@ -24,8 +24,8 @@
 #include <utility>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
+#include "engine/synthetic/fields.h"
 #include "io/mesh/mesh_wire.h"
 #include "isotope/error.h"
 #include "isotope/mesh.h"

@@ -12,12 +12,12 @@
 #include <string>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/diagnostics/component_report.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/diamond.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/hierarchy/record_builder.h"
-#include "engine/topology/component_report.h"
+#include "engine/synthetic/fields.h"
 #include "isotope/mesh.h"
 #include "test_support.h"
 

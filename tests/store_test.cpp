@@ -18,13 +18,13 @@
 #include <mutex>
 #include <random>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/traversal.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/compact_record.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/synthetic/fields.h"
 #include "io/store/brick_cache.h"
 #include "io/store/brick_pool.h"
 #include "io/store/handover_file.h"
@@ -105,7 +105,7 @@ class Store : public TempDirTest {
   // Every value and record of the store, read as an extraction reads it (band 0's records
   // computed from the values), equals the in-memory build's bit for bit, and each record is the
   // exact one (MultiresVolume) rounded as engine/hierarchy/compact_record.h says.
-  void expect_round_trip(const Volume& v, const std::string& store, int brick_bits = StoreLayout::kDefaultBrickBits) {
+  void expect_round_trip(const Volume& v, const std::string& store, int brick_bits = kDefaultBrickBits) {
     const Hierarchy loaded = load(store);
     const Hierarchy built = Hierarchy::build(v, kAll, brick_bits);
     ASSERT_EQ(loaded.layout().brick_count(), built.layout().brick_count());
@@ -242,7 +242,7 @@ TEST_F(Store, BandZeroRangesAndBoundsOfAUint8StoreAreTheBuildsWithNoOtherField) 
     ASSERT_EQ(BrickCache(StoreReader(own), 1).value_bytes(), 1);
     const RecordFields none{false, false, false, false};  // ranges and bounds alone
     const Hierarchy loaded = load(own, none);
-    const Hierarchy built = Hierarchy::build(testing::load_shared(shared), none, StoreLayout::kDefaultBrickBits);
+    const Hierarchy built = Hierarchy::build(testing::load_shared(shared), none, kDefaultBrickBits);
     ASSERT_EQ(loaded.layout().brick_count(), built.layout().brick_count());
     const int64_t nodes = built.layout().brick_nodes();
     const Band& band0 = built.layout().band(0);

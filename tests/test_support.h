@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "io/store/store_writer.h"
 #include "isotope/mesh.h"
 #include "isotope/volume.h"

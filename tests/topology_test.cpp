@@ -7,12 +7,12 @@
 #include <string>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/critical_rule.h"
 #include "engine/hierarchy/critical_table.h"
 #include "engine/hierarchy/diamond.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/synthetic/fields.h"
 #include "io/store/store_format.h"
 #include "isotope/mesh.h"
 #include "tests/test_support.h"

@@ -24,11 +24,11 @@
 #include <string>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/options.h"
 #include "engine/extract/traversal.h"
 #include "engine/hierarchy/hierarchy.h"
+#include "engine/synthetic/fields.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_format.h"

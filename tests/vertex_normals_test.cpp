@@ -12,9 +12,9 @@
 #include <span>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/mesh/vertex_parts.h"
+#include "engine/synthetic/fields.h"
 #include "isotope/mesh.h"
 
 namespace isotope {

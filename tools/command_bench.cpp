@@ -1,8 +1,8 @@
-// isotope bench: the command's face over the benchmark suite of bench/suite/bench_suite.h.
+// isotope bench: the command's face over its benchmark suite (tools/bench).
 #include <CLI/CLI.hpp>
 #include <memory>
 
-#include "bench/suite/bench_suite.h"
+#include "tools/bench/bench_suite.h"
 #include "tools/commands.h"
 
 namespace isotope::tools {

@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "engine/core/fields.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/multires_volume.h"
+#include "engine/synthetic/fields.h"
 #include "io/mesh/mesh_writer.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/mesh.h"

@@ -22,8 +22,8 @@
 #include <thread>
 
 #include "engine/core/byte_codec.h"
-#include "engine/extract/extract.h"
-#include "engine/topology/component_report.h"
+#include "engine/diagnostics/component_report.h"
+#include "engine/extract/extract_drivers.h"
 #include "io/file/atomic_file.h"
 #include "io/file/output_folder.h"
 #include "io/mesh/mesh_writer.h"
@@ -48,7 +48,7 @@ struct ExtractArgs {
   std::string delta;
   bool compare_full = false;
   // --compare-full relates components whose surfaces lie within this many voxel spacings: a
-  // coarse mesh moves the surface by up to a few voxels (engine/topology/component_report.h).
+  // coarse mesh moves the surface by up to a few voxels (engine/diagnostics/component_report.h).
   double compare_voxels = 3;
   std::string dims;
   std::string type;
@@ -162,7 +162,7 @@ int run_extract(const ExtractArgs& a) {
   if (!a.parts.empty() && !a.report.empty())
     throw CLI::ValidationError("--report", "needs one mesh (-o); --parts leaves it in pieces");
   // Below 2^-11 (about 0.00049) voxel spacings the comparison's sampling grid of a 2^19-node axis would overflow
-  // (engine/topology/component_report.cpp): refused here, before the work, not after it.
+  // (engine/diagnostics/component_report.cpp): refused here, before the work, not after it.
   if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6) {
     char shown[32];
     std::snprintf(shown, sizeof shown, "%g", a.compare_voxels);  // 1e-300, not 0.000000

@@ -1,4 +1,4 @@
-// isotope generate: synthetic volumes with known isosurfaces (engine/core/fields.h), written as
+// isotope generate: synthetic volumes with known isosurfaces (engine/synthetic/fields.h), written as
 // .raw (x fastest; float32, or uint8/uint16 stretched over the field's range) or as float32
 // HDF5 dataset /volume, chosen by the output's extension.
 #include <CLI/CLI.hpp>
@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/core/fields.h"
+#include "engine/synthetic/fields.h"
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_writer.h"
 #include "tools/commands.h"

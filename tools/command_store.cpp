@@ -34,7 +34,7 @@ struct ConvertArgs {
   int threads = 0;
   int zstd_level = 3;
   int quantize = 0;
-  int brick_bits = StoreLayout::kDefaultBrickBits;
+  int brick_bits = kDefaultBrickBits;
   bool quiet = false;
 };
 

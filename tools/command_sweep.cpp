@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "io/file/atomic_file.h"
 #include "isotope/mesh.h"
 #include "isotope/source.h"

@@ -15,7 +15,7 @@
 #include "engine/core/parallel.h"
 #include "engine/extract/budget_memo.h"
 #include "engine/extract/distributed_parts.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/finest_extract.h"
 #include "engine/extract/traversal.h"
 #include "engine/extract/triangle_budget.h"

@@ -19,7 +19,7 @@
 #include "engine/core/parallel.h"
 #include "engine/extract/block_march.h"
 #include "engine/extract/distributed_parts.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/slab_march.h"
 #include "engine/extract/traversal.h"
 #include "engine/extract/traversal_source.h"

@@ -15,7 +15,7 @@
 #include "engine/core/parallel.h"
 #include "engine/core/volume_check.h"
 #include "engine/extract/array_source.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/finest_extract.h"
 #include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"

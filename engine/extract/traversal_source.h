@@ -1,7 +1,7 @@
 #pragma once
 // What the traversal (engine/extract/traversal.h) reads, as C++20 concepts: where values and records
 // come from is the source's business, a hierarchy in memory (engine/hierarchy/hierarchy.h), the
-// exact reference MultiresVolume (engine/extract/extract.cpp) or a store paged through a brick
+// exact reference MultiresVolume (engine/extract/extract_drivers.cpp) or a store paged through a brick
 // cache (io/store/paged_volume.h). The compiler names what a new source lacks.
 #include <array>
 #include <concepts>

@@ -25,7 +25,7 @@
 #include <vector>
 
 #include "engine/core/parallel.h"
-#include "engine/core/progress.h"
+#include "engine/core/progress_reporter.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/store_layout.h"
 #include "isotope/detail/huge_page_allocator.h"

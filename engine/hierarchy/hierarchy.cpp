@@ -6,7 +6,6 @@
 #include <string>
 
 #include "engine/core/volume_check.h"
-#include "engine/extract/adaptive_extract.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/record_builder.h"
@@ -157,13 +156,6 @@ Hierarchy Hierarchy::build(const Volume& volume, const RecordFields& fields, int
   }
   h.stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return h;
-}
-
-Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats, BudgetMemo* memo) {
-  if (!hierarchy.fields().covers(fields_for(options)))
-    throw std::invalid_argument("this hierarchy was built without the records topology mode " +
-                                std::string(to_string(options.topology)) + " reads");
-  return extract_adaptive(hierarchy, options, stats, std::nullopt, memo);
 }
 
 }  // namespace isotope

@@ -16,13 +16,12 @@
 #include <stdexcept>
 #include <type_traits>
 
-#include "engine/core/progress.h"
-#include "engine/extract/extract.h"
-#include "engine/extract/options.h"
+#include "engine/core/progress_reporter.h"
 #include "engine/hierarchy/compact_record.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/multires_volume.h"
 #include "engine/hierarchy/record.h"
+#include "engine/hierarchy/record_fields.h"
 #include "engine/hierarchy/store_layout.h"
 #include "isotope/volume.h"
 
@@ -302,12 +301,5 @@ class Hierarchy::Reader : public CompactLookup<hierarchy_internal::MemoryBricks>
   explicit Reader(const Hierarchy& h) : CompactLookup(h.layout(), h.indexer(), {&h, h.layout().brick_nodes()}) {}
 };
 inline Hierarchy::Reader Hierarchy::reader() const { return Reader(*this); }
-
-class BudgetMemo;
-// extract() (engine/extract/extract.h) over an in-memory hierarchy. Throws std::invalid_argument when the
-// options read a field the hierarchy was built without. `memo`: as extract_adaptive's
-// (engine/extract/adaptive_extract.h), for a hierarchy kept open.
-Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats = nullptr,
-             BudgetMemo* memo = nullptr);
 
 }  // namespace isotope

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "engine/core/progress.h"
+#include "engine/core/progress_reporter.h"
 #include "engine/hierarchy/brick_layout.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/record.h"
@@ -25,7 +25,7 @@ struct PreprocessStats {
 class MultiresVolume {
  public:
   // Embeds and preprocesses (in parallel). Throws std::invalid_argument for dims < 2 or
-  // non-finite values. `progress`, if given, hears the fraction done (see engine/core/progress.h).
+  // non-finite values. `progress`, if given, hears the fraction done (see engine/core/progress_reporter.h).
   static MultiresVolume build(const Volume& volume, const ProgressCallback& progress = {});
   // An empty volume of these dimensions, to be filled with set_value and set_record (a store
   // being loaded). Throws std::invalid_argument as build does.

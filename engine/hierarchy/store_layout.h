@@ -11,6 +11,7 @@
 
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/record.h"
+#include "isotope/convert.h"  // kDefaultBrickBits: the brick size a store has unless convert is told otherwise
 
 namespace isotope {
 
@@ -26,8 +27,6 @@ struct Band {
 
 class StoreLayout {
  public:
-  static constexpr int kDefaultBrickBits = 4;
-
   StoreLayout() = default;
   StoreLayout(const std::array<int64_t, 3>& dims, int brick_bits) : dims_(dims), brick_bits_(brick_bits) {
     lattice_ = Lattice::enclosing(dims);

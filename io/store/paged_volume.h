@@ -12,7 +12,7 @@
 #include <cstdint>
 #include <memory>
 
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/record_builder.h"
@@ -200,7 +200,7 @@ class PagedVolume {
 };
 
 class BudgetMemo;
-// extract() (engine/extract/extract.h) over a store, paged through the volume's cache. `memo`: as
+// extract() (engine/extract/extract_drivers.h) over a store, paged through the volume's cache. `memo`: as
 // extract_adaptive's (engine/extract/adaptive_extract.h), for a store kept open.
 Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr,
              BudgetMemo* memo = nullptr);

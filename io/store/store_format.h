@@ -49,7 +49,7 @@ struct StoreHeader {
   std::array<int64_t, 3> dims{0, 0, 0};
   std::array<double, 3> spacing{1, 1, 1};
   std::array<double, 3> origin{0, 0, 0};
-  int brick_bits = StoreLayout::kDefaultBrickBits;
+  int brick_bits = kDefaultBrickBits;
   int lattice_k = 0;        // redundant with dims, checked
   std::string source_type;  // element type of the input, e.g. "uint16" (at most 15 chars)
   double value_min = 0, value_max = 0;

@@ -12,7 +12,7 @@
 #include <utility>
 #include <vector>
 
-#include "engine/core/progress.h"
+#include "engine/core/progress_reporter.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/store_layout.h"
 #include "io/store/store_format.h"

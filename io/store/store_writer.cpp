@@ -29,8 +29,6 @@
 
 namespace isotope {
 
-static_assert(kDefaultBrickBits == StoreLayout::kDefaultBrickBits,
-              "isotope/convert.h names the store layout's default");
 namespace {
 
 // A hand-over smaller than this stays in memory (build_options).

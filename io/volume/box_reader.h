@@ -59,6 +59,13 @@ class BoxReader {
   VolumeInfo info_;
 };
 
+// What a reader of values of TYPE knows of its volume.
+VolumeInfo volume_info(ScalarType type, const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
+                       const std::array<double, 3>& origin);
+
+// "(x,y,z)": a node or a box's size, as the readers' messages write them.
+std::string coordinates_text(const std::array<int64_t, 3>& v);
+
 // Throws std::invalid_argument, naming WHERE, unless the box of SIZE nodes at LO lies inside
 // info.dims (a size of 0 is inside: it reads nothing). For the readers' read_box.
 void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, const VolumeInfo& info,

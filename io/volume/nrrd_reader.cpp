@@ -1,5 +1,6 @@
 #include "io/volume/nrrd_reader.h"
 
+#include <unistd.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -21,6 +22,7 @@
 #include <vector>
 
 #include "io/file/input_file.h"
+#include "io/volume/raw_data_reader.h"
 #include "io/volume/raw_reader.h"
 #include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
@@ -581,6 +583,70 @@ Volume read_nrrd(const std::string& path) {
   });
   check_finite(volume, path);
   return volume;
+}
+
+// ---------------------------------------------------------------- by boxes
+
+namespace {
+
+// The inflated copy of gzip data: a file created under a unique name in DIR, removed when this
+// is destroyed.
+class InflatedFile {
+ public:
+  // An empty DIR is the working directory, as everywhere else a relative path is.
+  InflatedFile(const std::string& dir, const std::string& purpose)
+      : path_((fs::path(dir) / "isotope-inflated-XXXXXX").string()),
+        fd_(::mkostemp(path_.data(), O_CLOEXEC)) {  // fills in the X's
+    if (fd_.get() < 0) {
+      throw IoError((dir.empty() ? "." : dir) + ": cannot create a scratch file to " + purpose + ": " +
+                    system_error_text(errno));
+    }
+  }
+  ~InflatedFile() { ::unlink(path_.c_str()); }
+  InflatedFile(const InflatedFile&) = delete;
+  InflatedFile& operator=(const InflatedFile&) = delete;
+
+  const std::string& path() const { return path_; }
+  int fd() const { return fd_.get(); }
+
+ private:
+  std::string path_;
+  FileDescriptor fd_;
+};
+
+void write_fully(int fd, const unsigned char* bytes, size_t size, const std::string& where) {
+  for (size_t done = 0; done < size;) {
+    const ssize_t n = ::write(fd, bytes + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int err = errno;
+      const std::string text = system_error_text(err);
+      throw IoError(where + ": write failed: " + (err == ENOSPC || err == EDQUOT ? "disk full (" + text + ")" : text));
+    }
+    done += static_cast<size_t>(n);
+  }
+}
+
+// Inflated once into SCRATCH_DIR, with bounded memory, then read like raw NRRD data.
+std::unique_ptr<BoxReader> open_gzip_nrrd(const NrrdLayout& layout, const VolumeInfo& info,
+                                          const std::string& scratch_dir) {
+  auto scratch = std::make_shared<const InflatedFile>(scratch_dir, "inflate " + layout.where);
+  const std::string copy = layout.where + ": inflated copy " + scratch->path();
+  stream_nrrd_data(layout,
+                   [&](const unsigned char* bytes, size_t size) { write_fully(scratch->fd(), bytes, size, copy); });
+  FileDescriptor fd = open_input(scratch->path(), copy, "a volume file");
+  RawData data{0, layout.type, layout.big_endian, layout.where, copy};
+  return open_raw_data(std::move(fd), std::move(data), info, std::move(scratch));
+}
+
+}  // namespace
+
+std::unique_ptr<BoxReader> open_nrrd_box_reader(const std::string& path, const std::string& scratch_dir) {
+  const NrrdLayout layout = read_nrrd_layout(path);  // also checks the file holds the data
+  const VolumeInfo info = volume_info(layout.type, layout.dims, layout.spacing, layout.origin);
+  if (layout.encoding == NrrdEncoding::gzip) return open_gzip_nrrd(layout, info, scratch_dir);
+  RawData data{layout.data_offset, layout.type, layout.big_endian, layout.where, layout.where};
+  return open_raw_data(open_input(layout.data_path, layout.where, "a volume file"), std::move(data), info);
 }
 
 }  // namespace isotope

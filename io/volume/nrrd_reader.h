@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 
 #include "io/volume/raw_reader.h"
@@ -46,5 +47,10 @@ NrrdLayout read_nrrd_layout(const std::string& path);
 // layout.where: missing or truncated data, corrupt gzip stream, more gzip data than the header says.
 using NrrdBlockSink = std::function<void(const unsigned char* bytes, size_t size)>;
 void stream_nrrd_data(const NrrdLayout& layout, const NrrdBlockSink& sink);
+
+class BoxReader;
+// A NRRD read by boxes (io/volume/box_reader.h): raw data in place; gzip data inflated once,
+// streaming, into a scratch file in SCRATCH_DIR that goes with the reader.
+std::unique_ptr<BoxReader> open_nrrd_box_reader(const std::string& path, const std::string& scratch_dir);
 
 }  // namespace isotope

@@ -25,6 +25,7 @@
 #include "io/file/checked_size.h"
 #include "io/file/input_file.h"
 #include "io/file/positioned_io.h"
+#include "io/volume/raw_data_reader.h"
 #include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
@@ -75,24 +76,10 @@ void decode(bool swap, const unsigned char* in, size_t count, float* out) {
   swap ? decode<T, true>(in, count, out) : decode<T, false>(in, count, out);
 }
 
-class Fd {
- public:
-  explicit Fd(int fd) : fd_(fd) {}
-  ~Fd() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  Fd(const Fd&) = delete;
-  Fd& operator=(const Fd&) = delete;
-  int get() const { return fd_; }
-
- private:
-  int fd_;
-};
-
 // Blocks of values read (pread) and converted on all threads: a 256^3 uint8 volume took 31 ms on
 // one, the largest share of a one-shot extraction after the marching itself.
 void read_values(const std::string& path, ScalarType type, std::vector<float>& values) {
-  const Fd file(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  const FileDescriptor file(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
   if (file.get() < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
   const size_t elem = static_cast<size_t>(scalar_type_size(type));
   constexpr size_t kBlockValues = size_t{1} << 18;  // bounds each task's staging buffer to 2 MiB
@@ -251,6 +238,12 @@ Volume read_raw(const std::string& path, const RawLayout& layout) {
   read_values(path, layout.type, volume.values);
   if (layout.type == ScalarType::float32 || layout.type == ScalarType::float64) check_finite(volume, path);
   return volume;
+}
+
+std::unique_ptr<BoxReader> open_raw_box_reader(const std::string& path, const RawLayout& layout) {
+  check_raw_file(path, layout);
+  const VolumeInfo info = volume_info(layout.type, layout.dims, {1, 1, 1}, {0, 0, 0});
+  return open_raw_data(open_input(path, path, "a volume file"), RawData{0, layout.type, false, path, path}, info);
 }
 
 }  // namespace isotope

@@ -3,6 +3,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -18,6 +19,10 @@ struct RawLayout {
 
 // "lobster_301x324x56_uint8.raw" -> {301,324,56}, uint8; nullopt when the name does not say.
 std::optional<RawLayout> parse_raw_name(const std::string& path);
+
+class BoxReader;
+// A raw file read by boxes (io/volume/box_reader.h): checked against LAYOUT at open.
+std::unique_ptr<BoxReader> open_raw_box_reader(const std::string& path, const RawLayout& layout);
 
 // Throws IoError: missing/unreadable file, size not equal to the layout, NaN or infinite values.
 Volume read_raw(const std::string& path, const RawLayout& layout);

@@ -7,10 +7,10 @@
 #include <string>
 #include <vector>
 
-#include "engine/extract/extract.h"
+#include "engine/diagnostics/component_report.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/extract/options.h"
 #include "engine/hierarchy/multires_volume.h"
-#include "engine/topology/component_report.h"
 #include "io/store/brick_cache.h"
 #include "isotope/mesh.h"
 #include "isotope/source.h"

@@ -1,5 +1,5 @@
-// Per-component measures and the full-versus-adaptive comparison (engine/topology/component_report.h).
-#include "engine/topology/component_report.h"
+// Per-component measures and the full-versus-adaptive comparison (engine/diagnostics/component_report.h).
+#include "engine/diagnostics/component_report.h"
 
 #include <algorithm>
 #include <cmath>

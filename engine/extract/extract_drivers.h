@@ -17,6 +17,14 @@ namespace isotope {
 // Throws as extract(const Volume&, ...) does (isotope/extract.h).
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
 
+class BudgetMemo;
+class Hierarchy;
+// extract() over an in-memory hierarchy. Throws std::invalid_argument when the options read a field
+// the hierarchy was built without. `memo`: as extract_adaptive's (engine/extract/adaptive_extract.h),
+// for a hierarchy kept open.
+Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats = nullptr,
+             BudgetMemo* memo = nullptr);
+
 // extract(volume, options, stats) for a volume validate_volume() accepted before, whose values
 // cannot have changed since (not a borrowed array): they are not scanned again.
 Mesh extract_validated(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);

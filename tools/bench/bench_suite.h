@@ -1,5 +1,5 @@
 #pragma once
-// The benchmark suite `isotope bench` runs (bench/suite/bench_suite.cpp): the product timed as a
+// The benchmark suite `isotope bench` runs (its definition beside this header): the product timed as a
 // user meets it on a fixed set of volumes, beside full-resolution marching tetrahedra and the
 // peers, with the targets met or missed row by row. The Google Benchmark binaries of
 // bench/ time the same engine paths stage by stage (bench/README.md).

@@ -1,7 +1,7 @@
-// Synthetic volumes on [-1,1]^3 with known isosurfaces (engine/core/fields.h).
+// Synthetic volumes on [-1,1]^3 with known isosurfaces (engine/synthetic/fields.h).
 // Node (i,j,k) of a size^3 grid sits at p = -1 + 2*(i,j,k)/(size-1), so spacing and origin
 // make the mesh coordinates those of the paper's Table-1 domain.
-#include "engine/core/fields.h"
+#include "engine/synthetic/fields.h"
 
 #include <algorithm>
 #include <cmath>

@@ -8,7 +8,7 @@
 // marching_cubes on the same file and VTK's Flying Edges on the same array (python3-skimage and
 // python3-vtk9, run here) and the paper's Table 1. Then the speed targets (README, "Performance"), row by
 // row, met or missed. `--scale` runs the large-volume row instead.
-#include "bench/suite/bench_suite.h"
+#include "tools/bench/bench_suite.h"
 
 #include <fcntl.h>
 #include <malloc.h>
@@ -34,10 +34,10 @@
 #include <thread>
 #include <vector>
 
-#include "engine/core/fields.h"
 #include "engine/core/parallel.h"
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 #include "engine/hierarchy/hierarchy.h"
+#include "engine/synthetic/fields.h"
 #include "io/file/atomic_file.h"
 #include "io/file/temp_dir.h"
 #include "io/volume/raw_reader.h"

@@ -1,4 +1,4 @@
-#include "engine/extract/extract.h"
+#include "engine/extract/extract_drivers.h"
 
 #include <algorithm>
 #include <cassert>
@@ -101,6 +101,13 @@ Mesh extract_validated(const Volume& volume, const ExtractOptions& options, Extr
 
 Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats) {
   return extract_adaptive(InMemory(mv), options, stats);
+}
+
+Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats, BudgetMemo* memo) {
+  if (!hierarchy.fields().covers(fields_for(options)))
+    throw std::invalid_argument("this hierarchy was built without the records topology mode " +
+                                std::string(to_string(options.topology)) + " reads");
+  return extract_adaptive(hierarchy, options, stats, std::nullopt, memo);
 }
 
 }  // namespace isotope
