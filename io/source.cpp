@@ -271,7 +271,7 @@ Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
   impl->cache_mb = options.cache_mb;
   impl->tune_allocator = options.tune_allocator;
   // A store is known by its magic; a file named .isotope without it is a damaged store, whose
-  // reader says so, not a raw volume whose name lacks its dimensions (tests/reject/zeros.isotope).
+  // reader says so, not a raw volume whose name lacks its dimensions (tests/golden/zeros.isotope).
   if (is_store_file(spec.path) || spec.path.ends_with(".isotope")) {
     if (spec.dims || spec.type) throw OptionError(spec.dims ? "dims" : "type", "does not apply to a store");
     if (options.tune_allocator) keep_freed_memory();

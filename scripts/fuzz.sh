@@ -2,7 +2,7 @@
 # Builds the libFuzzer targets of fuzz/ with clang-14 under ASan+UBSan (build-fuzz) and runs each
 # one for a bounded time from its seed corpus (fuzz/corpus/TARGET, copied: the repository is not
 # changed), one target per core at a time. A finding (crash, sanitizer report, leak, timeout, out-of-memory) fails the script and
-# leaves its reproducer in build-fuzz/findings; add it to tests/reject (docs/RELIABILITY.md) once
+# leaves its reproducer in build-fuzz/findings; add it to tests/golden (docs/RELIABILITY.md) once
 # fixed. CI runs this after the tests (scripts/test.sh).
 #
 #   scripts/fuzz.sh [--seconds N] [--stats FILE] [--no-build] [TARGET...]

@@ -26,7 +26,7 @@ if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+
 # the Python tests). libopenmpi-dev and openmpi-bin: the build finds MPI and makes `mpirun -n R
 # isotope` share its work (dist/, optional: without them the command runs as one process), which
 # tests/mpi checks. hdf5-filter-plugin: HDF5 datasets compressed by filter plugins (lz4, bzip2),
-# which the command reads with its static HDF5 beside the plugins' shared one (tests/io_test.cpp).
+# which the command reads with its static HDF5 beside the plugins' shared one (tests/io/volume_read_test.cpp).
 if [ "${1:-}" = "--tests" ]; then
   packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format python3-pytest python3-vtk9 python3-tifffile
     libopenmpi-dev openmpi-bin hdf5-filter-plugin)

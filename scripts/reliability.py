@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Tries isotope as a hostile user would and writes the table of docs/RELIABILITY.md: bad paths,
-bad volumes, corrupted stores by kind (the golden reject files of tests/reject and random
+bad volumes, corrupted stores by kind (the golden reject files of tests/golden and random
 corruptions), bad numbers on the command line, HTTP abuse of `isotope serve`, and the fuzz runs of
 scripts/fuzz.sh. Every row must hold: a clear message and exit 1 (2 for usage), or the HTTP status
 the docs promise; nothing written; no crash (no signal); no hang (each command within 30 s); memory
@@ -27,7 +27,7 @@ import time
 import urllib.parse
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-REJECT = os.path.join(ROOT, 'tests', 'reject')
+REJECT = os.path.join(ROOT, 'tests', 'golden')
 TIMEOUT = 30
 RSS_LIMIT_MB = 1024
 
@@ -235,7 +235,7 @@ def reject_files(iso, work):
         shutil.copy(os.path.join(REJECT, f), d)
         p = os.path.join(d, f)
         category = 'Corrupted stores' if f.endswith('.isotope') else 'Bad volumes'
-        r = add(Row(category, f'`tests/reject/{f}`'))
+        r = add(Row(category, f'`tests/golden/{f}`'))
         for line in open(os.path.join(REJECT, name)):
             command, message = line.rstrip('\n').split(': ', 1)
             argv = [iso, command, p] + (['--iso', '0.5', '-o', f'{d}/out.ply'] if command == 'extract' else [])
@@ -677,7 +677,7 @@ def write_table(out, fuzz_seconds):
              'unchanged, no crash, no hang (each command within 30 s), memory bounded (every command below 1 GB '
              'peak RSS). "Tried" counts commands (or requests, or fuzz inputs). The messages are the first line '
              'the command printed, paths shortened. The golden reject files and their expected messages are in '
-             '`tests/reject` (`tests/reject_test.cpp` runs them in CI); the server limits are in docs/SERVE.md.',
+             '`tests/golden` (`tests/cli/reject_test.cpp` runs them in CI); the server limits are in docs/SERVE.md.',
              '', '## The policies the table checks', '',
              '- **Outputs** (io/file/atomic_file.h): a new path or a regular file is written to a temporary file in '
              'its directory and renamed when complete (a full disk leaves the old file); a symbolic link is '

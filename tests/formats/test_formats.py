@@ -1,6 +1,6 @@
 """Every mesh format `isotope extract -o` writes, read back by a reader that is not ours.
 
-The PLY of the same extraction is the reference (its layout is pinned by tests/io_test.cpp); each
+The PLY of the same extraction is the reference (its layout is pinned by tests/io/mesh_formats_test.cpp); each
 other format must give the same vertex and triangle counts and the same bounds, exactly (floats
 are stored as they are, or as their shortest exact text):
 - .vtp through VTK's XML PolyData reader (python3-vtk9, what ParaView uses), with its normals;

@@ -39,7 +39,7 @@ constexpr int64_t kHistogramSamples = int64_t{4} << 20;  // a fraction of a seco
 constexpr std::ptrdiff_t kConcurrentExtractions = 2;
 // Requests waiting for one of those slots, at most; a request beyond them, or one that has waited
 // kMaxWaitSeconds, gets 503 with Retry-After (docs/SERVE.md, "Limits"): the memory and the delay a
-// crowd of clients can cause stay bounded (tests/serve_test.cpp, ACrowdIsAnsweredOrRefusedWithBoundedMemory).
+// crowd of clients can cause stay bounded (tests/cli/serve_test.cpp, ACrowdIsAnsweredOrRefusedWithBoundedMemory).
 constexpr int kWaitingExtractions = 16;
 constexpr int kMaxWaitSeconds = 30;
 // Requests carry no body (docs/SERVE.md, "Limits"; the others are HttpLimits).
