@@ -147,9 +147,9 @@ void append_element_bytes(isotope::ScalarType type, const std::vector<float>& va
   }
 }
 
-constexpr int64_t kBrickWidth = int64_t{1} << isotope::kDefaultBrickBits;  // 32
+constexpr int64_t kBrickWidth = int64_t{1} << isotope::kDefaultBrickBits;  // 16
 
-// One band-0 tile as the converter reads it: C^3 bricks of 32^3 plus a halo of two nodes, clipped
+// One band-0 tile as the converter reads it: C^3 bricks of 16^3 plus a halo of two nodes, clipped
 // to the volume, in one read_box. Each brick's core is narrowed to the element type and compressed
 // on its own, as the store compresses bricks; returns the compressed bytes of the tile.
 size_t read_and_compress_tile(const isotope::BoxReader& reader, isotope::ScalarType type, int64_t c, const Box3& tile) {
@@ -215,7 +215,7 @@ void BM_Convert(benchmark::State& state, Input d, int threads) {
 
 // The ceiling: every band-0 tile of TILE_BRICKS^3 bricks read through the same reader and each
 // brick's core compressed at the same level, in parallel over tiles under the same thread cap.
-// Nothing is written. TILE_BRICKS = 1 is one 32^3 brick per tile: 36^3 boxes stepping by 32.
+// Nothing is written. TILE_BRICKS = 1 is one 16^3 brick per tile: 20^3 boxes stepping by 16.
 void BM_ConvertCeiling(benchmark::State& state, Input d, int64_t tile_bricks, int threads) {
   const isotope::BoxReader* reader = nullptr;
   std::optional<isotope::ScalarType> type;

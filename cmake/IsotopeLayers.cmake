@@ -8,7 +8,12 @@
 # folder of the repository does.
 function(isotope_layer_root out layer)
   set(root ${PROJECT_BINARY_DIR}/layers/${layer})
-  if(NOT IS_SYMLINK ${root}/${layer})
+  set(target "")
+  if(IS_SYMLINK ${root}/${layer})
+    file(READ_SYMLINK ${root}/${layer} target)
+  endif()
+  if(NOT target STREQUAL "${PROJECT_SOURCE_DIR}/${layer}")  # none yet, or another checkout's
+    file(REMOVE ${root}/${layer})
     file(MAKE_DIRECTORY ${root})
     file(CREATE_LINK ${PROJECT_SOURCE_DIR}/${layer} ${root}/${layer} SYMBOLIC)
   endif()

@@ -24,6 +24,7 @@
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/store_layout.h"
 #include "io/file/temporary_registry.h"
+#include "io/source_access.h"
 #include "io/store/brick_cache.h"
 #include "io/store/paged_volume.h"
 #include "io/store/store_format.h"
@@ -352,7 +353,7 @@ void Source::prepare(const std::vector<ExtractOptions>& planned) const {
   if (whole) impl_->whole();
 }
 
-const StoreReader* Source::store() const { return impl_->store.get(); }
+const StoreReader* detail::SourceAccess::store(const Source& source) { return source.impl_->store.get(); }
 
 SourceInfo Source::info() const {
   const Impl& s = *impl_;

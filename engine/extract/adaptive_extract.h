@@ -17,6 +17,7 @@
 #include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract_drivers.h"
 #include "engine/extract/finest_extract.h"
+#include "engine/extract/process_group.h"
 #include "engine/extract/traversal.h"
 #include "engine/extract/triangle_budget.h"
 #include "engine/mesh/box_clip.h"
@@ -147,6 +148,164 @@ inline BudgetSample budget_sample_for(const Lattice& lattice) {
   return lattice.k >= 9 ? BudgetSample{18, 4} : BudgetSample{};
 }
 
+// One adaptive extraction, pass by pass (extract_adaptive below is their driver): the options in
+// the source's value units; a triangle budget's choice of eps (and delta), remembered, searched on a
+// sample, or searched exactly; then the mesh at that choice.
+template <TraversalSource Source>
+class AdaptiveExtraction {
+ public:
+  AdaptiveExtraction(const Source& source, const ExtractOptions& options, std::optional<BudgetSample> sample,
+                     BudgetMemo* memo)
+      : source_(source),
+        options_(options),
+        group_(options.distribution),
+        sample_(sample.value_or(budget_sample_for(source.lattice()))),
+        memo_(group_.spread() ? nullptr : memo),  // every rank searches alike
+        in_codes_(options) {
+    // Identity unless the source holds quantized codes. What one code of delta's weight is worth:
+    // |X| scales with the values, |X| times a gradient with their square.
+    const double offset = source.value_offset();
+    scale_ = source.value_scale();
+    weight_scale_ = std::array<double, 3>{scale_, scale_ * scale_, 1.0}[static_cast<size_t>(options.weight)];
+    if (offset != 0 || scale_ != 1) {
+      in_codes_.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale_);
+      in_codes_.eps = threshold_in_codes(options.eps, scale_);
+      in_codes_.delta = threshold_in_codes(options.delta, weight_scale_);
+    }
+  }
+
+  // A budget settled before over this source (the memo's), taken as it was.
+  void recall_choice() {
+    if (memo_ && options_.max_triangles > 0) remembered_ = memo_->find(options_, sample_);
+    if (!remembered_) return;
+    in_codes_.eps = remembered_->eps;
+    in_codes_.eps_ties = remembered_->eps_ties;
+    in_codes_.delta = remembered_->delta;
+    BudgetMemo::take_budget_part(remembered_->stats, total_);
+    total_.budget_remembered = true;
+    chosen_ = true;
+  }
+
+  // Unless recalled: delta for auto_delta, and on a large lattice the sample's guess of eps.
+  void search_choice() {
+    if (remembered_ || options_.max_triangles <= 0) return;
+    // The search reads the bricks its extraction will read: a paged source keeps its whole budget
+    // from the start instead of finding that out after a window of misses.
+    if constexpr (RereadHint<Source>) source_.will_read_again();
+    group_.step([&] {
+      if (options_.auto_delta) choose_delta();
+      if (!sample_.exact()) {
+        const BudgetChoice c = choose_eps_for_budget(source_, rule(), options_.max_triangles, sample_);
+        // A guess of eps 0 (full resolution, or a cut within the diamonds of error 0), or none, is
+        // left to the exact search: it alone can tell whether the whole mesh fits, or that no mesh
+        // does. (A lattice without the sample's subtrees is counted exactly at once.)
+        if (!c.sampled || (c.fits && c.eps != 0)) take(c), chosen_ = true, sampled_ = c.sampled;
+      }
+    });
+  }
+
+  // The exact search where nothing chose yet; the choice kept, unless a sampled guess awaits its mesh.
+  void settle_choice() {
+    if (options_.max_triangles > 0 && !chosen_) choose_exactly();
+    if (!sampled_) keep();
+  }
+
+  // A sampled guess's mesh, into MESH, when it holds between kSampleFloor and all of the budget;
+  // otherwise false, after the exact search has replaced the guess (docs/METHOD.md, "Focus and
+  // triangle budget"). Every process counts the whole mesh, so all of them decide alike.
+  bool mesh_of_guess(Mesh& mesh) {
+    if (!sampled_) return false;
+    const std::function<bool(int64_t)> stands = [&](int64_t mine) {
+      const int64_t count = group_.sum(mine);
+      return count <= options_.max_triangles &&
+             static_cast<double>(count) >= kSampleFloor * static_cast<double>(options_.max_triangles);
+    };
+    if (extract_pieces(source_, in_codes_, steps(), total_, &mesh, stands)) {
+      keep();
+      return true;
+    }
+    total_.tets_visited = total_.tets_emitted = total_.tets_simplified = 0;
+    total_.ranks.clear();
+    choose_exactly();
+    keep();
+    return false;
+  }
+
+  // The mesh at the choice. Full resolution only when every diamond of key 0 is refined: a
+  // budget's finest step may be a cut within them (eps 0 and some tie classes), a mesh of fewer
+  // triangles.
+  Mesh mesh_at_choice() {
+    if (in_codes_.eps == 0 && in_codes_.eps_ties < 0 && finest_extract_applies(source_.lattice()))
+      return extract_finest(source_, rule(), &total_);
+    Mesh mesh;
+    extract_pieces(source_, in_codes_, steps(), total_, &mesh, nullptr);
+    return mesh;
+  }
+
+  const ExtractStats& stats() const { return total_; }
+
+ private:
+  // The split rule of the options as they stand: a budget's choices change their eps and delta.
+  traversal::SplitRule rule() const {
+    return traversal::SplitRule(in_codes_, source_.lattice(), source_.origin(), source_.spacing(),
+                                source_.error_fold());
+  }
+  auto steps() const {
+    return [this](const auto& work) { group_.step(work); };
+  }
+  // An eps a triangle budget chose, into the options and the stats.
+  void take(const BudgetChoice& c) {
+    in_codes_.eps = c.eps;
+    in_codes_.eps_ties = c.ties;
+    total_.chosen_eps = threshold_in_data(c.eps, scale_);
+    total_.chosen_eps_ties = c.ties;
+    total_.next_eps = threshold_in_data(c.next_eps, scale_);
+    total_.next_eps_ties = c.next_ties;
+    total_.next_triangles = c.next_triangles;
+    total_.budget_steps = c.steps;
+    total_.budget_sampled = c.sampled;
+  }
+  // Half the budget for the features kept, half for the geometry around them; when even with
+  // every feature dropped the coarsest mesh takes more than half, all of it for the features.
+  void choose_delta() {
+    in_codes_.delta = 0;
+    const traversal::SplitRule r = rule();
+    BudgetChoice d;
+    try {
+      d = choose_delta_for_budget(source_, r, std::max<int64_t>(1, options_.max_triangles / 2));
+    } catch (const TriangleBudgetTooSmall&) {
+      d = choose_delta_for_budget(source_, r, options_.max_triangles);
+    }
+    in_codes_.delta = d.eps;
+    total_.chosen_delta = threshold_in_data(d.eps, weight_scale_);
+    total_.delta_floor_triangles = d.triangles;
+  }
+  void choose_exactly() {
+    in_codes_.eps = 0, in_codes_.eps_ties = -1;  // as the options gave them with a budget
+    group_.step([&] { take(choose_eps_for_budget(source_, rule(), options_.max_triangles)); });
+  }
+  // A choice is kept once settled: an exact one at once (its extraction may yet be cancelled), a
+  // sampled guess once its mesh confirmed it or the exact search replaced it.
+  void keep() {
+    if (!memo_ || options_.max_triangles <= 0 || remembered_) return;
+    BudgetMemo::Choice settled{in_codes_.eps, in_codes_.eps_ties, in_codes_.delta, {}};
+    BudgetMemo::take_budget_part(total_, settled.stats);
+    memo_->remember(options_, sample_, settled);
+  }
+
+  const Source& source_;
+  const ExtractOptions& options_;
+  const ProcessGroup group_;
+  const BudgetSample sample_;
+  BudgetMemo* const memo_;
+  ExtractOptions in_codes_;  // the options in the source's value units
+  double scale_ = 1, weight_scale_ = 1;
+  ExtractStats total_;
+  std::optional<BudgetMemo::Choice> remembered_;
+  bool chosen_ = false;   // an eps is chosen for the budget
+  bool sampled_ = false;  // and it is a sample's guess, for the mesh's count to confirm
+};
+
 // `sample`: as budget_sample_for(the source's lattice) unless given (tests choose it). `memo`: the
 // budgets already settled over this source (an open isotope::Source's); a budget found there is
 // extracted at once, one not found is remembered once settled. A distributed extraction neither
@@ -154,143 +313,19 @@ inline BudgetSample budget_sample_for(const Lattice& lattice) {
 template <TraversalSource Source>
 Mesh extract_adaptive(const Source& source, const ExtractOptions& options, ExtractStats* stats,
                       std::optional<BudgetSample> sample = std::nullopt, BudgetMemo* memo = nullptr) {
-  using namespace traversal;
   const auto start = std::chrono::steady_clock::now();
   options.validate();
-  ExtractOptions in_codes = options;  // identity unless the source holds quantized codes
-  const double offset = source.value_offset(), scale = source.value_scale();
-  // What one code of delta's weight is worth: |X| scales with the values, |X| times a gradient
-  // with their square.
-  const double weight_scale = std::array<double, 3>{scale, scale * scale, 1.0}[static_cast<size_t>(options.weight)];
-  if (offset != 0 || scale != 1) {
-    in_codes.iso = static_cast<float>((static_cast<double>(options.iso) - offset) / scale);
-    in_codes.eps = threshold_in_codes(options.eps, scale);
-    in_codes.delta = threshold_in_codes(options.delta, weight_scale);
-  }
-  // The split rule of in_codes as it stands: the budget's choices change its eps and delta.
-  auto rule_now = [&] {
-    return SplitRule(in_codes, source.lattice(), source.origin(), source.spacing(), source.error_fold());
-  };
-  ExtractStats total;
-  const Distribution* group = options.distribution;
-  // Distributed, each step that may fail runs under settle_together, so that a rank whose read
-  // fails stops every rank instead of leaving them waiting at the next gather.
-  auto together = [group](const auto& work) {
-    if (group)
-      settle_together(*group, work);
-    else
-      work();
-  };
-  // The eps a triangle budget chose, into in_codes and the stats.
-  auto take_choice = [&](const BudgetChoice& c) {
-    in_codes.eps = c.eps;
-    in_codes.eps_ties = c.ties;
-    total.chosen_eps = threshold_in_data(c.eps, scale);
-    total.chosen_eps_ties = c.ties;
-    total.next_eps = threshold_in_data(c.next_eps, scale);
-    total.next_eps_ties = c.next_ties;
-    total.next_triangles = c.next_triangles;
-    total.budget_steps = c.steps;
-    total.budget_sampled = c.sampled;
-  };
-  auto choose_exactly = [&] {
-    in_codes.eps = 0, in_codes.eps_ties = -1;  // as the options gave them with a budget
-    together([&] {
-      const SplitRule rule = rule_now();
-      take_choice(choose_eps_for_budget(source, rule, options.max_triangles));
-    });
-  };
-  bool chosen = false;   // an eps is chosen for the budget
-  bool sampled = false;  // and it is a sample's guess, for the mesh's count to confirm
-  const BudgetSample budget_sample = sample.value_or(budget_sample_for(source.lattice()));
-  if (group) memo = nullptr;
-  const std::optional<BudgetMemo::Choice> remembered =
-      memo && options.max_triangles > 0 ? memo->find(options, budget_sample) : std::nullopt;
-  if (remembered) {
-    in_codes.eps = remembered->eps;
-    in_codes.eps_ties = remembered->eps_ties;
-    in_codes.delta = remembered->delta;
-    BudgetMemo::take_budget_part(remembered->stats, total);
-    total.budget_remembered = true;
-    chosen = true;
-  }
-  // The search reads the bricks its extraction will read: a paged source keeps its whole budget
-  // from the start instead of finding that out after a window of misses.
-  if constexpr (RereadHint<Source>)
-    if (!remembered && options.max_triangles > 0) source.will_read_again();
-  together([&] {
-    if (remembered) return;
-    if (options.auto_delta) {
-      // Half the budget for the features kept, half for the geometry around them; when even with
-      // every feature dropped the coarsest mesh takes more than half, all of it for the features.
-      in_codes.delta = 0;
-      const SplitRule rule = rule_now();
-      BudgetChoice d;
-      try {
-        d = choose_delta_for_budget(source, rule, std::max<int64_t>(1, options.max_triangles / 2));
-      } catch (const TriangleBudgetTooSmall&) {
-        d = choose_delta_for_budget(source, rule, options.max_triangles);
-      }
-      in_codes.delta = d.eps;
-      total.chosen_delta = threshold_in_data(d.eps, weight_scale);
-      total.delta_floor_triangles = d.triangles;
-    }
-    if (options.max_triangles > 0) {
-      if (!budget_sample.exact()) {
-        const SplitRule rule = rule_now();
-        const BudgetChoice c = choose_eps_for_budget(source, rule, options.max_triangles, budget_sample);
-        // A guess of eps 0 (full resolution, or a cut within the diamonds of error 0), or none, is
-        // left to the exact search: it alone can tell whether the whole mesh fits, or that no mesh
-        // does. (A lattice without the sample's subtrees is counted exactly at once.)
-        if (!c.sampled || (c.fits && c.eps != 0)) take_choice(c), chosen = true, sampled = c.sampled;
-      }
-    }
-  });
-  // A choice is kept once settled: an exact one at once (its extraction may yet be cancelled), a
-  // sampled guess once its mesh confirmed it or the exact search replaced it.
-  auto keep = [&] {
-    if (!memo || options.max_triangles <= 0 || remembered) return;
-    BudgetMemo::Choice settled{in_codes.eps, in_codes.eps_ties, in_codes.delta, {}};
-    BudgetMemo::take_budget_part(total, settled.stats);
-    memo->remember(options, budget_sample, settled);
-  };
-  if (options.max_triangles > 0 && !chosen) choose_exactly();
-  if (!sampled) keep();
-  auto finish = [&](Mesh mesh) {
-    if (stats) {
-      *stats = total;
-      stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    }
-    return mesh;
-  };
-  // A sampled guess stands when its mesh holds between kSampleFloor and all of the budget; else
-  // the exact search chooses, and the extraction runs again (docs/METHOD.md, "Focus and triangle
-  // budget"). Every process counts the whole mesh, so all of them decide alike.
-  const std::function<bool(int64_t)> guess_stands = [&](int64_t mine) {
-    const int64_t count = group ? sum_over_ranks(*group, mine) : mine;
-    return count <= options.max_triangles &&
-           static_cast<double>(count) >= kSampleFloor * static_cast<double>(options.max_triangles);
-  };
+  AdaptiveExtraction<Source> run(source, options, sample, memo);
+  run.recall_choice();
+  run.search_choice();
+  run.settle_choice();
   Mesh mesh;
-  if (sampled) {
-    if (extract_pieces(source, in_codes, together, total, &mesh, guess_stands)) {
-      keep();
-      return finish(std::move(mesh));
-    }
-    // The guess did not stand: the exact choice, and its mesh.
-    total.tets_visited = total.tets_emitted = total.tets_simplified = 0;
-    total.ranks.clear();
-    choose_exactly();
-    keep();
+  if (!run.mesh_of_guess(mesh)) mesh = run.mesh_at_choice();
+  if (stats) {
+    *stats = run.stats();
+    stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
-  // Full resolution only when every diamond of key 0 is refined: a budget's finest step may be a
-  // cut within them (eps 0 and some tie classes), which is a mesh of fewer triangles.
-  if (in_codes.eps == 0 && in_codes.eps_ties < 0 && finest_extract_applies(source.lattice())) {
-    const SplitRule rule = rule_now();
-    return finish(extract_finest(source, rule, &total));
-  }
-  extract_pieces(source, in_codes, together, total, &mesh, nullptr);
-  return finish(std::move(mesh));
+  return mesh;
 }
 
 }  // namespace isotope

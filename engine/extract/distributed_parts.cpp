@@ -3,7 +3,7 @@
 #include <stdexcept>
 #include <utility>
 
-#include "engine/core/byte_codec.h"
+#include "engine/core/gather_items.h"
 
 namespace isotope {
 
@@ -49,42 +49,24 @@ std::vector<RankLoad> gather_loads(const Distribution& group, const RankLoad& mi
 }
 
 std::vector<PartMesh> gather_parts(const Distribution& group, std::vector<PartMesh> mine) {
-  ByteWriter w;
-  settle_together(group, [&] {  // the copy may run out of memory on one rank alone
-    w.put(static_cast<uint64_t>(mine.size()));
-    for (PartMesh& p : mine) {
-      w.put_array(p.mesh.positions);
-      w.put_array(p.mesh.triangles);
-      w.put_array(p.keys);
-      w.put(p.tets_visited);
-      w.put(p.tets_emitted);
-      w.put(p.tets_simplified);
-      w.put(p.region);
-      p = PartMesh{};
-    }
-  });
-  std::vector<std::vector<uint8_t>> all;
-  settle_together(group, [&] { all = group.gather(w.bytes()); });  // rank 0 may run out of memory receiving
-  w = ByteWriter{};
-  std::vector<PartMesh> parts;
-  settle_together(group, [&] {
-    for (std::vector<uint8_t>& bytes : all) {
-      ByteReader r(bytes);
-      const auto n = r.get<uint64_t>();
-      for (uint64_t i = 0; i < n; ++i) {
-        PartMesh& p = parts.emplace_back();
-        r.get_array(p.mesh.positions);
-        r.get_array(p.mesh.triangles);
+  return gather_items(
+      group, mine,
+      [](ByteWriter& w, const PartMesh& p) {
+        put_mesh(w, p.mesh);
+        w.put_array(p.keys);
+        w.put(p.tets_visited);
+        w.put(p.tets_emitted);
+        w.put(p.tets_simplified);
+        w.put(p.region);
+      },
+      [](ByteReader& r, PartMesh& p) {
+        get_mesh(r, p.mesh);
         r.get_array(p.keys);
         p.tets_visited = r.get<int64_t>();
         p.tets_emitted = r.get<int64_t>();
         p.tets_simplified = r.get<int64_t>();
         p.region = r.get<Tet>();
-      }
-      bytes = {};
-    }
-  });
-  return parts;
+      });
 }
 
 }  // namespace isotope

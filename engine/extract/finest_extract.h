@@ -4,7 +4,7 @@
 // the isosurface cuts (docs/DESIGN.md, invariant 2). Rather than walk the bisection tree down to each
 // leaf, the cells are marched block by block: the range record of a block's cube diamond culls
 // it when the isovalue misses it, then the range of the block's own nodes (docs/METHOD.md). A
-// source without records (a plain array: engine/volume_source.h) is culled by the block's own
+// source without records (a plain array: engine/extract/array_source.h) is culled by the block's own
 // nodes alone, which marches the same blocks: the record's range holds every node of the block.
 #include <algorithm>
 #include <array>

@@ -13,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "engine/core/byte_codec.h"
+#include "engine/core/gather_items.h"
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/edge_vertex_map.h"
@@ -311,37 +311,20 @@ Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribu
     settle_together(group, [&] { mesh = join_slabs(mine); });
     return mesh;
   }
-  ByteWriter w;
-  settle_together(group, [&] {  // the copy may run out of memory on one rank alone
-    w.put(static_cast<uint64_t>(mine.size()));
-    for (Slab& s : mine) {
-      w.put_array(s.mesh.positions);
-      w.put_array(s.mesh.triangles);
-      w.put_array(s.bottom);
-      w.put_array(s.top);
-      s = Slab{};
-    }
-  });
-  std::vector<std::vector<uint8_t>> all;
-  settle_together(group, [&] { all = group.gather(w.bytes()); });  // rank 0 may run out of memory receiving
-  w = ByteWriter{};
-  Mesh mesh;
-  settle_together(group, [&] {
-    std::vector<Slab> slabs;
-    for (std::vector<uint8_t>& bytes : all) {
-      ByteReader r(bytes);
-      const auto n = r.get<uint64_t>();
-      for (uint64_t i = 0; i < n; ++i) {
-        Slab& s = slabs.emplace_back();
-        r.get_array(s.mesh.positions);
-        r.get_array(s.mesh.triangles);
+  std::vector<Slab> slabs = gather_items(
+      group, mine,
+      [](ByteWriter& w, const Slab& s) {
+        put_mesh(w, s.mesh);
+        w.put_array(s.bottom);
+        w.put_array(s.top);
+      },
+      [](ByteReader& r, Slab& s) {
+        get_mesh(r, s.mesh);
         r.get_array(s.bottom);
         r.get_array(s.top);
-      }
-      bytes = {};
-    }
-    mesh = join_slabs(slabs);
-  });
+      });
+  Mesh mesh;
+  settle_together(group, [&] { mesh = join_slabs(slabs); });
   return mesh;
 }
 

@@ -11,7 +11,7 @@
 
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/record.h"
-#include "isotope/convert.h"  // kDefaultBrickBits: the brick size a store has unless convert is told otherwise
+#include "isotope/store_defaults.h"
 
 namespace isotope {
 

@@ -13,11 +13,10 @@
 #include <isotope/distribution.h>
 #include <isotope/progress.h>
 #include <isotope/source.h>
+#include <isotope/store_defaults.h>
 #include <isotope/volume.h>
 
 namespace isotope {
-
-inline constexpr int kDefaultBrickBits = 4;  // bricks of 16^3 nodes
 
 struct ConvertOptions {
   int64_t memory_mb = 1024;            // tiles in flight and band scratch; scratch beyond a quarter of it goes to disk

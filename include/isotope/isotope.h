@@ -9,6 +9,11 @@
 //                      from as often as needed
 //   isotope/convert.h  convert(): a volume into a store, for extraction out of core
 //   isotope/error.h    IoError, what a file's trouble throws
+//   isotope/progress.h ProgressCallback, what a long step reports to
+//   isotope/distribution.h  Distribution: one extraction or convert spread over processes
+//
+// examples/ holds three programs: from a file, from an array, and out of core (a convert within a
+// memory budget, with progress and cancellation, then extractions from the store).
 //
 // Ten lines from a file to a mesh (examples/extract_file.cpp):
 //
@@ -25,6 +30,7 @@
 // CMake: find_package(isotope CONFIG REQUIRED) and target_link_libraries(app isotope::isotope).
 // Everything else in this repository (engine/, io/) is a detail that may change.
 #include <isotope/convert.h>
+#include <isotope/distribution.h>
 #include <isotope/error.h>
 #include <isotope/extract.h>
 #include <isotope/mesh.h>

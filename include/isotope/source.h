@@ -37,7 +37,9 @@
 
 namespace isotope {
 
-class StoreReader;  // io/store/store_reader.h: not part of the public interface
+namespace detail {
+struct SourceAccess;  // the library's own faces' view of a store (io/source_access.h)
+}  // namespace detail
 
 // What names an input, as a user types it on the command line.
 struct VolumeSpec {
@@ -123,13 +125,10 @@ class Source {
   // out of range.
   void prepare(const std::vector<ExtractOptions>& planned) const;
   SourceInfo info() const;
-  // A store's reader, for the isotope command's own views of a store (its header, a histogram);
-  // nullptr for a volume. Its type is not part of the public interface.
-  const StoreReader* store() const;
-
-  struct Impl;
 
  private:
+  struct Impl;
+  friend struct detail::SourceAccess;
   friend Source open_volume(const VolumeSpec& spec, const OpenOptions& options);
   friend Source open_volume(Volume volume, const OpenOptions& options);
   explicit Source(std::unique_ptr<Impl> impl);

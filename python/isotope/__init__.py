@@ -17,7 +17,7 @@ converted once, and nested lists of numbers are read as float64.
 The work runs with the GIL released; Ctrl-C stops it. Errors are raised with the words of the
 command line: ``isotope.IoError`` (an OSError) for files, ``isotope.OptionError`` (a ValueError,
 with ``.option``) for options out of range, ValueError for arrays that are not volumes (a spacing
-or origin that is not finite, or a NaN, named by its x, y, z), RuntimeError for a Store used from
+or origin that is not finite, or a NaN, named by its x, y, z), RuntimeError for a Source used from
 its own progress callback.
 """
 
@@ -29,7 +29,7 @@ import numpy as np
 from . import _isotope
 from ._isotope import IoError, Mesh, OptionError, __version__
 
-__all__ = ["extract", "convert", "Store", "Mesh", "IoError", "OptionError", "__version__"]
+__all__ = ["extract", "convert", "Source", "Store", "Mesh", "IoError", "OptionError", "__version__"]
 
 
 def _option_error(name, message):
@@ -95,7 +95,7 @@ def _integer(name, value):
     return max(-(1 << 62), min(int(value), 1 << 62))
 
 
-class Store:
+class Source:
     """An input opened once and extracted from as often as needed.
 
     ``input`` is a store made by :func:`convert` (read out of core: only the bricks an extraction
@@ -138,7 +138,7 @@ class Store:
         (``stats["budget_sampled"]``; with
         simplify and no delta, delta too; ``stats["chosen_eps_ties"]`` is the ``eps_ties`` that, with
         ``eps=stats["chosen_eps"]``, gives the same mesh). The same budget asked for again of this
-        Store is the choice made the first time, without the search (``stats["budget_remembered"]``).
+        Source is the choice made the first time, without the search (``stats["budget_remembered"]``).
         ``eps_ties`` (with an ``eps``, 0 included):
         of the diamonds whose error equals eps exactly, refine only those of the N coarsest tie
         classes. ``threads``: 0 for all cores (up to 4096); a limit holds for the whole process while the call
@@ -148,18 +148,22 @@ class Store:
         return self._source.extract(options, _integer_text(threads))
 
 
+# The name Source had before it matched the C++ API's; kept so that code written against it runs.
+Store = Source
+
+
 def extract(volume, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
             radius=None, max_triangles=None, eps_ties=None, dims=None, type=None, spacing=None, origin=None, cache_mb=512,
             threads=0, progress=None):
-    """One extraction: ``Store(volume, ...).extract(iso, ...)``; see :class:`Store`."""
-    store = Store(volume, dims=dims, type=type, spacing=spacing, origin=origin, cache_mb=cache_mb, progress=progress)
+    """One extraction: ``Source(volume, ...).extract(iso, ...)``; see :class:`Source`."""
+    store = Source(volume, dims=dims, type=type, spacing=spacing, origin=origin, cache_mb=cache_mb, progress=progress)
     return store.extract(iso, eps=eps, topology=topology, error=error, weight=weight, delta=delta, focus=focus,
                          radius=radius, max_triangles=max_triangles, eps_ties=eps_ties, threads=threads)
 
 
 def convert(volume, output, *, dims=None, type=None, spacing=None, origin=None, memory_mb=1024, zstd_level=3,
             brick_bits=4, quantize_bits=0, threads=0, progress=None):
-    """A volume (a file, as :class:`Store` takes, or an array) into a store at ``output``.
+    """A volume (a file, as :class:`Source` takes, or an array) into a store at ``output``.
 
     The store holds the hierarchy in compressed, checksummed bricks, so that later extractions
     read only what they reach. ``memory_mb`` bounds the conversion's memory whatever the volume's

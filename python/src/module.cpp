@@ -7,7 +7,7 @@
 //   calling thread can hear Ctrl-C (Python handles signals on the main thread only) and cancel;
 // - progress reported to a Python callable; an exception it raises cancels the work and is raised;
 // - the library's exceptions as Python's, with the library's words: IoError (an OSError),
-//   OptionError (a ValueError) naming the option, ValueError, RuntimeError (a Store used from its own
+//   OptionError (a ValueError) naming the option, ValueError, RuntimeError (a Source used from its own
 //   progress callback, refused rather than waiting for itself).
 // Options are parsed by the one parser every face uses (isotope/extract.h), from the text Python
 // hands over (python/isotope/__init__.py, _option_text).
@@ -359,7 +359,7 @@ class PySource {
 
  private:
   // The source whose hierarchy's build is reporting on this thread, if any: its progress callback
-  // runs while the build holds the source, so a callback that uses the same Store (its info, an
+  // runs while the build holds the source, so a callback that uses the same Source (its info, an
   // extraction) would wait for itself forever.
   static inline thread_local const PySource* reporting_ = nullptr;
   struct Reporting {
@@ -370,8 +370,8 @@ class PySource {
   void refuse_reentry() const {
     if (reporting_ == this)
       throw std::runtime_error(
-          "a progress callback may not use the Store that reports to it (its hierarchy is being built); use "
-          "the Store after the call that builds it returns");
+          "a progress callback may not use the Source that reports to it (its hierarchy is being built); use "
+          "the Source after the call that builds it returns");
   }
 
   void set_progress(ProgressCallback callback) {

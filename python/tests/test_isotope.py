@@ -98,10 +98,10 @@ def test_a_float32_array_in_c_order_is_read_without_a_copy(data):
     # The process's resident memory sees a copy wherever it is made, numpy's or the library's.
     floats = load(data, "embryo_256x256x256_uint8.raw").astype(np.float32)  # 64 MiB, touched
     before = resident_bytes()
-    source = isotope.Store(floats)
+    source = isotope.Source(floats)
     borrowed = resident_bytes() - before
     before = resident_bytes()
-    converted = isotope.Store(floats.astype(np.float64))  # held as a float32 copy (the float64 is freed)
+    converted = isotope.Source(floats.astype(np.float64))  # held as a float32 copy (the float64 is freed)
     copied = resident_bytes() - before
     assert borrowed < 4 << 20, borrowed
     assert copied > 48 << 20, copied  # the measure sees a copy: this one is 64 MiB
@@ -116,7 +116,7 @@ def test_a_store_is_opened_once_and_extracted_from_repeatedly(data, tmp_path):
     volume = load(data, "bolt_70x123x66_uint8.raw")
     stats = isotope.convert(volume, tmp_path / "bolt.isotope", memory_mb=64)
     assert stats["dims"] == [70, 123, 66] and stats["output_bytes"] > 0
-    store = isotope.Store(tmp_path / "bolt.isotope", cache_mb=16)
+    store = isotope.Source(tmp_path / "bolt.isotope", cache_mb=16)
     assert store.info["store"] and store.info["shape"] == (66, 123, 70)
     for eps in (0, 8, 0):
         a, b = store.extract(iso=64.5, eps=eps), isotope.extract(volume, iso=64.5, eps=eps)
@@ -127,7 +127,7 @@ def test_a_store_is_opened_once_and_extracted_from_repeatedly(data, tmp_path):
     waits, hints = store.info["read_waits"], store.info["read_hints"]
     assert isinstance(waits, int) and isinstance(hints, int)
     assert waits >= 0 and (hints == 0 or waits > 0)
-    # a budget asked for again of the same Store is the first choice, remembered
+    # a budget asked for again of the same Source is the first choice, remembered
     first, again = (store.extract(iso=64.5, topology="none", max_triangles=5000) for _ in range(2))
     assert not first.stats["budget_remembered"] and again.stats["budget_remembered"]
     assert again.stats["chosen_eps"] == first.stats["chosen_eps"] > 0
@@ -148,7 +148,7 @@ def test_options_reach_the_library(data):
     assert budget.stats["chosen_eps_ties"] >= 0
     np.testing.assert_array_equal(again.faces, budget.faces)
     # a budget the full-resolution mesh fits is that mesh, counted, with no hierarchy built
-    store = isotope.Store(volume)
+    store = isotope.Source(volume)
     whole = store.extract(iso=64.5, max_triangles=len(full.faces))
     np.testing.assert_array_equal(whole.faces, full.faces)
     np.testing.assert_array_equal(whole.vertices, full.vertices)
@@ -157,7 +157,7 @@ def test_options_reach_the_library(data):
     store.extract(iso=64.5, max_triangles=len(full.faces) - 1)
     assert store.info["hierarchy_built"]
     # mode none builds the records' core alone, its critical points not counted; preserve counts them
-    source = isotope.Store(volume)
+    source = isotope.Source(volume)
     source.extract(iso=64.5, eps=8, topology="none")
     assert source.info["hierarchy_built"] and not source.info["critical_counted"]
     assert source.info["critical_exact"] is None and source.info["critical_paper"] is None
@@ -206,7 +206,7 @@ def test_errors_carry_the_commands_words(data, isotope_command, tmp_path):
 def test_progress_is_heard_and_an_exception_in_it_cancels(data, tmp_path):
     volume = load(data, "embryo_256x256x256_uint8.raw")
     heard = []
-    store = isotope.Store(volume, progress=heard.append)
+    store = isotope.Source(volume, progress=heard.append)
     store.extract(iso=64.5, eps=16)  # builds the hierarchy: the step that reports
     assert len(heard) > 10 and heard == sorted(heard) and heard[-1] == 1.0
 
@@ -364,7 +364,7 @@ def test_a_misaligned_float32_array_is_copied_not_borrowed(data):
     misaligned = np.frombuffer(raw.data, dtype=np.float32, offset=1).reshape(base.shape)
     assert not misaligned.flags.aligned
     before = resident_bytes()
-    source = isotope.Store(misaligned)
+    source = isotope.Source(misaligned)
     assert resident_bytes() - before > 48 << 20  # an aligned float32 copy (64 MiB), not the bytes as they lie
     np.testing.assert_array_equal(source.extract(iso=64.5, eps=16).faces, isotope.extract(base, iso=64.5, eps=16).faces)
 
@@ -470,7 +470,7 @@ def test_a_store_used_from_its_own_progress_callback_is_refused_not_a_hang(data)
               "        if not calls:\n"
               "            calls.append(1)\n"
               "            store.info if use == 'info' else store.extract(32.5, eps=8)\n"
-              "    store = isotope.Store(a, progress=report)\n"
+              "    store = isotope.Source(a, progress=report)\n"
               "    try:\n"
               "        store.extract(32.5, eps=4)\n"
               "    except RuntimeError as e:\n"
@@ -480,8 +480,8 @@ def test_a_store_used_from_its_own_progress_callback_is_refused_not_a_hang(data)
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     for use in ("info", "extract"):
-        assert f"{use} refused: a progress callback may not use the Store that reports to it" in r.stdout, r.stdout
-        assert f"{use} then True" in r.stdout  # and the Store works once the call is over
+        assert f"{use} refused: a progress callback may not use the Source that reports to it" in r.stdout, r.stdout
+        assert f"{use} then True" in r.stdout  # and the Source works once the call is over
 
 
 def test_messages_name_what_is_wrong(data, tmp_path):
@@ -508,3 +508,9 @@ def test_messages_name_what_is_wrong(data, tmp_path):
               "    print('MemoryError')\n")
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert "MemoryError" in r.stdout and "error_already_set" not in r.stderr, (r.stdout, r.stderr)
+
+
+def test_source_keeps_its_former_name_store():
+    # Source is the C++ API's name; code written when the module called it Store still runs.
+    assert isotope.Store is isotope.Source
+    assert {"Source", "Store"} <= set(isotope.__all__)

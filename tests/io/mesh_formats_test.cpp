@@ -316,9 +316,17 @@ TEST_F(MeshFormats, EveryFormatHoldsTheSameMeshReadBack) {
 TEST_F(MeshFormats, AnEmptyMeshReadsBackEmptyFromEveryFormat) {
   const Mesh empty;
   for (const char* name : {"e.obj", "e.stl", "e.glb", "e.vtp"}) write_mesh(empty, path(name));
-  EXPECT_TRUE(read_obj(path("e.obj")).positions.empty());
+  const Mesh obj = read_obj(path("e.obj"));
+  EXPECT_TRUE(obj.positions.empty() && obj.triangles.empty());
   EXPECT_TRUE(read_stl_corners(path("e.stl")).empty());
-  EXPECT_TRUE(read_glb(path("e.glb")).positions.empty());
+  // GLB: its stated length the file's, one JSON chunk and no binary one, a scene without meshes.
+  const std::vector<unsigned char> glb = read_bytes(path("e.glb"));
+  size_t at = 8;
+  EXPECT_EQ(take_le<uint32_t>(glb, at), glb.size());
+  const auto json_bytes = take_le<uint32_t>(glb, at);
+  EXPECT_EQ(take_le<uint32_t>(glb, at), 0x4E4F534Au);  // "JSON"
+  EXPECT_EQ(20 + json_bytes, glb.size());
+  EXPECT_FALSE(nlohmann::json::parse(glb.begin() + 20, glb.end()).contains("meshes"));
   const Mesh vtp = read_vtp(path("e.vtp"));
   EXPECT_TRUE(vtp.positions.empty() && vtp.triangles.empty());
 }

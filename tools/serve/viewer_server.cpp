@@ -16,6 +16,7 @@
 #include "engine/core/parallel.h"
 #include "io/file/input_file.h"
 #include "io/mesh/mesh_wire.h"
+#include "io/source_access.h"
 #include "io/store/store_histogram.h"
 #include "io/store/store_reader.h"
 #include "isotope/error.h"
@@ -104,7 +105,7 @@ struct ViewerServer::Impl {
   explicit Impl(const Settings& s)
       : settings(s),
         input(open_store(s)),
-        info(store_info_json(*input.store()).dump()),
+        info(store_info_json(*detail::SourceAccess::store(input)).dump()),
         responses(s.response_budget_bytes),
         http(s.limits) {
     http.Get("/api/info", [this](const httplib::Request&, httplib::Response& res) {
