@@ -1,8 +1,5 @@
 #include "io/volume/raw_reader.h"
 
-#include <fcntl.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <bit>
 #include <cctype>
@@ -79,8 +76,7 @@ void decode(bool swap, const unsigned char* in, size_t count, float* out) {
 // Blocks of values read (pread) and converted on all threads: a 256^3 uint8 volume took 31 ms on
 // one, the largest share of a one-shot extraction after the marching itself.
 void read_values(const std::string& path, ScalarType type, std::vector<float>& values) {
-  const FileDescriptor file(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
-  if (file.get() < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
+  const FileDescriptor file = open_input(path, path, "a volume file");
   const size_t elem = static_cast<size_t>(scalar_type_size(type));
   constexpr size_t kBlockValues = size_t{1} << 18;  // bounds each task's staging buffer to 2 MiB
   const auto blocks = static_cast<int64_t>((values.size() + kBlockValues - 1) / kBlockValues);
