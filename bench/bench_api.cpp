@@ -1,5 +1,6 @@
-// isotope_bench_api: the C++ path that the Python module's calls take (python/src/module.cpp), timed
-// in process, so that bench/python_overhead.py can set the Python path beside it in the same run:
+// isotope_bench_api: the C++ path that the Python module's calls take (isotope._isotope), timed
+// in process, so that the Python overhead benchmark (bench/README.md) can set the Python path beside
+// it in the same run:
 //   BM_ApiExtract/array/eps:E   open_volume(Volume borrowing a float array) + Source::extract:
 //                               isotope.extract(float32_array, iso, eps=E)
 //   BM_ApiExtract/file/eps:E    open_volume(raw file) + Source::extract: isotope.extract(path, ...)

@@ -124,7 +124,7 @@ void set_rate_counters(benchmark::State& state, const isotope::VolumeInfo& info,
 // ---- Ceiling: read + compress the same bytes in the same tiles ---------------------------------
 
 // The core's values narrowed back to the input's element type, its bytes appended to OUT: the
-// bytes of the input file, which is what the ceiling compresses. (The converter's field
+// bytes of the input file, which is what the target's ceiling compresses. (The converter's field
 // codec also turns integer-valued data into narrow deltas before zstd, so it compresses about
 // this many bytes, not 4 per value.)
 template <class T>
@@ -273,7 +273,7 @@ void register_benchmarks() {
   }
 }
 
-// Registered before main() runs (bench_extract.cpp owns main), from a static initializer.
+// Registered before main() runs (the extraction benchmarks own main), from a static initializer.
 [[maybe_unused]] const bool registered = (register_benchmarks(), true);
 
 }  // namespace

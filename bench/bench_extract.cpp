@@ -1,8 +1,8 @@
 // Google Benchmark suite: adaptive extraction against the full-resolution baseline, the same
 // extraction paged out of a store through a brick cache, the decoding of one brick, preprocessing,
 // and the critical-pattern table. Every threaded benchmark runs at each cap of thread_counts().
-// How to build, run and compare: bench/README.md (bench/ratios.py turns the JSON output into
-// ratios against the baseline).
+// How to build, run and compare: bench/README.md (and how the JSON output becomes ratios against
+// the baseline: "JSON output and ratios against the baseline").
 //
 // Every input (volume, preprocessed hierarchy, store) is built once per process in a
 // function-local static, outside any timed loop. Times are wall-clock (UseRealTime) because preprocessing runs
@@ -265,13 +265,13 @@ void BM_Extract(benchmark::State& state, Dataset d, double eps, TopologyMode mod
 // extract() over a store: the same traversal, with values and records looked up in bricks read
 // (pread), decompressed and decoded (band 0's records rebuilt) on demand through a BrickCache of
 // a budget of: all the decoded bytes the extraction reaches (`full`: nothing evicted), an eighth of
-// the whole store decoded (`eighth`: the "1/8 of the store"), or an eighth of what the
+// the whole store decoded (`eighth`: the target's "1/8 of the store"), or an eighth of what the
 // extraction reaches (`eighth_reached`: stricter at coarse eps, which reaches few bricks).
 // The cache is built inside the timed loop, so every iteration starts cold and pays for every
 // read and decode; the store file itself stays in the OS page cache.
 enum class PagedBudget { full, eighth, eighth_reached };
 
-// A brick's core decoded (io/store/brick_cache.h): every node's value and range-and-bound word in
+// A brick's core decoded (as a BrickCache holds it): every node's value and range-and-bound word in
 // the bytes the store's type promises (held_value_bytes, held_bounds_bytes).
 uint64_t store_decoded_bytes(const isotope::StoreReader& store) {
   const isotope::StoreLayout& l = store.layout();
@@ -326,7 +326,8 @@ void BM_ExtractPaged(benchmark::State& state, Dataset d, double eps, PagedBudget
 
 // extract_full_resolution(): marching tetrahedra over every finest tetrahedron of the raw array,
 // no hierarchy, no store; parallel over oneTBB, so it runs under the same cap as BM_Extract. Every
-// extraction row is read as a ratio to the row of the same dataset and threads (bench/ratios.py).
+// extraction row is read as a ratio to the row of the same dataset and threads (bench/README.md,
+// "JSON output and ratios against the baseline").
 void BM_FullResolutionBaseline(benchmark::State& state, Dataset d, int threads) {
   const Volume* volume = nullptr;
   if (!prepare(state, [&] { volume = &volume_of(d); })) return;
@@ -367,7 +368,7 @@ void BM_MeshTopology(benchmark::State& state, int threads) {
 }
 
 // StoreReader::read_brick() of the core section, which is what a BrickCache miss runs
-// (io/store/brick_cache.cpp, decode): pread, checksum, zstd decompression and field decoding. Not timed:
+// (BrickCache::decode): pread, checksum, zstd decompression and field decoding. Not timed:
 // the cache's bookkeeping, and band 0's records, computed when the traversal reads them. One
 // iteration decodes every brick of the store once, in directory order, so the mix of bands is the
 // store's own whatever the iteration count. The file stays in the OS page cache: CPU cost, not disk.
@@ -427,7 +428,7 @@ void BM_Preprocess(benchmark::State& state, Dataset d, int threads) {
 }
 
 // Opening a band of a store checks that its directory's entries tile one run of the file
-// (io/store/store_format.h, check_directory): 128^3 entries are a 2048^3 volume's band 0, checked
+// (check_directory): 128^3 entries are a 2048^3 volume's band 0, checked
 // once per process that reads it. Argument 0: the entries in the writer's Morton order (what every
 // store holds, walked without a sort); 1: in a shuffled order (what the sort behind it costs).
 void BM_StoreDirectoryCheck(benchmark::State& state) {

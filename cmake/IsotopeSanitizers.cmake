@@ -11,7 +11,7 @@ if(ISOTOPE_SANITIZE)
   # types (Release, the default) get -g1, so that their reports name file and line too.
   add_compile_options(${_san_list} -fno-omit-frame-pointer $<$<NOT:$<CONFIG:Debug,RelWithDebInfo>>:-g1>)
   if(ISOTOPE_SANITIZE MATCHES "thread")
-    add_compile_definitions(ISOTOPE_STD_THREADS)  # see engine/core/parallel.h
+    add_compile_definitions(ISOTOPE_STD_THREADS)  # parallel_for on std::threads: oneTBB is not instrumented
   endif()
   add_link_options(${_san_list})
 endif()

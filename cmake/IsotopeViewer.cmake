@@ -1,6 +1,6 @@
 # The browser viewer (viewer/): three.js and the viewer's script bundled by esbuild, both from npm
-# (viewer/package-lock.json; scripts/install-deps.sh runs `npm ci`), then embedded in the isotope
-# binary by tools/serve/viewer_assets.cpp.in. Defines isotope_viewer_sources(OUT_VAR) for tools/.
+# (the viewer's package lock; the dependency install runs `npm ci`), then embedded in the isotope
+# binary as the viewer assets (ViewerAsset). Defines isotope_viewer_sources(OUT_VAR) for tools/.
 set(ISOTOPE_VIEWER_DIR ${PROJECT_SOURCE_DIR}/viewer)
 find_program(ISOTOPE_NODE node)
 if(NOT ISOTOPE_NODE OR NOT EXISTS ${ISOTOPE_VIEWER_DIR}/node_modules/esbuild/package.json

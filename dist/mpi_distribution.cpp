@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "isotope/error.h"
+
 namespace isotope {
 namespace {
 
@@ -27,7 +29,7 @@ std::vector<std::vector<uint8_t>> MpiDistribution::all_gather(const std::vector<
   const uint64_t size = mine.size();
   MPI_Allgather(&size, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, comm_);
   const uint64_t total = std::accumulate(sizes.begin(), sizes.end(), uint64_t{0});
-  if (total > INT_MAX) throw std::runtime_error("all_gather: more than 2 GiB");
+  if (total > INT_MAX) throw Error("all_gather: more than 2 GiB");
   std::vector<int> counts(sizes.begin(), sizes.end()), displs(static_cast<size_t>(ranks_), 0);
   for (size_t r = 1; r < displs.size(); ++r) displs[r] = displs[r - 1] + counts[r - 1];
   std::vector<uint8_t> all(std::max<uint64_t>(total, 1));
@@ -80,7 +82,7 @@ std::vector<std::vector<uint8_t>> MpiDistribution::gather(const std::vector<uint
 MpiSession::MpiSession(int* argc, char*** argv) {
   int provided = 0;
   if (MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS)
-    throw std::runtime_error("MPI could not be initialized");
+    throw Error("MPI could not be initialized");
   world_ = MpiDistribution(MPI_COMM_WORLD);
 }
 

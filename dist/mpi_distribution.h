@@ -1,5 +1,5 @@
 #pragma once
-// The processes of an MPI communicator as a Distribution (include/isotope/distribution.h): what
+// The processes of an MPI communicator as a Distribution (isotope::Distribution): what
 // `mpirun -n R isotope extract|convert` runs on (docs/DISTRIBUTED.md). Only the thread that
 // initialized MPI calls it (MPI_THREAD_FUNNELED): the engine gathers between its parallel loops,
 // never inside them.

@@ -1,5 +1,5 @@
 #pragma once
-// MPI as a module of the isotope command (tools/support/command_module.h): Open MPI's libraries
+// MPI as a module of the isotope command (the command's modules, module_function): Open MPI's libraries
 // are loaded only by a command that an MPI launcher started (mpirun, srun), so a command started
 // alone starts without them.
 #include "isotope/distribution.h"

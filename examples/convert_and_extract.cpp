@@ -46,27 +46,28 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, on_interrupt);
   try {
     isotope::ConvertOptions c;
-    c.memory_mb = 64;  // what the convert may hold, whatever the volume's size; the rest goes to disk
-    c.cancel = &stop;
+    c.memory_mb = 64;         // what the convert may hold, whatever the volume's size; the rest goes to disk
+    isotope::RunContext run;  // how the calls run: the same bytes whatever it says
+    run.cancel = &stop;       // Ctrl-C stops the convert (no store left) and the extraction
     int shown = -1;
-    c.progress = [&](double fraction) {  // called at most once per percent, one call at a time; shown every 10%
+    run.progress = [&](double fraction) {  // called at most once per percent, one call at a time; shown every 10%
       if (static_cast<int>(fraction * 10) > shown) {
         shown = static_cast<int>(fraction * 10);
         std::fprintf(stderr, "convert: %3.0f%%\n", 100 * fraction);
       }
       if (fraction >= stop_at) stop.store(true);
     };
-    const isotope::ConvertStats converted = isotope::convert({argv[1]}, argv[2], c);
+    const isotope::ConvertStats converted = isotope::convert({argv[1]}, argv[2], c, run);
     std::printf("%s: %lld bricks, %.1f MB from %.1f MB\n", argv[2], static_cast<long long>(converted.bricks),
                 converted.output_bytes / 1e6, converted.input_bytes / 1e6);
 
     isotope::Source store = isotope::open_volume({argv[2]});
     isotope::ExtractOptions o;
     o.iso = static_cast<float>(iso);
-    o.eps = eps;       // data units; 0: full resolution
-    o.cancel = &stop;  // Ctrl-C stops the extraction too (isotope::ExtractionCancelled)
+    o.eps = eps;             // data units; 0: full resolution
+    run.progress = nullptr;  // a store's hierarchy is built: nothing to hear
     isotope::ExtractStats stats;
-    const isotope::Mesh mesh = store.extract(o, &stats);
+    const isotope::Mesh mesh = store.extract(o, run, &stats);  // isotope::ExtractionCancelled on Ctrl-C
     isotope::write_mesh(mesh, argv[4]);
     std::printf("%s: %zu triangles in %.3f s, %llu bytes of the store read\n", argv[4], mesh.triangles.size(),
                 stats.seconds, static_cast<unsigned long long>(store.info().bytes_read));

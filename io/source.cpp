@@ -16,9 +16,11 @@
 #include <string_view>
 #include <utility>
 
+#include "engine/core/parallel.h"
 #include "engine/core/volume_check.h"
 #include "engine/extract/budget_memo.h"
 #include "engine/extract/extract_drivers.h"
+#include "engine/extract/options.h"
 #include "engine/extract/streamed_extract.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/lattice.h"
@@ -108,7 +110,6 @@ struct Source::Impl {
   // The whole read. Taken inside build_mutex (a hierarchy reads the volume), never around it: an
   // extraction from the volume waits for its read, not for another extraction's hierarchy.
   mutable std::mutex read_mutex;
-  ProgressCallback progress;
   mutable std::mutex build_mutex;
   // Shared: an extraction on another thread keeps the hierarchy it started with while a later one
   // that reads more fields builds the next (Source::extract may run on several threads at once).
@@ -131,13 +132,13 @@ struct Source::Impl {
   }
   const Volume* in_memory() const { return held.load(std::memory_order_acquire); }
   // Whether an extraction with these options streams the file rather than read it whole.
-  bool streams(const ExtractOptions& options) const {
+  bool streams(const ExtractCall& options) const {
     return file && !in_memory() && streamed_extract_applies(file->info().dims, options);
   }
   // The options an extraction runs: without the triangle budget when the full-resolution mesh fits
   // it (budget_takes_full_resolution), which a budget reads the volume whole for anyway.
-  ExtractOptions as_extracted(const ExtractOptions& options) const {
-    ExtractOptions o = options;
+  ExtractCall as_extracted(const ExtractCall& options) const {
+    ExtractCall o = options;
     if (options.max_triangles <= 0) return o;
     options.validate();  // before the volume is read
     if (budget_takes_full_resolution(whole(), options)) o.max_triangles = 0;
@@ -176,7 +177,8 @@ struct Source::Impl {
   // padding (StoreLayout::memory_brick_bits: the hierarchy in memory takes bricks of 4^3 there).
   // With the sections FIELDS need alone (StoreSections) the first time, with all when made again:
   // a source whose extractions change modes converts its volume twice at most.
-  std::shared_ptr<const ScratchStore> paged_hierarchy(const RecordFields& fields) const {
+  std::shared_ptr<const ScratchStore> paged_hierarchy(const RecordFields& fields,
+                                                      const ProgressCallback& progress) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (hierarchy_in_memory || (scratch && scratch->serves(fields))) return scratch;
     const StoreSections sections = scratch ? kAllSections : sections_for(fields);
@@ -212,7 +214,8 @@ struct Source::Impl {
       fs::remove_all(folder, failed);
     };
     ConvertOptions options;
-    options.progress = progress;
+    RunContext run;
+    run.progress = progress;
     // Before the build, as `isotope convert` sets it: its tiles' buffers, freed and allocated
     // again tile after tile, then serve the bricks and the mesh from memory already faulted in.
     if (tune_allocator) keep_freed_memory();
@@ -221,9 +224,10 @@ struct Source::Impl {
     try {
       if (held_volume) {
         validate_volume(*held_volume);  // a borrowed array may have changed since it was checked
-        convert_to_store(VolumeBoxReader(*held_volume), name, options, StoreLife::transient, sections);
+        convert_to_store(VolumeBoxReader(*held_volume), name, ConvertCall(options, run), StoreLife::transient,
+                         sections);
       } else {
-        convert_to_store(*file, name, options, StoreLife::transient, sections);
+        convert_to_store(*file, name, ConvertCall(options, run), StoreLife::transient, sections);
       }
       built->store = std::make_unique<StoreReader>(name);
     } catch (const IoError& e) {
@@ -245,7 +249,7 @@ struct Source::Impl {
     return scratch;
   }
 
-  std::shared_ptr<const Hierarchy> hierarchy(const RecordFields& fields) const {
+  std::shared_ptr<const Hierarchy> hierarchy(const RecordFields& fields, const ProgressCallback& progress) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (memory && memory->fields().covers(fields)) return memory;
     const Volume& values = whole();
@@ -267,7 +271,6 @@ Source::~Source() = default;
 Source open_volume(const VolumeSpec& spec, const OpenOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   auto impl = std::make_unique<Source::Impl>();
-  impl->progress = options.preprocess_progress;
   check_cache_mb(options);
   impl->cache_mb = options.cache_mb;
   impl->tune_allocator = options.tune_allocator;
@@ -298,15 +301,17 @@ Source open_volume(Volume volume, const OpenOptions& options) {
   check_cache_mb(options);  // the cache of the array's hierarchy, in a store of its own
   validate_volume(volume);  // what extract() would refuse, refused at open
   auto impl = std::make_unique<Source::Impl>();
-  impl->progress = options.preprocess_progress;
   impl->cache_mb = options.cache_mb;
   impl->tune_allocator = options.tune_allocator;
   impl->hold(std::make_unique<Volume>(std::move(volume)));
   return Source(std::move(impl));
 }
 
-Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
-  if (impl_->paged) return isotope::extract(*impl_->paged, options, stats, &impl_->budgets);
+Mesh Source::extract(const ExtractOptions& options, const RunContext& run, ExtractStats* stats) const {
+  run.validate();
+  const ThreadLimit threads(run.threads);
+  const ExtractCall call(options, run);
+  if (impl_->paged) return isotope::extract(*impl_->paged, call, stats, &impl_->budgets);
   if (impl_->streams(options)) {
     const BoxReader& file = *impl_->file;
     const VolumeInfo& i = file.info();
@@ -323,23 +328,26 @@ Mesh Source::extract(const ExtractOptions& options, ExtractStats* stats) const {
         file.read_box_stored({0, 0, z}, {i.dims[0], i.dims[1], count}, out);
       };
     }
-    return extract_streamed(layers, options, stats);
+    return extract_streamed(layers, call, stats);
   }
-  const ExtractOptions extracted = impl_->as_extracted(options);
+  const ExtractCall extracted = impl_->as_extracted(call);
   if (!needs_hierarchy(extracted)) {
     // Values read from a file or copied in were checked then; a borrowed array may have changed.
     const Volume& volume = impl_->whole();
-    return volume.borrowed.data() ? isotope::extract(volume, extracted, stats)
-                                  : extract_validated(volume, extracted, stats);
+    return volume.borrowed.data() ? isotope::extract(volume, extracted, run, stats)
+                                  : extract_validated(volume, extracted, stats, run.progress);
   }
-  if (const std::shared_ptr<const ScratchStore> scratch = impl_->paged_hierarchy(fields_for(extracted)))
+  const RecordFields fields = fields_for(extracted);
+  if (const std::shared_ptr<const ScratchStore> scratch = impl_->paged_hierarchy(fields, run.progress))
     return isotope::extract(*scratch->paged, extracted, stats, &impl_->budgets);
-  const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields_for(extracted));
+  const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields, run.progress);
   return isotope::extract(*hierarchy, extracted, stats, &impl_->budgets);
 }
 
-void Source::prepare(const std::vector<ExtractOptions>& planned) const {
+void Source::prepare(const std::vector<ExtractOptions>& planned, const RunContext& run) const {
   for (const ExtractOptions& o : planned) o.validate();
+  run.validate();
+  const ThreadLimit threads(run.threads);
   if (impl_->paged) return;
   RecordFields fields{false, false, false, false};
   bool needed = false, whole = false;
@@ -349,7 +357,8 @@ void Source::prepare(const std::vector<ExtractOptions>& planned) const {
     needed = needed || hierarchy;
     whole = whole || (!hierarchy && !impl_->streams(o));  // eps 0 from the volume held whole
   }
-  if (needed && !impl_->paged_hierarchy(fields)) impl_->hierarchy(fields);  // reads the volume whole
+  if (needed && !impl_->paged_hierarchy(fields, run.progress))
+    impl_->hierarchy(fields, run.progress);  // reads the volume whole
   if (whole) impl_->whole();
 }
 

@@ -68,7 +68,6 @@ struct ExtractArgs {
 // every cell), from the same source, so a store is read out of core again.
 ExtractOptions full_resolution(const ExtractOptions& o) {
   ExtractOptions full;
-  full.distribution = o.distribution;  // shared among the same processes
   full.iso = o.iso;
   full.eps = 0;
   full.topology = TopologyMode::none;
@@ -196,8 +195,9 @@ int run_extract(const ExtractArgs& a) {
 
   // Under mpirun every rank opens the input and extracts its share; rank 0 gets the mesh and does
   // the rest (docs/DISTRIBUTED.md). Each step that one rank may fail alone is settled among all.
-  run.options.distribution = process_group();
-  run.options.keep_shares = !a.parts.empty();
+  RunContext context = preprocessing_context(progress);
+  context.distribution = process_group();
+  context.keep_shares = !a.parts.empty();
   Mesh mesh, full;
   {  // scoped: the input's memory (volume or brick cache) is given back before measuring and writing
     std::optional<Source> opened;
@@ -205,12 +205,12 @@ int run_extract(const ExtractArgs& a) {
       opened.emplace(open_input(a.input, a.dims, a.type, a.cache_mb, progress));
       // A volume's hierarchy, if the extraction needs one, built here, where a rank that runs out
       // of memory stops them all (a store needs nothing).
-      if (process_group()) opened->prepare({run.options});
+      if (process_group()) opened->prepare({run.options}, context);
     });
     const Source& input = *opened;
     const double read_before = input.info().read_seconds;
     const auto start = std::chrono::steady_clock::now();
-    mesh = input.extract(run.options, &run.extract);
+    mesh = input.extract(run.options, context, &run.extract);
     const double elapsed = seconds_since(start);
     describe(input.info(), run);  // before --compare-full: the cache's reads are the extraction's own
     // A volume file is read whole, and its hierarchy built, on demand inside the extraction: that
@@ -221,7 +221,9 @@ int run_extract(const ExtractArgs& a) {
     if (progress) std::fprintf(stderr, "isotope: extracted in %.3f s\n", run.extract_seconds);
     if (a.compare_full) {
       const auto compare_start = std::chrono::steady_clock::now();
-      full = input.extract(full_resolution(run.options));
+      RunContext shared;  // among the same processes, one mesh on rank 0
+      shared.distribution = context.distribution;
+      full = input.extract(full_resolution(run.options), shared);
       run.compare_seconds = seconds_since(compare_start);
     }
   }

@@ -55,16 +55,17 @@ int run_convert(const ConvertArgs& a) {
   options.zstd_level = a.zstd_level;
   options.quantize_bits = a.quantize;
   options.brick_bits = a.brick_bits;
-  options.distribution = process_group();  // under mpirun: the ranks share the tiles (docs/DISTRIBUTED.md)
-  if (progress_enabled(a.quiet)) options.progress = progress_bar("converting");
+  RunContext run;
+  run.distribution = process_group();  // under mpirun: the ranks share the tiles (docs/DISTRIBUTED.md)
+  if (progress_enabled(a.quiet)) run.progress = progress_bar("converting");
   // Alone: Ctrl-C stops the convert between tiles, and its temporary output is removed as it
   // unwinds. Under mpirun the signal ends the rank at once instead (tools/main.cpp).
   std::optional<InterruptGuard> guard;
   if (!process_group()) {
     guard.emplace();
-    options.cancel = &InterruptGuard::flag();
+    run.cancel = &InterruptGuard::flag();
   }
-  const ConvertStats s = convert(input, a.output, options);
+  const ConvertStats s = convert(input, a.output, options, run);
   if (!a.quiet && speaking_rank()) {
     const auto& d = s.dims;
     std::printf(

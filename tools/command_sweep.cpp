@@ -148,7 +148,8 @@ int run_sweep(const SweepArgs& a) {
     o.eps = r.eps;
     planned.push_back(o);
   }
-  source.prepare(planned);
+  const RunContext run = preprocessing_context(progress);
+  source.prepare(planned, run);
   for (size_t i = 0; i < plan.size(); ++i) {
     SweepRow& r = plan[i];
     ExtractOptions o = base;
@@ -156,7 +157,7 @@ int run_sweep(const SweepArgs& a) {
     o.eps = r.eps;
     o.delta = r.delta;
     ExtractStats stats;
-    const Mesh mesh = source.extract(o, &stats);
+    const Mesh mesh = source.extract(o, run, &stats);
     r.seconds = stats.seconds;
     r.topology = measure_topology(mesh);
     if (progress) std::fprintf(stderr, "\risotope: sweep %zu/%zu", i + 1, plan.size());

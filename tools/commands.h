@@ -1,8 +1,8 @@
 #pragma once
 // The subcommands of the isotope tool. Each one registers its options on the application and
 // returns the function that runs it after a successful parse; main() maps what it throws to
-// exit codes (CLI::ParseError: usage, 2; anything else: runtime failure, 1). What they share is in
-// tools/support/command_line.h.
+// exit codes (CLI::ParseError: usage, 2; anything else: runtime failure, 1). What they share is
+// the command-line support (parse_command_line_options, open_input).
 #include <functional>
 
 #include "tools/support/command_line.h"

@@ -63,7 +63,7 @@ int main(int argc, char** argv) {
   using namespace isotope::tools;
   // A file size limit (ulimit -f, a quota) would otherwise kill the process by SIGXFSZ halfway
   // through a write; ignored, the write fails with EFBIG and the output's own error path runs
-  // (io/file/atomic_file.h: the message, the temporary removed, the target left as it was).
+  // (AtomicFile's: the message, the temporary removed, the target left as it was).
   std::signal(SIGXFSZ, SIG_IGN);
   const MpiLauncher launcher = mpi_launcher();
 #ifdef ISOTOPE_HAVE_MPI
@@ -101,7 +101,7 @@ int main(int argc, char** argv) {
   }
 #endif
   // SIGTERM and Ctrl-C end the command at once, its temporary files removed first
-  // (io/file/temporary_registry.h): an output half written, a volume's hierarchy store being
+  // (remove_temporaries_now): an output half written, a volume's hierarchy store being
   // written. Under mpirun, which ends the other ranks of a job one of whose ranks failed or was
   // killed with SIGTERM (then SIGKILL), a rank blocked in a collective could not unwind to its
   // destructors. A convert and the bench stop between steps instead, and unwind (InterruptGuard).

@@ -1,12 +1,14 @@
 #pragma once
 // Plain values and arrays into bytes and back, for what processes hand each other (the parts of a
-// mesh, a rank's counts: include/isotope/distribution.h). Same machine type on both ends (one
+// mesh, a rank's counts: isotope::Distribution). Same machine type on both ends (one
 // cluster, one build), so values go as they are in memory; a reader that runs past the end throws.
 #include <cstdint>
 #include <cstring>
 #include <stdexcept>
 #include <type_traits>
 #include <vector>
+
+#include "isotope/error.h"
 
 namespace isotope {
 
@@ -51,7 +53,7 @@ class ByteReader {
   void get_array(Array& a) {
     using T = typename Array::value_type;
     const auto n = get<uint64_t>();
-    if (n > static_cast<uint64_t>(end_ - at_) / sizeof(T)) throw std::runtime_error("a rank's data is truncated");
+    if (n > static_cast<uint64_t>(end_ - at_) / sizeof(T)) throw Error("a rank's data is truncated");
     a.resize(n);
     take(a.data(), n * sizeof(T));
   }
@@ -59,7 +61,7 @@ class ByteReader {
 
  private:
   void take(void* out, size_t n) {
-    if (n > static_cast<size_t>(end_ - at_)) throw std::runtime_error("a rank's data is truncated");
+    if (n > static_cast<size_t>(end_ - at_)) throw Error("a rank's data is truncated");
     if (n > 0) std::memcpy(out, at_, n);
     at_ += n;
   }

@@ -22,7 +22,7 @@ inline void get_mesh(ByteReader& r, Mesh& mesh) {
 
 // MINE from every rank, in rank order, on rank 0; every other rank gets none. Each item is written
 // by PUT(ByteWriter&, const T&) and freed at once, and read back by GET(ByteReader&, T&). Collective.
-// Each step settles together (include/isotope/distribution.h): the copy may run out of memory on
+// Each step settles together (settle_together): the copy may run out of memory on
 // one rank alone, and so may rank 0 receiving or reading back.
 template <class T, class Put, class Get>
 std::vector<T> gather_items(const Distribution& group, std::vector<T>& mine, const Put& put, const Get& get) {

@@ -1,4 +1,4 @@
-// The huge-block store behind detail::HugePageAllocator (isotope/detail/huge_page_allocator.h).
+// The huge-block store behind detail::HugePageAllocator.
 #include <sys/mman.h>
 #include <sys/resource.h>
 

@@ -3,8 +3,8 @@
 // task reuses memory already touched, and there are never more objects than tasks run at once.
 // On the reference machine fresh memory costs more than the work that fills it (docs/METHOD.md,
 // "In parallel"). A mutex, not per-thread storage: two lock operations a task, and
-// ThreadSanitizer sees them (oneTBB's thread-local storage is not instrumented,
-// engine/core/parallel.h).
+// ThreadSanitizer sees them (oneTBB's thread-local storage is not instrumented, which is why
+// parallel_for runs std::threads under it).
 #include <cstddef>
 #include <memory>
 #include <mutex>

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <exception>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -24,6 +25,18 @@ namespace isotope {
 inline int64_t thread_count() {
   return static_cast<int64_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
+
+// RunContext::threads for the span of a call: the process's max_allowed_parallelism while it
+// lives, when threads > 0 (0 leaves the process's own limit, such as a face's --threads).
+class ThreadLimit {
+ public:
+  explicit ThreadLimit(int threads) {
+    if (threads > 0) control_.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+  }
+
+ private:
+  std::optional<tbb::global_control> control_;
+};
 
 // Whether parallel_for(begin, end, ...) calls its bodies one after the other on the calling
 // thread: one thread allowed, or at most one index. A body may then skip what guards it against

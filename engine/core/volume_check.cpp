@@ -10,6 +10,7 @@
 #include <string>
 
 #include "engine/core/parallel.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -25,8 +26,8 @@ std::string triple(const std::array<double, 3>& v) {
 void validate_dims(const std::array<int64_t, 3>& dims) {
   for (int64_t d : dims)
     if (d < 2 || d > (int64_t{1} << 19) + 1)
-      throw std::invalid_argument("volume dimensions " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
-                                  std::to_string(dims[2]) + " (x by y by z): every axis needs 2 .. 524289 nodes");
+      throw InvalidInput("volume dimensions " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" +
+                         std::to_string(dims[2]) + " (x by y by z): every axis needs 2 .. 524289 nodes");
 }
 
 void validate_layout(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
@@ -34,25 +35,24 @@ void validate_layout(const std::array<int64_t, 3>& dims, const std::array<double
   validate_dims(dims);
   for (double s : spacing)
     if (!std::isfinite(s) || !(s > 0))
-      throw std::invalid_argument("spacing " + triple(spacing) + " must be 3 finite numbers > 0 (x, y, z)");
+      throw InvalidInput("spacing " + triple(spacing) + " must be 3 finite numbers > 0 (x, y, z)");
   for (double o : origin)
-    if (!std::isfinite(o))
-      throw std::invalid_argument("origin " + triple(origin) + " must be 3 finite numbers (x, y, z)");
-  // Vertices are float32 (isotope/mesh.h): the box's far corner must be one.
+    if (!std::isfinite(o)) throw InvalidInput("origin " + triple(origin) + " must be 3 finite numbers (x, y, z)");
+  // Vertices are float32 (isotope::Mesh): the box's far corner must be one.
   std::array<double, 3> corner{};
   for (int a = 0; a < 3; ++a) corner[a] = origin[a] + spacing[a] * static_cast<double>(dims[a] - 1);
   for (int a = 0; a < 3; ++a)
     if (!within_float_range(corner[a]) || !within_float_range(origin[a]))
-      throw std::invalid_argument("spacing " + triple(spacing) + " and origin " + triple(origin) +
-                                  " put the volume's far corner at " + triple(corner) +
-                                  ", beyond the mesh's float32 coordinates (about 3.4e38)");
+      throw InvalidInput("spacing " + triple(spacing) + " and origin " + triple(origin) +
+                         " put the volume's far corner at " + triple(corner) +
+                         ", beyond the mesh's float32 coordinates (about 3.4e38)");
 }
 
 void validate_volume(const Volume& volume) {
   validate_layout(volume.dims, volume.spacing, volume.origin);
   if (static_cast<int64_t>(volume.size()) != volume.node_count())
-    throw std::invalid_argument("volume holds " + std::to_string(volume.size()) + " values, its dimensions need " +
-                                std::to_string(volume.node_count()));
+    throw InvalidInput("volume holds " + std::to_string(volume.size()) + " values, its dimensions need " +
+                       std::to_string(volume.node_count()));
   const float* values = volume.data();
   const size_t i = first_non_finite(values, volume.size());
   if (i == volume.size()) return;
@@ -60,7 +60,7 @@ void validate_volume(const Volume& volume) {
   char text[160];
   std::snprintf(text, sizeof text, "volume value %g at (x,y,z) = (%zu,%zu,%zu) is not finite", values[i], i % n,
                 i / n % m, i / (n * m));
-  throw std::invalid_argument(text);
+  throw InvalidInput(text);
 }
 
 size_t first_non_finite(const float* values, size_t count) {

@@ -1,4 +1,4 @@
-// Per-component measures and the full-versus-adaptive comparison (engine/diagnostics/component_report.h).
+// Per-component measures and the full-versus-adaptive comparison (measure_components, compare_components).
 #include "engine/diagnostics/component_report.h"
 
 #include <algorithm>
@@ -12,6 +12,7 @@
 #include "engine/core/mix_hash.h"
 #include "engine/topology/filed_edges.h"
 #include "isotope/detail/huge_page_allocator.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -45,12 +46,12 @@ class DisjointSets {
 
 void check_mesh(const Mesh& mesh) {
   if (mesh.positions.size() >= (size_t{1} << 31))
-    throw std::invalid_argument("component report: the mesh has 2^31 or more vertices");
+    throw InvalidInput("component report: the mesh has 2^31 or more vertices");
   for (const auto& t : mesh.triangles)
     for (const uint32_t v : t)
       if (v >= mesh.positions.size())
-        throw std::invalid_argument("component report: triangle refers to vertex " + std::to_string(v) + " of " +
-                                    std::to_string(mesh.positions.size()));
+        throw InvalidInput("component report: triangle refers to vertex " + std::to_string(v) + " of " +
+                           std::to_string(mesh.positions.size()));
 }
 
 // The component of each vertex, numbered in order of the component's lowest vertex (its root,
@@ -401,8 +402,7 @@ struct Sampling {
 Sampling make_sampling(const Mesh& full, const MeshComponents& fc, const Mesh& adaptive, const MeshComponents& ac,
                        double tolerance) {
   if (!std::isfinite(tolerance) || tolerance <= 0)
-    throw std::invalid_argument("compare_components: tolerance must be finite and > 0, got " +
-                                std::to_string(tolerance));
+    throw InvalidInput("compare_components: tolerance must be finite and > 0, got " + std::to_string(tolerance));
   constexpr double kInf = std::numeric_limits<double>::infinity();
   Vec lo{kInf, kInf, kInf}, hi{-kInf, -kInf, -kInf};
   for (const auto* list : {&fc.components, &ac.components})
@@ -412,8 +412,8 @@ Sampling make_sampling(const Mesh& full, const MeshComponents& fc, const Mesh& a
   if (!(lo[0] <= hi[0])) return s;  // both meshes empty
   const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
   if (extent / tolerance >= 0x1.0p30)
-    throw std::invalid_argument("compare_components: tolerance " + std::to_string(tolerance) +
-                                " is too small for the meshes' extent " + std::to_string(extent));
+    throw InvalidInput("compare_components: tolerance " + std::to_string(tolerance) +
+                       " is too small for the meshes' extent " + std::to_string(extent));
   s.thin.size = std::max(s.thin.size, extent * 0x1.0p-20);  // Grid::packed
   const double budget =
       std::clamp(static_cast<double>(full.triangles.size() + adaptive.triangles.size()), kMinLatticeBudget, 0x1.0p30);
@@ -607,7 +607,7 @@ ComponentComparison compare_components(const Mesh& full, const MeshComponents& f
                                        const MeshComponents& adaptive_components, double tolerance) {
   if (full_components.vertex_component.size() != full.positions.size() ||
       adaptive_components.vertex_component.size() != adaptive.positions.size())
-    throw std::invalid_argument("compare_components: the component labels are not those of the meshes");
+    throw InvalidInput("compare_components: the component labels are not those of the meshes");
   const Sampling sampling = make_sampling(full, full_components, adaptive, adaptive_components, tolerance);
   ComponentComparison r;
   r.full_components = full_components.components;

@@ -6,7 +6,7 @@
 // Orientation: triangles are counter-clockwise seen from the outside (value <= iso), so normals
 // point from the inside (value > iso) to the outside. The divergence theorem then gives a
 // positive signed volume for a closed component that bounds a region of value > iso from
-// outside (a ball, the outer wall of a shell: engine/synthetic/fields.h) and a negative one for a component
+// outside (a ball, the outer wall of a shell: generate_nested_spheres) and a negative one for a component
 // that bounds such a region from within (the inner wall of a hollow shell, whose normals point
 // into the cavity).
 //

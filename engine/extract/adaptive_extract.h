@@ -43,7 +43,7 @@ inline int piece_level(const Lattice& lattice) {
 // With `check`, this process's triangle count goes to it before the weld, which is skipped
 // (returning false) when it says no.
 template <TraversalSource Source, class Together>
-bool extract_pieces(const Source& source, const ExtractOptions& options, const Together& together, ExtractStats& total,
+bool extract_pieces(const Source& source, const ExtractCall& options, const Together& together, ExtractStats& total,
                     Mesh* mesh, const std::function<bool(int64_t)>& check) {
   using namespace traversal;
   const Distribution* group = options.distribution;
@@ -154,7 +154,7 @@ inline BudgetSample budget_sample_for(const Lattice& lattice) {
 template <TraversalSource Source>
 class AdaptiveExtraction {
  public:
-  AdaptiveExtraction(const Source& source, const ExtractOptions& options, std::optional<BudgetSample> sample,
+  AdaptiveExtraction(const Source& source, const ExtractCall& options, std::optional<BudgetSample> sample,
                      BudgetMemo* memo)
       : source_(source),
         options_(options),
@@ -294,11 +294,11 @@ class AdaptiveExtraction {
   }
 
   const Source& source_;
-  const ExtractOptions& options_;
+  const ExtractCall options_;
   const ProcessGroup group_;
   const BudgetSample sample_;
   BudgetMemo* const memo_;
-  ExtractOptions in_codes_;  // the options in the source's value units
+  ExtractCall in_codes_;  // the options in the source's value units
   double scale_ = 1, weight_scale_ = 1;
   ExtractStats total_;
   std::optional<BudgetMemo::Choice> remembered_;
@@ -311,7 +311,7 @@ class AdaptiveExtraction {
 // extracted at once, one not found is remembered once settled. A distributed extraction neither
 // looks nor remembers, so that every rank searches alike.
 template <TraversalSource Source>
-Mesh extract_adaptive(const Source& source, const ExtractOptions& options, ExtractStats* stats,
+Mesh extract_adaptive(const Source& source, const ExtractCall& options, ExtractStats* stats,
                       std::optional<BudgetSample> sample = std::nullopt, BudgetMemo* memo = nullptr) {
   const auto start = std::chrono::steady_clock::now();
   options.validate();

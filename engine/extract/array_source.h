@@ -11,14 +11,15 @@
 
 #include "engine/extract/column_extremes.h"
 #include "engine/hierarchy/lattice.h"
+#include "isotope/error.h"
 #include "isotope/volume.h"
 
 namespace isotope {
 
 // What ArrayReader::block_cut throws, asked to check, on a block holding a value that is not
 // finite: the caller names the value (where it is, in which file) by reading it again.
-struct NonFiniteValue : std::runtime_error {
-  NonFiniteValue() : std::runtime_error("a value of the volume is not finite (NaN or infinite)") {}
+struct NonFiniteValue : InvalidInput {
+  NonFiniteValue() : InvalidInput("a value of the volume is not finite (NaN or infinite)") {}
 };
 
 // Reads node values by their global coordinates from an array of whole z-layers, of T (float, or

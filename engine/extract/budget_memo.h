@@ -39,8 +39,7 @@ class BudgetMemo {
     const std::lock_guard<std::mutex> lock(mutex_);
     if (entry(options, sample)) return;  // two threads settled the same budget at once
     if (entries_.size() == kCapacity) entries_.pop_front();
-    Entry& e = entries_.emplace_back(Entry{options, sample, choice});
-    e.options.cancel = nullptr, e.options.distribution = nullptr;  // not the question's; may not outlive it
+    entries_.push_back(Entry{options, sample, choice});  // the question alone: no run context kept
   }
   // The fields of `from` that report a budget's choice, into `to`.
   static void take_budget_part(const ExtractStats& from, ExtractStats& to) {

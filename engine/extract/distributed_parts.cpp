@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "engine/core/gather_items.h"
+#include "isotope/error.h"
 
 namespace isotope {
 
@@ -22,7 +23,7 @@ std::vector<double> share_costs(const Distribution& group, size_t n,
     rd.get_array(part);
     all.insert(all.end(), part.begin(), part.end());
   }
-  if (all.size() != n) throw std::runtime_error("the ranks disagree on the number of pieces");
+  if (all.size() != n) throw Error("the ranks disagree on the number of pieces");
   return all;
 }
 

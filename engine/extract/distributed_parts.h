@@ -1,8 +1,8 @@
 #pragma once
-// An extraction spread over processes (include/isotope/distribution.h): what each process's share
+// An extraction spread over processes (isotope::Distribution): what each process's share
 // of the traversal's pieces is estimated to cost, and how the pieces' meshes and each process's
 // load travel to rank 0, which welds them in piece order as one process would
-// (engine/extract/adaptive_extract.h).
+// (extract_adaptive).
 #include <algorithm>
 #include <functional>
 #include <vector>

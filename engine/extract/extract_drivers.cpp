@@ -8,9 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "engine/core/parallel.h"
 #include "engine/extract/adaptive_extract.h"
 #include "engine/extract/array_source.h"
 #include "engine/hierarchy/hierarchy.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -62,7 +64,7 @@ bool needs_hierarchy(const ExtractOptions& options) {
   return options.eps != 0 || options.max_triangles > 0 || options.eps_ties >= 0;
 }
 
-bool budget_takes_full_resolution(const Volume& volume, const ExtractOptions& options) {
+bool budget_takes_full_resolution(const Volume& volume, const ExtractCall& options) {
   if (options.max_triangles <= 0 || options.auto_delta || options.distribution) return false;
   options.validate();
   return count_full_resolution_triangles(volume, options.iso) <= options.max_triangles;
@@ -71,12 +73,14 @@ bool budget_takes_full_resolution(const Volume& volume, const ExtractOptions& op
 namespace {
 
 // An array's extraction, its options and values checked.
-Mesh extract_checked(const Volume& volume, const ExtractOptions& given, ExtractStats* stats) {
-  ExtractOptions options = given;
+Mesh extract_checked(const Volume& volume, const ExtractCall& given, ExtractStats* stats,
+                     const ProgressCallback& progress) {
+  ExtractCall options = given;
   if (budget_takes_full_resolution(volume, options)) options.max_triangles = 0;
   const ArraySource source(volume);
   if (needs_hierarchy(options) || !finest_extract_applies(source.lattice()))
-    return extract(Hierarchy::build(volume, fields_for(options)), options, stats);
+    return extract(Hierarchy::build(volume, fields_for(options), Hierarchy::kMemoryBrickBits, progress), options,
+                   stats);
   const auto start = std::chrono::steady_clock::now();
   const traversal::SplitRule rule(options, source.lattice(), source.origin(), source.spacing());
   ExtractStats s;
@@ -88,25 +92,28 @@ Mesh extract_checked(const Volume& volume, const ExtractOptions& given, ExtractS
 
 }  // namespace
 
-Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract(const Volume& volume, const ExtractOptions& options, const RunContext& run, ExtractStats* stats) {
   options.validate();
+  run.validate();
   validate_volume(volume);
-  return extract_checked(volume, options, stats);
+  const ThreadLimit threads(run.threads);
+  return extract_checked(volume, ExtractCall(options, run), stats, run.progress);
 }
 
-Mesh extract_validated(const Volume& volume, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract_validated(const Volume& volume, const ExtractCall& options, ExtractStats* stats,
+                       const ProgressCallback& progress) {
   options.validate();
-  return extract_checked(volume, options, stats);
+  return extract_checked(volume, options, stats, progress);
 }
 
-Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract(const MultiresVolume& mv, const ExtractCall& options, ExtractStats* stats) {
   return extract_adaptive(InMemory(mv), options, stats);
 }
 
-Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats, BudgetMemo* memo) {
+Mesh extract(const Hierarchy& hierarchy, const ExtractCall& options, ExtractStats* stats, BudgetMemo* memo) {
   if (!hierarchy.fields().covers(fields_for(options)))
-    throw std::invalid_argument("this hierarchy was built without the records topology mode " +
-                                std::string(to_string(options.topology)) + " reads");
+    throw InvalidInput("this hierarchy was built without the records topology mode " +
+                       std::string(to_string(options.topology)) + " reads");
   return extract_adaptive(hierarchy, options, stats, std::nullopt, memo);
 }
 

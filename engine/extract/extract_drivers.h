@@ -15,19 +15,20 @@
 namespace isotope {
 
 // Throws as extract(const Volume&, ...) does (isotope/extract.h).
-Mesh extract(const MultiresVolume& mv, const ExtractOptions& options, ExtractStats* stats = nullptr);
+Mesh extract(const MultiresVolume& mv, const ExtractCall& options, ExtractStats* stats = nullptr);
 
 class BudgetMemo;
 class Hierarchy;
 // extract() over an in-memory hierarchy. Throws std::invalid_argument when the options read a field
 // the hierarchy was built without. `memo`: as extract_adaptive's (engine/extract/adaptive_extract.h),
 // for a hierarchy kept open.
-Mesh extract(const Hierarchy& hierarchy, const ExtractOptions& options, ExtractStats* stats = nullptr,
+Mesh extract(const Hierarchy& hierarchy, const ExtractCall& options, ExtractStats* stats = nullptr,
              BudgetMemo* memo = nullptr);
 
 // extract(volume, options, stats) for a volume validate_volume() accepted before, whose values
 // cannot have changed since (not a borrowed array): they are not scanned again.
-Mesh extract_validated(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
+Mesh extract_validated(const Volume& volume, const ExtractCall& options, ExtractStats* stats = nullptr,
+                       const ProgressCallback& progress = {});
 
 // Whether extract(volume, options) needs a hierarchy (eps > 0, tie classes at eps 0, or a
 // triangle budget): all but full resolution.
@@ -38,6 +39,6 @@ bool needs_hierarchy(const ExtractOptions& options);
 // choice, found without the hierarchy the search would build (docs/METHOD.md, "Focus and triangle
 // budget"). Only for a budget alone: one that chooses delta too (auto_delta), or spread over
 // processes, searches as before. Throws OptionError for options validate() refuses.
-bool budget_takes_full_resolution(const Volume& volume, const ExtractOptions& options);
+bool budget_takes_full_resolution(const Volume& volume, const ExtractCall& options);
 
 }  // namespace isotope

@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "isotope/error.h"
+
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -111,7 +113,7 @@ void column_cases(const uint8_t* s00, const uint8_t* s10, const uint8_t* s01, co
 }  // namespace
 
 int64_t count_full_resolution_triangles(const Volume& volume, float iso) {
-  if (!std::isfinite(iso)) throw std::invalid_argument("the isovalue must be a finite number");
+  if (!std::isfinite(iso)) throw InvalidInput("the isovalue must be a finite number");
   static const CellTriangles table = make_cell_triangles();
   const auto& d = volume.dims;
   if (d[0] < 2 || d[1] < 2 || d[2] < 2) return 0;
@@ -171,7 +173,7 @@ int64_t full_resolution_slab_layers(const std::array<int64_t, 3>& dims) {
 }
 
 Mesh extract_full_resolution(const Volume& volume, float iso) {
-  if (!std::isfinite(iso)) throw std::invalid_argument("the isovalue must be a finite number");
+  if (!std::isfinite(iso)) throw InvalidInput("the isovalue must be a finite number");
   const auto& d = volume.dims;
   SlabPlan plan;
   plan.cell_layers = std::max<int64_t>(d[2] - 1, 0);

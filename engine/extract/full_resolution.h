@@ -9,7 +9,7 @@
 
 namespace isotope {
 
-// Marching tetrahedra over every cell, on all threads (engine/core/parallel.h). The mesh is the same
+// Marching tetrahedra over every cell, on all threads (parallel_for). The mesh is the same
 // bit for bit whatever the number of threads: vertices numbered in order of first appearance in
 // one walk over the cells, z slowest, then y, then x. Throws std::invalid_argument for a
 // non-finite iso.

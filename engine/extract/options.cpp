@@ -65,11 +65,6 @@ int64_t triangle_budget(std::string_view text) {
 
 }  // namespace
 
-OptionError::OptionError(std::string option_name, std::string what_it_must_be)
-    : std::invalid_argument(option_name + " " + what_it_must_be),
-      option(std::move(option_name)),
-      message(std::move(what_it_must_be)) {}
-
 std::optional<double> parse_real(std::string_view text) {
   auto parse_one = [](std::string_view s) -> std::optional<double> {
     if (s.empty()) return std::nullopt;
@@ -177,11 +172,20 @@ void ExtractOptions::validate() const {
   }
 }
 
+namespace {
+std::string threads_must_be() {
+  return "must be an integer in 0 .. " + std::to_string(kMaxThreads) + " (0: all cores)";
+}
+}  // namespace
+
+void RunContext::validate() const {
+  if (threads < 0 || threads > kMaxThreads)
+    throw OptionError("threads", threads_must_be() + ", got " + std::to_string(threads));
+}
+
 int parse_thread_count(std::string_view text) {
   const auto v = integer_in(text.substr(0, kMaxValueChars + 1), 0, kMaxThreads);
-  if (!v)
-    throw OptionError("threads", "must be an integer in 0 .. " + std::to_string(kMaxThreads) + " (0: all cores), got " +
-                                     quoted(text));
+  if (!v) throw OptionError("threads", threads_must_be() + ", got " + quoted(text));
   return static_cast<int>(*v);
 }
 

@@ -1,8 +1,11 @@
 #pragma once
+#include <atomic>
+
 // The engine's side of the extraction options (isotope/extract.h): which record fields an
 // extraction reads (engine/hierarchy/record_fields.h), and the cancellation check its loops make.
 #include "engine/hierarchy/record_fields.h"
 #include "isotope/extract.h"
+#include "isotope/run_context.h"
 
 namespace isotope {
 
@@ -22,8 +25,20 @@ RecordFields fields_for(const ExtractOptions& options);
 double threshold_in_codes(double value, double factor);
 inline double threshold_in_data(double codes, double factor) { return codes * factor; }
 
+// One extraction as the engine carries it through its passes: the method's settings, and what the
+// passes read of its run context (isotope/run_context.h; the threads and the progress are the
+// entry point's). From options alone: this process alone, never cancelled.
+struct ExtractCall : ExtractOptions {
+  ExtractCall() = default;
+  ExtractCall(const ExtractOptions& options, const RunContext& run = {})  // NOLINT: options alone convert
+      : ExtractOptions(options), cancel(run.cancel), distribution(run.distribution), keep_shares(run.keep_shares) {}
+  const std::atomic<bool>* cancel = nullptr;
+  const Distribution* distribution = nullptr;
+  bool keep_shares = false;
+};
+
 // Throws ExtractionCancelled when `options` asks to stop; cheap enough for every piece or slab.
-inline void throw_if_cancelled(const ExtractOptions& options) {
+inline void throw_if_cancelled(const ExtractCall& options) {
   if (options.cancel && options.cancel->load(std::memory_order_relaxed)) throw ExtractionCancelled{};
 }
 

@@ -1,6 +1,6 @@
 #pragma once
-// The processes one extraction is spread over, as its drivers see them (include/isotope/
-// distribution.h): alone, a step just runs and a count is this process's; spread, each step that
+// The processes one extraction is spread over, as its drivers see them (isotope::Distribution):
+// alone, a step just runs and a count is this process's; spread, each step that
 // may fail settles together, so that a rank whose read fails stops every rank instead of leaving
 // them waiting at the next gather, and a count is summed over the ranks. A driver calls the same
 // steps either way.

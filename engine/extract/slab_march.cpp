@@ -18,6 +18,7 @@
 #include "engine/core/parallel.h"
 #include "engine/mesh/edge_vertex_map.h"
 #include "isotope/detail/huge_page_allocator.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -166,8 +167,7 @@ class SlabNumbering {
     vertices_ += place.new_vertices;
     triangles_ += slab.mesh.triangles.size();
     if (vertices_ >= kAbsent)
-      throw std::length_error("the mesh has " + std::to_string(vertices_) +
-                              " vertices, more than its 32-bit indices can number");
+      throw Error("the mesh has " + std::to_string(vertices_) + " vertices, more than its 32-bit indices can number");
     return place;
   }
   size_t vertices() const { return vertices_; }

@@ -1,7 +1,7 @@
 #pragma once
 // Marching tetrahedra over z-slabs of cells on all threads, joined into the mesh of one walk over
-// the slabs in order: what the full-resolution baseline (engine/extract/full_resolution.cpp) and the
-// finest-level extraction (engine/extract/finest_extract.h) share.
+// the slabs in order: what the full-resolution baseline (extract_full_resolution) and the
+// finest-level extraction (extract_finest) share.
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -45,7 +45,7 @@ inline int64_t slab_count(const SlabPlan& plan) {
   return std::max<int64_t>(0, (plan.cell_layers + plan.slab_layers - 1) / plan.slab_layers);
 }
 
-// Spread over processes (include/isotope/distribution.h): this one marches slabs [first, last),
+// Spread over processes (isotope::Distribution): this one marches slabs [first, last),
 // and rank 0 joins every process's slabs in slab order (each process's share is a contiguous run
 // of them), so that its mesh is the one march_in_slabs makes, bit for bit. Other ranks get an
 // empty mesh. Collective; a failure anywhere throws DistributedError everywhere.

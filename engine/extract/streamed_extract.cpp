@@ -61,8 +61,7 @@ class LayerRing {
  public:
   // `first` and `layers`: whole slabs.
   LayerRing(const std::function<void(int64_t, int64_t, T*)>& read, const LayerSource& source,
-            const ExtractOptions& options, int64_t first, int64_t end, int64_t layers, int64_t slab_layers,
-            int64_t held)
+            const ExtractCall& options, int64_t first, int64_t end, int64_t layers, int64_t slab_layers, int64_t held)
       : read_(read), options_(options), first_(first), end_(end), layers_(layers), slab_layers_(slab_layers) {
     const int64_t windows = std::max<int64_t>(0, (end - first + layers - 1) / layers);
     marched_.assign(static_cast<size_t>(windows), 0);
@@ -161,7 +160,7 @@ class LayerRing {
   }
 
   const std::function<void(int64_t, int64_t, T*)>& read_;
-  const ExtractOptions& options_;
+  const ExtractCall options_;
   const int64_t first_, end_, layers_, slab_layers_;
   size_t stride_ = 0;  // values from a buffer's start to the next's: whole pages
   int64_t held_ = 0;   // buffers: none where no window is ours
@@ -177,7 +176,7 @@ class LayerRing {
 
 // The layers read again, checked, in order, `layers` at a time: throws what a checked read throws
 // first (a value that is not finite, a failed read), or returns when they all read.
-void read_checked(const LayerSource& source, const ExtractOptions& options, int64_t layers) {
+void read_checked(const LayerSource& source, const ExtractCall& options, int64_t layers) {
   const std::array<int64_t, 3>& dims = source.dims;
   std::vector<float> window(static_cast<size_t>(dims[0] * dims[1] * layers));
   for (int64_t z = 0; z < dims[2]; z += layers) {
@@ -200,7 +199,7 @@ struct StreamPlan {
 // The march over windows of values of type T that READ fills. MARCH_CHECKS: the values were
 // read unchecked, and the march checks them (ArrayReader).
 template <class T>
-Mesh march_windows(const LayerSource& source, const ExtractOptions& options, const StreamPlan& s,
+Mesh march_windows(const LayerSource& source, const ExtractCall& options, const StreamPlan& s,
                    const std::function<void(int64_t, int64_t, T*)>& read, bool march_checks, ExtractStats* stats) {
   const std::array<int64_t, 3>& dims = source.dims;
   const SlabPlan& plan = s.plan;
@@ -260,7 +259,7 @@ Mesh march_windows(const LayerSource& source, const ExtractOptions& options, con
 
 // The march over the values as the file stores them, of type T.
 template <class T>
-Mesh march_stored(const LayerSource& source, const ExtractOptions& options, const StreamPlan& s, ExtractStats* stats) {
+Mesh march_stored(const LayerSource& source, const ExtractCall& options, const StreamPlan& s, ExtractStats* stats) {
   const std::function<void(int64_t, int64_t, T*)> read = [&](int64_t z, int64_t count, T* out) {
     source.read_stored(z, count, reinterpret_cast<unsigned char*>(out));
   };
@@ -278,11 +277,11 @@ int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims) {
   return window_bytes(dims, window_layers(dims, plan.slab_layers));
 }
 
-Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, ExtractStats* stats) {
+Mesh extract_streamed(const LayerSource& source, const ExtractCall& options, ExtractStats* stats) {
   options.validate();
   validate_layout(source.dims, source.spacing, source.origin);
   if (!streamed_extract_applies(source.dims, options))
-    throw std::invalid_argument("a streamed extraction is at full resolution");
+    throw std::logic_error("a streamed extraction is at full resolution");
   const auto start = std::chrono::steady_clock::now();
   const std::array<int64_t, 3>& dims = source.dims;
   const Lattice lattice = Lattice::enclosing(dims);

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 
+#include "engine/extract/options.h"
 #include "isotope/extract.h"
 #include "isotope/mesh.h"
 #include "isotope/volume.h"
@@ -35,7 +36,7 @@ struct LayerSource {
 
 // Whether extract_streamed makes what these options ask for: full resolution with no tie classes
 // and no budget (nothing that needs the hierarchy), on a lattice with blocks. Under several
-// processes (ExtractOptions::distribution) each streams the layers of its share of the slabs.
+// processes (RunContext::distribution) each streams the layers of its share of the slabs.
 bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractOptions& options);
 
 // The bytes of one window's values as float (a quarter of them for uint8 read as stored): one layer of blocks at least,
@@ -45,6 +46,6 @@ int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims);
 
 // Throws as extract(const Volume&, ...) does, std::invalid_argument when the options need more
 // than full resolution (streamed_extract_applies), and what the source's reads throw.
-Mesh extract_streamed(const LayerSource& source, const ExtractOptions& options, ExtractStats* stats = nullptr);
+Mesh extract_streamed(const LayerSource& source, const ExtractCall& options, ExtractStats* stats = nullptr);
 
 }  // namespace isotope

@@ -68,7 +68,7 @@ class SplitRule {
  public:
   // error_fold: added to every error before it is compared (a quantized store's rounding,
   // io/store/store_format.h): the records are those of the quantized field.
-  SplitRule(const ExtractOptions& o, const Lattice& lattice, const std::array<double, 3>& origin,
+  SplitRule(const ExtractCall& o, const Lattice& lattice, const std::array<double, 3>& origin,
             const std::array<double, 3>& spacing, double error_fold = 0)
       : options_(o), origin_(origin), spacing_(spacing), fold_(error_fold) {
     fields_.exact = o.topology == TopologyMode::preserve || o.topology == TopologyMode::simplify;
@@ -130,7 +130,7 @@ class SplitRule {
     return level * kTieBuckets + static_cast<int>((v * 0x9E3779B97F4A7C15ull) >> 60);
   }
   bool in_range(const DiamondBounds& b) const { return b.lo <= options_.iso && options_.iso < b.hi; }
-  const ExtractOptions& options() const { return options_; }
+  const ExtractCall& options() const { return options_; }
   // The fields error_key(), critical() and dropped() read beyond the range and the bound.
   const RecordFields& fields() const { return fields_; }
 
@@ -155,7 +155,7 @@ class SplitRule {
     return std::clamp(d / options_.focus->radius, 0.0, 1.0);
   }
 
-  ExtractOptions options_;
+  ExtractCall options_;
   std::array<double, 3> origin_, spacing_;
   double fold_ = 0;
   RecordFields fields_;

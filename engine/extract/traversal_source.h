@@ -1,8 +1,8 @@
 #pragma once
-// What the traversal (engine/extract/traversal.h) reads, as C++20 concepts: where values and records
-// come from is the source's business, a hierarchy in memory (engine/hierarchy/hierarchy.h), the
-// exact reference MultiresVolume (engine/extract/extract_drivers.cpp) or a store paged through a brick
-// cache (io/store/paged_volume.h). The compiler names what a new source lacks.
+// What the traversal (traversal::Traversal) reads, as C++20 concepts: where values and records
+// come from is the source's business, a hierarchy in memory (Hierarchy), the
+// exact reference MultiresVolume (extract's InMemory) or a store paged through a brick
+// cache (PagedVolume). The compiler names what a new source lacks.
 #include <array>
 #include <concepts>
 #include <cstdint>
@@ -59,7 +59,7 @@ concept BlockReader = requires(R& r, const Coord& lo, const std::array<int64_t, 
   { r.block_values(lo, n, f, stride) } -> std::convertible_to<bool>;
 };
 
-// The shape of the grid and a reader per task: what eps = 0 needs (engine/extract/finest_extract.h).
+// The shape of the grid and a reader per task: what eps = 0 needs (extract_finest).
 template <class S>
 concept ValueSource = requires(const S& s) {
   { s.lattice() } -> std::same_as<const Lattice&>;  // a reference: the traversal keeps it

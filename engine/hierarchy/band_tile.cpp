@@ -13,6 +13,7 @@
 #include <type_traits>
 
 #include "engine/core/lanes.h"
+#include "isotope/error.h"
 
 namespace isotope {
 
@@ -182,7 +183,7 @@ const BandTile::DiamondGeometry& BandTile::geometry_of(const Lattice& l, int j, 
   constexpr int kMaxK = 40;  // a lattice of 2^40 cells a side: far beyond any volume's
   using Classes = std::array<std::atomic<const DiamondGeometry*>, 64>;
   static std::atomic<Classes*> bands[kMaxK + 1][kMaxK + 1];
-  if (l.k > kMaxK) throw std::length_error("lattice of 2^" + std::to_string(l.k) + " cells a side");
+  if (l.k > kMaxK) throw InvalidInput("lattice of 2^" + std::to_string(l.k) + " cells a side");
   Classes& classes = publish_once(bands[l.k][j], [] { return std::make_unique<Classes>(); });  // null pointers
   return publish_once(classes[static_cast<size_t>(parity)], [&] {
     const DiamondShape shape = shape_of(d, l);
@@ -348,7 +349,7 @@ void BandTile::build(CriticalCounts& counts, bool topology, bool weights) {
   // paper's flags v an extremum, but its interval [c, c) is empty), weights 0; and so are its
   // children's, which lie within one node of it and reach one node further. Only inside the data
   // box's inner part, where no descendant reaches past the box (those are critical in every
-  // topology mode: engine/hierarchy/record_builder.h).
+  // topology mode: RecordBuilder).
   const bool trivial = j_ == 0;
   if (trivial) find_constant_blocks();
   // Whether a value of the window is -0 (build_fast's vector range takes none).

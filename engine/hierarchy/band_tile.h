@@ -1,12 +1,12 @@
 #pragma once
-// One tile of one band of the banded build (engine/hierarchy/store_layout.h): the records of the scale-j
+// One tile of one band of the banded build (StoreLayout): the records of the scale-j
 // nodes of a box of G_j, computed from the values of that box plus a halo of two nodes and, for
 // j > 0, the records of the scale j-1 cube centres (one per G_j cell), which band j-1 produced.
 // Nothing else is needed: a cube centre's record depends on nodes at most two G_j steps away
 // (its face-centre children one step along one axis, their edge-midpoint children one step in
 // the face, whose polyhedra reach one step further), so bands are built one after the other,
 // tile by tile, in memory bounded by the tile. The records are bit for bit those of
-// MultiresVolume::build: both run engine/hierarchy/record_builder.h on the same inputs.
+// MultiresVolume::build: both run RecordBuilder on the same inputs.
 #include <array>
 #include <cstdint>
 #include <utility>
@@ -98,7 +98,7 @@ class BandTile {
   bool computable(const Box3& g, int odd) const;
 
   // A diamond's polyhedron and children as offsets in the window's arrays. The geometry of a
-  // scale-j vertex depends only on its G_j coordinates mod 4 (engine/hierarchy/diamond.cpp), so one
+  // scale-j vertex depends only on its G_j coordinates mod 4 (diamond_of), so one
   // template per class serves every vertex whose diamond lies inside the data box: no
   // coordinates, no mirroring, no existence checks. The offsets depend on the window's size
   // alone, so the tiles of a band, most of one size, share their templates (per thread). The

@@ -1,5 +1,5 @@
 #pragma once
-// The hierarchy built band by band, tile by tile (engine/hierarchy/band_tile.h), in memory bounded by a
+// The hierarchy built band by band, tile by tile (BandTile), in memory bounded by a
 // budget whatever the volume's size: band 0 from the volume's values, each band j > 0 from what
 // band j-1 handed on (per node of G_j: its value, and the record of the cell's scale j-1 cube
 // centre). The tiles of a band run in parallel, in batches sized to the budget; each brick is
@@ -7,7 +7,7 @@
 // order: bands 0 .. k, within a band bricks in Morton order (docs/FORMAT.md). What the sink keeps
 // therefore depends on neither the thread count nor the budget.
 //
-// Two sinks: the in-memory hierarchy (engine/hierarchy/hierarchy.h), and the store writer (io/store/store_writer.cpp),
+// Two sinks: the in-memory hierarchy (Hierarchy), and the store writer (convert_to_store),
 // which compresses the bricks and appends them to the file.
 #include <algorithm>
 #include <array>
@@ -130,7 +130,7 @@ struct BandedBuildOptions {
   std::function<void()> check_cancel;  // called between batches; throws to stop
   // Where a band's hand-over goes; by default (or when this returns null) into memory.
   std::function<std::unique_ptr<BandHandover>(const Box3& nodes, uint64_t held_bytes)> make_handover;
-  // One process's share of a distributed convert (io/store/store_writer.cpp): only bands
+  // One process's share of a distributed convert (convert_to_store): only bands
   // first_band .. last_band (-1: to the last), and of each only tiles [first_tile, last_tile) of
   // its Morton order, `tile_bricks` a side (0: chosen by tile_bricks_for). Band first_band > 0
   // reads `handover_in`; the last band built, when another follows, writes `handover_out`.
@@ -151,7 +151,7 @@ struct BandedBuildOptions {
   // that hand-over never exists, for a little work done twice (the halo). Needs a sink that holds
   // (below), tiles of an even number of bricks, and whole bands (no first_tile, last_tile).
   bool fuse = false;
-  // A distributed convert's pass (io/store/store_writer.cpp): bands first_band and last_band =
+  // A distributed convert's pass (convert_to_store): bands first_band and last_band =
   // first_band + 1 built as `fuse` builds them, over this process's run of band first_band's
   // tiles, whatever the hand-overs; `tile_bricks` even (fused_tile_bricks_for). The caller places
   // the held bricks.

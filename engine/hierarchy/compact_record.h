@@ -1,5 +1,5 @@
 #pragma once
-// The saturated record (engine/hierarchy/record.h) in a few bytes (docs/FORMAT.md, "Compact records"). The
+// The saturated record (Record) in a few bytes (docs/FORMAT.md, "Compact records"). The
 // guaranteed error bound is kept as the float it is; every other field becomes a bfloat16 code,
 // the upper half of its float's bits, rounded in the direction that can only make the traversal
 // refine more:
@@ -12,8 +12,8 @@
 // Each rounding is one fixed monotone map, and these fields saturate by min, max and hull, which
 // commute with it: the rounded saturation of the exact records equals the saturation of the rounded
 // ones. So a parent's code is never below a child's (the conforming, crack-free cut of
-// engine/extract/traversal.h survives), a record may be computed from its children's compact records (a
-// store's band 0, io/store/paged_volume.h) with the same bits as from exact ones, and the bound, a sum
+// the traversal survives), a record may be computed from its children's compact records (a
+// store's band 0, PagedVolume) with the same bits as from exact ones, and the bound, a sum
 // over the levels, is not rounded at all: eps keeps its L-infinity meaning exactly. A bfloat16 keeps
 // 8 significant bits: a range, surplus or weight moves by at most 2^-8 of itself.
 #include <bit>
@@ -47,7 +47,7 @@ inline Bf16 bf16_down(float f) {
 }
 
 // What every visit reads: the range and the guaranteed bound, in one 64-bit word (a store's band-0
-// records are computed on first use by whichever thread gets there: io/store/paged_volume.h).
+// records are computed on first use by whichever thread gets there: PagedVolume).
 struct PackedBounds {
   Bf16 lo = 0, hi = 0;
   float bound = 0;

@@ -8,7 +8,7 @@
 namespace isotope {
 
 IsoInterval paper_interval(const DiamondValues& d) {
-  // Every critical pattern has equal signs at a and b (tests/engine/critical_table_test.cpp): most
+  // Every critical pattern has equal signs at a and b (a test of the critical table holds it): most
   // vertices of smooth data lie between their edge's ends and are settled without the table.
   if ((d.fa > d.fv) != (d.fb > d.fv)) return {};
   // Relative to f(v) itself: a tie counts as '-', as it does for t = f(v) in marching tetrahedra.

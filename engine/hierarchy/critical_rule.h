@@ -35,7 +35,7 @@ struct DiamondValues {
   float ring[8] = {};
 };
 
-// Sign pattern (bit set = value > t) in the layout of critical_table.h. Inline: both rules take
+// Sign pattern (bit set = value > t) in the layout of the critical table (is_critical_pattern). Inline: both rules take
 // it for nearly every vertex whose v lies beyond a and b.
 inline uint32_t sign_pattern(const DiamondValues& d, float t) {
   uint32_t p = (d.fa > t ? 1u : 0u) | (d.fb > t ? 2u : 0u);

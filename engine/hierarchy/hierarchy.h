@@ -1,12 +1,12 @@
 #pragma once
-// The hierarchy as extraction reads it: the bands and bricks of engine/hierarchy/store_layout.h, each brick
-// holding its nodes' values and the compact records (engine/hierarchy/compact_record.h) of its scale-j
+// The hierarchy as extraction reads it: the bands and bricks of the StoreLayout, each brick
+// holding its nodes' values and the compact records (docs/FORMAT.md, "Compact records") of its scale-j
 // nodes, in Morton order within the brick, so that a subtree of the traversal reads a few
 // contiguous kilobytes. The same bricks, byte for byte, whether built in memory from a volume (this
-// file: a one-shot extraction with eps > 0) or read from a store (io/store/paged_volume.h), so a
+// file: a one-shot extraction with eps > 0) or read from a store (PagedVolume), so a
 // store's extraction equals the in-memory one and a warm brick cache runs as fast as memory.
 //
-// Fields a mode does not read need not be held (engine/extract/options.h, RecordFields).
+// Fields a mode does not read need not be held (RecordFields, fields_for).
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -30,7 +30,7 @@ namespace isotope {
 // One brick's arrays, indexed by the Morton code of a node within the brick (brick_morton);
 // entries of nodes coarser than the band (code a multiple of 8) hold nothing. A null array is a
 // field not held. Written through std::atomic_ref where a store fills band 0's records on first
-// use (io/store/paged_volume.h).
+// use (PagedVolume).
 struct BrickView {
   const float* values = nullptr;
   uint64_t* bounds = nullptr;   // bounds_word(PackedBounds)
@@ -54,7 +54,7 @@ inline DiamondTopology topology_of(uint32_t exact, uint32_t paper, uint64_t weig
   return unpack(p);
 }
 
-// Writes record r (packed here, rounded as engine/hierarchy/compact_record.h says) of Morton code m into a
+// Writes record r (packed here, rounded as round_record rounds it) of Morton code m into a
 // brick, the fields the brick holds.
 void store_record(const BrickView& brick, uint32_t m, const Record& r);
 
@@ -95,13 +95,13 @@ class BrickIndexer {
 // The hierarchy built in memory, every brick present.
 class Hierarchy {
  public:
-  // The banded build (engine/hierarchy/banded_build.h) on all threads, with only the topology fields asked
+  // The banded build (build_bands) on all threads, with only the topology fields asked
   // for, in bricks of 2^brick_bits nodes a side (kMemoryBrickBits: StoreLayout::memory_brick_bits).
-  // Throws std::invalid_argument for dimensions below 2 or non-finite values.
+  // Throws InvalidInput for dimensions below 2 or non-finite values.
   static constexpr int kMemoryBrickBits = 0;
   static Hierarchy build(const Volume& volume, const RecordFields& fields = {}, int brick_bits = kMemoryBrickBits,
                          const ProgressCallback& progress = {});
-  // Empty bricks to be filled (a store read whole: io/store/store_reader.h).
+  // Empty bricks to be filled (a store read whole by a StoreReader).
   static Hierarchy allocate(const std::array<int64_t, 3>& dims, int brick_bits, const RecordFields& fields);
 
   Hierarchy(Hierarchy&&) = default;
@@ -146,7 +146,7 @@ class Hierarchy {
   const uint64_t* weights_data() const { return weights_.get(); }
   const BrickIndexer& indexer() const { return *indexer_; }
 
-  // As a traversal source (engine/extract/traversal.h).
+  // As a traversal source (TraversalSource).
   class Reader;
   Reader reader() const;
 
@@ -166,7 +166,7 @@ class Hierarchy {
 };
 
 // f(p) over a brick's values: p is the array itself where they are floats (a hierarchy in
-// memory), or what a paged brick holds them in (io/store/brick_cache.h, BrickValues::visit).
+// memory), or what a paged brick holds them in (BrickValues::visit).
 template <class Values, class F>
 decltype(auto) with_values(const Values& values, F&& f) {
   if constexpr (std::is_pointer_v<Values>)
@@ -176,7 +176,7 @@ decltype(auto) with_values(const Values& values, F&& f) {
 }
 
 // Values and records by coordinates over any set of bricks, as a traversal reader
-// (engine/extract/traversal.h). `Bricks` gives a brick's arrays (view) and reads records: a
+// (RecordReader). `Bricks` gives a brick's arrays (view) and reads records: a
 // record's range and bound (range_bound: its word's, as floats, error_surplus 0), its words
 // (bounds_word, topology). Lookups as MultiresVolume's: a node's value is read from band j (its
 // coordinates lie on G_j), clamped into the data box beyond band j's grid; a record from the band
@@ -225,7 +225,7 @@ class CompactLookup {
   float value_at_record(const Handle& h) { return bricks_.values(h.index)[h.m]; }
 
   // The values of band-0 nodes lo .. lo + n (inclusive; inside band 0's grid) into f, x fastest,
-  // rows `stride` apart: a block of finest cells (engine/extract/finest_extract.h), from every brick it spans.
+  // rows `stride` apart: a block of finest cells (extract_finest), from every brick it spans.
   bool block_values(const Coord& lo, const std::array<int64_t, 3>& n, float* f, int64_t stride) {
     const int bits = layout_.brick_bits();
     const int64_t t = layout_.brick_width();

@@ -25,7 +25,7 @@ struct PreprocessStats {
 class MultiresVolume {
  public:
   // Embeds and preprocesses (in parallel). Throws std::invalid_argument for dims < 2 or
-  // non-finite values. `progress`, if given, hears the fraction done (see engine/core/progress_reporter.h).
+  // non-finite values. `progress`, if given, hears the fraction done (see ProgressReporter).
   static MultiresVolume build(const Volume& volume, const ProgressCallback& progress = {});
   // An empty volume of these dimensions, to be filled with set_value and set_record (a store
   // being loaded). Throws std::invalid_argument as build does.
@@ -69,7 +69,7 @@ class MultiresVolume {
     }
   }
 
-  // Records of scale j (engine/hierarchy/record.h) have their own bricked array over the multiples of 2^j:
+  // Records of scale j (Record) have their own bricked array over the multiples of 2^j:
   // the coarse levels take little memory and stay in cache, and the records of one subtree lie
   // together. Each array stops at record_extent.
   bool has_record(const Coord& v) const {

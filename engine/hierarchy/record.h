@@ -26,8 +26,8 @@ struct DiamondTopology {
   float exact_lo = kNone, exact_hi = -kNone;  // hull X_bar of isovalues where the exact rule fires
   float paper_lo = kNone, paper_hi = -kNone;  // hull I_bar of the paper's critical intervals
   // Saturated simplification weights (max over the subtree), indexed by SimplificationWeight
-  // (engine/extract/options.h): |X|, |X| times the steepest gradient around v, and the local isosurface
-  // size (engine/hierarchy/record_builder.h, local_weights).
+  // (an extraction option): |X|, |X| times the steepest gradient around v, and the local isosurface
+  // size (local_weights).
   std::array<float, 3> weight{0, 0, 0};
 };
 

@@ -1,7 +1,7 @@
 #pragma once
 // One refinement vertex's saturated record (docs/METHOD.md, "Per-vertex records"), computed from the
 // values at its polyhedron and the already final records of its children. Written once, used by
-// the in-memory build (MultiresVolume) and by the banded out-of-core build (engine/hierarchy/band_tile.h),
+// the in-memory build (MultiresVolume) and by the banded out-of-core build (BandTile),
 // which therefore produce the same bits.
 //
 // Grid is where values and records live; it provides
@@ -71,7 +71,7 @@ struct Saturation {
   std::array<float, 3> weight{0, 0, 0};
 
   // Folds in one child; its range widens the vertex's range `bounds`. Without `topology`, only
-  // the range and errors (a store's band 0 read in mode none: io/store/paged_volume.h).
+  // the range and errors (a store's band 0 read in mode none: PagedVolume).
   void add(const Record& c, DiamondBounds& bounds, bool topology = true) {
     bound = std::max(bound, c.bounds.error_bound);
     surplus = std::max(surplus, c.bounds.error_surplus);
@@ -593,7 +593,7 @@ class RecordBuilder {
       : grid_(grid), lattice_(grid.lattice()), classes_(grid.lattice(), scale) {}
 
   // Without `topology`, the range and errors alone; without `weights`, no simplification weights
-  // (engine/hierarchy/band_tile.h, build).
+  // (BandTile::build).
   void build(const Coord& v, CriticalCounts& counts, bool topology = true, bool weights = true) const {
     const int j = scale_of(v, lattice_);
     const Diamond d = classes_.diamond(v, j);
@@ -615,7 +615,7 @@ class RecordBuilder {
     ChildFold fold(range);
     classes_.for_each_child(d, j, [&](const Coord& u) {
       // Without a record, u's whole diamond lies beyond a face of the data box: no data node
-      // below it, and what the traversal emits there is clipped away (engine/mesh/box_clip.h).
+      // below it, and what the traversal emits there is clipped away (clip_to_box).
       Record c;
       if (grid_.child(u, c)) fold.add(c, topology);
     });

@@ -1,6 +1,6 @@
 #pragma once
 // The optional fields of the records, as the build computes them, a store keeps them and an
-// extraction reads them (engine/extract/options.h, fields_for).
+// extraction reads them (fields_for, from the extraction options).
 
 namespace isotope {
 

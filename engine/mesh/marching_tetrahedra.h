@@ -21,7 +21,7 @@ Coord edge_key_sum(uint64_t key, int64_t side);
 // What marching tetrahedra makes of one tetrahedron, before any vertex is welded: the cut edges
 // (pairs of corner indices) and the triangles over them, in the order and winding MeshBuilder emits
 // them. Shared by MeshBuilder and by what counts the triangles a mesh will have after clipping to
-// the data box (engine/mesh/box_clip.h), which must see the same triangles.
+// the data box (clipped_triangles), which must see the same triangles.
 class TetCutter {
  public:
   // side: nodes per axis of the grid whose coordinates are passed in.
@@ -83,7 +83,7 @@ class MeshBuilder {
   void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive);
 
   // The pieces of add_tet, for a kernel that cuts its tetrahedra itself and remembers the vertices
-  // it made (engine/extract/block_march.cpp): the vertex of edge (p, q) welded by its key, a new
+  // it made (march_block): the vertex of edge (p, q) welded by its key, a new
   // vertex for an edge the kernel knows no other tetrahedron outside its own box has (so it skips
   // the welding table), and a triangle.
   uint32_t welded_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
@@ -96,12 +96,12 @@ class MeshBuilder {
   }
 
   // The triangles add_tet emits, unwelded (what a count of the mesh's triangles after clipping
-  // builds again: engine/mesh/box_clip.h).
+  // builds again: clipped_triangles).
   const TetCutter& cutter() const { return cutter_; }
 
   Mesh take() { return std::move(mesh_); }
   // The edge key of every vertex, in vertex order (kept only when asked for, by keep_keys()):
-  // what welds the meshes of separately built parts into one (engine/mesh/piece_weld.cpp).
+  // what welds the meshes of separately built parts into one (weld).
   void keep_keys() { keep_keys_ = true; }
   std::vector<uint64_t> take_keys() { return std::move(keys_); }
   // A vertex on a plane z = const, with its edge key.
@@ -111,7 +111,7 @@ class MeshBuilder {
   };
   // Only the keys of the vertices whose edge (p, q) has p_z + q_z = BOTTOM or = TOP (-1: neither),
   // each list in vertex order: what a slab shares with the slabs below and above it
-  // (engine/extract/slab_march.cpp), without a key for every vertex.
+  // (march_in_slabs), without a key for every vertex.
   void keep_plane_keys(int64_t bottom, int64_t top) { plane_z2_ = {bottom, top}; }
   std::vector<PlaneVertex> take_bottom_keys() { return std::move(plane_keys_[0]); }
   std::vector<PlaneVertex> take_top_keys() { return std::move(plane_keys_[1]); }

@@ -1,5 +1,5 @@
 #pragma once
-// Joining the meshes of the traversal's pieces (engine/extract/adaptive_extract.h) into one.
+// Joining the meshes of the traversal's pieces (extract_adaptive) into one.
 #include <cstdint>
 #include <vector>
 
@@ -22,7 +22,7 @@ struct PartMesh {
 // bit for bit, whatever the number of threads that built the pieces. Only vertices on a face of
 // their piece's tetrahedron can appear in another piece, so only those go through a welding
 // table. `side`: nodes per lattice axis. `room_to_clip`: the mesh will be clipped to the data box
-// (engine/mesh/box_clip.h), so its arrays are reserved with room for what that adds, a few
+// (clip_to_box), so its arrays are reserved with room for what that adds, a few
 // triangles and vertices along the far faces, instead of growing by a copy of the whole mesh.
 Mesh weld(std::vector<PartMesh>& parts, int64_t side, bool room_to_clip = false);
 

@@ -12,6 +12,7 @@
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_parts.h"
 #include "isotope/detail/huge_page_allocator.h"
+#include "isotope/error.h"
 #include "isotope/mesh.h"
 
 namespace isotope {
@@ -64,8 +65,8 @@ std::array<float, 3> unit(const std::array<double, 3>& s, const std::array<float
 void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> normals, const std::array<float, 3>& none) {
   const size_t n = mesh.positions.size();
   if (normals.size() != n)
-    throw std::invalid_argument("vertex normals: an array of " + std::to_string(normals.size()) + " for " +
-                                std::to_string(n) + " vertices");
+    throw InvalidInput("vertex normals: an array of " + std::to_string(normals.size()) + " for " + std::to_string(n) +
+                       " vertices");
   sum_by_parts(mesh, [&](const VertexPart& part, const auto& sum) {
     for (uint32_t i = part.begin; i < part.end; ++i) normals[i] = unit(sum[i - part.begin], none);
   });

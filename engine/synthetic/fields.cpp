@@ -1,4 +1,4 @@
-// Synthetic volumes on [-1,1]^3 with known isosurfaces (engine/synthetic/fields.h).
+// Synthetic volumes on [-1,1]^3 with known isosurfaces (generate_algebraic, generate_sphere and the rest).
 // Node (i,j,k) of a size^3 grid sits at p = -1 + 2*(i,j,k)/(size-1), so spacing and origin
 // make the mesh coordinates those of the paper's Table-1 domain.
 #include "engine/synthetic/fields.h"
@@ -12,6 +12,7 @@
 
 #include "engine/core/parallel.h"
 #include "isotope/detail/huge_page_allocator.h"
+#include "isotope/error.h"
 
 namespace isotope {
 namespace {
@@ -26,7 +27,7 @@ double grid_coordinate(double h, int64_t i) { return -1.0 + h * static_cast<doub
 // A size^3 volume on [-1, 1]^3, its values not yet set.
 Volume grid(int64_t size) {
   if (size < 2) {
-    throw std::invalid_argument("synthetic field: size must be at least 2, got " + std::to_string(size));
+    throw InvalidInput("synthetic field: size must be at least 2, got " + std::to_string(size));
   }
   Volume v;
   v.dims = {size, size, size};
@@ -107,7 +108,7 @@ Volume generate_nested_spheres(int64_t size) {
 }
 
 Volume generate_noise(int64_t size, uint64_t seed, int bumps) {
-  if (bumps < 1) throw std::invalid_argument("noise field: bumps must be at least 1");
+  if (bumps < 1) throw InvalidInput("noise field: bumps must be at least 1");
   struct Bump {
     Point centre;
     double inv_two_width_sq, amplitude;

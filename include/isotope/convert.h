@@ -11,7 +11,7 @@
 #include <string>
 
 #include <isotope/distribution.h>
-#include <isotope/progress.h>
+#include <isotope/run_context.h>
 #include <isotope/source.h>
 #include <isotope/store_defaults.h>
 #include <isotope/volume.h>
@@ -26,13 +26,6 @@ struct ConvertOptions {
   // range; the hierarchy is built on the codes, and half a code step, the rounding error, is
   // added to every error indicator (docs/FORMAT.md, "Quantization").
   int quantize_bits = 0;
-  ProgressCallback progress;
-  const std::atomic<bool>* cancel = nullptr;  // set (e.g. by SIGINT) to stop; IoError("interrupted")
-  // Spread over a group of processes, each calling convert with the same arguments
-  // (include/isotope/distribution.h): each builds a contiguous share of band 0's tiles, and rank 0
-  // the coarser bands from what they hand on; the store is the same file, byte for byte. OUTPUT's
-  // directory must be one every process sees. nullptr: this process alone.
-  const Distribution* distribution = nullptr;
 };
 
 struct ConvertStats {
@@ -50,9 +43,14 @@ struct ConvertStats {
 // nothing is left behind, and an OUTPUT that is the input, a device, a FIFO or a directory is
 // refused before any work. The file does not depend on the thread count or the memory budget.
 // Scratch data goes to unlinked files beside OUTPUT. Throws IoError, and OptionError for options
-// out of range (or --quantize on integer data).
-ConvertStats convert(const VolumeSpec& input, const std::string& output, const ConvertOptions& options = {});
+// out of range (or --quantize on integer data). RUN: a cancel flag set stops it with
+// IoError("interrupted") and no file left; its progress hears the build; under a distribution, each
+// process builds a contiguous share of band 0's tiles and rank 0 the coarser bands from what they
+// hand on, the same file byte for byte (OUTPUT's directory must be one every process sees).
+ConvertStats convert(const VolumeSpec& input, const std::string& output, const ConvertOptions& options = {},
+                     const RunContext& run = {});
 // The same from an array in memory.
-ConvertStats convert(const Volume& volume, const std::string& output, const ConvertOptions& options = {});
+ConvertStats convert(const Volume& volume, const std::string& output, const ConvertOptions& options = {},
+                     const RunContext& run = {});
 
 }  // namespace isotope

@@ -11,9 +11,10 @@
 // another forever.
 #include <cstdint>
 #include <functional>
-#include <stdexcept>
 #include <string>
 #include <vector>
+
+#include <isotope/error.h>
 
 namespace isotope {
 
@@ -30,16 +31,6 @@ class Distribution {
   // it must still take part to the end, then throw (the engine calls it under settle_together, so
   // that every rank learns of it).
   virtual std::vector<std::vector<uint8_t>> gather(const std::vector<uint8_t>& mine) const = 0;
-};
-
-// What every process of a distributed call throws when one of them failed: the message is that
-// process's own ("rank 1 of 3: scan.isotope: brick 812 (...): checksum mismatch"). `usage` is true
-// when the failure was an option out of range (the command's exit code 2).
-struct DistributedError : std::runtime_error {
-  DistributedError(int failed_rank, bool usage, const std::string& message)
-      : std::runtime_error(message), rank(failed_rank), usage_error(usage) {}
-  int rank;
-  bool usage_error;
 };
 
 // Collective: runs `work` on this process, then learns from every process whether its work

@@ -15,7 +15,9 @@
 #include <vector>
 
 #include <isotope/distribution.h>
+#include <isotope/error.h>
 #include <isotope/mesh.h>
+#include <isotope/run_context.h>
 #include <isotope/volume.h>
 
 namespace isotope {
@@ -79,17 +81,6 @@ struct ExtractOptions {
   // takes at most half the budget (features of smallest weight dropped first), then the finest eps
   // within the whole budget. delta must be 0.
   bool auto_delta = false;
-  // Set (by another thread) to stop: the extraction then throws ExtractionCancelled at its next
-  // piece or slab. For a server whose client asked for something newer; nullptr: never.
-  const std::atomic<bool>* cancel = nullptr;
-  // Spread over a group of processes, each running this extraction with the same options
-  // (include/isotope/distribution.h): rank 0 gets the mesh, the same bytes as without; every other
-  // rank an empty one. nullptr: this process alone.
-  const Distribution* distribution = nullptr;
-  // With a distribution: every rank keeps the mesh of its own share (welded within the share; a
-  // vertex on the boundary between two shares is in both), and nothing is sent to rank 0: for a
-  // mesh too large for one process to hold or write (isotope extract --parts).
-  bool keep_shares = false;
 
   // Throws OptionError naming the first option out of its range: iso not finite, eps or delta
   // negative or NaN (infinity is the coarsest), eps_ties outside -1 .. kMaxTieClasses or with an
@@ -97,14 +88,6 @@ struct ExtractOptions {
   // radius not > 0, a budget outside [0, kMaxTriangleBudget] or with eps > 0, auto_delta without a budget in
   // simplify mode. Every extraction calls it; a face calls it to refuse before any work.
   void validate() const;
-};
-
-// An option out of its range, or text that is not one: `option` is its name as the faces spell it
-// ("eps", "max-triangles"; the command line adds "--"), `message` what it must be, e.g. "must be
-// >= 0, got '-1'". what() is "OPTION MESSAGE".
-struct OptionError : std::invalid_argument {
-  OptionError(std::string option_name, std::string what_it_must_be);
-  std::string option, message;
 };
 
 // The options as text, by name: iso (required), eps, error, topology, weight, delta, focus ("X,Y,Z"),
@@ -120,12 +103,8 @@ ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, st
 // Throws OptionError.
 void set_extract_option(ExtractOptions& options, std::string_view name, std::string_view text);
 
-// The most worker threads a face accepts.
-inline constexpr int kMaxThreads = 4096;
-
-// A thread count as a user types it: an integer in 0 (all cores) .. kMaxThreads. Throws
-// OptionError("threads", ...), in the words every face (the command's --threads, the Python
-// module's threads=) uses.
+// A thread count as a user types it (RunContext::threads): an integer in 0 (all cores) ..
+// kMaxThreads. Throws OptionError("threads", ...) as RunContext::validate() does.
 int parse_thread_count(std::string_view text);
 
 // A real number as a user types it: "0.25", "-3e-2", "+1" or a fraction "1/64"; nullopt otherwise.
@@ -182,24 +161,14 @@ struct ExtractStats {
   std::vector<RankLoad> ranks;
 };
 
-// What an extraction throws when its ExtractOptions::cancel was set.
-struct ExtractionCancelled : std::exception {
-  const char* what() const noexcept override { return "extraction cancelled"; }
-};
-
-// What an extraction with a triangle budget throws when even the coarsest mesh its topology mode
-// allows (eps = infinity) has more triangles; the message says how many. No eps meets such a
-// budget: the server answers 400, the command exits 1.
-struct TriangleBudgetTooSmall : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
 // One extraction from an array in memory, with only the hierarchy the options need: at eps = 0
 // (no triangle budget) none at all, since the mesh is marching tetrahedra over every cut cell;
 // otherwise the hierarchy with the record fields the mode reads. The same mesh, byte for byte, as
 // from a store of the same volume (isotope::Source). Throws OptionError for options out of range,
-// std::invalid_argument for dimensions below 2 or values that are not finite, and
-// TriangleBudgetTooSmall when max_triangles is below the coarsest mesh the topology mode allows.
-Mesh extract(const Volume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr);
+// InvalidInput for dimensions below 2 or values that are not finite, and
+// TriangleBudgetTooSmall when max_triangles is below the coarsest mesh the topology mode allows,
+// and ExtractionCancelled when RUN's cancel was set. RUN's progress hears the hierarchy's build.
+Mesh extract(const Volume& volume, const ExtractOptions& options, const RunContext& run = {},
+             ExtractStats* stats = nullptr);
 
 }  // namespace isotope

@@ -8,7 +8,9 @@
 //   isotope/source.h   open_volume(): any input (raw, NRRD, HDF5, a store, an array), extracted
 //                      from as often as needed
 //   isotope/convert.h  convert(): a volume into a store, for extraction out of core
-//   isotope/error.h    IoError, what a file's trouble throws
+//   isotope/run_context.h  RunContext: how a call runs (threads, cancel, progress, processes),
+//                      apart from what it computes
+//   isotope/error.h    isotope::Error and its kinds (OptionError, InvalidInput, IoError, ...)
 //   isotope/progress.h ProgressCallback, what a long step reports to
 //   isotope/distribution.h  Distribution: one extraction or convert spread over processes
 //
@@ -35,6 +37,7 @@
 #include <isotope/extract.h>
 #include <isotope/mesh.h>
 #include <isotope/progress.h>
+#include <isotope/run_context.h>
 #include <isotope/source.h>
 #include <isotope/version.h>
 #include <isotope/volume.h>

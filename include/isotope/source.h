@@ -33,6 +33,7 @@
 #include <isotope/extract.h>
 #include <isotope/mesh.h>
 #include <isotope/progress.h>
+#include <isotope/run_context.h>
 #include <isotope/volume.h>
 
 namespace isotope {
@@ -54,8 +55,6 @@ struct VolumeSpec {
 struct OpenOptions {
   // A store, or the store of a volume's hierarchy: memory for decoded bricks (at least 16 bricks); 1 .. 2^30
   int64_t cache_mb = 512;
-  // A volume's hierarchy being built (on the first extraction that needs it).
-  ProgressCallback preprocess_progress;
   // Process-wide: keep freed brick memory for reuse (keep_freed_memory) instead of returning it to
   // the kernel and faulting fresh pages in for the next brick. What the isotope command does; a
   // host program with its own allocator policy leaves it off.
@@ -118,12 +117,14 @@ class Source {
   // budget asked for again is the choice this Source made the first time, without the search
   // (ExtractStats::budget_remembered). A volume's budget that its full-resolution mesh fits is
   // that mesh, found by counting, with no hierarchy built.
-  Mesh extract(const ExtractOptions& options, ExtractStats* stats = nullptr) const;
+  // RUN: its threads, its cancel flag, the group of processes it is spread over, and its progress,
+  // which hears the build of a volume's hierarchy when this extraction is the one that builds it.
+  Mesh extract(const ExtractOptions& options, const RunContext& run = {}, ExtractStats* stats = nullptr) const;
   // Builds now what extractions with these options will need (a volume's hierarchy, with every
   // record field they read), so that a series of them builds it once. A store needs nothing, nor
   // a budget the full-resolution mesh fits (its volume is read). Throws as extract() for options
-  // out of range.
-  void prepare(const std::vector<ExtractOptions>& planned) const;
+  // out of range. RUN as for extract(), but for its distribution: every process builds its own.
+  void prepare(const std::vector<ExtractOptions>& planned, const RunContext& run = {}) const;
   SourceInfo info() const;
 
  private:
@@ -142,7 +143,7 @@ class Source {
 // cache_mb out of range. A value that is not finite is refused by the extraction that reads it.
 Source open_volume(const VolumeSpec& spec, const OpenOptions& options = {});
 // An array already in memory (a simulation's field, a numpy array's copy). Throws
-// std::invalid_argument for dimensions below 2, values that do not fill them, or values that are
+// InvalidInput for dimensions below 2, values that do not fill them, or values that are
 // not finite.
 Source open_volume(Volume volume, const OpenOptions& options = {});
 

@@ -112,7 +112,7 @@ void check_outputs(const std::vector<NamedPath>& inputs, const std::vector<Named
   for (const NamedPath& p : inputs) {
     if (p.path.empty()) continue;
     Seen s = identify(p, p.path);
-    // FILE.h5:/dataset names a file before its last ":/" (io/volume/volume_reader.h).
+    // FILE.h5:/dataset names a file before its last ":/" (as read_volume splits it).
     const size_t split = p.path.rfind(":/");
     if (!s.exists && split != std::string::npos) s = identify(p, p.path.substr(0, split));
     in.push_back(s);

@@ -42,7 +42,7 @@ class DirectAppends;
 class AtomicFile {
  public:
   // How appends reach the disk: through the page cache, or, for a large output written once from
-  // start to end (a store), past it from a writer thread (io/file/direct_appends.h). Where the
+  // start to end (a store), past it from a writer thread (DirectAppends). Where the
   // file system takes no direct writes, they go through the page cache; the bytes are the same.
   // Transient: through the page cache and never made durable (no fsync of the file or of its
   // directory), for a file this process reads back and removes, whose pages the kernel may then
@@ -64,7 +64,7 @@ class AtomicFile {
   uint64_t append_region(uint64_t bytes);
   // Writes BYTES at OFFSET inside a region append_region() made. Safe on several threads at once.
   // In a region of at least kDirectRegionBytes, a piece's whole pages are copied into a buffer of
-  // the file's writer thread (io/file/region_writes.h), which writes them past the page cache
+  // the file's writer thread (RegionWrites), which writes them past the page cache
   // (O_DIRECT) while the caller goes on, and the partial pages at its two ends go through the page
   // cache. A piece with fewer than kMinDirectBytes of whole pages, and every piece of a file whose
   // regions have no such thread (none of kDirectRegionBytes yet, a transient file, a file system
@@ -83,14 +83,14 @@ class AtomicFile {
   // (docs/METHOD.md, "Reading and writing files").
   static constexpr size_t kRegionPieceBytes = size_t{4} << 20;
   // Flushes, then makes the next write() append at `offset`: for bytes that other processes wrote
-  // into temp_path() meanwhile (a distributed convert, io/store/store_writer.cpp). Direct appends
+  // into temp_path() meanwhile (a distributed convert, convert_to_store). Direct appends
   // end here: all writes after it go through the page cache.
   void continue_at(uint64_t offset);
   uint64_t size() const { return size_; }  // bytes written so far
   // Flushes, fsyncs (not a transient file) and closes the temporary file: what can fail for lack
   // of disk fails here.
   // Several outputs of one command are all finished before the first is committed, so that a
-  // failure leaves every target as it was (tools/command_extract.cpp).
+  // failure leaves every target as it was (as `isotope extract` does with its mesh and report).
   void finish();  // throws IoError; a second call does nothing
   void commit();  // finish() if not yet, then rename; throws IoError
   const std::string& temp_path() const { return temp_path_; }
@@ -119,7 +119,7 @@ class AtomicFile {
   std::unique_ptr<RegionWrites> region_writes_;  // the writer of region_fd_'s direct writes, or null
   bool transient_ = false;                       // Appends::transient
   bool finished_ = false, committed_ = false;
-  int registered_ = -1;  // io/file/temporary_registry.h
+  int registered_ = -1;  // register_temporary's slot
   uint64_t size_ = 0;
 };
 

@@ -2,7 +2,7 @@
 // Overflow-safe arithmetic for sizes, offsets and counts read from files. A check written
 // as `offset + size <= end` wraps when a crafted file puts both near 2^64, and then passes; every
 // reader that takes a number from a file and compares it, multiplies it or allocates by it goes
-// through these two instead (io/store/store_reader.cpp, io/store/store_format.cpp, io/volume/raw_reader.cpp, and
+// through these two instead (the store's reader and format, the raw reader, and
 // through checked_node_count the NRRD, HDF5 and volume readers).
 #include <cstdint>
 #include <optional>

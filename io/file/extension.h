@@ -1,7 +1,7 @@
 #pragma once
 // A path's extension, lowercased ("SCAN.TIF" -> ".tif"): what chooses an input's reader
-// (io/volume/volume_reader.cpp, io/volume/tiff_reader.cpp) and an output mesh's format
-// (io/mesh/mesh_writer.cpp).
+// (read_volume, is_tiff_stack) and an output mesh's format
+// (mesh_format_of).
 #include <algorithm>
 #include <cctype>
 #include <filesystem>

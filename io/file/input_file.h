@@ -1,8 +1,8 @@
 #pragma once
-// The input policy (the counterpart of the output policy in io/file/atomic_file.h): every file isotope
+// The input policy (the counterpart of AtomicFile's output policy): every file isotope
 // reads is a regular file. A FIFO without a writer would block the open or the first read forever,
 // a device such as /dev/zero never ends, so both are refused by name before anything opens them
-// (`isotope extract some.fifo` used to hang; tests/io/volume_read_test.cpp, NonRegularInputsAreRefused).
+// (`isotope extract some.fifo` used to hang; the test VolumeRead.NonRegularInputsAreRefused).
 #include <fcntl.h>
 #include <unistd.h>
 

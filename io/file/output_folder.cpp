@@ -127,7 +127,7 @@ void OutputFolder::check(const NamedPath& output, const std::vector<NamedPath>& 
     if (input.path.empty()) continue;
     std::error_code ec;
     fs::path file = input.path;
-    // FILE.h5:/dataset names a file before its last ":/" (io/volume/volume_reader.h).
+    // FILE.h5:/dataset names a file before its last ":/" (as read_volume splits it).
     const size_t split = input.path.rfind(":/");
     if (!fs::exists(file, ec) && split != std::string::npos) file = input.path.substr(0, split);
     if (!fs::exists(file, ec)) continue;  // its reader says so

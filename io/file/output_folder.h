@@ -1,6 +1,6 @@
 #pragma once
 // A folder of files written as one output (isotope extract --parts: one mesh per rank and the
-// index naming them), under the output policy of io/file/atomic_file.h carried to folders:
+// index naming them), under the output policy of AtomicFile carried to folders:
 // - the files are written into a new folder beside the target, which takes the target's place
 //   only when complete (commit); destroyed before that, it is removed with what it holds;
 // - the target may be missing, an empty folder, or a folder this class wrote before, recognised by

@@ -1,7 +1,7 @@
 #pragma once
 // Reading and writing a whole buffer at an offset (pread, pwrite): what the files several threads
-// or processes use at their own places share (io/file/atomic_file.h's regions, shared_file.h,
-// scratch_file.h) with the readers of volumes and stores. Each caller words its own message.
+// or processes use at their own places share (AtomicFile's regions, SharedFile,
+// ScratchFile) with the readers of volumes and stores. Each caller words its own message.
 #include <unistd.h>
 
 #include <algorithm>

@@ -1,7 +1,7 @@
 #pragma once
 // A file that several processes write at once, each its own byte ranges (pwrite, pread): the
 // output's temporary file and the band hand-over of a distributed convert
-// (io/store/store_writer.cpp), on a file system every rank sees. Unlike a scratch file it has a
+// (convert_to_store), on a file system every rank sees. Unlike a scratch file it has a
 // name, so that other processes can open it; whoever creates it removes it.
 #include <cstddef>
 #include <cstdint>
@@ -28,7 +28,7 @@ class SharedFile {
   std::string path_;
   int fd_ = -1;
   bool remove_ = false;
-  int registered_ = -1;  // io/file/temporary_registry.h
+  int registered_ = -1;  // register_temporary's slot
 };
 
 }  // namespace isotope

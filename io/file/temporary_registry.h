@@ -3,7 +3,7 @@
 // volume's hierarchy store and its folder), so that a process told to end at once can remove them
 // first: under mpirun, a rank that fails or is killed makes mpirun end every other rank with
 // SIGTERM, then SIGKILL, and a rank blocked in a collective cannot unwind to its destructors; the
-// isotope command's Ctrl-C ends it at once outside a convert (tools/main.cpp). Removal is
+// isotope command's Ctrl-C ends it at once outside a convert (the command's signal handler). Removal is
 // async-signal-safe.
 #include <string>
 

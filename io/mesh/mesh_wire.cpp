@@ -5,6 +5,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "isotope/error.h"
+
 namespace isotope {
 namespace {
 
@@ -19,7 +21,7 @@ std::string_view bytes_of(const T* data, size_t count) {
 
 uint32_t checked_u32(size_t n, const char* what) {
   if (n > std::numeric_limits<uint32_t>::max())
-    throw std::length_error(std::string("too many ") + what + " for the mesh wire format");
+    throw InvalidInput(std::string("too many ") + what + " for the mesh wire format");
   return static_cast<uint32_t>(n);
 }
 
@@ -29,7 +31,7 @@ size_t padded(size_t n) { return (n + 3) & ~size_t{3}; }
 
 MeshWirePieces mesh_wire_pieces(const Mesh& mesh, const std::vector<std::array<float, 3>>& normals,
                                 std::string_view report_json) {
-  if (normals.size() != mesh.positions.size()) throw std::invalid_argument("one normal per vertex");
+  if (normals.size() != mesh.positions.size()) throw InvalidInput("one normal per vertex");
   const uint32_t vertices = checked_u32(mesh.positions.size(), "vertices");
   const uint32_t triangles = checked_u32(mesh.triangles.size(), "triangles");
   const uint32_t json_bytes = checked_u32(report_json.size(), "report bytes");
@@ -63,12 +65,12 @@ MeshWire decode_mesh_wire(std::string_view bytes) {
     return v;
   };
   if (bytes.size() < 20 || std::memcmp(bytes.data(), kMeshWireMagic.data(), 4) != 0)
-    throw std::runtime_error("not an isotope mesh (magic ISOM)");
-  if (u32_at(4) != kMeshWireVersion) throw std::runtime_error("unsupported mesh wire version");
+    throw IoError("not an isotope mesh (magic ISOM)");
+  if (u32_at(4) != kMeshWireVersion) throw IoError("unsupported mesh wire version");
   const size_t json = u32_at(8), vertices = u32_at(12), triangles = u32_at(16);
   const size_t json_end = 20 + padded(json);
   if (bytes.size() != json_end + 24 * vertices + 12 * triangles)
-    throw std::runtime_error("mesh wire size does not match its counts");
+    throw IoError("mesh wire size does not match its counts");
   MeshWire w;
   w.report_json.assign(bytes.substr(20, json));
   w.mesh.positions.resize(vertices);
@@ -79,7 +81,7 @@ MeshWire decode_mesh_wire(std::string_view bytes) {
   std::memcpy(w.mesh.triangles.data(), bytes.data() + json_end + 24 * vertices, 12 * triangles);
   for (const auto& t : w.mesh.triangles)
     for (const uint32_t i : t)
-      if (i >= vertices) throw std::runtime_error("mesh wire index out of range");
+      if (i >= vertices) throw IoError("mesh wire index out of range");
   return w;
 }
 

@@ -5,7 +5,7 @@
 //   .stl  binary STL: per triangle its unit normal and three corners (3-D printing, CAD)
 //   .glb  glTF 2.0 binary: positions, unit vertex normals, uint32 indices (browsers, Blender)
 //   .vtp  VTK XML PolyData, raw appended binary: points, normals, polys (ParaView)
-// Every format is written through AtomicFile (io/file/atomic_file.h): complete or not at all.
+// Every format is written through AtomicFile (its output policy): complete or not at all.
 #include <optional>
 #include <string>
 #include <string_view>

@@ -1,10 +1,10 @@
 #pragma once
-// Decoded bricks of a store (io/store/store_reader.h) shared by all threads under a byte budget.
+// Decoded bricks of a store (StoreReader) shared by all threads under a byte budget.
 //
 // A brick enters with its core section decoded (values; the range and bound of its records), and
 // gains its other fields the first time an extraction reads them (require): a `none` extraction
 // never decodes a critical interval. Band 0 stores no records: its bricks enter with their record
-// arrays marked unset, and io/store/paged_volume.h fills each record from the values the first time it is
+// arrays marked unset, and PagedVolume fills each record from the values the first time it is
 // read. So the cost of a brick follows what the traversal reads of it.
 //
 // A hit copies the brick's pointer under one of 64 striped locks (held for a pointer copy); a miss
@@ -13,7 +13,7 @@
 // brick's reference bit, and the hand evicts bricks whose bit it finds clear until the decoded bytes
 // are within the working budget: a quarter of the budget while each brick is read once, all of it
 // once bricks are read again. A brick evicted while a reader still holds it lives on until that reader
-// lets go (io/store/paged_volume.h keeps a few per thread), so the memory in use stays within the budget
+// lets go (PagedVolume's pagers keep a few per thread), so the memory in use stays within the budget
 // plus those few bricks per thread; and a miss on such a brick takes it back instead of decoding it
 // again.
 #include <array>
@@ -72,7 +72,7 @@ class BrickValues {
   int bytes_;
 };
 
-// One decoded brick. Arrays as engine/hierarchy/hierarchy.h's BrickView, but its values are a
+// One decoded brick. Arrays as the hierarchy's BrickView, but its values are a
 // BrickValues, and its range-and-bound words are narrow (narrow_bounds) where its values are
 // held in one byte; the arrays of fields not yet required are null.
 class CachedBrick {

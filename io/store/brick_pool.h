@@ -1,5 +1,5 @@
 #pragma once
-// Memory for decoded bricks (io/store/brick_cache.h): blocks of one fixed size carved from 16 MB chunks
+// Memory for decoded bricks (BrickCache): blocks of one fixed size carved from 16 MB chunks
 // and recycled through a free list, so that a brick evicted leaves its memory, already faulted in,
 // to the next one decoded. Chunks are kept until the pool goes; untouched parts of a chunk cost no
 // memory.

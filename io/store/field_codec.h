@@ -21,8 +21,8 @@ FieldCoding encode_field(std::span<const float> values, std::vector<uint8_t>& ou
 // encoded count, else IoError); returns the pointer just past it. Never reads outside [p, end),
 // never crashes on hostile bytes: throws IoError("...what is malformed...") instead.
 const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<float> values);
-// The same for a field whose values are integers of 0..255 (a one-byte store's values: io/store/
-// held_words.h), each into its byte, without floats in between. Returns null where some value is
+// The same for a field whose values are integers of 0..255 (a one-byte store's values:
+// held_value_bytes), each into its byte, without floats in between. Returns null where some value is
 // not such an integer; what was written to `bytes` then means nothing.
 const uint8_t* decode_field(const uint8_t* p, const uint8_t* end, std::span<uint8_t> bytes);
 

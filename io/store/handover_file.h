@@ -1,5 +1,5 @@
 #pragma once
-// A band's hand-over (engine/hierarchy/banded_build.h) in a file, for volumes whose hand-over does
+// A band's hand-over (BandHandover) in a file, for volumes whose hand-over does
 // not fit the convert's budget: in scratch files beside the output, or in one named file that
 // every process of a distributed convert writes its tiles' parts into.
 #include <algorithm>

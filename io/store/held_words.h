@@ -2,7 +2,7 @@
 // The widths a store's words are held in, as its header promises them (docs/METHOD.md, "Out of
 // core"): a store of integers of 0..255 (a uint8 scan, 8-bit codes) holds a value in a byte and a
 // record's range and bound in 32 bits, one of integers up to 65535 a value in two bytes. What the
-// cache (io/store/brick_cache.h) holds them in, and what verify (io/store/store_reader.h) checks
+// cache (BrickCache) holds them in, and what verify (verify_store) checks
 // every brick against, so that a brick the extraction refuses as corrupt is refused by verify too.
 // (The cache decodes a one-byte store's records straight into narrow words, decode_section's
 // `narrow`, which takes and refuses what narrow_bounds does: a test holds the two together.)
@@ -33,7 +33,7 @@ inline constexpr const char* kRecordNotHeld =
     "up to 32767 nor +inf";
 
 // A record's range and bound as the cache holds them where values are held in one byte: in 32
-// bits instead of the 64 of engine/hierarchy/compact_record.h's word. A record's lo and hi are
+// bits instead of the 64 of a compact record's word (bounds_word). A record's lo and hi are
 // then integers of 0..255, a byte each; its bound is a multiple of a half (at each level, the
 // distance of the value at a diamond's centre from the mean of the values at its edge's ends,
 // added over at most 3k <= 57 levels: at most 14,535), kept as a count of halves in 16 bits, or
@@ -75,7 +75,7 @@ inline uint32_t narrow_word_of(uint32_t low, uint32_t high, uint32_t& bad) {
 // 0..255 in order, or a bound not a multiple of a half up to 32767 nor +inf), and then what was
 // written to `narrow` means nothing.
 bool narrow_bounds(const uint64_t* words, size_t n, uint32_t* narrow);
-// range_bound (engine/hierarchy/compact_record.h) of a narrow word's 64-bit word, without it: the
+// range_bound (of the compact records) of a narrow word's 64-bit word, without it: the
 // same floats (a byte's float is its bfloat16's, a count of halves' half is exact).
 inline DiamondBounds narrow_range_bound(uint32_t narrow) {
   const uint32_t halves = narrow >> 16;

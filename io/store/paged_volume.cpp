@@ -192,7 +192,7 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v, CachedBrick& home, 
   const Near near = near_of(v);
   if (home.narrow() && home.surplus() == nullptr) return band0_narrow_inside(v, t, index, home, m, near);
   float f[11];
-  // As read_polyhedron and finish_record (engine/hierarchy/record_builder.h) with every vertex in the box.
+  // As read_polyhedron and finish_record (the record builder's) with every vertex in the box.
   DiamondBounds range = polyhedron_values(v, t, home, near, f);
   const bool surplus = home.surplus() != nullptr;
   Saturation sat;
@@ -220,7 +220,7 @@ void PagedVolume::Pager::band0_bounds_inside(const Coord& v, CachedBrick& home, 
 
 void PagedVolume::Pager::band0_narrow_inside(const Coord& v, const Band0Template& t, int64_t index, CachedBrick& home,
                                              uint32_t m, const Near& near) {
-  // band0_bounds_inside's record in the narrow word's own integers (io/store/held_words.h): the
+  // band0_bounds_inside's record in the narrow word's own integers (narrow_word_of): the
   // values and the range are bytes, a bound a count of halves, and min, max, |2 c - a - b| and a
   // sum of halves are exact there as they are in floats. The same word, bit for bit, for a
   // fraction of the work: a fine extraction from a one-byte store computes millions.
@@ -323,7 +323,7 @@ DiamondTopology PagedVolume::Pager::topology(int64_t index, uint32_t m, const Re
   return topology_of(static_cast<uint32_t>(w[0]), static_cast<uint32_t>(w[1]), w[2]);
 }
 
-Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats, BudgetMemo* memo) {
+Mesh extract(const PagedVolume& volume, const ExtractCall& options, ExtractStats* stats, BudgetMemo* memo) {
   return extract_adaptive(volume, options, stats, std::nullopt, memo);
 }
 

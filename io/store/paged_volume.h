@@ -1,11 +1,11 @@
 #pragma once
-// A store as a traversal source (engine/extract/traversal.h): values and records are looked up in the
+// A store as a traversal source (TraversalSource): values and records are looked up in the
 // bricks that hold them, through a shared BrickCache, so extraction reads only the bricks its
 // traversal reaches, and of those only the sections its mode reads. A node's value is read from
 // the coarsest band that holds it, and a diamond's record from its own band, so a coarse
 // extraction never touches the finer bands. Band 0's records are not stored: each is computed
 // from the values the first time the traversal reads it, from the compact records of its
-// children (engine/hierarchy/compact_record.h: the same bits as the in-memory build's), and kept in the
+// children (compact records: the same bits as the in-memory build's), and kept in the
 // cached brick for the next reader.
 #include <array>
 #include <atomic>
@@ -39,7 +39,7 @@ class PagedVolume {
 
  private:
   // A scale-0 diamond's shape relative to its vertex, for one class of coordinates mod 4 (the
-  // geometry of a vertex depends only on them: engine/hierarchy/band_tile.h): its polyhedron and the
+  // geometry of a vertex depends only on them, as BandTile's templates use): its polyhedron and the
   // refinement vertices of its children, as offsets.
   struct Band0Template {
     bool valid = false;
@@ -150,7 +150,7 @@ class PagedVolume {
     void band0_narrow_inside(const Coord& v, const Band0Template& t, int64_t index, CachedBrick& home, uint32_t m,
                              const Near& near);
     float value_at(const Coord& c);  // as MultiresVolume::value: any lattice node, clamped into the data box
-    // A record's range-and-bound word as engine/hierarchy/compact_record.h's, whatever width the
+    // A record's range-and-bound word as bounds_word packs it, whatever width the
     // brick holds it in (CachedBrick::narrow), kUnsetBounds for one not computed yet; and storing one.
     uint64_t load_bounds(int64_t index, uint32_t m) { return word_of(brick(index), m); }
     static uint64_t word_of(const CachedBrick& b, uint32_t m) {
@@ -200,9 +200,9 @@ class PagedVolume {
 };
 
 class BudgetMemo;
-// extract() (engine/extract/extract_drivers.h) over a store, paged through the volume's cache. `memo`: as
-// extract_adaptive's (engine/extract/adaptive_extract.h), for a store kept open.
-Mesh extract(const PagedVolume& volume, const ExtractOptions& options, ExtractStats* stats = nullptr,
+// extract(), as over a MultiresVolume, over a store, paged through the volume's cache. `memo`: as
+// extract_adaptive's, for a store kept open.
+Mesh extract(const PagedVolume& volume, const ExtractCall& options, ExtractStats* stats = nullptr,
              BudgetMemo* memo = nullptr);
 
 // The whole store in memory with the record fields asked for, every brick read as an extraction

@@ -441,7 +441,7 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
 namespace {
 
 // One core field of a one-byte store's records (lo, hi or bound: float bits, one per record) into
-// the records' narrow words (io/store/held_words.h), as narrow_bounds() narrows the 64-bit words
+// the records' narrow words (narrow_word_of), as narrow_bounds() narrows the 64-bit words
 // decode_section would otherwise scatter them into: the same words and the same refusals, without
 // the wide words in between. Branch-free over the records, so that it vectorizes. Returns nonzero
 // where a value has no narrow form (a range that is not an integer of 0..255, a bound not a

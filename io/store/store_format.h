@@ -33,7 +33,7 @@ inline constexpr int kMinBrickBits = 3, kMaxBrickBits = 6;
 enum class Section : int { core = 0, exact = 1, weights = 2, extra = 3 };
 inline constexpr int kSections = 4;
 // A set of a brick's sections, by Section: those a read takes, or those a store holds (every one,
-// kAllSections, but for a volume's hierarchy store: io/store/store_writer.h).
+// kAllSections, but for a volume's hierarchy store: convert_to_store's `sections`).
 using StoreSections = std::array<bool, kSections>;
 inline constexpr StoreSections kAllSections{true, true, true, true};
 // Which sections an extraction reading these fields needs besides the core.
@@ -64,7 +64,7 @@ struct StoreHeader {
 
 // Half a code step in code units: the rounding of a quantized store's values, which its records
 // (those of the quantized field) do not include; the traversal adds it to every error it compares
-// with eps (engine/extract/traversal.h, SplitRule), so eps still bounds the deviation from the data.
+// with eps (SplitRule), so eps still bounds the deviation from the data.
 inline constexpr float kQuantizationError = 0.5f;
 
 struct BrickEntry {
@@ -101,18 +101,18 @@ inline bool stores_records(const StoreLayout& layout, int j) { return j >= 1 && 
 
 // A brick's fields as the encoder takes them: the values (T^3, Morton order) and, for bands that
 // store records, each record field over the record slots (7/8 T^3, Morton order), as the floats
-// their codes stand for (engine/hierarchy/compact_record.h).
+// their codes stand for (docs/FORMAT.md, "Compact records").
 struct BrickFields {
   enum Record { lo, hi, bound, exact_lo, exact_hi, w0, w1, w2, paper_lo, paper_hi, surplus, count };
   std::vector<float> values;
   std::array<std::vector<float>, count> records;
 };
-// The fields of a filled brick (engine/hierarchy/hierarchy.h BrickView, every field present).
+// The fields of a filled brick (a BrickView with every field present).
 BrickFields fields_of(const StoreLayout& layout, int band, const BrickView& brick);
 
 // The sections of a brick, each ready to be written: an XXH64 of the zstd frame, then the frame.
 // Sections the band does not store are empty, and so are those `which` leaves out (a volume's
-// hierarchy store of some sections: io/store/store_writer.h, StoreSections), whose fields `brick`
+// hierarchy store of some sections: convert_to_store, StoreSections), whose fields `brick`
 // need not hold.
 std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layout, int band, const BrickFields& brick,
                                                          int zstd_level, const StoreSections& which = kAllSections);
@@ -120,7 +120,7 @@ std::array<std::vector<uint8_t>, kSections> encode_brick(const StoreLayout& layo
 // Checks a section's checksum, inflates it and decodes its fields into the brick's arrays (those
 // the section holds must be present). Throws IoError starting with `where` ("FILE: brick 12 (band
 // 0, brick 1 0 0)") naming what is wrong.
-// `narrow`: a one-byte store's brick (io/store/held_words.h), whose values go straight into bytes
+// `narrow`: a one-byte store's brick (held_value_bytes 1), whose values go straight into bytes
 // and whose core records into 32-bit words instead (`values` and out.bounds are then not written).
 // A value that is not a byte throws IoError "WHERE: " + value_not_held + " (corrupt brick)", a
 // record the words cannot hold "WHERE: " + kRecordNotHeld + " (corrupt brick)". Of a band that

@@ -49,7 +49,7 @@ void for_each_run(const StoreSections& which, F f) {
 
 bool is_store_file(const std::string& path) {
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) return false;  // never open a FIFO (io/file/input_file.h)
+  if (!std::filesystem::is_regular_file(path, ec)) return false;  // never open a FIFO (the input policy)
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) return false;
   char magic[kStoreMagic.size()] = {};
@@ -249,7 +249,7 @@ std::string check_brick(const StoreReader& store, int64_t index, FullBrick& bric
   return {};
 }
 
-// What the extraction's cache checks of every brick it reads (io/store/held_words.h): values
+// What the extraction's cache checks of every brick it reads (held_value_bytes, narrow_bounds): values
 // within the width the header promises, and beside values of one byte, records narrow words hold.
 std::string check_held_widths(const StoreReader& store, int64_t index, const FullBrick& brick) {
   const int bytes = held_value_bytes(store.header());

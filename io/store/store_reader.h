@@ -35,7 +35,7 @@ class StoreReader {
   // Where the bricks end and the directories begin.
   uint64_t brick_area_end() const { return area_end_; }
 
-  // Brick `index` of the directory order (engine/hierarchy/store_layout.h). Loads and checks its band's
+  // Brick `index` of the directory order (StoreLayout). Loads and checks its band's
   // directory on first use; throws IoError naming the file when that fails.
   const BrickEntry& entry(int64_t index) const;
   // Reads the brick's sections that `which` names with as few preads as they take, checks and

@@ -300,7 +300,7 @@ struct BandShare {
 
 class Converter {
  public:
-  Converter(const BoxReader& input, const std::string& output, const ConvertOptions& options, StoreLife life,
+  Converter(const BoxReader& input, const std::string& output, const ConvertCall& options, StoreLife life,
             const StoreSections& sections)
       : input_(quantized_or(input, options)),
         options_(options),
@@ -708,7 +708,7 @@ class Converter {
     out_->write_at(0, header.data(), header.size());
   }
 
-  const BoxReader& quantized_or(const BoxReader& input, const ConvertOptions& options) {
+  const BoxReader& quantized_or(const BoxReader& input, const ConvertCall& options) {
     if (options.quantize_bits == 0) return input;
     if (input.info().is_integer)
       throw OptionError("quantize", "applies to float data; integer data is stored losslessly as it is");
@@ -718,7 +718,7 @@ class Converter {
 
   std::unique_ptr<QuantizingReader> quantized_;
   const BoxReader& input_;
-  const ConvertOptions& options_;
+  const ConvertCall options_;
   StoreLife life_;          // a distributed store is always kept
   StoreSections sections_;  // and holds all
   StoreLayout layout_;
@@ -730,7 +730,7 @@ class Converter {
 
 }  // namespace
 
-ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
+ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertCall& options,
                               StoreLife life, const StoreSections& sections) {
   if (options.zstd_level < 1 || options.zstd_level > 19) throw OptionError("zstd-level", "must be 1..19");
   if (options.memory_mb < 1) throw OptionError("memory-mb", "must be at least 1");
@@ -752,7 +752,10 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
   return converter->run();
 }
 
-ConvertStats convert(const VolumeSpec& input, const std::string& output, const ConvertOptions& options) {
+ConvertStats convert(const VolumeSpec& input, const std::string& output, const ConvertOptions& options,
+                     const RunContext& run) {
+  run.validate();
+  const ThreadLimit threads(run.threads);
   std::unique_ptr<BoxReader> reader;
   auto open = [&] {
     check_outputs({{"INPUT", input.path}}, {{"OUTPUT", output}});
@@ -760,17 +763,20 @@ ConvertStats convert(const VolumeSpec& input, const std::string& output, const C
     const std::string scratch = std::filesystem::absolute(output).parent_path().string();
     reader = open_box_reader(input, scratch);
   };
-  if (options.distribution)  // every rank opens the input; one that cannot stops them all
-    settle_together(*options.distribution, open);
+  if (run.distribution)  // every rank opens the input; one that cannot stops them all
+    settle_together(*run.distribution, open);
   else
     open();
-  return convert_to_store(*reader, output, options);
+  return convert_to_store(*reader, output, ConvertCall(options, run));
 }
 
-ConvertStats convert(const Volume& volume, const std::string& output, const ConvertOptions& options) {
+ConvertStats convert(const Volume& volume, const std::string& output, const ConvertOptions& options,
+                     const RunContext& run) {
+  run.validate();
+  const ThreadLimit threads(run.threads);
   check_outputs({}, {{"OUTPUT", output}});
   validate_volume(volume);
-  return convert_to_store(VolumeBoxReader(volume), output, options);
+  return convert_to_store(VolumeBoxReader(volume), output, ConvertCall(options, run));
 }
 
 }  // namespace isotope

@@ -9,6 +9,7 @@
 #include "io/store/store_format.h"
 #include "io/volume/box_reader.h"
 #include "isotope/convert.h"
+#include "isotope/run_context.h"
 
 namespace isotope {
 
@@ -17,6 +18,18 @@ namespace isotope {
 // hierarchy store, docs/METHOD.md "One-shot extraction through a store"): through the page cache
 // and never synced, the same bytes.
 enum class StoreLife { kept, transient };
+
+// One convert as the store's writer carries it: the store's settings, and what the build reads of
+// its run context (the threads are the entry point's). From options alone: this process alone,
+// never cancelled, heard by no one.
+struct ConvertCall : ConvertOptions {
+  ConvertCall() = default;
+  ConvertCall(const ConvertOptions& options, const RunContext& run = {})  // NOLINT: options alone convert
+      : ConvertOptions(options), progress(run.progress), cancel(run.cancel), distribution(run.distribution) {}
+  ProgressCallback progress;
+  const std::atomic<bool>* cancel = nullptr;  // IoError("interrupted") at the next tile
+  const Distribution* distribution = nullptr;
+};
 
 // Writes OUTPUT atomically (temporary name, renamed when complete); on any error or
 // cancellation nothing is left behind. Throws IoError.
@@ -27,7 +40,7 @@ enum class StoreLife { kept, transient };
 // simplification weights without the weights section (a seventh). A brick's sections left out are
 // 0 bytes, and an extraction that reads one stops at "a section is missing". Not under a
 // distribution, whose stores are kept.
-ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertOptions& options,
+ConvertStats convert_to_store(const BoxReader& input, const std::string& output, const ConvertCall& options,
                               StoreLife life = StoreLife::kept, const StoreSections& sections = kAllSections);
 
 }  // namespace isotope

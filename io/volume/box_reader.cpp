@@ -6,6 +6,7 @@
 #include "io/volume/nrrd_reader.h"
 #include "io/volume/raw_reader.h"
 #include "io/volume/tiff_reader.h"
+#include "isotope/error.h"
 
 namespace isotope {
 
@@ -30,9 +31,8 @@ void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& s
                const std::string& where) {
   for (int axis = 0; axis < 3; ++axis) {
     if (lo[axis] < 0 || size[axis] < 0 || size[axis] > info.dims[axis] - lo[axis]) {
-      throw std::invalid_argument(where + ": box of size " + coordinates_text(size) +
-                                  " at (x,y,z) = " + coordinates_text(lo) + " is not inside the volume of size " +
-                                  coordinates_text(info.dims));
+      throw InvalidInput(where + ": box of size " + coordinates_text(size) + " at (x,y,z) = " + coordinates_text(lo) +
+                         " is not inside the volume of size " + coordinates_text(info.dims));
     }
   }
 }

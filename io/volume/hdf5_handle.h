@@ -1,5 +1,5 @@
 #pragma once
-// Private to io/*.cpp (needs hdf5.h, which only the io library sees): an owning HDF5 id
+// Private to the io library's sources (needs hdf5.h, which only the io library sees): an owning HDF5 id
 // that is closed on every path, the HDF5 error text that goes into IoError messages, the lock
 // every HDF5 call holds, and the dataset lookups the HDF5 readers share.
 #include <hdf5.h>
@@ -70,7 +70,7 @@ inline std::mutex& hdf5_mutex() {
   return m;
 }
 
-// Defined in hdf5_reader.cpp; the caller holds hdf5_mutex(). Each throws IoError naming the
+// Defined with the HDF5 box reader; the caller holds hdf5_mutex(). Each throws IoError naming the
 // file (and dataset) and what is wrong.
 Hdf5Handle open_hdf5_file(const std::string& file);  // exists, is HDF5, opens read-only
 // Lists the file's 3-D datasets in the message when DATASET is missing.

@@ -17,7 +17,7 @@ Volume read_hdf5(const std::string& file, const std::string& dataset);
 std::vector<std::string> list_3d_datasets(const std::string& file);
 
 class BoxReader;
-// A dataset read by boxes (io/volume/box_reader.h): one stored whole and contiguous, as raw data at
+// A dataset read by boxes (BoxReader): one stored whole and contiguous, as raw data at
 // its offset, on every thread at once; any other through HDF5, keeping up to CHUNK_CACHE_BYTES of
 // decoded chunks (0: HDF5's default).
 std::unique_ptr<BoxReader> open_hdf5_box_reader(const std::string& file, const std::string& dataset,

@@ -49,7 +49,7 @@ using NrrdBlockSink = std::function<void(const unsigned char* bytes, size_t size
 void stream_nrrd_data(const NrrdLayout& layout, const NrrdBlockSink& sink);
 
 class BoxReader;
-// A NRRD read by boxes (io/volume/box_reader.h): raw data in place; gzip data inflated once,
+// A NRRD read by boxes (BoxReader): raw data in place; gzip data inflated once,
 // streaming, into a scratch file in SCRATCH_DIR that goes with the reader.
 std::unique_ptr<BoxReader> open_nrrd_box_reader(const std::string& path, const std::string& scratch_dir);
 

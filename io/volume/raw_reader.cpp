@@ -174,7 +174,7 @@ void check_volume_layout(const std::array<int64_t, 3>& dims, const std::array<do
                          const std::array<double, 3>& origin, const std::string& file) {
   try {
     validate_layout(dims, spacing, origin);
-  } catch (const std::invalid_argument& e) {
+  } catch (const InvalidInput& e) {
     throw IoError(file + ": " + e.what());
   }
 }

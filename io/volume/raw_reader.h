@@ -21,7 +21,7 @@ struct RawLayout {
 std::optional<RawLayout> parse_raw_name(const std::string& path);
 
 class BoxReader;
-// A raw file read by boxes (io/volume/box_reader.h): checked against LAYOUT at open.
+// A raw file read by boxes (BoxReader): checked against LAYOUT at open.
 std::unique_ptr<BoxReader> open_raw_box_reader(const std::string& path, const RawLayout& layout);
 
 // Throws IoError: missing/unreadable file, size not equal to the layout, NaN or infinite values.
@@ -34,7 +34,7 @@ int64_t check_raw_file(const std::string& path, const RawLayout& layout);
 // dims[0]*dims[1]*dims[2]*element_bytes does not fit in int64; returns the node count.
 int64_t checked_node_count(const std::array<int64_t, 3>& dims, int element_bytes, const std::string& file);
 
-// The volume's dimensions and geometry as every consumer takes them (engine/core/volume_check.h),
+// The volume's dimensions and geometry as every consumer takes them (validate_layout),
 // checked for FILE: by open_box_reader before any value is read, by read_volume once it has read
 // them; throws IoError naming FILE and the numbers.
 void check_volume_layout(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,

@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "io/volume/box_reader.h"
+#include "isotope/error.h"
 #include "isotope/volume.h"
 
 namespace isotope {
@@ -24,8 +25,7 @@ class VolumeBoxReader final : public BoxReader {
   bool reads_box_alone() const override { return true; }
   void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override {
     for (int a = 0; a < 3; ++a)
-      if (lo[a] < 0 || size[a] < 0 || lo[a] + size[a] > volume_.dims[a])
-        throw std::invalid_argument("box outside the volume");
+      if (lo[a] < 0 || size[a] < 0 || lo[a] + size[a] > volume_.dims[a]) throw InvalidInput("box outside the volume");
     for (int64_t z = 0; z < size[2]; ++z)
       for (int64_t y = 0; y < size[1]; ++y) {
         const float* row = volume_.data() + volume_.index(lo[0], lo[1] + y, lo[2] + z);

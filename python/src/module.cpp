@@ -57,8 +57,7 @@ struct RunState {
 // A Python callable as a ProgressCallback: called under the GIL from whatever thread reports.
 // CALLBACK is held by pointer (it outlives the run: a PySource member or an argument of the call),
 // so that the library may copy the std::function on any thread without touching a reference count.
-// STATE is shared: a hierarchy's build, shared by the extractions of one Source, may report to a
-// call's callback after that call has returned.
+// STATE is shared, so that no copy of the callback the library keeps outlives it.
 ProgressCallback progress_of(const py::object& callback, const std::shared_ptr<RunState>& shared) {
   if (callback.is_none()) return {};
   return [callback = &callback, shared](double fraction) {
@@ -303,16 +302,6 @@ class PySource {
       : progress_(progress) {
     OpenOptions options;
     options.cache_mb = cache_mb;
-    if (!progress.is_none())  // none: the build counts nothing
-      options.preprocess_progress = [this](double f) {
-        ProgressCallback report;
-        {  // copied, then called without the lock: it takes the GIL, which set_progress's caller holds
-          const std::lock_guard lock(progress_mutex_);
-          report = on_progress_;
-        }
-        const Reporting reporting(this);
-        if (report) report(f);
-      };
     if (py::isinstance<py::array>(input)) {
       if (dims || type) throw OptionError("dims", "is for raw files, not arrays (an array has its shape and dtype)");
       Volume v = volume_of(input.cast<py::array>(), spacing, origin, array_);
@@ -332,17 +321,17 @@ class PySource {
     const int threads = parse_thread_count(threads_text);
     const auto shared = std::make_shared<RunState>();
     RunState& state = *shared;
-    options.cancel = &state.cancel;
-    set_progress(progress_of(progress_, shared));
+    RunContext context;
+    context.cancel = &state.cancel;
+    // The build of the hierarchy, when this extraction is the one that builds it (none: it counts nothing).
+    if (ProgressCallback report = progress_of(progress_, shared))
+      context.progress = [this, report = std::move(report)](double f) {
+        const Reporting reporting(this);
+        report(f);
+      };
     ExtractStats stats;
     auto result = std::make_unique<PyMesh>();
-    try {
-      result->mesh = run(state, threads, [&] { return source_->extract(options, &stats); });
-    } catch (...) {
-      set_progress({});
-      throw;
-    }
-    set_progress({});
+    result->mesh = run(state, threads, [&] { return source_->extract(options, context, &stats); });
     result->stats = stats_dict(result->mesh, stats);
     return py::cast(std::move(result));
   }
@@ -374,15 +363,8 @@ class PySource {
           "the Source after the call that builds it returns");
   }
 
-  void set_progress(ProgressCallback callback) {
-    const std::lock_guard lock(progress_mutex_);
-    on_progress_ = std::move(callback);
-  }
-
-  py::object array_;           // the array a volume borrows, if any
-  py::object progress_;        // a Python callable or None
-  std::mutex progress_mutex_;  // the hierarchy's build reports from a worker thread
-  ProgressCallback on_progress_;
+  py::object array_;     // the array a volume borrows, if any
+  py::object progress_;  // a Python callable or None
   std::shared_ptr<Source> source_;
 };
 
@@ -403,16 +385,17 @@ py::dict convert_any(const py::object& input, const std::string& output, const s
   options.zstd_level = small(zstd_level);
   options.brick_bits = small(brick_bits);
   options.quantize_bits = small(quantize_bits);
-  options.progress = progress_of(progress, shared);
-  options.cancel = &state.cancel;
+  RunContext context;
+  context.progress = progress_of(progress, shared);
+  context.cancel = &state.cancel;
   ConvertStats s;
   if (py::isinstance<py::array>(input)) {
     py::object keep;
     const Volume v = volume_of(input.cast<py::array>(), spacing, origin, keep);
-    s = run(state, threads, [&] { return convert(v, output, options); });
+    s = run(state, threads, [&] { return convert(v, output, options, context); });
   } else {
     const VolumeSpec spec = spec_of(py::str(input).cast<std::string>(), dims, type);
-    s = run(state, threads, [&] { return convert(spec, output, options); });
+    s = run(state, threads, [&] { return convert(spec, output, options, context); });
   }
   py::dict d;
   d["dims"] = s.dims;
@@ -442,6 +425,8 @@ PYBIND11_MODULE(_isotope, m) {
       py::object error = py::handle(option_error.ptr())(e.what());  // an instance, to carry .option
       error.attr("option") = e.option;
       PyErr_SetObject(option_error.ptr(), error.ptr());
+    } catch (const InvalidInput& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
     } catch (const IoError& e) {
       io_error(e.what());
     } catch (const ExtractionCancelled& e) {

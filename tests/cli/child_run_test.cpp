@@ -1,4 +1,4 @@
-// Child processes as the benchmark measures them (tools/support/child_run.h).
+// Child processes as the benchmark measures them (run_child, evict_from_page_cache).
 #include "tools/support/child_run.h"
 
 #include <gtest/gtest.h>

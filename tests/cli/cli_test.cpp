@@ -373,9 +373,10 @@ TEST_F(Cli, OutputIntoMissingDirectoryFailsAndWritesNothing) {
   expect_failure("generate sphere --size 9 -o " + quote(in_work("no/such/dir/s.raw")), 1);
 }
 
-// The output policy (io/file/atomic_file.h) through the commands: an output that is the input, or the
+// The output policy (AtomicFile) through the commands: an output that is the input, or the
 // other output, is refused before any work, and the input is left as it was; a FIFO as output is
-// refused and stays a FIFO (a device node is tested in tests/io/output_files_test.cpp, made there by mknod).
+// refused and stays a FIFO (a device node is tested in OutputFiles.AtomicFileNeverReplacesADeviceNode,
+// made there by mknod).
 TEST_F(Cli, AnOutputThatIsTheInputOrTheOtherOutputIsRefusedAndNothingChanges) {
   const std::string vol = generate("sphere", 9, "s_9x9x9_float32.raw");
   const std::string bytes = slurp(vol);
@@ -397,7 +398,7 @@ TEST_F(Cli, AnOutputThatIsTheInputOrTheOtherOutputIsRefusedAndNothingChanges) {
   EXPECT_TRUE(fs::is_fifo(in_work("pipe.ply")));
 }
 
-// --parts DIR writes a folder (io/file/output_folder.h): a new, empty or earlier --parts folder is
+// --parts DIR writes a folder (OutputFolder): a new, empty or earlier --parts folder is
 // written; a folder holding anything isotope did not write, the input among them, is refused and
 // left as it was, byte for byte; of an earlier output only the files its manifest lists go.
 TEST_F(Cli, PartsFolderNeverDeletesWhatIsotopeDidNotWrite) {
@@ -560,9 +561,9 @@ TEST_F(Cli, LibrariesOfOneCommandAreLoadedByThatCommandAlone) {
 }
 
 // A full disk, stood in for by a file size limit (ulimit -f: writes past it fail with EFBIG, as
-// they fail with ENOSPC on a full disk; tools/main.cpp ignores SIGXFSZ): a clear message, exit 1,
+// they fail with ENOSPC on a full disk; the command's main() ignores SIGXFSZ): a clear message, exit 1,
 // no temporary left, and outputs that existed keep their bytes, the mesh and the report alike
-// (both are finished before either is renamed: tools/command_extract.cpp), on 1 and 2 threads.
+// (both are finished before either is renamed, as `isotope extract` does), on 1 and 2 threads.
 TEST_F(Cli, AFullDiskFailsWithAMessageAndLeavesEveryOutputAsItWas) {
   const std::string vol = generate("sphere", 65, "s_65x65x65_float32.raw");
   const std::string mesh = in_work("m.ply"), report = in_work("r.json"), store = in_work("s.isotope");
@@ -1115,7 +1116,7 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
   ASSERT_EQ(j["datasets"].size(), 2u);
   std::map<std::string, nlohmann::json> dataset;
   for (const auto& d : j["datasets"]) dataset[d["name"]] = d;
-  EXPECT_EQ(dataset["algebraic65"]["full_triangles"], 58772);  // tests/engine/exact_full_resolution_test.cpp
+  EXPECT_EQ(dataset["algebraic65"]["full_triangles"], 58772);  // ExactAtEpsZero's pinned count
   for (const auto& [name, d] : dataset) {
     EXPECT_GT(d["store_bytes"].get<uint64_t>(), 0u) << name;
     EXPECT_GT(d["convert_seconds"].get<double>(), 0) << name;
@@ -1204,7 +1205,7 @@ TEST_F(Cli, BenchTimesTheSuiteAgainstTheBaseline) {
     EXPECT_GT(p["skimage"]["triangles"].get<int64_t>(), 0) << p;
     EXPECT_LT(p["skimage"]["triangles"].get<int64_t>(), dataset[p["dataset"]]["full_triangles"].get<int64_t>()) << p;
     EXPECT_GT(p["skimage"]["load_and_march_seconds"].get<double>(), 0) << p;
-    // The peers run under our extractions' allocator policy (isotope/source.h, keep_freed_memory).
+    // The peers run under our extractions' allocator policy (isotope::keep_freed_memory).
     EXPECT_EQ(p["skimage"]["malloc_mmap_threshold"], std::to_string(isotope::kKeptBlockBytes)) << p;
     // VTK's Flying Edges on the same array, on one thread and on the two ours use: marching cubes
     // too, the same triangles as scikit-image where no value equals the isovalue (float data).

@@ -29,7 +29,7 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr int64_t kBudgetMb = 32;
-constexpr int64_t kSize = 513;  // the case: 513^3 uint16 = 270 MB, over 8 times the budget
+constexpr int64_t kSize = 513;  // the case the budget is held to: 513^3 uint16 = 270 MB, over 8 times the budget
 // Slack above the tiny convert's peak: allocator arenas and page-granular growth that vary run to run.
 constexpr int64_t kMarginMb = 8;
 

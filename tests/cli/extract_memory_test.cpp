@@ -52,18 +52,18 @@ constexpr double kCoarseEps = 256;
 // A triangle budget: the eps it chooses reaches more bricks than kCoarseEps.
 constexpr int64_t kBudget = 100000;
 
-// What a paged extraction may hold beyond the budget, in decoded bricks (io/store/brick_cache.h: "the
+// What a paged extraction may hold beyond the budget, in decoded bricks (BrickCache: "the
 // memory in use stays within the budget plus those few bricks per thread"):
-//  - every PagedVolume::Pager pins its last 32 bricks (io/store/paged_volume.h, Pager::pinned_),
+//  - every PagedVolume::Pager pins its last 32 bricks (Pager::pinned_),
 //    evicted or not; one reader per running piece (plus, counted here to be safe, the top-level
 //    traversal's, which lets go before the pieces run). Keep this equal to the size of pinned_: raising it raises what
 //    a paged extraction may hold beyond --cache-mb, and this test is where that should show;
 constexpr int64_t kPinnedPerReader = 32;
 //  - per thread, the brick being decoded before its admission, and the thread's decode scratch
-//    kept for reuse (io/store/store_format.cpp, decode_section: the inflated section and one field).
+//    kept for reuse (decode_section's: the inflated section and one field).
 constexpr int64_t kDecodePerThread = 2;
 // The output mesh is 12 bytes per vertex and 12 per triangle (mesh_bytes), but the peak is at the
-// weld (engine/mesh/piece_weld.cpp), which holds at once: the pieces' meshes and their 8-byte edge key
+// weld (weld()), which holds at once: the pieces' meshes and their 8-byte edge key
 // per vertex (vertices on piece boundaries repeated, ~15% here; vectors grown by doubling), the
 // welding map (EdgeVertexMap, since then for the vertices on piece boundaries only; it was 2 to 4
 // slots of 12 bytes per vertex, 48 MB here) and the output mesh filling up while the pieces are
@@ -105,7 +105,7 @@ struct Extraction {
   int64_t vertices() const { return report.at("vertices").get<int64_t>(); }
   int64_t triangles() const { return report.at("triangles").get<int64_t>(); }
   int64_t bricks_read() const { return report.at("bricks_read").get<int64_t>(); }
-  // What the output mesh takes in memory (isotope/mesh.h): 3 floats per vertex, 3 indices per triangle.
+  // What the output mesh takes in memory (isotope::Mesh): 3 floats per vertex, 3 indices per triangle.
   int64_t mesh_bytes() const { return 12 * vertices() + 12 * triangles(); }
 };
 

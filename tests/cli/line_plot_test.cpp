@@ -1,4 +1,4 @@
-// Line plots (tools/support/line_plot.h): a PNG of the requested size, log axes that survive eps = 0,
+// Line plots (write_line_plot_png): a PNG of the requested size, log axes that survive eps = 0,
 // atomic replacement, concurrent callers, no output on the terminal, and PLplot's fatal errors
 // turned into IoError instead of exit().
 #include "tools/support/line_plot.h"

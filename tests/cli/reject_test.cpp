@@ -1,4 +1,4 @@
-// The golden reject files of tests/golden (written by tests/golden/make_rejects.py): bad volumes and
+// The golden reject files (written by their generator script): bad volumes and
 // stores, corrupted by kind, some under recomputed checksums. For every command that each file's
 // NAME.expect lists, `isotope COMMAND FILE` must exit 1 with "isotope: error: " and the expected
 // part of the message, write nothing, and leave the file as it was. docs/RELIABILITY.md lists them.

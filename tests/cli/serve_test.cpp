@@ -200,14 +200,14 @@ TEST(ExtractionCancelled, AFlagSetBeforehandStopsBothPaths) {
   const MultiresVolume mv = MultiresVolume::build(generate_sphere(33));
   const std::atomic<bool> cancel{true};
   for (const double eps : {0.0, 0.05}) {
-    ExtractOptions o;
+    ExtractCall o;
     o.iso = 0;
     o.eps = eps;
     o.cancel = &cancel;
     EXPECT_THROW(extract(mv, o), ExtractionCancelled) << "eps " << eps;
   }
   const std::atomic<bool> go{false};
-  ExtractOptions o;
+  ExtractCall o;
   o.cancel = &go;
   EXPECT_EQ(extract(mv, o).triangles.size(), extract(mv, {}).triangles.size());
 }

@@ -1,4 +1,4 @@
-// The banded build (engine/hierarchy/band_tile.h) against MultiresVolume::build: every record bit for bit,
+// The banded build (BandTile) against MultiresVolume::build: every record bit for bit,
 // with the bands chained through nothing but each tile's next-band output, as the store writer
 // chains them through its scratch files.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Compact records (engine/hierarchy/compact_record.h): every code rounds its field the conservative way, the
+// Compact records (docs/FORMAT.md, "Compact records"): every code rounds its field the conservative way, the
 // rounding commutes with saturation, and the meshes of the compact hierarchy differ from those of
 // the exact records only by refining more: none with the bound is the same mesh, every other mode
 // within 5% of the triangles and with the same topology where preserve keeps it.

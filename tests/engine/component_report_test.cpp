@@ -245,11 +245,11 @@ TEST(MeasureComponents, EmptyMeshHasNoComponents) {
 TEST(MeasureComponents, RejectsTriangleWithMissingVertex) {
   Mesh m = unit_tetrahedron();
   m.triangles.push_back({0, 1, 4});
-  EXPECT_THROW(label_components(m), std::invalid_argument);
+  EXPECT_THROW(label_components(m), InvalidInput);
 }
 
 TEST(MeasureComponents, SphereMatchesItsRadius) {
-  const double r = 0.6;  // engine/synthetic/fields.cpp
+  const double r = 0.6;  // generate_sphere's radius
   const std::vector<ComponentStats> s = measure_components(sphere_mesh(65));
   ASSERT_EQ(s.size(), 1u);
   EXPECT_TRUE(s[0].closed);
@@ -268,7 +268,7 @@ TEST(MeasureComponents, TorusHasGenusOne) {
   EXPECT_EQ(s[0].euler_characteristic, 0);
   EXPECT_EQ(s[0].genus, 1);
   EXPECT_TRUE(s[0].encloses_inside);
-  // Tube radius 0.2 around a circle of radius 0.5 in z = 0 (engine/synthetic/fields.cpp).
+  // Tube radius 0.2 around a circle of radius 0.5 in z = 0 (generate_torus).
   EXPECT_NEAR(s[0].area / (4 * pi * pi * 0.5 * 0.2), 1.0, 0.03);
   EXPECT_NEAR(*s[0].volume / (2 * pi * pi * 0.5 * 0.2 * 0.2), 1.0, 0.03);
   expect_box(s[0], {-0.7, -0.7, -0.2}, {0.7, 0.7, 0.2}, 0.01);
@@ -282,7 +282,7 @@ TEST(MeasureComponents, LinkedToriAreTwoGenusOneComponents) {
 
 TEST(MeasureComponents, InnerWallOfHollowShellEnclosesOutside) {
   const std::vector<ComponentStats> s = measure_components(extract_full_resolution(generate_nested_spheres(65), 0.0f));
-  ASSERT_EQ(s.size(), 3u);  // largest first: outer wall 0.75, inner wall 0.4, ball 0.2 (fields.cpp)
+  ASSERT_EQ(s.size(), 3u);  // largest first: outer wall 0.75, inner wall 0.4, ball 0.2 (generate_nested_spheres)
   const double radius[3] = {0.75, 0.4, 0.2};
   const bool encloses[3] = {true, false, true};
   for (size_t i = 0; i < 3; ++i) {
@@ -420,7 +420,7 @@ TEST(CompareComponents, CoarseTorusWithoutTopologyControlSplits) {
 }
 
 // Three beads, the bar moved from the first pair to the second: two components on each side,
-// related many to many, which engine/diagnostics/component_report.h says reads as rearranged. The same
+// related many to many, which compare_components reads as rearranged. The same
 // result again, and through the overload the report uses (labels computed once).
 TEST(CompareComponents, AJoinMovedToTheNextPairReadsAsRearrangedTheSameEveryTime) {
   const Mesh a = beads({true, false}), b = beads({false, true});
@@ -447,10 +447,10 @@ TEST(CompareComponents, EmptyMeshesCompareEqual) {
 
 TEST(CompareComponents, RejectsBadTolerance) {
   const Mesh m = unit_cube();
-  EXPECT_THROW(compare_components(m, m, 0.0), std::invalid_argument);
-  EXPECT_THROW(compare_components(m, m, -1.0), std::invalid_argument);
-  EXPECT_THROW(compare_components(m, m, std::nan("")), std::invalid_argument);
-  EXPECT_THROW(compare_components(m, m, 1e-12), std::invalid_argument);
+  EXPECT_THROW(compare_components(m, m, 0.0), InvalidInput);
+  EXPECT_THROW(compare_components(m, m, -1.0), InvalidInput);
+  EXPECT_THROW(compare_components(m, m, std::nan("")), InvalidInput);
+  EXPECT_THROW(compare_components(m, m, 1e-12), InvalidInput);
 }
 
 TEST(CompareComponents, KindsHaveNames) {

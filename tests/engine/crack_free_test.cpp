@@ -170,7 +170,7 @@ TEST(CrackFree, IntegerIsovaluesOnUint8DataTieConsistently) {
   }
 }
 
-// Clipping at the data box (engine/mesh/box_clip.h), on its own: a closed surface cut by three
+// Clipping at the data box (clip_to_box), on its own: a closed surface cut by three
 // faces through it (so some triangles meet two or three of them) ends exactly on those faces,
 // nothing lies past them, the edges cut are welded (each interior edge has one triangle on either
 // side, consistently oriented), and the count without clipping is what clipping leaves.
@@ -224,7 +224,7 @@ TEST(CrackFree, ClippingAtTheBoxEndsOnItsFacesWeldsWhatItCutsAndCountsWhatItLeav
       EXPECT_GT(boundary, 0) << what;
       EXPECT_EQ(off_face, 0) << what;
       // In order, each triangle replaced by what is left of it: one wholly inside is where the
-      // counts of those before it put it (clipping works in place: engine/mesh/box_clip.cpp).
+      // counts of those before it put it (clip_to_box works in place).
       auto corners = [](const Mesh& mesh, const std::array<uint32_t, 3>& t) {
         return std::array<std::array<float, 3>, 3>{mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]};
       };

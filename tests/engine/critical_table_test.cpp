@@ -12,7 +12,7 @@
 namespace isotope {
 namespace {
 
-// A polyhedron's sign patterns: its two refinement-edge ends and its ring (engine/hierarchy/diamond.h).
+// A polyhedron's sign patterns: its two refinement-edge ends and its ring (Diamond).
 uint32_t pattern_count(PolyhedronType t) { return 1u << (ring_size(t) + 2); }
 
 // The paper's counts: 6, 4 and 8 ring vertices (256, 64 and 1024 patterns), of which 68, 8 and

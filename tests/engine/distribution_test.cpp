@@ -192,10 +192,10 @@ TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
     const Mesh single = extract(volume, o);
     ASSERT_GT(single.triangles.size(), 1000u);
     const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(3, [&](const Distribution& g) {
-      ExtractOptions mine = o;
-      mine.distribution = &g;
+      RunContext run;
+      run.distribution = &g;
       ExtractStats stats;
-      Mesh mesh = extract(volume, mine, &stats);
+      Mesh mesh = extract(volume, o, run, &stats);
       return std::pair{std::move(mesh), stats};
     });
     for (int r = 0; r < 3; ++r) {
@@ -228,7 +228,7 @@ TEST(DistributedExtract, ASampledBudgetStandsOrFallsBackOnEveryRankAlike) {
       std::array<BudgetMemo, 3> memos;
       for (BudgetMemo& memo : memos) memo.remember(o, sample, BudgetMemo::Choice{1e30, -1, 0, {}});
       const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(3, [&](const Distribution& g) {
-        ExtractOptions mine = o;
+        ExtractCall mine = o;
         mine.distribution = &g;
         ExtractStats stats;
         Mesh mesh = extract_adaptive(hierarchy, mine, &stats, sample, &memos[static_cast<size_t>(g.rank())]);
@@ -275,7 +275,7 @@ TEST(DistributedExtract, EpsZeroStreamedReadsEachRanksShareOnly) {
                        nullptr};
   };
   const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(2, [&](const Distribution& g) {
-    ExtractOptions mine = o;
+    ExtractCall mine = o;
     mine.distribution = &g;
     ExtractStats stats;
     Mesh mesh = extract_streamed(source_for(g.rank(), -1), mine, &stats);
@@ -297,7 +297,7 @@ TEST(DistributedExtract, EpsZeroStreamedReadsEachRanksShareOnly) {
   EXPECT_EQ(reads[0], (Reads{{0, 9}, {8, 9}}));
   EXPECT_EQ(reads[1], (Reads{{16, 9}, {24, 9}}));
   const auto failed = on_ranks<int>(2, [&](const Distribution& g) {
-    ExtractOptions mine = o;
+    ExtractCall mine = o;
     mine.distribution = &g;
     extract_streamed(source_for(g.rank(), 30), mine);
     return 0;
@@ -313,13 +313,14 @@ TEST(DistributedExtract, EpsZeroStreamedSharesAreTheInMemoryOnes) {
   const Volume volume = testing::make_volume({100, 90, 70}, [](int64_t x, int64_t y, int64_t z) {
     return 20 - std::hypot(static_cast<double>(x - 50), static_cast<double>(y - 45), static_cast<double>(z - 34));
   });
-  ExtractOptions o = options_for(0);
-  o.keep_shares = true;
+  const ExtractOptions o = options_for(0);
   for (const int ranks : {3, 12}) {
     std::vector<std::vector<std::array<int64_t, 2>>> reads(static_cast<size_t>(ranks));
     const auto out = on_ranks<std::pair<Mesh, Mesh>>(ranks, [&](const Distribution& g) {
-      ExtractOptions mine = o;
-      mine.distribution = &g;
+      RunContext run;
+      run.distribution = &g;
+      run.keep_shares = true;
+      const ExtractCall mine(o, run);
       const LayerSource source{volume.dims, volume.spacing, volume.origin,
                                [&](int64_t z, int64_t n, float* to) {
                                  reads[static_cast<size_t>(g.rank())].push_back({z, n});
@@ -328,7 +329,7 @@ TEST(DistributedExtract, EpsZeroStreamedSharesAreTheInMemoryOnes) {
                                },
                                nullptr};
       Mesh streamed = extract_streamed(source, mine);
-      return std::pair{std::move(streamed), extract(volume, mine)};
+      return std::pair{std::move(streamed), extract(volume, o, run)};
     });
     for (int r = 0; r < ranks; ++r) {
       ASSERT_FALSE(out[static_cast<size_t>(r)].error) << ranks << " ranks, rank " << r;
@@ -364,9 +365,9 @@ TEST_F(DistributedStore, FourRanksWriteTheSingleProcessFileAndExtractFromIt) {
   single_options.brick_bits = 3;  // many bricks and tiles for a small volume
   convert(volume, (dir_ / "one.isotope").string(), single_options);
   const auto out = on_ranks<int>(4, [&](const Distribution& g) {
-    ConvertOptions o = single_options;
-    o.distribution = &g;
-    convert(volume, (dir_ / "four.isotope").string(), o);
+    RunContext run;
+    run.distribution = &g;
+    convert(volume, (dir_ / "four.isotope").string(), single_options, run);
     return 0;
   });
   for (const auto& o : out) ASSERT_FALSE(o.error);
@@ -380,9 +381,9 @@ TEST_F(DistributedStore, FourRanksWriteTheSingleProcessFileAndExtractFromIt) {
   for (const ExtractOptions& opt : {options_for(0), options_for(0.01)}) {
     const Mesh single = store.extract(opt);
     const auto meshes = on_ranks<Mesh>(4, [&](const Distribution& g) {
-      ExtractOptions mine = opt;
-      mine.distribution = &g;
-      return store.extract(mine);
+      RunContext run;
+      run.distribution = &g;
+      return store.extract(opt, run);
     });
     ASSERT_FALSE(meshes[0].error);
     expect_same(*meshes[0].value, single);
@@ -405,9 +406,9 @@ TEST_F(DistributedStore, RanksThatBuildTwoBandsAPassWriteTheSingleProcessFile) {
   for (const int ranks : {2, 3}) {
     const std::string name = std::to_string(ranks) + ".isotope";
     const auto out = on_ranks<ConvertStats>(ranks, [&](const Distribution& g) {
-      ConvertOptions o = single_options;
-      o.distribution = &g;
-      return convert(volume, (dir_ / name).string(), o);
+      RunContext run;
+      run.distribution = &g;
+      return convert(volume, (dir_ / name).string(), single_options, run);
     });
     for (const auto& o : out) ASSERT_FALSE(o.error);
     EXPECT_EQ(out[0].value->bands_built_beside, 4) << "bands 1, 3, 5 and 7 of 0..8 built beside the band below";
@@ -422,9 +423,10 @@ TEST_F(DistributedStore, ARankThatFailsStopsEveryRankAndLeavesNothing) {
   const auto out = on_ranks<int>(3, [&](const Distribution& g) {
     ConvertOptions o;
     o.brick_bits = 3;
-    o.distribution = &g;
-    if (g.rank() == 2) o.cancel = &stop;
-    convert(volume, (dir_ / "three.isotope").string(), o);
+    RunContext run;
+    run.distribution = &g;
+    if (g.rank() == 2) run.cancel = &stop;
+    convert(volume, (dir_ / "three.isotope").string(), o, run);
     return 0;
   });
   expect_every_rank_threw(out, "rank 2 of 3: interrupted");

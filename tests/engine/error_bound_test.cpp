@@ -24,7 +24,7 @@ namespace isotope {
 namespace {
 
 // The data's piecewise linear field at p (lattice coordinates; spacing 1, origin 0): the Kuhn
-// tetrahedron of p's cell around the diagonal from the cell's all-even corner (engine/hierarchy/kuhn.h).
+// tetrahedron of p's cell around the diagonal from the cell's all-even corner (cell_tetrahedra).
 double fine_field(const Volume& v, const std::array<float, 3>& p) {
   std::array<int64_t, 3> c{};
   std::array<double, 3> t{};

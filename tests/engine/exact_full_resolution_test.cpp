@@ -146,12 +146,12 @@ TEST(ExactAtEpsZero, BlocksTheIsovalueMissesAreNotMarched) {
     EXPECT_LT(cut, (v.dims[0] - 1) * (v.dims[1] - 1) * (v.dims[2] - 1)) << "some block is culled";
     EXPECT_EQ(stats.tets_emitted, 6 * cut);
     ExtractStats one_shot;
-    extract(v, o, &one_shot);
+    extract(v, o, {}, &one_shot);
     EXPECT_EQ(one_shot.tets_emitted, 6 * cut) << "the array's blocks are culled by their own nodes alone";
     o.iso = 1e9f;
     EXPECT_TRUE(extract(mv, o, &stats).triangles.empty());
     EXPECT_EQ(stats.tets_emitted, 0);
-    EXPECT_TRUE(extract(v, o, &one_shot).triangles.empty());
+    EXPECT_TRUE(extract(v, o, {}, &one_shot).triangles.empty());
     EXPECT_EQ(one_shot.tets_emitted, 0);
   }
 }
@@ -176,12 +176,12 @@ TEST(OneShot, EpsAboveZeroOrABudgetGoThroughTheHierarchy) {
   EXPECT_LE(a.triangles.size(), 500u);
   Volume bad = v;
   bad.values[17] = NAN;
-  EXPECT_THROW(extract(bad, ExtractOptions{}), std::invalid_argument);
+  EXPECT_THROW(extract(bad, ExtractOptions{}), InvalidInput);
   bad.values.pop_back();
-  EXPECT_THROW(extract(bad, ExtractOptions{}), std::invalid_argument);
+  EXPECT_THROW(extract(bad, ExtractOptions{}), InvalidInput);
   ExtractOptions nan_iso;
   nan_iso.iso = NAN;
-  EXPECT_THROW(extract(v, nan_iso), std::invalid_argument);
+  EXPECT_THROW(extract(v, nan_iso), OptionError);
 }
 
 // eps 0 with tie classes is a cut within the diamonds of error 0 (what a triangle budget may
@@ -229,7 +229,7 @@ TEST(FullResolutionCount, IsTheMarchsTriangleCountOnEveryVolumeIsovalueAndShape)
   EXPECT_GT(count_full_resolution_triangles(sphere, 0.0f), 0);
   EXPECT_EQ(count_full_resolution_triangles(sphere, 10.0f), 0) << "an isovalue above every value";
   EXPECT_EQ(count_full_resolution_triangles(testing::crop(sphere, {33, 33, 1}), 0.0f), 0) << "no cell";
-  EXPECT_THROW(count_full_resolution_triangles(sphere, NAN), std::invalid_argument);
+  EXPECT_THROW(count_full_resolution_triangles(sphere, NAN), InvalidInput);
 }
 
 // A budget the full-resolution mesh fits takes that mesh without a hierarchy: the same bytes as
@@ -251,7 +251,7 @@ TEST(FullResolutionCount, ABudgetTheFullMeshFitsTakesItWithoutAHierarchy) {
     o.max_triangles = budget;
     EXPECT_TRUE(budget_takes_full_resolution(v, o)) << budget;
     ExtractStats stats;
-    const Mesh a = extract(v, o, &stats);
+    const Mesh a = extract(v, o, {}, &stats);
     EXPECT_TRUE(a.positions == reference.positions && a.triangles == reference.triangles) << budget;
     EXPECT_EQ(stats.chosen_eps, 0);
     EXPECT_EQ(stats.chosen_eps_ties, -1);
@@ -872,7 +872,7 @@ TEST(Streamed, CancelledWhileItReadsItStops) {
   for (int threads : {1, 2}) {
     const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
     std::atomic<bool> cancel{false};
-    ExtractOptions o;
+    ExtractCall o;
     o.iso = 64.5f;
     o.cancel = &cancel;
     RecordedLayers layers{e, {}};
@@ -894,7 +894,7 @@ TEST(Streamed, OnlyFullResolutionIsStreamed) {
   EXPECT_FALSE(streamed_extract_applies({2, 2, 2}, o)) << "no block fits";
   o.eps = 0.5;
   EXPECT_FALSE(streamed_extract_applies(v.dims, o));
-  EXPECT_THROW(extract_streamed(layers.source(), o), std::invalid_argument);
+  EXPECT_THROW(extract_streamed(layers.source(), o), std::logic_error);
   o.eps = 0;
   o.max_triangles = 100;
   EXPECT_FALSE(streamed_extract_applies(v.dims, o));
@@ -1202,15 +1202,15 @@ TEST_F(SourceOfAFile, WhatStopsAHierarchysStoreStopsTheExtraction) {
   std::filesystem::create_directory(scratch);
   const testing::TemporaryDirectoryIs tmp(scratch);
   std::atomic<int> calls{0};
-  OpenOptions options;
-  options.preprocess_progress = [&](double) {
+  RunContext run;
+  run.progress = [&](double) {
     if (calls++ == 0) throw IoError("stopped by the host");
   };
-  const Source source = open_volume(spec_of(raw), options);
+  const Source source = open_volume(spec_of(raw));
   ExtractOptions o;
   o.iso = 64.5f;
   o.eps = 1;
-  EXPECT_EQ(testing::io_error_of([&] { source.extract(o); }), "stopped by the host");
+  EXPECT_EQ(testing::io_error_of([&] { source.extract(o, run); }), "stopped by the host");
   EXPECT_TRUE(std::filesystem::is_empty(scratch));
   EXPECT_FALSE(source.info().values_in_memory) << "the volume was not read whole after it";
   EXPECT_GT(source.extract(o).triangles.size(), 1000u) << "built on the next extraction";

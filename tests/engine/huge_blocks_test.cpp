@@ -1,4 +1,4 @@
-// The huge-block store (isotope/detail/huge_page_allocator.h): once asked to keep freed blocks,
+// The huge-block store (behind detail::HugePageAllocator): once asked to keep freed blocks,
 // it hands a freed block out again where it lay, already faulted in, whole or in part, and keeps
 // no more than it was told.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// measure_topology (isotope/mesh.h), what every topology claim is checked with: counts on
+// isotope::measure_topology, what every topology claim is checked with: counts on
 // small meshes worked out by hand, and the same counts on any number of threads, also as the
 // component report's totals.
 #include <gtest/gtest.h>

@@ -523,7 +523,7 @@ TEST(SimplifyBudget, ChoosesTheSmallestDeltaThatLeavesHalfTheBudget) {
   ExtractOptions bad = options(iso, 0, TopologyMode::preserve);
   bad.max_triangles = 1000;
   bad.auto_delta = true;
-  EXPECT_THROW(extract(mv, bad), std::invalid_argument) << "choosing delta is for simplify mode";
+  EXPECT_THROW(extract(mv, bad), OptionError) << "choosing delta is for simplify mode";
 }
 
 }  // namespace

@@ -283,7 +283,7 @@ TEST_F(TriangleBudget, CountsEveryCutAsTheWalkDownTheCutDoesPaged) {
 TEST_F(TriangleBudget, ACancelledSearchStops) {
   const Hierarchy sphere = Hierarchy::build(generate_sphere(65));
   const std::atomic<bool> cancel{true};
-  ExtractOptions o;
+  ExtractCall o;
   o.iso = 0, o.cancel = &cancel;
   const traversal::SplitRule rule(o, sphere.lattice(), sphere.origin(), sphere.spacing(), sphere.error_fold());
   EXPECT_THROW(choose_eps_for_budget(sphere, rule, 1000), ExtractionCancelled);

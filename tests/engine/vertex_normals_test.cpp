@@ -1,4 +1,4 @@
-// vertex_normals (isotope/mesh.h), the shading normals GLB, VTP and the viewer carry: area-weighted
+// isotope::vertex_normals, the shading normals GLB, VTP and the viewer carry: area-weighted
 // sums of the triangles' normals, the same bits on any number of threads as one walk over the
 // triangles in order.
 #include "engine/mesh/vertex_normals.h"
@@ -110,7 +110,7 @@ TEST(VertexNormals, IntoAnArrayEveryVertexIsWrittenThoseWithoutANormalAsAsked) {
     for (uint32_t i = first; i < first + 4; ++i) EXPECT_EQ(out[i], none) << i;
   }
   std::vector<std::array<float, 3>> short_by_one(m.positions.size() - 1);
-  EXPECT_THROW(vertex_normals_into(m, short_by_one, none), std::invalid_argument);
+  EXPECT_THROW(vertex_normals_into(m, short_by_one, none), InvalidInput);
 }
 
 // Run by run, as the writers take them: every vertex in exactly one run, no run longer than

@@ -218,7 +218,7 @@ def main():
     volume_case('data-file-directory.nhdr', header.replace('encoding', 'data file: .\nencoding').encode(),
                 'is a directory')
     volume_case('not-nrrd.nrrd', b'PK\x03\x04' + bytes(60), 'NRRD')
-    # TIFF stacks (io/volume/tiff_reader.h): each page is checked at open, before anything is read.
+    # TIFF stacks (open_tiff_stack): each page is checked at open, before anything is read.
     gray = bytes(range(16))
     volume_case('tiff-rgb.tif', tiff([(4, 4, 8, 1, 3, bytes(48), None, None)] * 2), '3 samples per pixel')
     volume_case('tiff-int32.tif', tiff([(2, 2, 32, 2, 1, bytes(16), None, None)] * 2), '32-bit signed integer')

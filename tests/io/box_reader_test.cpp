@@ -779,7 +779,7 @@ TEST_F(BoxReaderTest, BoxOutsideTheVolumeIsAnInvalidArgument) {
   for (const BoxReader* r : {raw.get(), h5.get()}) {
     for (const Box& b : outside) {
       SCOPED_TRACE(box_text(b));
-      EXPECT_THROW(r->read_box(b.lo, b.size, sink.data()), std::invalid_argument);
+      EXPECT_THROW(r->read_box(b.lo, b.size, sink.data()), InvalidInput);
     }
   }
 }

@@ -176,7 +176,7 @@ TEST_F(MeshFormats, GlbAndVtpCarryEveryVertexsNormalAtItsPlace) {
 // ---------------------------------------------------------------- every format read back
 
 // Minimal readers of what the writers make, enough to take the mesh back out of each format; the
-// readers of other tools (tests/formats) check the formats as their users open them.
+// readers of other tools (the formats harness) check the formats as their users open them.
 
 Mesh read_obj(const std::string& path) {
   Mesh m;

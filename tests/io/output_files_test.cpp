@@ -206,7 +206,7 @@ TEST_F(OutputFiles, AtomicFileLargeRegionsGoPastThePageCacheWithTheSameBytes) {
   if (!no_direct.empty()) GTEST_SKIP() << no_direct;
 }
 
-// Direct appends (io/file/direct_appends.h) write the bytes they were given, past the page cache
+// Direct appends (DirectAppends) write the bytes they were given, past the page cache
 // or through it: pieces of odd sizes across several of its buffers, overwrites of bytes on disk,
 // in the buffer being filled and across the two, and appends after a drain, from an aligned
 // offset and from an unaligned one.
@@ -271,7 +271,7 @@ TEST_F(OutputFiles, DirectAppendsReportAFailedWriteByTheirWriterThread) {
   ::close(read_only);
 }
 
-// A region's writer thread (io/file/region_writes.h) writes what it is handed: a write it fails
+// A region's writer thread (RegionWrites) writes what it is handed: a write it fails
 // (here: a descriptor not open for writing) is reported by the next take() and by drain(), with
 // its errno, and what is handed over after it is dropped; a direct write the kernel refuses
 // (EINVAL: here bytes not aligned in memory) goes through the page cache with the same bytes, as
@@ -362,7 +362,7 @@ TEST_F(OutputFiles, AFailedRegionWriteFailsEveryCommitAfterIt) {
 }
 
 // Every few MB written, the appends' own thread makes them durable while the caller goes on: a
-// large file's commit then waits for its last few MB alone (io/file/direct_appends.h). Here the
+// large file's commit then waits for its last few MB alone (DirectAppends). Here the
 // syncs are seen before any drain: 25 MB appended, at least 16 MB of them synced in time.
 TEST_F(OutputFiles, DirectAppendsMakeWhatTheyWroteDurableWhileTheCallerGoesOn) {
   const std::string p = path("synced.bin");
@@ -493,7 +493,7 @@ TEST_F(OutputFiles, AtomicFileTransientIsNeverSyncedAndHoldsTheSameBytes) {
       << "a plain file dropped " << plain_dropped;
 }
 
-// The output policy (io/file/atomic_file.h): what is not a regular file is never replaced, and
+// The output policy (AtomicFile): what is not a regular file is never replaced, and
 // refused before anything is written.
 TEST_F(OutputFiles, AtomicFileRefusesATargetThatIsADirectoryBeforeWriting) {
   fs::create_directory(path("taken"));

@@ -1,10 +1,10 @@
-// Out-of-core extraction (io/store/paged_volume.h, io/store/brick_cache.h): a store paged through a brick
+// Out-of-core extraction (PagedVolume, BrickCache): a store paged through a brick
 // cache gives the in-memory mesh bit for bit, whatever the threads and the cache budget; closed
 // surfaces stay closed and keep their topology through the paged, parallel path; a focus is full
 // resolution at its point; a triangle budget takes the finest eps that fits; the cache reads each
 // brick at most once when the store fits and stays near its budget when it does not; a corrupt
 // brick is named, never a crash. The PagedParallel tests, small versions of the parallel ones,
-// also run under ThreadSanitizer (scripts/test.sh).
+// also run under ThreadSanitizer in CI.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
@@ -91,7 +91,7 @@ std::string describe(const ExtractOptions& o) {
 }
 
 // Every directed edge of a closed, consistently oriented surface appears once, and so does its
-// reverse (as in crack_free_test.cpp, with a sorted array for the map).
+// reverse (as in the CrackFree tests, with a sorted array for the map).
 int64_t orientation_defects(const Mesh& m) {
   std::vector<std::pair<uint32_t, uint32_t>> directed;
   directed.reserve(3 * m.triangles.size());
@@ -168,7 +168,7 @@ DecodedSizes decoded_sizes(const StoreReader& store) {
 
 class PagedTest : public testing::TempDirTest {
  protected:
-  // Writes `v` as float32 raw and converts it (as store_test.cpp does); returns the store's path.
+  // Writes `v` as float32 raw and converts it (as the store tests do); returns the store's path.
   std::string convert(const Volume& v, const std::string& name, int brick_bits = kDefaultBrickBits,
                       int quantize_bits = 0) {
     ConvertOptions o;
@@ -179,7 +179,7 @@ class PagedTest : public testing::TempDirTest {
   void expect_corrupt_bricks_named(size_t stride, const std::vector<std::pair<size_t, uint64_t>>& schedule);
 };
 using PagedExtract = PagedTest;
-using PagedParallel = PagedTest;  // small enough for ThreadSanitizer (scripts/test.sh)
+using PagedParallel = PagedTest;  // small enough for ThreadSanitizer in CI
 
 // 1. Paged = in-memory, bit for bit, over volumes, brick sizes, isovalues, eps, modes and error
 // indicators, through a generous cache and through the smallest one (kTinyBudget).
@@ -321,14 +321,14 @@ TEST_F(PagedExtract, SameBytesForAnyThreadsAndCacheBudget) {
 }
 
 // The same on a small volume with small bricks and 2 and 8 threads, so that threads contend for
-// the cache's slots and locks: the one scripts/test.sh runs under ThreadSanitizer.
+// the cache's slots and locks: the one CI runs under ThreadSanitizer.
 TEST_F(PagedParallel, SameBytesForAnyThreadsAndCacheBudget) {
   const Volume noise = as_raw(testing::crop(generate_noise(40, 7), {29, 23, 27}));
   expect_same_bytes("noise", noise, 0.1f, StoreReader(convert(noise, "noise", 3)), {2, 8});
 }
 
 // 3. Invariant 3 of docs/DESIGN.md through the paged, parallel path: the closed shapes of
-// crack_free_test.cpp, converted to stores with small bricks and read through a cache of
+// the CrackFree tests, converted to stores with small bricks and read through a cache of
 // an eighth of their decoded size on 4 threads, stay closed, manifold and oriented at every eps,
 // with a focus anywhere (inside, on the corner, outside the volume) and with a triangle budget;
 // at eps 0, and in preserve mode always, they keep their components and Euler characteristic.
@@ -446,7 +446,7 @@ TEST_F(PagedExtract, FocusIsFullResolutionAtItsPoint) {
           // Full resolution at the point. An eps 0 triangle with a vertex x within 0.25 of p lies
           // in a leaf; each of the leaf's ancestors at level l holds x, so its refinement vertex
           // lies within D(l) + 0.25 of p, D(l) being the farthest a point of a level-l
-          // tetrahedron is from its refinement vertex. D(l) + 0.25 < reach(l) (engine/extract/traversal.h)
+          // tetrahedron is from its refinement vertex. D(l) + 0.25 < reach(l) (SplitRule's focus)
           // at every level: at the last one above the leaves D = sqrt(2), reach = sqrt(3); higher
           // up the margin only grows. So every ancestor has focus factor 0, an infinite key, and
           // is refined: the triangle is in the focused mesh.
@@ -604,7 +604,7 @@ TEST_F(PagedExtract, TriangleBudgetTakesTheFinestEpsThatFits) {
   EXPECT_GT(ties_chosen, 5);  // steps within a key were taken
 }
 
-// 5b. A triangle budget from a sample (engine/extract/adaptive_extract.h, BudgetSample): where
+// 5b. A triangle budget from a sample (BudgetSample): where
 // the guess stands, its mesh holds between 90% and 100% of the budget and is the plain mesh at
 // the eps and tie classes reported; where it does not, the choice is the exact search's, mesh for
 // mesh. Paged = in memory, one thread = two, and a sample too coarse to be trusted falls back.
@@ -678,7 +678,7 @@ TEST_F(PagedExtract, TriangleBudgetFromASampleLandsWithinTenPercentOrFallsBack) 
   EXPECT_GE(fell_back, 1);  // 48 of the 384 subtrees of level 6 do not make a trustworthy estimate
 }
 
-// 5c. A budget asked for again over a source kept open (engine/extract/budget_memo.h) is the
+// 5c. A budget asked for again over a source kept open (BudgetMemo) is the
 // choice made the first time, taken without the search: the same mesh, byte for byte, and the
 // same report, at the cost of the plain extraction at the chosen eps (the cache's lookups, on one
 // thread, are that extraction's). A sampled guess that stood and one that fell back are remembered
@@ -765,8 +765,8 @@ TEST_F(PagedExtract, ABudgetAskedForAgainIsTheFirstChoiceWithoutTheSearch) {
   const Source from_array = open_volume(embryo);
   for (const Source* source : {&from_store, &from_array}) {
     ExtractStats s1, s2;
-    const Mesh a = source->extract(base, &s1);
-    const Mesh b = source->extract(base, &s2);
+    const Mesh a = source->extract(base, {}, &s1);
+    const Mesh b = source->extract(base, {}, &s2);
     EXPECT_FALSE(s1.budget_remembered);
     EXPECT_TRUE(s2.budget_remembered);
     EXPECT_TRUE(same_mesh(a, b));
@@ -776,7 +776,7 @@ TEST_F(PagedExtract, ABudgetAskedForAgainIsTheFirstChoiceWithoutTheSearch) {
 
 // 6. The cache: when the store fits, each brick is read at most once and no more bytes than the
 // store's bricks hold; when it does not, the mesh is the same and the decoded bytes held at once
-// stay within what brick_cache.cpp guarantees: after each admission the resident bytes are
+// stay within what BrickCache guarantees: after each admission the resident bytes are
 // within max(budget, that brick), and the peak is taken before eviction, so
 // peak <= max(budget, largest brick) + largest brick, budget being the cache's own (its floor
 // raises a small one). Bricks evicted but still pinned by a reader are not counted in the peak.
@@ -1473,9 +1473,9 @@ TEST_F(PagedExtract, CorruptBrickIsNamedFromAnyThreadCount) {
   expect_corrupt_bricks_named(1, {{1, kTinyBudget}, {2, kHugeBudget}, {4, kTinyBudget}, {8, kHugeBudget}});
 }
 
-// The same bytes through a uint8 store, whose cache holds 32-bit record words (io/store/held_words.h,
-// narrow bounds), band 0's computed on first read by whichever thread gets there: what
-// scripts/test.sh runs under ThreadSanitizer for that path.
+// The same bytes through a uint8 store, whose cache holds 32-bit record words (narrow_bounds),
+// band 0's computed on first read by whichever thread gets there: what CI runs under
+// ThreadSanitizer for that path.
 TEST_F(PagedParallel, SameBytesThroughAUint8Store) {
   const testing::SharedVolume& neghip = testing::shared_volumes()[1];
   ASSERT_EQ(neghip.file, "neghip_66x66x66_uint8.raw");
@@ -1496,7 +1496,7 @@ TEST_F(PagedParallel, SameBytesThroughAUint8Store) {
   expect_same_bytes("neghip uint8", testing::load_shared(neghip), neghip.isovalues[0], store, threads);
 }
 
-// A sample of the bricks on many threads: what scripts/test.sh runs under ThreadSanitizer.
+// A sample of the bricks on many threads: what CI runs under ThreadSanitizer.
 TEST_F(PagedParallel, CorruptBrickIsNamedFromManyThreads) {
   expect_corrupt_bricks_named(5, {{4, kTinyBudget}, {8, kHugeBudget}});
 }

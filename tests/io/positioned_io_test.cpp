@@ -1,4 +1,4 @@
-// Reading and writing a whole buffer at a file offset (io/file/positioned_io.h): the bytes are the
+// Reading and writing a whole buffer at a file offset (pread_all, pwrite_all): the bytes are the
 // file's whatever the buffer's place in its page, including where the transfer goes through the
 // bounce buffer (a destination a few bytes ahead of its source modulo 4 KB), in pieces, to the
 // file's end, and on failure.

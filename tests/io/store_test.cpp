@@ -98,8 +98,9 @@ bool same_words(const Hierarchy& a, const Hierarchy& b, int64_t index, int64_t n
 class Store : public TempDirTest {
  protected:
   // Writes `v` as float32 raw and converts it; returns the store's path.
-  std::string convert(const Volume& v, const std::string& name, ConvertOptions options = {}) {
-    return testing::write_store(v, dir_.string(), name, options);
+  std::string convert(const Volume& v, const std::string& name, const ConvertOptions& options = {},
+                      const RunContext& run = {}) {
+    return testing::write_store(v, dir_.string(), name, options, run);
   }
 
   // Every value and record of the store, read as an extraction reads it (band 0's records
@@ -708,12 +709,13 @@ TEST_F(Store, CancelledConvertLeavesNothing) {
   std::atomic<bool> cancel{false};
   ConvertOptions o;
   o.memory_mb = 1;
-  o.progress = [&](double f) {
+  RunContext run;
+  run.progress = [&](double f) {
     if (f > 0.3) cancel = true;
   };
-  o.cancel = &cancel;
+  run.cancel = &cancel;
   const auto before = entries();
-  EXPECT_CONTAINS(io_error_of([&] { convert(v, "cancelled", o); }), "interrupted");
+  EXPECT_CONTAINS(io_error_of([&] { convert(v, "cancelled", o, run); }), "interrupted");
   auto after = entries();
   after.erase(std::remove(after.begin(), after.end(), "cancelled_65x65x65_float32.raw"), after.end());
   EXPECT_EQ(after, before);

@@ -1,4 +1,4 @@
-// TIFF stacks (io/volume/tiff_reader.h): multi-page files and folders of slices, in strips and
+// TIFF stacks (read_tiff_stack, open_tiff_stack): multi-page files and folders of slices, in strips and
 // tiles, compressed or not, of every element type isotope reads, give the same values as the raw
 // files of the same volumes, whole and box by box; convert streams them into the same store; and
 // every bad stack becomes an IoError naming the file and what is wrong.

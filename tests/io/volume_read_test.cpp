@@ -229,7 +229,7 @@ TEST_F(VolumeRead, RawDirectoryInsteadOfFileIsRejected) {
   EXPECT_CONTAINS(io_error_of([&] { read_raw(p, *parse_raw_name(p)); }), "is a directory");
 }
 
-// The input policy (io/file/input_file.h): a FIFO without a writer would block every reader's open
+// The input policy (require_regular_file): a FIFO without a writer would block every reader's open
 // forever (this test then hangs until ctest's timeout); each reader refuses it by name instead,
 // through a link too, and an NRRD header whose detached data file is a FIFO as well.
 TEST_F(VolumeRead, NonRegularInputsAreRefused) {
@@ -445,7 +445,7 @@ TEST_F(VolumeRead, Hdf5ErrorPathsLeaveNoHandleOpen) {
   EXPECT_EQ(open_hdf5_objects(), before);
 }
 
-// The isotope command links HDF5's static archive (io/CMakeLists.txt), and a filter plugin links
+// The isotope command links HDF5's static archive (ISOTOPE_ARCHIVES), and a filter plugin links
 // the shared library, which then loads beside it: a dataset compressed by a plugin (Debian's
 // hdf5-filter-plugin: lz4, bzip2) reads through the command as the same values gzip-compressed.
 TEST_F(VolumeRead, Hdf5DatasetsOfFilterPluginsReadThroughTheCommandAsWithGzip) {

@@ -322,7 +322,7 @@ def test_parts_replace_an_earlier_parts_folder_and_nothing_else(tmp_path, isotop
 
 @pytest.mark.parametrize("eps", [0, 4])
 def test_parts_are_the_single_process_mesh_cut_at_the_ranks_boundaries(tmp_path, isotope_command, embryo_store, eps):
-    vtk = pytest.importorskip("vtk")  # python3-vtk9 (scripts/install-deps.sh --tests); a skip fails the run
+    vtk = pytest.importorskip("vtk")  # python3-vtk9 (installed with the test dependencies); a skip fails the run
     from vtk.util.numpy_support import vtk_to_numpy
     args = ["extract", embryo_store, "--iso", "50", "--eps", eps]
     single = tmp_path / "one.vtp"

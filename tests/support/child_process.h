@@ -23,7 +23,7 @@ struct Child {
 };
 
 // Runs the isotope binary with ARGS, stdout into OUT (stderr too), and waits for it alone
-// (tools/support/child_run.h, which isotope bench measures its processes with).
+// (as run_child, which isotope bench measures its processes with).
 inline Child run_isotope(const std::vector<std::string>& args, const std::string& out) {
   std::vector<std::string> argv = {ISOTOPE_BINARY};
   argv.insert(argv.end(), args.begin(), args.end());

@@ -104,8 +104,8 @@ Volume crop(const Volume& v, std::array<int64_t, 3> dims) {
   return c;
 }
 
-std::string write_store(const Volume& v, const std::string& dir, const std::string& name,
-                        const ConvertOptions& options) {
+std::string write_store(const Volume& v, const std::string& dir, const std::string& name, const ConvertOptions& options,
+                        const RunContext& run) {
   const std::string dims =
       std::to_string(v.dims[0]) + "x" + std::to_string(v.dims[1]) + "x" + std::to_string(v.dims[2]);
   const std::string raw = dir + "/" + name + "_" + dims + "_float32.raw";
@@ -113,7 +113,7 @@ std::string write_store(const Volume& v, const std::string& dir, const std::stri
       .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
   const std::string store = dir + "/" + name + ".isotope";
   const auto input = open_box_reader({raw, std::nullopt, std::nullopt}, dir);
-  convert_to_store(*input, store, options);
+  convert_to_store(*input, store, ConvertCall(options, run));
   std::filesystem::remove(raw);
   return store;
 }

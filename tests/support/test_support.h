@@ -47,7 +47,7 @@ Volume make_volume(std::array<int64_t, 3> dims, F f) {
 // Writes `v` into DIR as a float32 raw file, converts it to DIR/NAME.isotope (removing the raw
 // file) and returns the store's path. A float32 raw carries unit spacing and origin 0.
 std::string write_store(const Volume& v, const std::string& dir, const std::string& name,
-                        const ConvertOptions& options = {});
+                        const ConvertOptions& options = {}, const RunContext& run = {});
 
 // Cuts a sub-box out of a volume (for dimensions that are not 2^k + 1).
 Volume crop(const Volume& v, std::array<int64_t, 3> dims);

@@ -206,7 +206,7 @@ std::string reference_version(const std::string& executable, const fs::path& wor
   return version;
 }
 
-// What `isotope extract` prints on stdout when it ends (tools/support/report.cpp, summary_line): the
+// What `isotope extract` prints on stdout when it ends (summary_line): the
 // triangles and its preprocessing and extraction seconds (to four significant digits: the cold
 // rows of the small volumes take a few milliseconds). The timed runs read these instead of
 // asking for a report, whose per-component measures (--report) would be timed with the process.
@@ -468,12 +468,12 @@ class Suite {
     o.topology = TopologyMode::none;
     o.max_triangles = std::max<int64_t>(1, static_cast<int64_t>(kCoarseShare * static_cast<double>(d.full_triangles)));
     ExtractStats stats;
-    volume.extract(o, &stats);
+    volume.extract(o, {}, &stats);
     return stats.chosen_eps_ties >= 0 ? std::nextafter(stats.chosen_eps, std::numeric_limits<double>::infinity())
                                       : stats.chosen_eps;
   }
 
-  // A store as isotope extract and isotope serve open it (isotope/source.h), through --cache-mb.
+  // A store as isotope extract and isotope serve open it (isotope::Source), through --cache-mb.
   Source open_store(const std::string& store) const {
     OpenOptions options;
     options.cache_mb = a_.cache_mb;
@@ -879,7 +879,7 @@ class Suite {
   }
 
   // A peer's command, run with the allocator policy this process's own extractions run under
-  // (keep_freed_memory, isotope/source.h): without it each of a peer's runs faults fresh pages in
+  // (isotope::keep_freed_memory): without it each of a peer's runs faults fresh pages in
   // for its output, which on the reference machine made Flying Edges' march on embryo 180 ms on one
   // thread instead of 35 ms, while ours reuse their memory (docs/METHOD.md, "Fresh memory"). The
   // peer prints what it saw of it.
@@ -1148,7 +1148,7 @@ std::vector<Target> check_targets(const std::vector<Row>& rows, const std::vecto
                     ratio(x).c_str(), w.mode.c_str(), w.eps > 0 ? "coarse" : "eps 0", w.eps, w.threads, p->pairs);
       add("warm store within 1.25x of memory", name, buf, x <= 1.25);
     }
-    // Coarse never slower than eps 0, warm and cold: every row of the coarse (at most 10%
+    // Coarse never slower than eps 0, warm and cold: every row of a coarse surface (at most 10%
     // of the triangles; preserve keeps more on noisy data, and is then not a coarse surface).
     for (const Row& c : rows) {
       if (c.dataset != name || (c.input != "store-warm" && c.input != "store-cold") || c.eps == 0 ||
@@ -1609,7 +1609,7 @@ std::vector<const DatasetSpec*> selected(const SuiteOptions& a) {
 
 int run_suite(const SuiteOptions& a) {
   // Before this process holds any volume: the peak memory of each process it times is then the
-  // process's own (tools/support/child_run.h).
+  // process's own (spawn_children_from_here).
   spawn_children_from_here();
   const std::vector<const DatasetSpec*> specs = selected(a);
   if (!a.json.empty()) AtomicFile check(a.json);  // a bad --json directory fails now, not after the suite

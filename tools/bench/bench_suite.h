@@ -1,7 +1,7 @@
 #pragma once
 // The benchmark suite `isotope bench` runs (its definition beside this header): the product timed as a
 // user meets it on a fixed set of volumes, beside full-resolution marching tetrahedra and the
-// peers, with the targets met or missed row by row. The Google Benchmark binaries of
+// peers, with the performance targets met or missed row by row. The Google Benchmark binaries of
 // bench/ time the same engine paths stage by stage (bench/README.md).
 #include <cstdint>
 #include <string>
@@ -20,7 +20,7 @@ struct SuiteOptions {
   bool quiet = false;
   bool scale = false;
   int64_t scale_size = 2048;
-  // Another isotope executable (another commit's: bench/build_reference.sh builds one): convert and
+  // Another isotope executable (another commit's, built as README.md's `isotope bench` says): convert and
   // the one-shot coarse surfaces of each dataset timed with it and with this one, in alternation.
   std::string reference;
 };

@@ -154,9 +154,10 @@ struct ViewerServer::Impl {
     try {
       ServeRequest r = parse_extract_request(req.params);
       std::optional<Supersession::Ticket> ticket;
+      RunContext context;  // a later request of the same client cancels this one
       if (r.seq) {
         ticket.emplace(supersession.enter(r.client, *r.seq));
-        r.options.cancel = ticket->cancel();
+        context.cancel = ticket->cancel();
       }
       if (responses.exhausted()) return refuse_for_responses(res);
       if (!wait_for_slot(ticket ? &*ticket : nullptr)) {
@@ -170,7 +171,7 @@ struct ViewerServer::Impl {
       run.input = settings.store;
       run.options = r.options;
       run.threads = static_cast<int>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
-      Mesh mesh = input.extract(r.options, &run.extract);
+      Mesh mesh = input.extract(r.options, context, &run.extract);
       run.extract_seconds = seconds_since(start);
       describe(input.info(), run);
       const auto measure_start = std::chrono::steady_clock::now();
@@ -211,7 +212,9 @@ struct ViewerServer::Impl {
       log(req, run);
     } catch (const BadRequest& e) {
       answer_text(res, 400, e.what());
-    } catch (const std::invalid_argument& e) {  // the engine's own checks of the options
+    } catch (const OptionError& e) {  // the engine's own checks of the options
+      answer_text(res, 400, e.what());
+    } catch (const InvalidInput& e) {
       answer_text(res, 400, e.what());
     } catch (const TriangleBudgetTooSmall& e) {  // no eps meets max-triangles
       answer_text(res, 400, e.what());

@@ -1,4 +1,4 @@
-// Child processes and the page cache (tools/support/child_run.h).
+// Child processes and the page cache (run_child, evict_from_page_cache).
 #include "tools/support/child_run.h"
 
 #include <fcntl.h>

@@ -62,7 +62,6 @@ Source open_input(const std::string& path, const std::string& dims, const std::s
   OpenOptions options;
   options.cache_mb = cache_mb;
   options.tune_allocator = true;
-  if (progress) options.preprocess_progress = progress_bar("preprocessing");
   try {
     Source source = open_volume(spec, options);
     const SourceInfo info = source.info();
@@ -73,6 +72,12 @@ Source open_input(const std::string& path, const std::string& dims, const std::s
   } catch (const OptionError& e) {
     throw CLI::ValidationError("--" + e.option, e.message);
   }
+}
+
+RunContext preprocessing_context(bool progress) {
+  RunContext run;
+  if (progress) run.progress = progress_bar("preprocessing");
+  return run;
 }
 
 bool progress_enabled(bool quiet) { return !quiet && speaking_rank() && isatty(STDERR_FILENO) == 1; }

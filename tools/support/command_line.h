@@ -29,10 +29,14 @@ ExtractOptions parse_command_line_options(const std::vector<std::pair<std::strin
 
 // Opens INPUT for extraction as every command does (isotope/source.h): --dims and --type as typed
 // ("" = from the file name), --cache-mb for a store, the allocator kept for bricks, and with
-// PROGRESS the preprocessing bar and a line when the volume is read. --dims or --type that do not
-// apply (a store) or do not parse are usage errors.
+// PROGRESS a line when the volume is read. --dims or --type that do not apply (a store) or do not
+// parse are usage errors.
 Source open_input(const std::string& path, const std::string& dims, const std::string& type, int64_t cache_mb,
                   bool progress);
+
+// The run context of a command's extractions: with PROGRESS, the preprocessing bar for a volume's
+// hierarchy that one of them builds first.
+RunContext preprocessing_context(bool progress);
 
 // Wall time since START.
 inline double seconds_since(std::chrono::steady_clock::time_point start) {

@@ -1,4 +1,4 @@
-// Interrupts as a flag (tools/support/interrupt_guard.h).
+// Interrupts as a flag (InterruptGuard).
 #include "tools/support/interrupt_guard.h"
 
 #include <csignal>

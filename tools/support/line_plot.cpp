@@ -26,7 +26,7 @@
 //   plexit (PLplot gives up, normally exit()): our exit handler longjmps back to the guard
 //     around the drawing code, which therefore holds no object with a destructor. The stream is
 //     then in an unknown state, so later calls refuse at once instead of touching PLplot again.
-// This file is the plot module (tools/support/command_module.h): the command writes the PNG bytes
+// This file is the plot module (one of the command's modules): the command writes the PNG bytes
 // with AtomicFile, which sees every write and flush error; the pngcairo driver itself ignores them.
 
 namespace isotope {

@@ -22,7 +22,7 @@ struct LinePlot {
   int width = 1200, height = 800;  // pixels, 200..8000 each
 };
 
-// Draws `plot` and writes it to `path` as a PNG image, atomically (io/file/atomic_file.h): `path` is
+// Draws `plot` and writes it to `path` as a PNG image, atomically (AtomicFile): `path` is
 // replaced only by a complete image. Throws IoError naming `path` when the plot is malformed (x
 // and y of different lengths, a size out of range), the directory is missing or not writable,
 // the disk is full, or PLplot fails (e.g. plplot-driver-cairo not installed). Safe to call from

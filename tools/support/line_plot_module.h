@@ -1,5 +1,5 @@
 #pragma once
-// The plot module's entry point (tools/support/command_module.h): PLplot is loaded only by the
+// The plot module's entry point (one of the command's modules, module_function): PLplot is loaded only by the
 // commands that draw.
 #include <string>
 #include <vector>

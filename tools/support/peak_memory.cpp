@@ -1,4 +1,4 @@
-// Peak resident memory (tools/support/peak_memory.h).
+// Peak resident memory (peak_rss_bytes, reset_peak_rss).
 #include "tools/support/peak_memory.h"
 
 #include <sys/resource.h>
