@@ -1,17 +1,12 @@
 #pragma once
-// What a user chooses for one extraction, and what it reports: the one owner of the extraction's
-// options. Every face (the command line, `isotope sweep`, `isotope serve`, the C++ API) reads them
-// through parse_extract_options() and checks them with ExtractOptions::validate(), so that an
-// option means the same and is refused with the same words everywhere (docs/DESIGN.md, "Seams").
+// What a user chooses for one extraction (what the mesh is; how the call runs is a RunContext), and
+// what it reports. Every extraction checks its options with ExtractOptions::validate(); the faces
+// read them from text or from their own values with the same words (docs/DESIGN.md, "Seams").
 #include <array>
-#include <atomic>
 #include <cstdint>
-#include <exception>
 #include <optional>
-#include <stdexcept>
 #include <string>
 #include <string_view>
-#include <utility>
 #include <vector>
 
 #include <isotope/distribution.h>
@@ -90,26 +85,8 @@ struct ExtractOptions {
   void validate() const;
 };
 
-// The options as text, by name: iso (required), eps, error, topology, weight, delta, focus ("X,Y,Z"),
-// radius, max-triangles, eps-ties. Numbers as a user types them ("0.25", "-3e-2", "1/64"). Each name at most
-// once; a budget of at least 1; a budget in simplify mode without a delta sets auto_delta; the
-// result is validated (an eps other than 0 with a budget among what validate() refuses). Throws
-// OptionError (an unknown name is reported under its own name, with the message "is not an
-// extraction option").
-ExtractOptions parse_extract_options(const std::vector<std::pair<std::string, std::string>>& given);
-
-// One option's text into OPTIONS, without the checks that relate options to each other (which
-// validate() makes): for a face that lists values of one option (`isotope sweep --eps 0,1/64`).
-// Throws OptionError.
-void set_extract_option(ExtractOptions& options, std::string_view name, std::string_view text);
-
-// A thread count as a user types it (RunContext::threads): an integer in 0 (all cores) ..
-// kMaxThreads. Throws OptionError("threads", ...) as RunContext::validate() does.
-int parse_thread_count(std::string_view text);
-
-// A real number as a user types it: "0.25", "-3e-2", "+1" or a fraction "1/64"; nullopt otherwise.
-std::optional<double> parse_real(std::string_view text);
-
+// The names of the values, as every face spells them ("preserve", "surplus"); nullopt for a name
+// that is none.
 std::string_view to_string(ErrorIndicator e);
 std::string_view to_string(TopologyMode t);
 std::string_view to_string(SimplificationWeight w);

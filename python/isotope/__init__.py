@@ -22,7 +22,7 @@ its own progress callback.
 """
 
 import os
-from numbers import Integral, Real
+from numbers import Integral
 
 import numpy as np
 
@@ -38,25 +38,12 @@ def _option_error(name, message):
     return error
 
 
-def _option_text(name, value):
-    """A Python value as the text the library's one option parser reads (isotope/extract.h)."""
-    if isinstance(value, str):
-        return value
-    if isinstance(value, bool):
-        raise _option_error(name, f"must be a number or a name, got {value!r}")
-    if isinstance(value, Integral):
-        return str(int(value))
-    if isinstance(value, Real):
-        return repr(float(value))  # shortest text that reads back as the same double
-    if name == "focus":
-        return ",".join(_option_text(name, v) for v in value)
-    raise _option_error(name, f"must be a number, got {value!r}")
-
-
 def _extract_options(iso, eps, topology, error, weight, delta, focus, radius, max_triangles, eps_ties):
+    """The options given (None: left out), by the names the command line spells; the library sets each
+    from its value and refuses it in the command's words."""
     given = {"iso": iso, "eps": eps, "topology": topology, "error": error, "weight": weight, "delta": delta,
              "focus": focus, "radius": radius, "max-triangles": max_triangles, "eps-ties": eps_ties}
-    return [(name, _option_text(name, value)) for name, value in given.items() if value is not None]
+    return [(name, value) for name, value in given.items() if value is not None]
 
 
 def _input(volume):

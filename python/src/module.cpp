@@ -9,8 +9,8 @@
 // - the library's exceptions as Python's, with the library's words: IoError (an OSError),
 //   OptionError (a ValueError) naming the option, ValueError, RuntimeError (a Source used from its own
 //   progress callback, refused rather than waiting for itself).
-// Options are parsed by the one parser every face uses (isotope/extract.h), from the text Python
-// hands over (python/isotope/__init__.py, _option_text).
+// Options are set from Python's values as they are (numbers as numbers), through the setters every
+// face uses (option_text), so that a value is refused in the command's words.
 #include <oneapi/tbb/global_control.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -29,12 +29,14 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <span>
 #include <string>
 #include <thread>
 #include <utility>
 #include <vector>
 
+#include "tools/support/option_text.h"
 #include <isotope/isotope.h>
 
 namespace py = pybind11;
@@ -42,7 +44,41 @@ namespace py = pybind11;
 namespace isotope::python {
 namespace {
 
-using TextOptions = std::vector<std::pair<std::string, std::string>>;
+// The options by name as Python gives them: numbers, names (str), a focus point.
+using GivenOptions = std::vector<std::pair<std::string, py::object>>;
+
+// Each value set as it is, a number as a number: refused in the words the command uses for the
+// same value typed (option_text), and checked together as the command checks them.
+ExtractOptions options_of(const GivenOptions& given) {
+  ExtractOptions o;
+  std::set<std::string> names;
+  for (const auto& [name, value] : given) {
+    names.insert(name);
+    if (py::isinstance<py::str>(value)) {  // a name, or a number as a user types it ("1/64")
+      set_extract_option(o, name, std::string_view(value.cast<std::string>()));
+    } else if (py::isinstance<py::bool_>(value)) {
+      throw OptionError(name, "must be a number or a name, got " + py::repr(value).cast<std::string>());
+    } else if (name == "focus") {
+      if (!py::isinstance<py::sequence>(value) || py::len(value) != 3)
+        throw OptionError(name,
+                          "must be three numbers X,Y,Z, got " + py::repr(value).cast<std::string>().substr(0, 64));
+      std::array<double, 3> p{};
+      for (size_t a = 0; a < 3; ++a) p[a] = py::float_(value.cast<py::sequence>()[a]).cast<double>();
+      set_extract_focus(o, p);
+    } else if (py::isinstance<py::int_>(value)) {
+      // Beyond 64 bits: the nearest that fits, out of range too, refused in the option's words.
+      const double wide = py::float_(value).cast<double>();
+      set_extract_option(
+          o, name, std::abs(wide) < 0x1p62 ? value.cast<int64_t>() : static_cast<int64_t>(std::copysign(0x1p62, wide)));
+    } else if (py::isinstance<py::float_>(value) || PyNumber_Check(value.ptr())) {
+      set_extract_option(o, name, py::float_(value).cast<double>());
+    } else {
+      throw OptionError(name, "must be a number, got " + py::repr(value).cast<std::string>().substr(0, 64));
+    }
+  }
+  finish_extract_options(o, names);
+  return o;
+}
 
 // ---- work off the GIL, cancellable from Python ----
 
@@ -315,9 +351,9 @@ class PySource {
     }
   }
 
-  py::object extract(const TextOptions& text, const std::string& threads_text) {
+  py::object extract(const GivenOptions& given, const std::string& threads_text) {
     refuse_reentry();
-    ExtractOptions options = parse_extract_options(text);
+    const ExtractOptions options = options_of(given);
     const int threads = parse_thread_count(threads_text);
     const auto shared = std::make_shared<RunState>();
     RunState& state = *shared;

@@ -172,6 +172,30 @@ def test_options_reach_the_library(data):
     np.testing.assert_allclose(spaced.vertices, full.vertices * [0.5, 0.5, 2] + [10, 0, 0], rtol=1e-6)
 
 
+def test_options_are_set_from_their_values(data):
+    # Numbers go to the library as numbers (numpy's too), names and typed text ("1/64") as the
+    # command reads them: the same options, the same mesh.
+    volume = load(data, "bolt_70x123x66_uint8.raw")
+    base = isotope.extract(volume, iso=64.5, eps=4, focus=(35, 60, 30), radius=10)
+    assert len(base.faces) != len(isotope.extract(volume, iso=64.5, eps=4, focus=(35, 60, 30), radius=20).faces)
+    for kw in (dict(eps="8/2"), dict(eps=np.float32(4)), dict(iso=np.float64(64.5)),
+               dict(focus=np.array([35, 60, 30])), dict(radius="10"), dict(radius=10.0)):
+        args = dict(iso=64.5, eps=4, focus=(35, 60, 30), radius=10)
+        args.update(kw)
+        mesh = isotope.extract(volume, **args)
+        np.testing.assert_array_equal(mesh.faces, base.faces, err_msg=str(kw))
+        np.testing.assert_array_equal(mesh.vertices, base.vertices, err_msg=str(kw))
+    budget = isotope.extract(volume, iso=64.5, max_triangles=1000)
+    assert len(isotope.extract(volume, iso=64.5, max_triangles=1000.0).faces) == len(budget.faces)
+    for kw, option, words in ((dict(focus=(1, 2), radius=3), "focus", "must be three numbers X,Y,Z"),
+                              (dict(max_triangles=1.5), "max-triangles", "must be an integer in 1 .."),
+                              (dict(eps=True), "eps", "must be a number or a name"),
+                              (dict(eps=[1]), "eps", "must be a number")):
+        with pytest.raises(isotope.OptionError) as e:
+            isotope.extract(volume, iso=64.5, **kw)
+        assert e.value.option == option and words in str(e.value), (kw, str(e.value))
+
+
 def test_errors_carry_the_commands_words(data, isotope_command, tmp_path):
     missing = str(tmp_path / "missing_8x8x8_uint8.raw")
     with pytest.raises(isotope.IoError) as e:

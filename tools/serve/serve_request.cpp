@@ -6,6 +6,8 @@
 #include <utility>
 #include <vector>
 
+#include "tools/support/option_text.h"
+
 namespace isotope::tools {
 namespace {
 

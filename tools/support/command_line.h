@@ -9,8 +9,8 @@
 #include <utility>
 #include <vector>
 
-#include "isotope/extract.h"  // parse_real: numbers as users type them
 #include "isotope/source.h"
+#include "tools/support/option_text.h"  // options and numbers as users type them
 
 namespace CLI {
 class Validator;
