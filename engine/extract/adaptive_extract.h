@@ -42,41 +42,31 @@ inline int piece_level(const Lattice& lattice) {
 // piece order into *mesh (on rank 0; on every rank with keep_shares), the counts added to *total.
 // With `check`, this process's triangle count goes to it before the weld, which is skipped
 // (returning false) when it says no.
-template <TraversalSource Source, class Together>
-bool extract_pieces(const Source& source, const ExtractCall& options, const Together& together, ExtractStats& total,
+template <TraversalSource Source>
+bool extract_pieces(const Source& source, const ExtractCall& options, const ProcessGroup& group, ExtractStats& total,
                     Mesh* mesh, const std::function<bool(int64_t)>& check) {
   using namespace traversal;
-  const Distribution* group = options.distribution;
   const SplitRule rule(options, source.lattice(), source.origin(), source.spacing(), source.error_fold());
   std::vector<Piece> pieces;
-  // Spread over processes: this one runs its share of the pieces, and rank 0 welds them all
-  // (engine/extract/distributed_parts.h). Every other rank returns an empty mesh.
-  std::vector<size_t> shares;
-  std::vector<double> costs;
-  together([&] {
-    {  // scoped: a paged source's reader lets its bricks go before the pieces run
-      Traversal<Source> top(source, rule);
-      pieces = top.split(piece_level(source.lattice()));
-      total.tets_visited = top.tets_visited();
-      total.tets_simplified = top.tets_simplified();
-    }
+  group.step([&] {
+    // scoped: a paged source's reader lets its bricks go before the pieces run
+    Traversal<Source> top(source, rule);
+    pieces = top.split(piece_level(source.lattice()));
+    total.tets_visited = top.tets_visited();
+    total.tets_simplified = top.tets_simplified();
   });
-  shares = {0, pieces.size()};
-  if (group) {
-    costs = share_costs(*group, pieces.size(), [&](size_t first, size_t last, double* out) {
-      piece_costs(source, rule, pieces, first, last, out);
-    });
-    shares = share_by_cost(costs, group->ranks());
-  }
-  const size_t first = shares[static_cast<size_t>(group ? group->rank() : 0)];
-  const size_t last = shares[static_cast<size_t>(group ? group->rank() : 0) + 1];
+  // Spread over processes, this one runs its share of the pieces, and rank 0 welds them all
+  // (gather_parts). Every other rank returns an empty mesh.
+  const ProcessGroup::Share share = group.share_of(pieces.size(), [&](size_t first, size_t last, double* out) {
+    piece_costs(source, rule, pieces, first, last, out);
+  });
   const auto work_start = std::chrono::steady_clock::now();
-  double work_seconds = 0;  // this process's share of the pieces, without waiting for the others
-  std::vector<PartMesh> parts(last - first);
+  std::vector<PartMesh> parts(share.last - share.first);
   LendingPool<LevelScratch<Source>> levels;
-  auto run_share = [&] {
+  RankLoad load;  // this process's share of the pieces, without waiting for the others
+  group.step([&] {
     parallel_for_in_order(int64_t{0}, static_cast<int64_t>(parts.size()), [&](int64_t j) {
-      const int64_t i = static_cast<int64_t>(first) + j;
+      const int64_t i = static_cast<int64_t>(share.first) + j;
       throw_if_cancelled(rule.options());
       std::unique_ptr<LevelScratch<Source>> scratch =
           levels.take([] { return std::make_unique<LevelScratch<Source>>(); });
@@ -93,22 +83,17 @@ bool extract_pieces(const Source& source, const ExtractCall& options, const Toge
       part.mesh = t.take();
       levels.give(std::move(scratch));  // t no longer walks
     });
-    work_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - work_start).count();
-  };
-  if (group) {
-    RankLoad load;
-    settle_together(*group, run_share);
-    for (size_t i = first; i < last; ++i) load.cost += costs[i];
+    load.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - work_start).count();
+  });
+  if (group.spread()) {
+    for (size_t i = share.first; i < share.last; ++i) load.cost += share.costs[i];
     for (const PartMesh& p : parts) load.work += p.tets_visited;
-    load.items = static_cast<int64_t>(last - first);
-    load.seconds = work_seconds;
+    load.items = static_cast<int64_t>(parts.size());
     if constexpr (requires { source.bytes_read(); }) load.bytes_read = source.bytes_read();
-    total.ranks = gather_loads(*group, load);
-  } else {
-    run_share();
+    total.ranks = group.loads(load);
   }
   levels.clear();  // the walks' scratch and welding tables, before the weld takes its memory
-  // What reaches past the data box is clipped to it once welded (engine/mesh/box_clip.h).
+  // What reaches past the data box is clipped to it once welded (BoxClip).
   const BoxClip box = BoxClip::of(source.data_dims(), source.lattice().n, source.origin(), source.spacing());
   if (check) {
     std::vector<int64_t> counts(parts.size());
@@ -119,16 +104,16 @@ bool extract_pieces(const Source& source, const ExtractCall& options, const Toge
     for (int64_t c : counts) mine += c;
     if (!check(mine)) return false;
   }
-  if (group && !options.keep_shares) parts = gather_parts(*group, std::move(parts));  // rank 0's parts: all of them
+  parts = group.to_welder(std::move(parts), options.keep_shares);
   for (const PartMesh& p : parts) {
     total.tets_visited += p.tets_visited;
     total.tets_emitted += p.tets_emitted;
     total.tets_simplified += p.tets_simplified;
   }
-  // Rank 0 (or every rank, keeping its share) welds; the others wait, so that running out of
-  // memory in the weld stops them too.
-  together([&] {
-    if (!group || options.keep_shares || group->rank() == 0) {
+  // The process that makes the mesh welds; the others wait, so that running out of memory in the
+  // weld stops them too.
+  group.step([&] {
+    if (group.makes_mesh(options.keep_shares)) {
       *mesh = weld(parts, source.lattice().side, box.any());
       clip_to_box(*mesh, box);
     }
@@ -220,7 +205,7 @@ class AdaptiveExtraction {
       return count <= options_.max_triangles &&
              static_cast<double>(count) >= kSampleFloor * static_cast<double>(options_.max_triangles);
     };
-    if (extract_pieces(source_, in_codes_, steps(), total_, &mesh, stands)) {
+    if (extract_pieces(source_, in_codes_, group_, total_, &mesh, stands)) {
       keep();
       return true;
     }
@@ -238,7 +223,7 @@ class AdaptiveExtraction {
     if (in_codes_.eps == 0 && in_codes_.eps_ties < 0 && finest_extract_applies(source_.lattice()))
       return extract_finest(source_, rule(), &total_);
     Mesh mesh;
-    extract_pieces(source_, in_codes_, steps(), total_, &mesh, nullptr);
+    extract_pieces(source_, in_codes_, group_, total_, &mesh, nullptr);
     return mesh;
   }
 
@@ -249,9 +234,6 @@ class AdaptiveExtraction {
   traversal::SplitRule rule() const {
     return traversal::SplitRule(in_codes_, source_.lattice(), source_.origin(), source_.spacing(),
                                 source_.error_fold());
-  }
-  auto steps() const {
-    return [this](const auto& work) { group_.step(work); };
   }
   // An eps a triangle budget chose, into the options and the stats.
   void take(const BudgetChoice& c) {

@@ -5,6 +5,9 @@
 // them waiting at the next gather, and a count is summed over the ranks. A driver calls the same
 // steps either way.
 #include <cstdint>
+#include <functional>
+#include <utility>
+#include <vector>
 
 #include "engine/extract/distributed_parts.h"
 #include "isotope/distribution.h"
@@ -26,6 +29,35 @@ class ProcessGroup {
   // Spread over ranks: a memo of earlier choices must then be ignored, so that every rank searches
   // alike.
   bool spread() const { return distribution_ != nullptr; }
+
+  // This process's share of N items, [first, last): all of them alone; spread, a contiguous share
+  // of about the same cost on each rank, the costs of all of them (every rank computing a part
+  // with cost_of(first, last, out)) kept in `costs`.
+  struct Share {
+    size_t first = 0, last = 0;
+    std::vector<double> costs;  // spread only
+  };
+  Share share_of(size_t n, const std::function<void(size_t first, size_t last, double* out)>& cost_of) const {
+    if (!distribution_) return {0, n, {}};
+    Share share;
+    share.costs = share_costs(*distribution_, n, cost_of);
+    const std::vector<size_t> bounds = share_by_cost(share.costs, distribution_->ranks());
+    share.first = bounds[static_cast<size_t>(distribution_->rank())];
+    share.last = bounds[static_cast<size_t>(distribution_->rank()) + 1];
+    return share;
+  }
+  // Every rank's load, in rank order, on every rank; none alone.
+  std::vector<RankLoad> loads(const RankLoad& mine) const {
+    return distribution_ ? gather_loads(*distribution_, mine) : std::vector<RankLoad>{};
+  }
+  // The parts the process that makes the mesh welds: its own alone, or each rank its own when it
+  // keeps its share; otherwise every rank's, in rank order, on rank 0, and nothing elsewhere.
+  std::vector<PartMesh> to_welder(std::vector<PartMesh> mine, bool keep_shares) const {
+    if (distribution_ && !keep_shares) return gather_parts(*distribution_, std::move(mine));
+    return mine;  // moved, not copied (a conditional expression would copy it)
+  }
+  // Whether this process makes a mesh: alone, keeping its share, or rank 0.
+  bool makes_mesh(bool keep_shares) const { return !distribution_ || keep_shares || distribution_->rank() == 0; }
 
  private:
   const Distribution* distribution_;
