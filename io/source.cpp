@@ -352,10 +352,11 @@ void Source::prepare(const std::vector<ExtractOptions>& planned, const RunContex
   RecordFields fields{false, false, false, false};
   bool needed = false, whole = false;
   for (const ExtractOptions& o : planned) {
-    fields = fields | fields_for(o);
-    const bool hierarchy = needs_hierarchy(impl_->as_extracted(o));
+    const ExtractCall call(o, run);  // as extract() will see it: spread over processes, a budget searches
+    fields = fields | fields_for(call);
+    const bool hierarchy = needs_hierarchy(impl_->as_extracted(call));
     needed = needed || hierarchy;
-    whole = whole || (!hierarchy && !impl_->streams(o));  // eps 0 from the volume held whole
+    whole = whole || (!hierarchy && !impl_->streams(call));  // eps 0 from the volume held whole
   }
   if (needed && !impl_->paged_hierarchy(fields, run.progress))
     impl_->hierarchy(fields, run.progress);  // reads the volume whole

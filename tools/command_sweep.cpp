@@ -43,8 +43,8 @@ struct SweepRow {
   double seconds = 0;
 };
 
-// A comma-separated list of one extraction option's values, each read by the parser every face
-// shares (isotope/extract.h).
+// A comma-separated list of one extraction option's values, each read by the reader every face
+// shares (option_text).
 std::vector<double> parse_list(const std::string& text, const std::string& name) {
   std::vector<double> values;
   std::stringstream in(text);

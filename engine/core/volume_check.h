@@ -18,16 +18,16 @@ namespace isotope {
 // float32 however a file gives them.
 inline bool within_float_range(double v) { return std::fabs(v) <= std::numeric_limits<float>::max(); }
 
-// Dimensions alone (a hierarchy's lattice, before there is a volume). Throws std::invalid_argument.
+// Dimensions alone (a hierarchy's lattice, before there is a volume). Throws InvalidInput.
 void validate_dims(const std::array<int64_t, 3>& dims);
 
-// Dimensions and geometry, before any value is read. Throws std::invalid_argument naming the
+// Dimensions and geometry, before any value is read. Throws InvalidInput naming the
 // first problem and the numbers, e.g. "volume dimensions 8x16x1 (x by y by z): every axis needs
 // 2 .. 524289 nodes".
 void validate_layout(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
                      const std::array<double, 3>& origin);
 
-// validate_layout, then the values. Throws std::invalid_argument naming the first problem (a value
+// validate_layout, then the values. Throws InvalidInput naming the first problem (a value
 // by its x, y, z).
 void validate_volume(const Volume& volume);
 

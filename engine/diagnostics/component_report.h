@@ -86,7 +86,7 @@ struct MeshComponents {
   bool operator==(const MeshComponents&) const = default;
 };
 
-// Throws std::invalid_argument when a triangle refers to a missing vertex or the mesh has 2^31
+// Throws InvalidInput when a triangle refers to a missing vertex or the mesh has 2^31
 // or more vertices. The edges are found on all threads, as measure_topology finds them.
 MeshComponents label_components(const Mesh& mesh);
 // What measure_topology gives, from the mesh's components: their sums, with no second pass over
@@ -141,11 +141,11 @@ struct ComponentComparison {
 // every group whose topology differs. `tolerance`: how far the adaptive surface may lie from the
 // full one (physical units; a few voxel spacings for coarse meshes). A component that moved
 // farther than that shows as lost plus appeared: the *_samples_matched counts tell. Deterministic,
-// serial. Throws std::invalid_argument for a tolerance that is not finite and > 0 or is below
+// serial. Throws InvalidInput for a tolerance that is not finite and > 0 or is below
 // 2^-30 of the meshes' extent (grid cells are 32-bit), and as label_components.
 ComponentComparison compare_components(const Mesh& full, const Mesh& adaptive, double tolerance);
 // The same with the components already labelled (label_components of each mesh; throws
-// std::invalid_argument when the labels do not have one entry per position).
+// InvalidInput when the labels do not have one entry per position).
 ComponentComparison compare_components(const Mesh& full, const MeshComponents& full_components, const Mesh& adaptive,
                                        const MeshComponents& adaptive_components, double tolerance);
 

@@ -19,7 +19,7 @@ Mesh extract(const MultiresVolume& mv, const ExtractCall& options, ExtractStats*
 
 class BudgetMemo;
 class Hierarchy;
-// extract() over an in-memory hierarchy. Throws std::invalid_argument when the options read a field
+// extract() over an in-memory hierarchy. Throws InvalidInput when the options read a field
 // the hierarchy was built without. `memo`: as extract_adaptive's (engine/extract/adaptive_extract.h),
 // for a hierarchy kept open.
 Mesh extract(const Hierarchy& hierarchy, const ExtractCall& options, ExtractStats* stats = nullptr,

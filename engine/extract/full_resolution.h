@@ -11,7 +11,7 @@ namespace isotope {
 
 // Marching tetrahedra over every cell, on all threads (parallel_for). The mesh is the same
 // bit for bit whatever the number of threads: vertices numbered in order of first appearance in
-// one walk over the cells, z slowest, then y, then x. Throws std::invalid_argument for a
+// one walk over the cells, z slowest, then y, then x. Throws InvalidInput for a
 // non-finite iso.
 Mesh extract_full_resolution(const Volume& volume, float iso);
 
@@ -20,7 +20,7 @@ Mesh extract_full_resolution(const Volume& volume, float iso);
 // tetrahedra make of each sign case (one for each parity of the cell, whose diagonal the
 // tetrahedra share runs from its all-even corner). A compare and a lookup per cell, where the march
 // builds and welds vertices: what a triangle budget asks first, whether the full-resolution mesh
-// fits it. Throws std::invalid_argument for a non-finite iso.
+// fits it. Throws InvalidInput for a non-finite iso.
 int64_t count_full_resolution_triangles(const Volume& volume, float iso);
 
 // Cell layers per slab, the unit of parallel work of extract_full_resolution(): slabs start at the

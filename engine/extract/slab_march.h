@@ -50,7 +50,7 @@ inline int64_t slab_count(const SlabPlan& plan) {
 // of them), so that its mesh is the one march_in_slabs makes, bit for bit. Other ranks get an
 // empty mesh. Collective; a failure anywhere throws DistributedError everywhere.
 // `seconds`: set to the time this process took for its own slabs. `keep_share`: every rank joins
-// only its own slabs and keeps that mesh (ExtractOptions::keep_shares). `on_failure`: as above.
+// only its own slabs and keeps that mesh (RunContext::keep_shares). `on_failure`: as above.
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribution& group, int64_t first,
                     int64_t last, double* seconds, bool keep_share, const std::function<void()>& on_failure = {});
 

@@ -44,7 +44,7 @@ bool streamed_extract_applies(const std::array<int64_t, 3>& dims, const ExtractO
 // two windows are larger.
 int64_t streamed_window_bytes(const std::array<int64_t, 3>& dims);
 
-// Throws as extract(const Volume&, ...) does, std::invalid_argument when the options need more
+// Throws as extract(const Volume&, ...) does, std::logic_error when the options need more
 // than full resolution (streamed_extract_applies), and what the source's reads throw.
 Mesh extract_streamed(const LayerSource& source, const ExtractCall& options, ExtractStats* stats = nullptr);
 

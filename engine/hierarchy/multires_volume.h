@@ -24,11 +24,11 @@ struct PreprocessStats {
 
 class MultiresVolume {
  public:
-  // Embeds and preprocesses (in parallel). Throws std::invalid_argument for dims < 2 or
+  // Embeds and preprocesses (in parallel). Throws InvalidInput for dims < 2 or
   // non-finite values. `progress`, if given, hears the fraction done (see ProgressReporter).
   static MultiresVolume build(const Volume& volume, const ProgressCallback& progress = {});
   // An empty volume of these dimensions, to be filled with set_value and set_record (a store
-  // being loaded). Throws std::invalid_argument as build does.
+  // being loaded). Throws InvalidInput as build does.
   static MultiresVolume allocate(const std::array<int64_t, 3>& dims, const std::array<double, 3>& spacing,
                                  const std::array<double, 3>& origin);
   void set_value(int64_t x, int64_t y, int64_t z, float f) { values_[static_cast<size_t>(layout_.slot(x, y, z))] = f; }

@@ -12,7 +12,7 @@
 
 namespace isotope {
 
-// OUT (one element per vertex, else std::invalid_argument) gets each vertex's unit normal, or NONE
+// OUT (one element per vertex, else InvalidInput) gets each vertex's unit normal, or NONE
 // for a vertex of only degenerate triangles (or of none): every element written, on all threads, so
 // an array not filled before is first touched by the thread that writes each part of it.
 void vertex_normals_into(const Mesh& mesh, std::span<std::array<float, 3>> out, const std::array<float, 3>& none);

@@ -18,7 +18,7 @@ inline constexpr uint32_t kMeshWireVersion = 1;
 // The wire bytes of a mesh as four pieces, its arrays left where they lie: the header with the
 // report and its padding (owned), then views of the positions, the normals and the indices, valid
 // while mesh and normals live unchanged. A server hands them to its socket one after the other,
-// where a copy of 1 M triangles was 23 MB of fresh memory per response. Throws std::length_error
+// where a copy of 1 M triangles was 23 MB of fresh memory per response. Throws InvalidInput
 // when the mesh or the report does not fit the format's 32-bit counts.
 struct MeshWirePieces {
   std::string head;

@@ -26,7 +26,7 @@ class BoxReader {
  public:
   virtual ~BoxReader() = default;
   const VolumeInfo& info() const { return info_; }
-  // Nodes lo .. lo+size-1 per axis (must lie inside info().dims, else std::invalid_argument),
+  // Nodes lo .. lo+size-1 per axis (must lie inside info().dims, else InvalidInput),
   // x fastest then y then z, converted to float, into out[size[0]*size[1]*size[2]].
   // Safe to call concurrently from several threads. Throws IoError naming the file on a short
   // read, and naming the global (x, y, z) of the first NaN or infinite value in the box.
@@ -66,7 +66,7 @@ VolumeInfo volume_info(ScalarType type, const std::array<int64_t, 3>& dims, cons
 // "(x,y,z)": a node or a box's size, as the readers' messages write them.
 std::string coordinates_text(const std::array<int64_t, 3>& v);
 
-// Throws std::invalid_argument, naming WHERE, unless the box of SIZE nodes at LO lies inside
+// Throws InvalidInput, naming WHERE, unless the box of SIZE nodes at LO lies inside
 // info.dims (a size of 0 is inside: it reads nothing). For the readers' read_box.
 void check_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, const VolumeInfo& info,
                const std::string& where);

@@ -50,30 +50,51 @@ using GivenOptions = std::vector<std::pair<std::string, py::object>>;
 // Each value set as it is, a number as a number: refused in the words the command uses for the
 // same value typed (option_text), and checked together as the command checks them.
 ExtractOptions options_of(const GivenOptions& given) {
+  const auto shown = [](const py::handle& v) { return py::repr(v).cast<std::string>().substr(0, 64); };
+  const auto is_number = [](const py::handle& v) {
+    return !py::isinstance<py::bool_>(v) && (py::isinstance<py::int_>(v) || py::isinstance<py::float_>(v) ||
+                                             (PyNumber_Check(v.ptr()) && !PyComplex_Check(v.ptr())));
+  };
   ExtractOptions o;
   std::set<std::string> names;
   for (const auto& [name, value] : given) {
     names.insert(name);
     if (py::isinstance<py::str>(value)) {  // a name, or a number as a user types it ("1/64")
-      set_extract_option(o, name, std::string_view(value.cast<std::string>()));
-    } else if (py::isinstance<py::bool_>(value)) {
-      throw OptionError(name, "must be a number or a name, got " + py::repr(value).cast<std::string>());
+      const std::string text = value.cast<std::string>();
+      if (text.size() > 128) throw OptionError(name, "is too long");  // as the command's reader
+      set_extract_option(o, name, std::string_view(text));
     } else if (name == "focus") {
       if (!py::isinstance<py::sequence>(value) || py::len(value) != 3)
-        throw OptionError(name,
-                          "must be three numbers X,Y,Z, got " + py::repr(value).cast<std::string>().substr(0, 64));
+        throw OptionError(name, "must be three numbers X,Y,Z, got " + shown(value));
+      const py::sequence xyz = value.cast<py::sequence>();
+      if (py::isinstance<py::str>(xyz[0]) || py::isinstance<py::str>(xyz[1]) || py::isinstance<py::str>(xyz[2])) {
+        const std::string text = py::str(",")
+                                     .attr("join")(py::make_tuple(py::str(xyz[0]), py::str(xyz[1]), py::str(xyz[2])))
+                                     .cast<std::string>();
+        set_extract_option(o, name, std::string_view(text));  // as typed: "1/2,3,4"
+        continue;
+      }
       std::array<double, 3> p{};
-      for (size_t a = 0; a < 3; ++a) p[a] = py::float_(value.cast<py::sequence>()[a]).cast<double>();
+      for (size_t a = 0; a < 3; ++a) {
+        const py::object x = xyz[a];
+        if (!is_number(x)) throw OptionError(name, "must be three numbers X,Y,Z, got " + shown(value));
+        p[a] = PyFloat_AsDouble(x.ptr());  // an integer beyond the doubles: -1 and an OverflowError
+        if (PyErr_Occurred()) throw py::error_already_set();
+      }
       set_extract_focus(o, p);
+    } else if (!is_number(value)) {
+      throw OptionError(name, std::string(py::isinstance<py::bool_>(value) ? "must be a number or a name, got "
+                                                                           : "must be a number, got ") +
+                                  shown(value));
     } else if (py::isinstance<py::int_>(value)) {
-      // Beyond 64 bits: the nearest that fits, out of range too, refused in the option's words.
-      const double wide = py::float_(value).cast<double>();
-      set_extract_option(
-          o, name, std::abs(wide) < 0x1p62 ? value.cast<int64_t>() : static_cast<int64_t>(std::copysign(0x1p62, wide)));
-    } else if (py::isinstance<py::float_>(value) || PyNumber_Check(value.ptr())) {
-      set_extract_option(o, name, py::float_(value).cast<double>());
+      int overflow = 0;
+      const long long v = PyLong_AsLongLongAndOverflow(value.ptr(), &overflow);
+      if (overflow != 0)  // beyond 64 bits: as its decimal text, which the command refuses or reads alike
+        set_extract_option(o, name, std::string_view(py::str(value).cast<std::string>()));
+      else
+        set_extract_option(o, name, static_cast<int64_t>(v));
     } else {
-      throw OptionError(name, "must be a number, got " + py::repr(value).cast<std::string>().substr(0, 64));
+      set_extract_option(o, name, py::float_(value).cast<double>());
     }
   }
   finish_extract_options(o, names);

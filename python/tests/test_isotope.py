@@ -179,7 +179,8 @@ def test_options_are_set_from_their_values(data):
     base = isotope.extract(volume, iso=64.5, eps=4, focus=(35, 60, 30), radius=10)
     assert len(base.faces) != len(isotope.extract(volume, iso=64.5, eps=4, focus=(35, 60, 30), radius=20).faces)
     for kw in (dict(eps="8/2"), dict(eps=np.float32(4)), dict(iso=np.float64(64.5)),
-               dict(focus=np.array([35, 60, 30])), dict(radius="10"), dict(radius=10.0)):
+               dict(focus=np.array([35, 60, 30])), dict(focus=("70/2", 60, 30)), dict(radius="10"),
+               dict(radius=10.0)):
         args = dict(iso=64.5, eps=4, focus=(35, 60, 30), radius=10)
         args.update(kw)
         mesh = isotope.extract(volume, **args)
@@ -190,9 +191,14 @@ def test_options_are_set_from_their_values(data):
     for kw, option, words in ((dict(focus=(1, 2), radius=3), "focus", "must be three numbers X,Y,Z"),
                               (dict(max_triangles=1.5), "max-triangles", "must be an integer in 1 .."),
                               (dict(eps=True), "eps", "must be a number or a name"),
-                              (dict(eps=[1]), "eps", "must be a number")):
+                              (dict(eps=[1]), "eps", "must be a number"),
+                              (dict(eps=1j), "eps", "must be a number"),
+                              (dict(focus=(True, 2, 3), radius=3), "focus", "must be three numbers X,Y,Z"),
+                              (dict(iso=10 ** 40), "iso", "is out of the float range"),
+                              (dict(max_triangles=2 ** 70), "max-triangles", "got '1180591620717411303424'"),
+                              (dict(eps="1" * 200), "eps", "is too long")):
         with pytest.raises(isotope.OptionError) as e:
-            isotope.extract(volume, iso=64.5, **kw)
+            isotope.extract(volume, **{"iso": 64.5, **kw})
         assert e.value.option == option and words in str(e.value), (kw, str(e.value))
 
 

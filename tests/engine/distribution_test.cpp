@@ -32,6 +32,7 @@
 #include "isotope/extract.h"
 #include "isotope/source.h"
 #include "tbb/global_control.h"
+#include "tests/support/byte_files.h"
 #include "tests/support/temp_dir_test.h"
 #include "tests/support/test_support.h"
 
@@ -415,6 +416,30 @@ TEST_F(DistributedStore, RanksThatBuildTwoBandsAPassWriteTheSingleProcessFile) {
     EXPECT_TRUE(bytes_of(dir_ / name) == bytes_of(dir_ / "one.isotope")) << ranks << " ranks: another file";
   }
   EXPECT_EQ(entries(), (std::vector<std::string>{"2.isotope", "3.isotope", "one.isotope"}));  // no hand-over left
+}
+
+// A budget that the full-resolution mesh fits is that mesh, counted, with no hierarchy built; spread
+// over processes it is searched instead, so a prepare under ranks builds the hierarchy, as the
+// extraction it prepares would, where every rank meets a failure of it together.
+TEST_F(DistributedStore, APreparedBudgetUnderRanksBuildsTheHierarchyItsSearchReads) {
+  const Volume volume = generate_noise(33, 5);
+  const std::string raw = (dir_ / "noise_33x33x33_float32.raw").string();
+  testing::write_values(raw, volume.values);
+  const ExtractOptions o = options_for(0, static_cast<int64_t>(extract(volume, options_for(0)).triangles.size()));
+  const Source alone = open_volume({raw, std::nullopt, std::nullopt});
+  alone.prepare({o});
+  EXPECT_FALSE(alone.info().hierarchy_built) << "alone, the budget is counted";
+  const auto built = on_ranks<bool>(2, [&](const Distribution& g) {
+    const Source source = open_volume({raw, std::nullopt, std::nullopt});
+    RunContext run;
+    run.distribution = &g;
+    source.prepare({o}, run);
+    return source.info().hierarchy_built;
+  });
+  for (const auto& b : built) {
+    ASSERT_FALSE(b.error);
+    EXPECT_TRUE(*b.value) << "spread, the budget's hierarchy is built by the prepare";
+  }
 }
 
 TEST_F(DistributedStore, ARankThatFailsStopsEveryRankAndLeavesNothing) {

@@ -11,7 +11,7 @@
 namespace isotope::tools {
 namespace {
 
-// The extraction options a client may set (docs/SERVE.md); the rest of isotope/extract.h's are the
+// The extraction options a client may set (docs/SERVE.md); the rest of ExtractOptions' are the
 // command line's.
 const std::set<std::string> kServedOptions = {"iso",   "eps",   "topology", "delta",         "weight",
                                               "error", "focus", "radius",   "max-triangles", "eps-ties"};
@@ -33,7 +33,7 @@ int64_t sequence_number(const std::string& text) {
 
 ServeRequest parse_extract_request(const std::multimap<std::string, std::string>& params) {
   // client and seq are the server's own; everything else is an extraction option, read by the
-  // parser every face shares (isotope/extract.h), whose message names the parameter.
+  // reader every face shares (option_text), whose message names the parameter.
   ServeRequest r;
   std::vector<std::pair<std::string, std::string>> options;
   std::optional<std::string> client, seq;

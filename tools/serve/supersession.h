@@ -1,6 +1,6 @@
 #pragma once
 // "A newer request from the same page supersedes an older one still running": each request of a
-// client holds a Ticket whose flag (an ExtractOptions::cancel) is raised as soon as a request of
+// client holds a Ticket whose flag (a RunContext::cancel) is raised as soon as a request of
 // the same client with a larger sequence number arrives, or at once if one already has. Requests
 // arrive on the server's threads in any order, so the numbers, not arrival, decide.
 #include <atomic>

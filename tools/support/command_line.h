@@ -18,11 +18,10 @@ class Validator;
 
 namespace isotope::tools {
 
-// A CLI11 check of one extraction option (--NAME) by the parser every face shares
-// (isotope/extract.h): a value out of range is a usage error at parse time, in the same words as
-// `isotope serve` uses.
+// A CLI11 check of one extraction option (--NAME) by the reader every face shares (option_text):
+// a value out of range is a usage error at parse time, in the same words as `isotope serve` uses.
 CLI::Validator extract_option_check(std::string name);
-// A CLI11 check of --threads by the library's parse_thread_count: the words the Python module uses.
+// A CLI11 check of --threads by parse_thread_count: the words the Python module uses.
 CLI::Validator thread_count_check();
 // parse_extract_options() with an OptionError turned into a usage error (exit 2) naming --OPTION.
 ExtractOptions parse_command_line_options(const std::vector<std::pair<std::string, std::string>>& given);

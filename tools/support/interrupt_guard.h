@@ -13,7 +13,7 @@ class InterruptGuard {
   InterruptGuard(const InterruptGuard&) = delete;
   InterruptGuard& operator=(const InterruptGuard&) = delete;
 
-  static const std::atomic<bool>& flag();  // e.g. ConvertOptions::cancel
+  static const std::atomic<bool>& flag();  // e.g. RunContext::cancel
   static bool interrupted() { return flag().load(); }
 
  private:
