@@ -61,7 +61,7 @@ ExtractOptions options_of(const GivenOptions& given) {
     names.insert(name);
     if (py::isinstance<py::str>(value)) {  // a name, or a number as a user types it ("1/64")
       const std::string text = value.cast<std::string>();
-      if (text.size() > 128) throw OptionError(name, "is too long");  // as the command's reader
+      if (text.size() > kMaxOptionTextChars) throw OptionError(name, "is too long");  // as the command's reader
       set_extract_option(o, name, std::string_view(text));
     } else if (name == "focus") {
       if (!py::isinstance<py::sequence>(value) || py::len(value) != 3)

@@ -11,7 +11,7 @@
 namespace isotope {
 namespace {
 
-constexpr size_t kMaxValueChars = 128;  // longer than any number or point a user types
+constexpr size_t kMaxValueChars = kMaxOptionTextChars;
 
 // A number's shortest exact form, which reads back as the same double.
 std::string shortest(double value) {

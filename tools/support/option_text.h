@@ -5,6 +5,7 @@
 // refuses in the same words (docs/DESIGN.md, "Seams"); the library checks the ranges again
 // (ExtractOptions::validate, RunContext::validate) for a host program that sets the fields itself.
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <set>
@@ -16,6 +17,10 @@
 #include "isotope/extract.h"
 
 namespace isotope {
+
+// The longest option text any face reads: longer than any number or point a user types. Longer
+// text "is too long" (parse_extract_options, and the Python module's text values).
+inline constexpr size_t kMaxOptionTextChars = 128;
 
 // A real number as a user types it: "0.25", "-3e-2", "+1" or a fraction "1/64"; nullopt otherwise.
 std::optional<double> parse_real(std::string_view text);
