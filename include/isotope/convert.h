@@ -37,6 +37,8 @@ struct ConvertStats {
   int64_t bricks = 0;
   int tiles_in_flight = 0;
   int bands_built_beside = 0;  // in one pass with the band before them, where their hand-over would have been a file
+  uint64_t input_held_bytes =
+      0;  // the input read once and held whole, where a quarter of the budget took it; 0: read by tiles
 };
 
 // Writes OUTPUT atomically (temporary name, renamed when complete): on any error or cancellation

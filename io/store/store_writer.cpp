@@ -24,6 +24,7 @@
 #include "io/file/shared_file.h"
 #include "io/store/handover_file.h"
 #include "io/store/store_format.h"
+#include "io/volume/held_box_reader.h"
 #include "io/volume/volume_box_reader.h"
 #include "isotope/error.h"
 
@@ -49,6 +50,7 @@ class QuantizingReader : public BoxReader {
   double max() const { return max_; }
   double scale() const { return scale_; }
   bool reads_box_alone() const override { return input_.reads_box_alone(); }
+  bool in_memory() const override { return input_.in_memory(); }
   void read_box(const Box3& lo, const Box3& size, float* out) const override {
     input_.read_box(lo, size, out);
     const int64_t n = size[0] * size[1] * size[2];
@@ -324,6 +326,7 @@ class Converter {
     stats.bricks = layout_.brick_count();
     stats.tiles_in_flight = built.tiles_in_flight;
     stats.bands_built_beside = built.bands_built_beside;
+    stats.input_held_bytes = input_held_bytes_;
     if (out_) stats.output_bytes = out_->size();  // this process wrote the store (alone, or rank 0)
     auto commit = [this] {
       if (out_) out_->commit();
@@ -339,7 +342,7 @@ class Converter {
  private:
   BandedBuildOptions build_options() {
     BandedBuildOptions build;
-    build.memory_bytes = static_cast<uint64_t>(options_.memory_mb) << 20;
+    build.memory_bytes = budget_bytes();
     // A stage gathers the reads of a group of tiles into one: worth it where a box costs more
     // than its bytes (strips or chunks decoded again for each tile). For raw data it saved only
     // part of the rows' gaps, and its groups ended in waits for their slowest tile: a 2048^3
@@ -363,7 +366,7 @@ class Converter {
     // does one that fits where its files find no room (a full disk, a file size limit): a volume
     // whose hand-overs fit the budget needs no room beside its output but the store's.
     build.make_handover = [this](const Box3& nodes, uint64_t held) -> std::unique_ptr<BandHandover> {
-      const bool fits = held <= static_cast<uint64_t>(options_.memory_mb) << 18;
+      const bool fits = held <= budget_bytes() / 4;
       if (!fits) return std::make_unique<ScratchHandover>(scratch_dir_, nodes);
       if (BandHandover::bytes(nodes) < kHandoverInMemoryBelow) return nullptr;
       try {
@@ -375,8 +378,10 @@ class Converter {
     };
     return build;
   }
-  ReadBox reader() const {
-    return [this](const Box3& lo, const Box3& size, float* out) { input_.read_box(lo, size, out); };
+  // The budget's bytes, less those of the input held whole (run_alone).
+  uint64_t budget_bytes() const { return (static_cast<uint64_t>(options_.memory_mb) << 20) - input_held_bytes_; }
+  static ReadBox reader(const BoxReader& input) {
+    return [&input](const Box3& lo, const Box3& size, float* out) { input.read_box(lo, size, out); };
   }
   // What a brick holds between its tile and its commit: at most its raw fields, 30 bytes a node.
   int64_t sink_brick_bytes() const { return layout_.brick_nodes() * 30; }
@@ -387,7 +392,18 @@ class Converter {
     const std::array<uint8_t, kHeaderBytes> blank{};
     out_->write(blank.data(), blank.size());
     FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_, sections_);
-    const BandedBuildStats built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build_options());
+    // A volume file that a quarter of the budget holds is read once and held (HeldBoxReader), the
+    // rest of the budget left to the build; the tiles' boxes, read each on its own, would copy
+    // most of the file out of the page cache several times (docs/METHOD.md, "The input held
+    // whole"). Not under a distribution, where each process reads only its share of the tiles.
+    std::optional<HeldBoxReader> held;
+    const uint64_t memory = static_cast<uint64_t>(options_.memory_mb) << 20;
+    if (input_.reads_box_alone() && !input_.in_memory() && HeldBoxReader::held_bytes(input_) <= memory / 4) {
+      held.emplace(input_);
+      input_held_bytes_ = HeldBoxReader::held_bytes(input_);
+    }
+    const BandedBuildStats built =
+        build_bands(layout_, reader(held ? *held : input_), sink, sink_brick_bytes(), build_options());
     finish(sink.entries(), built);
     return built;
   }
@@ -482,7 +498,7 @@ class Converter {
         BandedBuildStats built;
         auto run = [&](auto& sink) {
           if (pair) sink.release_to(&*held);
-          built = build_bands(layout_, reader(), sink, sink_brick_bytes(), build);
+          built = build_bands(layout_, reader(input_), sink, sink_brick_bytes(), build);
           for (int b = j; b <= top; ++b) take_band(sink.entries(), layout_.band(b), entries);
         };
         if (root) {
@@ -718,6 +734,7 @@ class Converter {
 
   std::unique_ptr<QuantizingReader> quantized_;
   const BoxReader& input_;
+  uint64_t input_held_bytes_ = 0;
   const ConvertCall options_;
   StoreLife life_;          // a distributed store is always kept
   StoreSections sections_;  // and holds all

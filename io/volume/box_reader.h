@@ -43,6 +43,8 @@ class BoxReader {
   // around it decoded again for each box (a TIFF stack's strips, an HDF5 dataset's chunks): a
   // convert gathers the boxes of neighbouring tiles into one read only where it does not.
   virtual bool reads_box_alone() const { return false; }
+  // Whether the values are in memory already (an array), so that holding a copy would gain nothing.
+  virtual bool in_memory() const { return false; }
   // The type read_box_stored reads values as, for a reader that can read them as the file stores
   // them, not converted: integers of one or two bytes of either byte order, in raw data (a raw
   // file's, a raw or inflated NRRD's, a contiguous HDF5 dataset's), an HDF5 dataset or a TIFF stack,

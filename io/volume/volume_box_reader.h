@@ -23,6 +23,7 @@ class VolumeBoxReader final : public BoxReader {
   }
 
   bool reads_box_alone() const override { return true; }
+  bool in_memory() const override { return true; }
   void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override {
     for (int a = 0; a < 3; ++a)
       if (lo[a] < 0 || size[a] < 0 || lo[a] + size[a] > volume_.dims[a]) throw InvalidInput("box outside the volume");

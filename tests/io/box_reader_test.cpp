@@ -27,6 +27,7 @@
 #include <thread>
 #include <vector>
 
+#include "io/volume/held_box_reader.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/error.h"
 #include "tests/support/byte_files.h"
@@ -697,6 +698,69 @@ TEST_F(BoxReaderTest, ConcurrentHdf5ReadsEqualSequentialReadsAlongsideReadVolume
   expect_concurrent_reads_match(*chunked, 4);
   expect_concurrent_reads_match(*shared, 3);
   whole.join();
+}
+
+// ---------------------------------------------------------------- the input held whole
+
+// Another reader, counting the values it is asked for, in either form.
+class CountingReader final : public BoxReader {
+ public:
+  explicit CountingReader(const BoxReader& input) : input_(input) { info_ = input.info(); }
+  void read_box(const Xyz& lo, const Xyz& size, float* out) const override {
+    nodes += size[0] * size[1] * size[2];
+    input_.read_box(lo, size, out);
+  }
+  bool reads_box_alone() const override { return input_.reads_box_alone(); }
+  std::optional<ScalarType> stored_type() const override { return input_.stored_type(); }
+  void read_box_stored(const Xyz& lo, const Xyz& size, unsigned char* out) const override {
+    nodes += size[0] * size[1] * size[2];
+    input_.read_box_stored(lo, size, out);
+  }
+  mutable std::atomic<int64_t> nodes{0};
+
+ private:
+  const BoxReader& input_;
+};
+
+TEST_F(BoxReaderTest, AHeldReaderGivesEveryBoxOfItsInputReadingEachValueOnce) {
+  // uint16 beyond a byte's range, so that a value decoded as the wrong type shows.
+  std::vector<uint16_t> u16(23 * 17 * 29);
+  for (size_t i = 0; i < u16.size(); ++i) u16[i] = static_cast<uint16_t>(i * 2654435761u >> 16);
+  const std::string wide = path("wide_23x17x29_uint16.raw");
+  write_file(wide, "", bytes_of(u16, std::endian::little));
+  std::vector<std::string> files = {wide};
+  for (const char* name : kSharedRaw) files.push_back((kData / name).string());
+  for (const std::string& file : files) {
+    SCOPED_TRACE(file);
+    const auto input = open_reader(file, dir_.string());
+    const CountingReader counted(*input);
+    const HeldBoxReader held(counted);
+    const Volume whole = read_volume({file, {}, {}});
+    // Integers of one or two bytes are held as the file stores them, the rest as float.
+    const uint64_t nodes = static_cast<uint64_t>(whole.node_count());
+    EXPECT_EQ(HeldBoxReader::held_bytes(*input),
+              nodes * (input->info().is_integer ? static_cast<uint64_t>(input->info().element_bytes) : 4));
+    EXPECT_TRUE(held.in_memory());
+    expect_concurrent_reads_match(held, 3);
+    expect_boxes_match(held, whole, 5);
+    EXPECT_EQ(counted.nodes.load(), whole.node_count());
+  }
+}
+
+TEST_F(BoxReaderTest, AHeldReaderFailsEveryBoxThatReachesAValueItsInputRefuses) {
+  std::vector<float> values(9 * 8 * 7, 1.5f);
+  values[(5 * 8 + 4) * 9 + 3] = std::numeric_limits<float>::quiet_NaN();  // (3, 4, 5)
+  const std::string raw = path("nan_9x8x7_float32.raw");
+  write_file(raw, "", bytes_of(values, std::endian::little));
+  const auto input = open_reader(raw, dir_.string());
+  const HeldBoxReader held(*input);
+  // Read once, its planes together: every box after them fails as the input's read failed.
+  for (int i = 0; i < 2; ++i) {
+    const std::string nan = io_error_of([&] { read(held, {{0, 0, 0}, {2, 2, 1}}); });
+    EXPECT_CONTAINS(nan, raw);
+    EXPECT_CONTAINS(nan, "(x,y,z) = (3,4,5)");
+  }
+  EXPECT_THROW(read(held, {{0, 0, 0}, {10, 1, 1}}), InvalidInput);
 }
 
 // ---------------------------------------------------------------- rejected values and boxes

@@ -32,6 +32,7 @@
 #include "io/store/store_reader.h"
 #include "io/store/store_writer.h"
 #include "io/volume/box_reader.h"
+#include "io/volume/held_box_reader.h"
 #include "io/volume/volume_box_reader.h"
 #include "isotope/convert.h"
 #include "isotope/error.h"
@@ -591,6 +592,30 @@ TEST_F(Store, FileDoesNotDependOnThreadsOrMemoryBudget) {
   EXPECT_FALSE(a.empty());
   EXPECT_TRUE(a == b);
   EXPECT_TRUE(a == c);
+}
+
+// A volume file that a quarter of the budget holds is read once and held (HeldBoxReader), a
+// larger one box by box: the same store, of float values and of integers held as stored.
+TEST_F(Store, AVolumeFileHeldWholeGivesTheStoreOfOneReadBoxByBox) {
+  const Volume v = testing::crop(generate_noise(70, 8), {70, 45, 39});
+  const std::string floats = path("noise_70x45x39_float32.raw");
+  std::ofstream(floats, std::ios::binary)
+      .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
+  for (const std::string& file : {floats, std::string(ISOTOPE_TEST_DATA) + "/bolt_70x123x66_uint8.raw"}) {
+    SCOPED_TRACE(file);
+    const auto input = open_box_reader({file, std::nullopt, std::nullopt}, dir_.string());
+    ConvertOptions small;
+    small.memory_mb = 1;  // a quarter of it under either volume's bytes
+    const ConvertStats held =
+        convert_to_store(*input, path("held.isotope"), ConvertCall(ConvertOptions{}, RunContext{}));
+    const ConvertStats boxes = convert_to_store(*input, path("boxes.isotope"), ConvertCall(small, RunContext{}));
+    EXPECT_EQ(held.input_held_bytes, HeldBoxReader::held_bytes(*input));
+    EXPECT_GT(held.input_held_bytes, 0u);
+    EXPECT_EQ(boxes.input_held_bytes, 0u);
+    const testing::Bytes a = read_bytes(path("held.isotope")), b = read_bytes(path("boxes.isotope"));
+    EXPECT_FALSE(a.empty());
+    EXPECT_TRUE(a == b);
+  }
 }
 
 // A hand-over in a file (scratch or shared) reads back what its tiles wrote, for any box: whole
