@@ -297,295 +297,387 @@ struct TileResult {
 
 }  // namespace banded_build_internal
 
-template <class Sink>
-BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sink& sink, int64_t sink_brick_bytes,
-                             const BandedBuildOptions& options) {
-  using namespace banded_build_internal;
-  using Payload = decltype(sink.process(0, Box3{}, std::declval<const BandTile&>()));
-  const int64_t threads = thread_count();
-  const auto budget = static_cast<int64_t>(options.memory_bytes / 4 * 3);
-  const bool may_fuse = options.fuse && options.first_tile == 0 && options.last_tile == SIZE_MAX;
-  // Band j+1's tiles are c/2 of its bricks a side: c even. Chosen here, fused passes only with
-  // tiles of kFusedSide nodes or more: the halo computed twice costs less than the hand-over's
-  // file (at 64^3, 15% more of band j's work; at 32^3, 31%).
-  // Whether a pass will be fused at all: band 0's hand-over, the largest, would be a file (each
-  // later one, with the one before it, is smaller than band 0's alone).
-  // The hand-over asked for is band 1's own, taken when band 0 hands over (handover_to, below).
-  bool fusing = may_fuse && options.first_band == 0 && layout.lattice().k >= 1 && options.make_handover;
-  std::unique_ptr<BandHandover> probe;
-  if (fusing) {
-    const Box3& nodes = layout.band(1).nodes;
-    probe = options.make_handover(nodes, BandHandover::bytes(nodes));
-    fusing = probe && !probe->fits_budget();
-  }
-  int64_t c = options.tile_bricks;
-  if (options.fuse_pair && (c <= 0 || c % 2 != 0 || options.last_band != options.first_band + 1))
-    throw std::logic_error("build_bands: a fused pair is two bands in tiles of an even number of bricks");
-  bool can_fuse = (fusing || options.fuse_pair) && c % 2 == 0;
-  int64_t plain_c = c;  // the tiles of a pass that is not fused
-  if (c <= 0) {
-    c = plain_c = tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes);
-    const int64_t fused = fusing ? fused_tile_bricks_for(layout, sink_brick_bytes, options.memory_bytes) : 0;
-    can_fuse = fused > 0;
-    if (can_fuse) c = fused;
-  }
-  const int in_flight =
-      static_cast<int>(std::clamp<int64_t>(budget / tile_bytes(layout, c, sink_brick_bytes, can_fuse), 1, 2 * threads));
-  const int first_band = options.first_band;
-  const int last_band = options.last_band < 0 ? layout.lattice().k : options.last_band;
-  const int k = layout.lattice().k;
-  const int64_t width = layout.brick_width();
+namespace banded_build_internal {
 
-  BandedBuildStats stats;
-  stats.tiles_in_flight = in_flight;
-  int64_t work = 0;
-  for (const Band& b : layout.bands()) {
-    if (b.scale < first_band || b.scale > last_band) continue;
-    const size_t tiles = tile_count(b, c);
-    const auto mine = static_cast<int64_t>(std::min(options.last_tile, tiles) - std::min(options.first_tile, tiles));
-    // Near enough: edge tiles are smaller.
-    work += b.nodes[0] * b.nodes[1] * b.nodes[2] / static_cast<int64_t>(tiles) * mine;
+// build_bands as named passes over the state they share: the tiles chosen and their slots
+// reserved once; then each band opened (its hand-over, fused with the band above or not, its
+// tiles), its groups of tiles staged, built and committed in order, and what they hand on written.
+template <class Sink>
+class BandedBuild {
+ public:
+  using Payload = decltype(std::declval<Sink&>().process(0, Box3{}, std::declval<const BandTile&>()));
+
+  BandedBuild(const StoreLayout& layout, const ReadBox& read, Sink& sink, int64_t sink_brick_bytes,
+              const BandedBuildOptions& options)
+      : layout_(layout),
+        read_(read),
+        sink_(sink),
+        sink_brick_bytes_(sink_brick_bytes),
+        options_(options),
+        threads_(thread_count()),
+        budget_(static_cast<int64_t>(options.memory_bytes / 4 * 3)),
+        first_band_(options.first_band),
+        last_band_(options.last_band < 0 ? layout.lattice().k : options.last_band),
+        k_(layout.lattice().k),
+        width_(layout.brick_width()) {}
+
+  BandedBuildStats run() {
+    choose_tiles();
+    reserve_slots();
+    in_ = first_band_ > 0 ? options_.handover_in : nullptr;
+    for (const Band& band : layout_.bands()) {
+      const int j = band.scale;
+      if (j < first_band_ || j > last_band_ || j == built_beside_) continue;
+      BandPass pass;
+      open_band(band, pass);
+      for (size_t group = 0; group < pass.tiles.size();) {
+        const size_t group_end = stage_group(pass, group);
+        build_group(pass, group, group_end);
+        hand_on_group(pass);
+        group = group_end;
+      }
+      close_band(pass);
+    }
+    return stats_;
   }
-  ProgressReporter progress(options.progress, work);
+
+ private:
+  // One band's pass.
+  struct BandPass {
+    const Band* band = nullptr;
+    int j = 0;
+    bool fuse = false;                         // band j+1 built beside band j
+    const Band* upper = nullptr;               // that band
+    BandHandover* next = nullptr;              // what the pass hands on (band j+1's, or fused j+2's)
+    std::unique_ptr<BandHandover> owned_next;  // that hand-over, where this build made it
+    int64_t c = 0, side = 0;                   // the band's tiles: c^3 bricks, side nodes
+    std::vector<Box3> tiles;                   // their coordinates, in Morton order
+    int64_t stage_side = 0;                    // tiles a side of a staged group; 0: no stage
+    std::vector<TileResult<Payload>> results;  // a slot's
+    std::future<void> writing;                 // a group's rows to `next`; waited for before the band's end
+  };
+
+  // The tile size, whether passes will fuse, and the tiles in flight. Band j+1's tiles are c/2 of
+  // its bricks a side: c even. Chosen here, fused passes only with tiles of kFusedSide nodes or
+  // more: the halo computed twice costs less than the hand-over's file (at 64^3, 15% more of band
+  // j's work; at 32^3, 31%). Whether a pass will be fused at all: band 0's hand-over, the largest,
+  // would be a file (each later one, with the one before it, is smaller than band 0's alone). The
+  // hand-over asked for is band 1's own, taken when band 0 hands over (handover_to, below).
+  void choose_tiles() {
+    const bool may_fuse = options_.fuse && options_.first_tile == 0 && options_.last_tile == SIZE_MAX;
+    bool fusing = may_fuse && options_.first_band == 0 && k_ >= 1 && options_.make_handover;
+    if (fusing) {
+      const Box3& nodes = layout_.band(1).nodes;
+      probe_ = options_.make_handover(nodes, BandHandover::bytes(nodes));
+      fusing = probe_ && !probe_->fits_budget();
+    }
+    c_ = options_.tile_bricks;
+    if (options_.fuse_pair && (c_ <= 0 || c_ % 2 != 0 || options_.last_band != options_.first_band + 1))
+      throw std::logic_error("build_bands: a fused pair is two bands in tiles of an even number of bricks");
+    can_fuse_ = (fusing || options_.fuse_pair) && c_ % 2 == 0;
+    plain_c_ = c_;
+    if (c_ <= 0) {
+      c_ = plain_c_ = tile_bricks_for(layout_, sink_brick_bytes_, options_.memory_bytes);
+      const int64_t fused = fusing ? fused_tile_bricks_for(layout_, sink_brick_bytes_, options_.memory_bytes) : 0;
+      can_fuse_ = fused > 0;
+      if (can_fuse_) c_ = fused;
+    }
+    in_flight_ = static_cast<int>(
+        std::clamp<int64_t>(budget_ / tile_bytes(layout_, c_, sink_brick_bytes_, can_fuse_), 1, 2 * threads_));
+    stats_.tiles_in_flight = in_flight_;
+    int64_t work = 0;
+    for (const Band& b : layout_.bands()) {
+      if (b.scale < first_band_ || b.scale > last_band_) continue;
+      const size_t tiles = tile_count(b, c_);
+      const auto mine =
+          static_cast<int64_t>(std::min(options_.last_tile, tiles) - std::min(options_.first_tile, tiles));
+      // Near enough: edge tiles are smaller.
+      work += b.nodes[0] * b.nodes[1] * b.nodes[2] / static_cast<int64_t>(tiles) * mine;
+    }
+    progress_.emplace(options_.progress, work);
+  }
+
   // Band 0 has the largest windows; reserved once for them, a slot's arrays never move again
   // (growing would copy them and fault in fresh pages for every larger tile at the volume's edges).
   // Reserved, not filled: a page is faulted in by the first tile that uses it, and band 0, which has
   // no children, leaves the children's untouched (a small volume's slots seldom hold a higher band).
-  auto reserved = [](const Box3& core, const Box3& grid) {
-    size_t nodes = 1, cells = 1;
-    for (int a = 0; a < 3; ++a) {
-      const auto w = static_cast<size_t>(std::min(core[a], grid[a]) + 4);
-      nodes *= w;
-      cells *= w - 1;
-    }
-    BandTile::Buffers b;
-    b.values.reserve(nodes);
-    b.records.reserve(nodes);
-    b.children.reserve(cells);
-    return b;
-  };
-  const int64_t widened = c * width + (can_fuse ? kFuseBelow + kFuseAbove : 0);
-  std::vector<BandTile::Buffers> buffers, upper_buffers;
-  std::vector<StagedBox> handed(can_fuse ? static_cast<size_t>(in_flight) : 0);  // band j to j+1, in a fused pass
-  for (int i = 0; i < in_flight; ++i) {
-    buffers.push_back(reserved({widened, widened, widened}, layout.band(0).nodes));
-    if (can_fuse && k > 0)
-      upper_buffers.push_back(
-          reserved({c * width / 2 + 1, c * width / 2 + 1, c * width / 2 + 1}, layout.band(1).nodes));
-  }
   // What the tiles in flight leave of the budget goes to the stage.
-  const int64_t tiles_held = in_flight * tile_bytes(layout, c, sink_brick_bytes, can_fuse);
-  const auto stage_room = static_cast<uint64_t>(std::max<int64_t>(0, budget - tiles_held));
-  StagedBox stage;
-  // Two: a group's rows are written on a thread of their own while the next group is built
-  // (the writes hold the file's lock, and would leave the other workers idle).
-  std::array<StagedNext, 2> staged_next;
-  size_t writing_to = 0;
-  std::vector<std::pair<Box3, Box3>> tile_boxes;  // a group's boxes of the band it hands on to
-  std::unique_ptr<BandHandover> owned_in;
-  const BandHandover* in = first_band > 0 ? options.handover_in : nullptr;
-  int built_beside = -1;  // the band built in the pass of the band before it
-  for (const Band& band : layout.bands()) {
-    const int j = band.scale;
-    if (j < first_band || j > last_band || j == built_beside) continue;
-    std::unique_ptr<BandHandover> owned_next;
-    // The hand-over band `to` reads: the one asked for after the last band, else as
-    // make_handover chooses (in memory by default).
-    auto handover_to = [&](int to) -> BandHandover* {
-      if (to - 1 == last_band && options.handover_out) return options.handover_out;
-      const Box3& nodes = layout.band(to).nodes;
-      const uint64_t held = BandHandover::bytes(nodes) + (in ? BandHandover::bytes(in->nodes()) : 0);
-      if (to == 1 && probe)
-        owned_next = std::move(probe);  // asked for with the same bytes held (band 0 reads none)
-      else if (options.make_handover)
-        owned_next = options.make_handover(nodes, held);
-      if (!owned_next) owned_next = std::make_unique<MemoryHandover>(nodes);
-      return owned_next.get();
+  void reserve_slots() {
+    auto reserved = [](const Box3& core, const Box3& grid) {
+      size_t nodes = 1, cells = 1;
+      for (int a = 0; a < 3; ++a) {
+        const auto w = static_cast<size_t>(std::min(core[a], grid[a]) + 4);
+        nodes *= w;
+        cells *= w - 1;
+      }
+      BandTile::Buffers b;
+      b.values.reserve(nodes);
+      b.records.reserve(nodes);
+      b.children.reserve(cells);
+      return b;
     };
-    // A fused pass: bands j and j+1, whose hand-over would have been a file (or a distributed
-    // convert's pair, whose hand-over would be shared: never made).
-    const bool pair = options.fuse_pair && j == first_band;
-    BandHandover* next = j < k && !pair ? handover_to(j + 1) : nullptr;
-    const bool fuse =
-        pair || (can_fuse && next && next == owned_next.get() && !next->fits_budget() && j + 1 <= last_band);
-    if (fuse) {
-      owned_next.reset();
-      next = j + 1 < k ? handover_to(j + 2) : nullptr;
-      built_beside = j + 1;
-      ++stats.bands_built_beside;
+    const int64_t widened = c_ * width_ + (can_fuse_ ? kFuseBelow + kFuseAbove : 0);
+    handed_.resize(can_fuse_ ? static_cast<size_t>(in_flight_) : 0);
+    for (int i = 0; i < in_flight_; ++i) {
+      buffers_.push_back(reserved({widened, widened, widened}, layout_.band(0).nodes));
+      if (can_fuse_ && k_ > 0)
+        upper_buffers_.push_back(
+            reserved({c_ * width_ / 2 + 1, c_ * width_ / 2 + 1, c_ * width_ / 2 + 1}, layout_.band(1).nodes));
     }
-    const Band* upper = fuse ? &layout.band(j + 1) : nullptr;
-    // Tiles of the chosen side (a fused pass's, or tiles counted by the caller), else the band's own.
-    const bool whole_band = options.tile_bricks <= 0 && options.first_tile == 0 && options.last_tile == SIZE_MAX;
-    const int64_t c_band = fuse || !whole_band ? c : band_tile_bricks(layout, band, std::min(c, plain_c));
-    const int64_t side = c_band * width;
-    std::vector<Box3> tile_coords = in_morton_order(tile_grid(band, c_band));
-    tile_coords = std::vector<Box3>(tile_coords.begin() + std::min(options.first_tile, tile_coords.size()),
-                                    tile_coords.begin() + std::min(options.last_tile, tile_coords.size()));
-    auto core_of = [&](const Box3& tc) {
-      Box3 lo, hi;
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = tc[a] * side;
-        hi[a] = std::min(lo[a] + side, band.nodes[a]);
-      }
-      return std::pair{lo, hi};
-    };
-    // Of a fused pass: the core band j's tile computes (its own widened by the halo band j+1's
-    // tile needs), and that tile's core (up to band j+1's last node at the grid's far faces).
-    auto widened_of = [&](const Box3& lo, const Box3& hi) {
-      Box3 wlo, whi;
-      for (int a = 0; a < 3; ++a) {
-        wlo[a] = std::max<int64_t>(0, lo[a] - kFuseBelow);
-        whi[a] = std::min(hi[a] + kFuseAbove, band.nodes[a]);
-      }
-      return std::pair{wlo, whi};
-    };
-    auto upper_of = [&](const Box3& lo, const Box3& hi) {
-      Box3 ulo, uhi;
-      for (int a = 0; a < 3; ++a) {
-        ulo[a] = lo[a] / 2;
-        uhi[a] = hi[a] == band.nodes[a] ? upper->nodes[a] : hi[a] / 2;
-      }
-      return std::pair{ulo, uhi};
-    };
-    // A group: the tiles of one aligned cube of s^3 tiles, which share a stage; without a stage,
-    // the band's tiles.
-    const bool costly = (in && !in->fits_budget()) || (next && !next->fits_budget());
-    const int64_t s = !options.staged || !costly ? 0
-                      : options.stage_tiles > 0  ? options.stage_tiles
-                                                 : stage_tiles_for(layout, j, c_band, stage_room, fuse);
-    std::vector<TileResult<Payload>> results(static_cast<size_t>(in_flight));
-    std::future<void> writing;  // a group's rows to `next`; waited for before this band's end
-    for (size_t group = 0; group < tile_coords.size();) {
-      // Without a stage, the whole band in one run: the tiles in flight are bounded by the
-      // commits (parallel_in_order_committed), and a run ended every few tiles would leave a
-      // thread idle at each end, waiting for the slowest tile of the run.
-      size_t group_end = tile_coords.size();
-      if (s > 0) {
-        group_end = group + 1;
-        auto cube = [s](const Box3& tc) { return Box3{tc[0] / s, tc[1] / s, tc[2] / s}; };
-        while (group_end < tile_coords.size() && cube(tile_coords[group_end]) == cube(tile_coords[group])) ++group_end;
-        Box3 lo{INT64_MAX, INT64_MAX, INT64_MAX}, hi{0, 0, 0}, next_lo = lo, next_hi = hi;
-        tile_boxes.clear();
-        for (size_t i = group; i < group_end; ++i) {
-          auto [core_lo, core_hi] = core_of(tile_coords[i]);
-          auto [nlo, nhi] = BandTile::next_of(layout, j, core_lo, core_hi);
-          if (fuse) {
-            const auto [ulo, uhi] = upper_of(core_lo, core_hi);
-            std::tie(nlo, nhi) = BandTile::next_of(layout, j + 1, ulo, uhi);
-            std::tie(core_lo, core_hi) = widened_of(core_lo, core_hi);
-          }
-          const auto [wlo, whi] = BandTile::window_of(layout, j, core_lo, core_hi);
-          tile_boxes.emplace_back(nlo, nhi);
-          for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], wlo[a]);
-            hi[a] = std::max(hi[a], whi[a]);
-            next_lo[a] = std::min(next_lo[a], nlo[a]);
-            next_hi[a] = std::max(next_hi[a], nhi[a]);
-          }
-        }
-        if (in)
-          stage.read_handover(lo, hi, *in);
-        else
-          stage.read_input(lo, hi, layout.dims(), read);
-        if (next) staged_next[writing_to].reset(next_lo, next_hi);
-      }
-      // Tiles built ahead of the commits by at most the tiles in flight, each in its slot; their
-      // bricks committed in the band's Morton order.
-      const auto slot_of = [&](int64_t i) {
-        return static_cast<size_t>(i - static_cast<int64_t>(group)) % results.size();
-      };
-      parallel_in_order_committed(
-          static_cast<int64_t>(group), static_cast<int64_t>(group_end), static_cast<int64_t>(results.size()),
-          [&](int64_t i) {
-            if (options.check_cancel) options.check_cancel();
-            const size_t slot = slot_of(i);
-            const Box3& tc = tile_coords[static_cast<size_t>(i)];
-            const auto [lo, hi] = core_of(tc);
-            const auto [clo, chi] = fuse ? widened_of(lo, hi) : std::pair{lo, hi};
-            TileResult<Payload> r;
-            BandTile tile(layout, j, clo, chi, std::move(buffers[slot]));
-            tile.count_only(lo, hi);
-            if (s > 0) {
-              stage.fill(tile);
-            } else {
-              if (in) {
-                fill_from_handover(tile, *in);
-              } else {
-                thread_local StagedBox own;  // the tile's window alone
-                own.read_input(tile.window_lo(), tile.window_hi(), layout.dims(), read);
-                own.fill(tile);
-              }
-            }
-            tile.build(r.counts, options.topology, options.weights);
-            if (j == 0) value_range(tile, layout, r.lo, r.hi);
-            // A tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
-            // the band's bricks are committed in Morton order whatever the tile size.
-            for (const Box3& l : in_morton_order({c_band, c_band, c_band})) {
-              const Box3 b{tc[0] * c_band + l[0], tc[1] * c_band + l[1], tc[2] * c_band + l[2]};
-              if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
-              r.bricks.emplace_back(b, sink.process(j, b, tile));
-            }
-            progress.advance((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
-            std::optional<BandTile> beside;  // band j+1's tile of a fused pass
-            if (fuse) {
-              const auto [ulo, uhi] = upper_of(lo, hi);
-              beside.emplace(layout, j + 1, ulo, uhi, std::move(upper_buffers[slot]));
-              handed[slot].take_next(tile, *beside);
-              handed[slot].fill(*beside);
-              beside->build(r.counts, options.topology, options.weights);
-              // Its bricks: those whose first node is in its core (at the far faces, beyond c/2).
-              Box3 first_brick, bricks;
-              for (int a = 0; a < 3; ++a) {
-                first_brick[a] = ulo[a] / width;
-                bricks[a] = (uhi[a] - 1) / width + 1 - first_brick[a];
-              }
-              for (const Box3& l : in_morton_order(bricks)) {
-                const Box3 b{first_brick[0] + l[0], first_brick[1] + l[1], first_brick[2] + l[2]};
-                r.held.emplace_back(b, sink.process(j + 1, b, *beside));
-              }
-              progress.advance((uhi[0] - ulo[0]) * (uhi[1] - ulo[1]) * (uhi[2] - ulo[2]));
-            }
-            const BandTile& handing = beside ? *beside : tile;  // what `next` reads: band j+1's (or j+2's) nodes
-            if (next && s > 0)
-              staged_next[writing_to].take(handing);
-            else if (next)
-              write_next(handing, *next);
-            buffers[slot] = tile.release();
-            if (beside) upper_buffers[slot] = beside->release();
-            results[slot] = std::move(r);
-          },
-          [&](int64_t i) {
-            TileResult<Payload>& r = results[slot_of(i)];
-            for (auto& [b, payload] : r.bricks) sink.commit(j, b, std::move(payload));
-            for (auto& [b, payload] : r.held) sink.hold(j + 1, b, std::move(payload));
-            r.bricks.clear();
-            r.held.clear();
-            for (int t = 0; t < 3; ++t) {
-              stats.critical[0][t] += r.counts[0][t];
-              stats.critical[1][t] += r.counts[1][t];
-            }
-            stats.lo = std::min(stats.lo, r.lo);
-            stats.hi = std::max(stats.hi, r.hi);
-          });
-      if (next && s > 0) {
-        if (writing.valid()) writing.get();  // rethrows what failed
-        if (threads > 1) {
-          writing = std::async(std::launch::async,
-                               [&, i = writing_to, boxes = tile_boxes] { staged_next[i].write(boxes, *next); });
-          writing_to ^= 1;
-        } else {
-          staged_next[writing_to].write(tile_boxes, *next);
-        }
-      }
-      group = group_end;
-    }
-    if (writing.valid()) writing.get();
-    if (fuse) sink.release();
-    owned_in = std::move(owned_next);
-    in = next;
+    const int64_t tiles_held = in_flight_ * tile_bytes(layout_, c_, sink_brick_bytes_, can_fuse_);
+    stage_room_ = static_cast<uint64_t>(std::max<int64_t>(0, budget_ - tiles_held));
   }
-  return stats;
+
+  // The hand-over band `to` reads: the one asked for after the last band, else as make_handover
+  // chooses (in memory by default).
+  BandHandover* handover_to(int to, BandPass& pass) {
+    if (to - 1 == last_band_ && options_.handover_out) return options_.handover_out;
+    const Box3& nodes = layout_.band(to).nodes;
+    const uint64_t held = BandHandover::bytes(nodes) + (in_ ? BandHandover::bytes(in_->nodes()) : 0);
+    if (to == 1 && probe_)
+      pass.owned_next = std::move(probe_);  // asked for with the same bytes held (band 0 reads none)
+    else if (options_.make_handover)
+      pass.owned_next = options_.make_handover(nodes, held);
+    if (!pass.owned_next) pass.owned_next = std::make_unique<MemoryHandover>(nodes);
+    return pass.owned_next.get();
+  }
+
+  // A fused pass: bands j and j+1, whose hand-over would have been a file (or a distributed
+  // convert's pair, whose hand-over would be shared: never made). Its tiles, of the chosen side (a
+  // fused pass's, or tiles counted by the caller), else the band's own; and its groups: the tiles
+  // of one aligned cube of s^3 tiles, which share a stage, where a hand-over in or out does not
+  // fit the budget; without a stage, the band's tiles.
+  void open_band(const Band& band, BandPass& pass) {
+    const int j = band.scale;
+    pass.band = &band;
+    pass.j = j;
+    const bool pair = options_.fuse_pair && j == first_band_;
+    pass.next = j < k_ && !pair ? handover_to(j + 1, pass) : nullptr;
+    pass.fuse = pair || (can_fuse_ && pass.next && pass.next == pass.owned_next.get() && !pass.next->fits_budget() &&
+                         j + 1 <= last_band_);
+    if (pass.fuse) {
+      pass.owned_next.reset();
+      pass.next = j + 1 < k_ ? handover_to(j + 2, pass) : nullptr;
+      built_beside_ = j + 1;
+      ++stats_.bands_built_beside;
+    }
+    pass.upper = pass.fuse ? &layout_.band(j + 1) : nullptr;
+    const bool whole_band = options_.tile_bricks <= 0 && options_.first_tile == 0 && options_.last_tile == SIZE_MAX;
+    pass.c = pass.fuse || !whole_band ? c_ : band_tile_bricks(layout_, band, std::min(c_, plain_c_));
+    pass.side = pass.c * width_;
+    const std::vector<Box3> all = in_morton_order(tile_grid(band, pass.c));
+    pass.tiles = std::vector<Box3>(all.begin() + std::min(options_.first_tile, all.size()),
+                                   all.begin() + std::min(options_.last_tile, all.size()));
+    const bool costly = (in_ && !in_->fits_budget()) || (pass.next && !pass.next->fits_budget());
+    pass.stage_side = !options_.staged || !costly ? 0
+                      : options_.stage_tiles > 0  ? options_.stage_tiles
+                                                  : stage_tiles_for(layout_, j, pass.c, stage_room_, pass.fuse);
+    pass.results.resize(static_cast<size_t>(in_flight_));
+  }
+
+  // A tile's core in band j's grid.
+  std::pair<Box3, Box3> core_of(const BandPass& pass, const Box3& tc) const {
+    Box3 lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = tc[a] * pass.side;
+      hi[a] = std::min(lo[a] + pass.side, pass.band->nodes[a]);
+    }
+    return {lo, hi};
+  }
+  // Of a fused pass: the core band j's tile computes (its own widened by the halo band j+1's
+  // tile needs), and that tile's core (up to band j+1's last node at the grid's far faces).
+  std::pair<Box3, Box3> widened_of(const BandPass& pass, const Box3& lo, const Box3& hi) const {
+    Box3 wlo, whi;
+    for (int a = 0; a < 3; ++a) {
+      wlo[a] = std::max<int64_t>(0, lo[a] - kFuseBelow);
+      whi[a] = std::min(hi[a] + kFuseAbove, pass.band->nodes[a]);
+    }
+    return {wlo, whi};
+  }
+  std::pair<Box3, Box3> upper_of(const BandPass& pass, const Box3& lo, const Box3& hi) const {
+    Box3 ulo, uhi;
+    for (int a = 0; a < 3; ++a) {
+      ulo[a] = lo[a] / 2;
+      uhi[a] = hi[a] == pass.band->nodes[a] ? pass.upper->nodes[a] : hi[a] / 2;
+    }
+    return {ulo, uhi};
+  }
+
+  // The group from tile `group` on: with a stage, the tiles of its aligned cube, their windows
+  // read into the stage at once, and what they hand on gathered; without one, the whole band in
+  // one run: the tiles in flight are bounded by the commits (parallel_in_order_committed), and a
+  // run ended every few tiles would leave a thread idle at each end, waiting for the slowest tile
+  // of the run. Returns the group's end.
+  size_t stage_group(BandPass& pass, size_t group) {
+    const int64_t s = pass.stage_side;
+    if (s == 0) return pass.tiles.size();
+    size_t group_end = group + 1;
+    auto cube = [s](const Box3& tc) { return Box3{tc[0] / s, tc[1] / s, tc[2] / s}; };
+    while (group_end < pass.tiles.size() && cube(pass.tiles[group_end]) == cube(pass.tiles[group])) ++group_end;
+    Box3 lo{INT64_MAX, INT64_MAX, INT64_MAX}, hi{0, 0, 0}, next_lo = lo, next_hi = hi;
+    tile_boxes_.clear();
+    for (size_t i = group; i < group_end; ++i) {
+      auto [core_lo, core_hi] = core_of(pass, pass.tiles[i]);
+      auto [nlo, nhi] = BandTile::next_of(layout_, pass.j, core_lo, core_hi);
+      if (pass.fuse) {
+        const auto [ulo, uhi] = upper_of(pass, core_lo, core_hi);
+        std::tie(nlo, nhi) = BandTile::next_of(layout_, pass.j + 1, ulo, uhi);
+        std::tie(core_lo, core_hi) = widened_of(pass, core_lo, core_hi);
+      }
+      const auto [wlo, whi] = BandTile::window_of(layout_, pass.j, core_lo, core_hi);
+      tile_boxes_.emplace_back(nlo, nhi);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], wlo[a]);
+        hi[a] = std::max(hi[a], whi[a]);
+        next_lo[a] = std::min(next_lo[a], nlo[a]);
+        next_hi[a] = std::max(next_hi[a], nhi[a]);
+      }
+    }
+    if (in_)
+      stage_.read_handover(lo, hi, *in_);
+    else
+      stage_.read_input(lo, hi, layout_.dims(), read_);
+    if (pass.next) staged_next_[writing_to_].reset(next_lo, next_hi);
+    return group_end;
+  }
+
+  // Tiles built ahead of the commits by at most the tiles in flight, each in its slot; their
+  // bricks committed in the band's Morton order.
+  void build_group(BandPass& pass, size_t group, size_t group_end) {
+    const auto slot_of = [&](int64_t i) {
+      return static_cast<size_t>(i - static_cast<int64_t>(group)) % pass.results.size();
+    };
+    parallel_in_order_committed(
+        static_cast<int64_t>(group), static_cast<int64_t>(group_end), static_cast<int64_t>(pass.results.size()),
+        [&](int64_t i) { build_tile(pass, pass.tiles[static_cast<size_t>(i)], slot_of(i)); },
+        [&](int64_t i) { commit_tile(pass, pass.results[slot_of(i)]); });
+  }
+
+  void build_tile(BandPass& pass, const Box3& tc, size_t slot) {
+    if (options_.check_cancel) options_.check_cancel();
+    const int j = pass.j;
+    const Band& band = *pass.band;
+    const auto [lo, hi] = core_of(pass, tc);
+    const auto [clo, chi] = pass.fuse ? widened_of(pass, lo, hi) : std::pair{lo, hi};
+    TileResult<Payload> r;
+    BandTile tile(layout_, j, clo, chi, std::move(buffers_[slot]));
+    tile.count_only(lo, hi);
+    if (pass.stage_side > 0) {
+      stage_.fill(tile);
+    } else if (in_) {
+      fill_from_handover(tile, *in_);
+    } else {
+      thread_local StagedBox own;  // the tile's window alone
+      own.read_input(tile.window_lo(), tile.window_hi(), layout_.dims(), read_);
+      own.fill(tile);
+    }
+    tile.build(r.counts, options_.topology, options_.weights);
+    if (j == 0) value_range(tile, layout_, r.lo, r.hi);
+    // A tile's bricks in Morton order: with aligned power-of-two tiles taken in Morton order,
+    // the band's bricks are committed in Morton order whatever the tile size.
+    for (const Box3& l : in_morton_order({pass.c, pass.c, pass.c})) {
+      const Box3 b{tc[0] * pass.c + l[0], tc[1] * pass.c + l[1], tc[2] * pass.c + l[2]};
+      if (b[0] >= band.bricks[0] || b[1] >= band.bricks[1] || b[2] >= band.bricks[2]) continue;
+      r.bricks.emplace_back(b, sink_.process(j, b, tile));
+    }
+    progress_->advance((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+    std::optional<BandTile> beside;  // band j+1's tile of a fused pass
+    if (pass.fuse) {
+      const auto [ulo, uhi] = upper_of(pass, lo, hi);
+      beside.emplace(layout_, j + 1, ulo, uhi, std::move(upper_buffers_[slot]));
+      handed_[slot].take_next(tile, *beside);
+      handed_[slot].fill(*beside);
+      beside->build(r.counts, options_.topology, options_.weights);
+      // Its bricks: those whose first node is in its core (at the far faces, beyond c/2).
+      Box3 first_brick, bricks;
+      for (int a = 0; a < 3; ++a) {
+        first_brick[a] = ulo[a] / width_;
+        bricks[a] = (uhi[a] - 1) / width_ + 1 - first_brick[a];
+      }
+      for (const Box3& l : in_morton_order(bricks)) {
+        const Box3 b{first_brick[0] + l[0], first_brick[1] + l[1], first_brick[2] + l[2]};
+        r.held.emplace_back(b, sink_.process(j + 1, b, *beside));
+      }
+      progress_->advance((uhi[0] - ulo[0]) * (uhi[1] - ulo[1]) * (uhi[2] - ulo[2]));
+    }
+    const BandTile& handing = beside ? *beside : tile;  // what `next` reads: band j+1's (or j+2's) nodes
+    if (pass.next && pass.stage_side > 0)
+      staged_next_[writing_to_].take(handing);
+    else if (pass.next)
+      write_next(handing, *pass.next);
+    buffers_[slot] = tile.release();
+    if (beside) upper_buffers_[slot] = beside->release();
+    pass.results[slot] = std::move(r);
+  }
+
+  void commit_tile(const BandPass& pass, TileResult<Payload>& r) {
+    for (auto& [b, payload] : r.bricks) sink_.commit(pass.j, b, std::move(payload));
+    for (auto& [b, payload] : r.held) sink_.hold(pass.j + 1, b, std::move(payload));
+    r.bricks.clear();
+    r.held.clear();
+    for (int t = 0; t < 3; ++t) {
+      stats_.critical[0][t] += r.counts[0][t];
+      stats_.critical[1][t] += r.counts[1][t];
+    }
+    stats_.lo = std::min(stats_.lo, r.lo);
+    stats_.hi = std::max(stats_.hi, r.hi);
+  }
+
+  // A staged group's rows, written on a thread of their own while the next group is built (the
+  // writes hold the file's lock, and would leave the other workers idle).
+  void hand_on_group(BandPass& pass) {
+    if (!pass.next || pass.stage_side == 0) return;
+    if (pass.writing.valid()) pass.writing.get();  // rethrows what failed
+    if (threads_ > 1) {
+      pass.writing = std::async(std::launch::async, [this, next = pass.next, i = writing_to_, boxes = tile_boxes_] {
+        staged_next_[i].write(boxes, *next);
+      });
+      writing_to_ ^= 1;
+    } else {
+      staged_next_[writing_to_].write(tile_boxes_, *pass.next);
+    }
+  }
+
+  void close_band(BandPass& pass) {
+    if (pass.writing.valid()) pass.writing.get();
+    if (pass.fuse) sink_.release();
+    owned_in_ = std::move(pass.owned_next);
+    in_ = pass.next;
+  }
+
+  const StoreLayout& layout_;
+  const ReadBox& read_;
+  Sink& sink_;
+  const int64_t sink_brick_bytes_;
+  const BandedBuildOptions& options_;
+  const int64_t threads_, budget_;
+  const int first_band_, last_band_, k_;
+  const int64_t width_;
+  std::optional<ProgressReporter> progress_;
+  std::unique_ptr<BandHandover> probe_;  // band 1's hand-over, asked for to learn whether passes fuse
+  int64_t c_ = 0, plain_c_ = 0;          // the tiles of a fused pass, and of one that is not
+  bool can_fuse_ = false;
+  int in_flight_ = 1;
+  BandedBuildStats stats_;
+  std::vector<BandTile::Buffers> buffers_, upper_buffers_;  // a slot's tile's, and its band j+1 tile's
+  std::vector<StagedBox> handed_;                           // band j to j+1, in a fused pass
+  uint64_t stage_room_ = 0;
+  StagedBox stage_;
+  // Two: a group's rows are written on a thread of their own while the next group is built.
+  std::array<StagedNext, 2> staged_next_;
+  size_t writing_to_ = 0;
+  std::vector<std::pair<Box3, Box3>> tile_boxes_;  // a group's boxes of the band it hands on to
+  std::unique_ptr<BandHandover> owned_in_;
+  const BandHandover* in_ = nullptr;
+  int built_beside_ = -1;  // the band built in the pass of the band before it
+};
+
+}  // namespace banded_build_internal
+
+template <class Sink>
+BandedBuildStats build_bands(const StoreLayout& layout, const ReadBox& read, Sink& sink, int64_t sink_brick_bytes,
+                             const BandedBuildOptions& options) {
+  return banded_build_internal::BandedBuild<Sink>(layout, read, sink, sink_brick_bytes, options).run();
 }
 
 }  // namespace isotope

@@ -426,232 +426,293 @@ class Converter {
   // and rank 0's temporary files are removed as it unwinds. Coarse bands with fewer tiles than
   // ranks leave some ranks idle; the last bands are a few bricks.
   BandedBuildStats run_shared(const Distribution& group) {
-    const bool root = group.rank() == 0;
-    const auto r = static_cast<size_t>(group.rank());
+    SharedRun run(group);
+    begin_shared(run);  // 1
+    for (int j = 0; j <= layout_.lattice().k;) {
+      SharedPass pass;
+      open_pass(run, j, pass);
+      const BandShare share = build_share(run, pass);  // 2
+      place_share(run, pass, share);                   // 3
+      if (pass.pair) place_top_runs(run, pass);
+      copy_into_place(run, pass);
+      gather_entries(run, pass);
+      run.end += pass.band_bytes + pass.top_bytes;
+      run.in = std::move(pass.next);  // band top's hand-over, read by band top + 1 (rank 0's removes its file)
+      j = pass.top + 1;
+    }
+    settle_together(group, [&] {  // 4
+      if (!run.root) return;
+      out_->continue_at(run.end);
+      finish(run.entries, run.stats);
+      out_->finish();
+    });
+    return run.stats;
+  }
+
+  // What the passes of a distributed convert share.
+  struct SharedRun {
+    explicit SharedRun(const Distribution& g) : group(g), root(g.rank() == 0), r(static_cast<size_t>(g.rank())) {}
+    const Distribution& group;
+    bool root;
+    size_t r;                        // this rank
+    int64_t c = 0;                   // tiles of c^3 bricks, the same on every rank
+    bool pairs = false;              // bands two to a pass (BandedBuildOptions::fuse_pair)
+    std::string temp_path;           // rank 0's temporary output
+    std::optional<SharedFile> temp;  // that file, as the other ranks write into it
+    BandedBuildStats stats;
+    std::vector<BrickEntry> entries;  // every brick's, once placed
+    uint64_t end = kHeaderBytes;      // where the next band's bricks begin
+    std::unique_ptr<SharedHandover> in;
+  };
+  // One pass: band j, or bands j and top = j + 1.
+  struct SharedPass {
+    int j = 0, top = 0;
+    bool pair = false, last = false;
+    std::unique_ptr<SharedHandover> next;  // the hand-over to band top + 1
+    std::optional<ScratchOut> scratch;     // a rank > 0's bricks of band j
+    std::optional<ScratchOut> held;        // a pair's band top, in Morton order
+    uint64_t offset = 0;                   // where this rank's run of band j goes
+    uint64_t band_bytes = 0, top_bytes = 0;
+    std::vector<TopRun> top_mine;  // this rank's runs of band top, in file (Morton) order
+  };
+
+  // Rank 0 creates the output's temporary file; the ranks agree on the tile size (the smallest
+  // any of them would choose), so that the tiles are the same on all, and on whether bands go two
+  // to a pass: under mpirun every hand-over is a shared file, and a pair's is never made.
+  void begin_shared(SharedRun& run) {
+    const Distribution& group = run.group;
     settle_together(group, [&] {
-      if (!root) return;
+      if (!run.root) return;
       out_.emplace(output_);
       const std::array<uint8_t, kHeaderBytes> blank{};
       out_->write(blank.data(), blank.size());
       out_->continue_at(kHeaderBytes);  // flushed: the file exists with its header's room
     });
     ByteWriter mine;
-    // The tiles every rank can build, and whether bands go two to a pass (BandedBuildOptions::
-    // fuse_pair): under mpirun every hand-over is a shared file, and a pair's is never made.
     const uint64_t memory = static_cast<uint64_t>(options_.memory_mb) << 20;
     mine.put(fused_tile_bricks_for(layout_, sink_brick_bytes(), memory));
     mine.put(tile_bricks_for(layout_, sink_brick_bytes(), memory));
-    mine.put_array(root ? out_->temp_path() : std::string());
+    mine.put_array(run.root ? out_->temp_path() : std::string());
     int64_t fused = INT64_MAX, c = INT64_MAX;
-    std::string temp_path;
     for (const std::vector<uint8_t>& bytes : group.all_gather(mine.bytes())) {
       ByteReader rd(bytes);
       fused = std::min(fused, rd.get<int64_t>());  // 0 where a rank cannot fuse
       c = std::min(c, rd.get<int64_t>());
       std::string path;
       rd.get_array(path);
-      if (!path.empty()) temp_path = path;
+      if (!path.empty()) run.temp_path = path;
     }
-    const bool pairs = fused > 0;
-    if (pairs) c = fused;
-    std::optional<SharedFile> temp;
+    run.pairs = fused > 0;
+    run.c = run.pairs ? fused : c;
     settle_together(group, [&] {
-      if (!root) temp.emplace(temp_path, SharedFile::Mode::open);
+      if (!run.root) run.temp.emplace(run.temp_path, SharedFile::Mode::open);
     });
+    run.entries.resize(static_cast<size_t>(layout_.brick_count()));
+  }
 
-    BandedBuildStats stats;
-    std::vector<BrickEntry> entries(static_cast<size_t>(layout_.brick_count()));
-    uint64_t end = kHeaderBytes;  // where the next band's bricks begin
-    std::unique_ptr<SharedHandover> in;
-    const int k = layout_.lattice().k;
-    for (int j = 0; j <= k;) {
-      const Band& band = layout_.band(j);
-      const bool pair = pairs && j + 1 <= k;
-      const int top = pair ? j + 1 : j;  // the last band of this pass
-      const bool last = top == k;
-      // The hand-over to band top + 1: created by rank 0, opened by the others once it exists.
-      std::unique_ptr<SharedHandover> next;
-      const std::string next_path = temp_path + ".band" + std::to_string(top + 1);
-      settle_together(group, [&] {
-        if (root && !last)
-          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::create, layout_.band(top + 1).nodes);
-      });
-      const std::vector<size_t> shares = share_by_cost(tile_costs(layout_, band, c), group.ranks());
-      std::optional<ScratchOut> scratch, held;  // held: a pair's band top, in Morton order
-      BandShare share;
-      settle_together(group, [&] {
-        if (!root && !last)
-          next = std::make_unique<SharedHandover>(next_path, SharedFile::Mode::open, layout_.band(top + 1).nodes);
-        BandedBuildOptions build = build_options();
-        if (j > 0)
-          build.progress =
-              nullptr;  // band 0's pass is 7/8 of the work (with band 1, 63/64): its progress is the convert's
-        build.first_band = j;
-        build.last_band = top;
-        build.fuse_pair = pair;
-        build.first_tile = shares[r];
-        build.last_tile = shares[r + 1];
-        build.tile_bricks = c;
-        build.handover_in = in.get();
-        build.handover_out = next.get();
-        if (pair) held.emplace(scratch_dir_);
-        BandedBuildStats built;
-        auto run = [&](auto& sink) {
-          if (pair) sink.release_to(&*held);
-          built = build_bands(layout_, reader(input_), sink, sink_brick_bytes(), build);
-          for (int b = j; b <= top; ++b) take_band(sink.entries(), layout_.band(b), entries);
-        };
-        if (root) {
-          out_->continue_at(end);
-          FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_, sections_);
-          run(sink);
-          share.bytes = out_->size() - end;
-        } else {
-          scratch.emplace(scratch_dir_);
-          FileSink<ScratchOut> sink(layout_, *scratch, options_.zstd_level, scratch_dir_, sections_);
-          run(sink);
-          share.bytes = scratch->size();
-        }
-        for (int m = 0; m < 2; ++m)
-          for (int t = 0; t < 3; ++t) share.critical[m][t] = built.critical[m][t];
-        share.lo = built.lo;
-        share.hi = built.hi;
-        stats.tiles_in_flight = std::max(stats.tiles_in_flight, built.tiles_in_flight);
-        stats.bands_built_beside += built.bands_built_beside;
-      });
-      // The exclusive scan of the runs' sizes, and the totals of what the band counted.
-      ByteWriter told;
-      told.put(share);
-      uint64_t offset = end, band_bytes = 0;
-      const std::vector<std::vector<uint8_t>> all = group.all_gather(told.bytes());
-      for (size_t i = 0; i < all.size(); ++i) {
-        ByteReader rd(all[i]);
-        const auto s = rd.get<BandShare>();
-        if (i < r) offset += s.bytes;
-        band_bytes += s.bytes;
-        for (int m = 0; m < 2; ++m)
-          for (int t = 0; t < 3; ++t) stats.critical[m][t] += s.critical[m][t];
-        stats.lo = std::min(stats.lo, s.lo);
-        stats.hi = std::max(stats.hi, s.hi);
-      }
-      // A pair's band top follows band j. A rank's bricks of it are not one run of the file
-      // (those at the grid's far faces come with the tiles before them): the ranks tell each
-      // other their runs of consecutive Morton codes and each run's bytes (a run for each part of
-      // a rank's tiles, and one for each brick at the grid's far faces), and so each learns where
-      // its own go.
-      std::vector<TopRun> top_mine;  // this rank's runs of band top, in file (Morton) order
-      uint64_t top_bytes = 0;
-      ByteWriter told_runs;
-      if (pair)
-        settle_together(group, [&] {
-          const Band& up = layout_.band(top);
-          std::vector<std::pair<uint64_t, int64_t>> mine_top;  // Morton code, directory index
-          for (int64_t i = up.first_brick; i < up.first_brick + up.brick_count(); ++i) {
-            if (entries[static_cast<size_t>(i)].total() == 0) continue;  // not this rank's
-            const Box3 b = StoreLayout::brick_of(up, i);
-            mine_top.push_back(
-                {morton_encode(static_cast<uint64_t>(b[0]), static_cast<uint64_t>(b[1]), static_cast<uint64_t>(b[2])),
-                 i});
-          }
-          std::sort(mine_top.begin(), mine_top.end());
-          std::vector<BrickRun> runs;
-          for (const auto& [code, i] : mine_top) {
-            const BrickEntry& e = entries[static_cast<size_t>(i)];
-            if (top_mine.empty() || code != top_mine.back().run.code + top_mine.back().run.count)
-              top_mine.push_back({{code, 0, 0}, e.offset, 0, {}});
-            TopRun& t = top_mine.back();
-            ++t.run.count;
-            t.run.bytes += e.total();
-            t.bricks.push_back(i);
-          }
-          for (const TopRun& t : top_mine) runs.push_back(t.run);
-          told_runs.put_array(runs);
-        });
-      std::vector<std::vector<uint8_t>> all_runs;
-      if (pair) all_runs = group.all_gather(told_runs.bytes());
-      if (pair)
-        settle_together(group, [&] {
-          std::vector<std::pair<BrickRun, size_t>> every;  // a run, and its rank
-          for (size_t rank = 0; rank < all_runs.size(); ++rank) {
-            ByteReader rd(all_runs[rank]);
-            std::vector<BrickRun> theirs;
-            rd.get_array(theirs);
-            for (const BrickRun& run : theirs) every.push_back({run, rank});
-          }
-          std::sort(every.begin(), every.end(),
-                    [](const auto& u, const auto& v) { return u.first.code < v.first.code; });
-          uint64_t at = end + band_bytes;
-          int64_t bricks = 0;
-          size_t n = 0;  // this rank's runs met so far, in order
-          for (const auto& [run, rank] : every) {
-            if (rank == r) top_mine[n++].to = at;
-            at += run.bytes;
-            bricks += static_cast<int64_t>(run.count);
-          }
-          if (bricks != layout_.band(top).brick_count())
-            throw IoError(output_ + ": the ranks' band " + std::to_string(top) + " holds " + std::to_string(bricks) +
-                          " bricks, not " + std::to_string(layout_.band(top).brick_count()));
-          top_bytes = at - (end + band_bytes);
-        });
-      // Ranks > 0 copy their run into place, every rank its runs of a pair's band top, then every
-      // rank tells rank 0 where its bricks are.
-      ByteWriter placed;
-      settle_together(group, [&] {
-        std::vector<PlacedEntry> run, run_top;
-        for (int64_t i = band.first_brick; i < band.first_brick + band.brick_count(); ++i) {
-          BrickEntry& e = entries[static_cast<size_t>(i)];
-          if (e.total() == 0) continue;   // not this rank's
-          if (!root) e.offset += offset;  // was relative to the rank's scratch file
-          run.push_back({i, e});
-        }
-        if (pair) {
-          std::optional<SharedFile> own;  // rank 0's file, written where its appends do not reach
-          if (root) own.emplace(out_->temp_path(), SharedFile::Mode::open);
-          for (const TopRun& t : top_mine) {
-            uint64_t at = t.to;
-            for (const int64_t i : t.bricks) {
-              BrickEntry& e = entries[static_cast<size_t>(i)];
-              e.offset = at;
-              at += e.total();
-              run_top.push_back({i, e});
-            }
-            held->copy_to(t.from, t.run.bytes, root ? *own : *temp, t.to);  // one after the other in `held` too
-          }
-        }
-        if (!root) {
-          // Its bricks are durable when rank 0 commits the store (rank 0's fsync covers only its own
-          // node's writes). The hand-over is not synced: a POSIX-coherent file system (Lustre,
-          // GPFS, BeeGFS, or one node's) shows other ranks its rows without (docs/DISTRIBUTED.md).
-          scratch->copy_to(*temp, offset);
-          temp->sync();
-        }
-        placed.put_array(run);
-        placed.put_array(run_top);
-      });
-      std::vector<std::vector<uint8_t>> where;
-      settle_together(group, [&] { where = group.gather(placed.bytes()); });  // rank 0 may run out of memory receiving
-      settle_together(group, [&] {
-        if (!root) return;
-        std::vector<std::vector<PlacedEntry>> runs(where.size()), runs_top(where.size());
-        for (size_t i = 0; i < where.size(); ++i) {
-          ByteReader rd(where[i]);
-          rd.get_array(runs[i]);
-          rd.get_array(runs_top[i]);
-        }
-        place_band(runs, band, entries);
-        if (pair) place_band(runs_top, layout_.band(top), entries);
-      });
-      end += band_bytes + top_bytes;
-      in = std::move(next);  // band top's hand-over, read by band top + 1 (rank 0's removes its file)
-      j = top + 1;
-    }
-    settle_together(group, [&] {
-      if (!root) return;
-      out_->continue_at(end);
-      finish(entries, stats);
-      out_->finish();
+  // The pass from band j, and its hand-over to band top + 1: created by rank 0, opened by the
+  // others once it exists (build_share).
+  void open_pass(const SharedRun& run, int j, SharedPass& pass) {
+    pass.j = j;
+    pass.pair = run.pairs && j + 1 <= layout_.lattice().k;
+    pass.top = pass.pair ? j + 1 : j;  // the last band of this pass
+    pass.last = pass.top == layout_.lattice().k;
+    settle_together(run.group, [&] {
+      if (run.root && !pass.last)
+        pass.next = std::make_unique<SharedHandover>(next_handover_path(run, pass), SharedFile::Mode::create,
+                                                     layout_.band(pass.top + 1).nodes);
     });
-    return stats;
+  }
+  std::string next_handover_path(const SharedRun& run, const SharedPass& pass) const {
+    return run.temp_path + ".band" + std::to_string(pass.top + 1);
+  }
+
+  // This rank's contiguous run of the band's tiles in Morton order (about equal in nodes across
+  // the ranks, tile_costs), built: rank 0 appends its bricks to the file, every other rank to a
+  // scratch file of its own; a pair's band top goes to another scratch file; all write their
+  // tiles' rows of the hand-over.
+  BandShare build_share(SharedRun& run, SharedPass& pass) {
+    const Band& band = layout_.band(pass.j);
+    const std::vector<size_t> shares = share_by_cost(tile_costs(layout_, band, run.c), run.group.ranks());
+    BandShare share;
+    settle_together(run.group, [&] {
+      if (!run.root && !pass.last)
+        pass.next = std::make_unique<SharedHandover>(next_handover_path(run, pass), SharedFile::Mode::open,
+                                                     layout_.band(pass.top + 1).nodes);
+      BandedBuildOptions build = build_options();
+      if (pass.j > 0)
+        build.progress =
+            nullptr;  // band 0's pass is 7/8 of the work (with band 1, 63/64): its progress is the convert's
+      build.first_band = pass.j;
+      build.last_band = pass.top;
+      build.fuse_pair = pass.pair;
+      build.first_tile = shares[run.r];
+      build.last_tile = shares[run.r + 1];
+      build.tile_bricks = run.c;
+      build.handover_in = run.in.get();
+      build.handover_out = pass.next.get();
+      if (pass.pair) pass.held.emplace(scratch_dir_);
+      BandedBuildStats built;
+      auto build_into = [&](auto& sink) {
+        if (pass.pair) sink.release_to(&*pass.held);
+        built = build_bands(layout_, reader(input_), sink, sink_brick_bytes(), build);
+        for (int b = pass.j; b <= pass.top; ++b) take_band(sink.entries(), layout_.band(b), run.entries);
+      };
+      if (run.root) {
+        out_->continue_at(run.end);
+        FileSink<AtomicFile> sink(layout_, *out_, options_.zstd_level, scratch_dir_, sections_);
+        build_into(sink);
+        share.bytes = out_->size() - run.end;
+      } else {
+        pass.scratch.emplace(scratch_dir_);
+        FileSink<ScratchOut> sink(layout_, *pass.scratch, options_.zstd_level, scratch_dir_, sections_);
+        build_into(sink);
+        share.bytes = pass.scratch->size();
+      }
+      for (int m = 0; m < 2; ++m)
+        for (int t = 0; t < 3; ++t) share.critical[m][t] = built.critical[m][t];
+      share.lo = built.lo;
+      share.hi = built.hi;
+      run.stats.tiles_in_flight = std::max(run.stats.tiles_in_flight, built.tiles_in_flight);
+      run.stats.bands_built_beside += built.bands_built_beside;
+    });
+    return share;
+  }
+
+  // The exclusive scan of the runs' sizes, which places this rank's run of band j, and the
+  // totals of what the band counted.
+  void place_share(SharedRun& run, SharedPass& pass, const BandShare& mine) {
+    ByteWriter told;
+    told.put(mine);
+    pass.offset = run.end;
+    const std::vector<std::vector<uint8_t>> all = run.group.all_gather(told.bytes());
+    for (size_t i = 0; i < all.size(); ++i) {
+      ByteReader rd(all[i]);
+      const auto s = rd.get<BandShare>();
+      if (i < run.r) pass.offset += s.bytes;
+      pass.band_bytes += s.bytes;
+      for (int m = 0; m < 2; ++m)
+        for (int t = 0; t < 3; ++t) run.stats.critical[m][t] += s.critical[m][t];
+      run.stats.lo = std::min(run.stats.lo, s.lo);
+      run.stats.hi = std::max(run.stats.hi, s.hi);
+    }
+  }
+
+  // A pair's band top follows band j. A rank's bricks of it are not one run of the file (those at
+  // the grid's far faces come with the tiles before them): the ranks tell each other their runs of
+  // consecutive Morton codes and each run's bytes (a run for each part of a rank's tiles, and one
+  // for each brick at the grid's far faces), and so each learns where its own go.
+  void place_top_runs(SharedRun& run, SharedPass& pass) {
+    const Distribution& group = run.group;
+    ByteWriter told_runs;
+    settle_together(group, [&] {
+      const Band& up = layout_.band(pass.top);
+      std::vector<std::pair<uint64_t, int64_t>> mine_top;  // Morton code, directory index
+      for (int64_t i = up.first_brick; i < up.first_brick + up.brick_count(); ++i) {
+        if (run.entries[static_cast<size_t>(i)].total() == 0) continue;  // not this rank's
+        const Box3 b = StoreLayout::brick_of(up, i);
+        mine_top.push_back(
+            {morton_encode(static_cast<uint64_t>(b[0]), static_cast<uint64_t>(b[1]), static_cast<uint64_t>(b[2])), i});
+      }
+      std::sort(mine_top.begin(), mine_top.end());
+      std::vector<BrickRun> runs;
+      for (const auto& [code, i] : mine_top) {
+        const BrickEntry& e = run.entries[static_cast<size_t>(i)];
+        if (pass.top_mine.empty() || code != pass.top_mine.back().run.code + pass.top_mine.back().run.count)
+          pass.top_mine.push_back({{code, 0, 0}, e.offset, 0, {}});
+        TopRun& t = pass.top_mine.back();
+        ++t.run.count;
+        t.run.bytes += e.total();
+        t.bricks.push_back(i);
+      }
+      for (const TopRun& t : pass.top_mine) runs.push_back(t.run);
+      told_runs.put_array(runs);
+    });
+    const std::vector<std::vector<uint8_t>> all_runs = group.all_gather(told_runs.bytes());
+    settle_together(group, [&] {
+      std::vector<std::pair<BrickRun, size_t>> every;  // a run, and its rank
+      for (size_t rank = 0; rank < all_runs.size(); ++rank) {
+        ByteReader rd(all_runs[rank]);
+        std::vector<BrickRun> theirs;
+        rd.get_array(theirs);
+        for (const BrickRun& brick_run : theirs) every.push_back({brick_run, rank});
+      }
+      std::sort(every.begin(), every.end(), [](const auto& u, const auto& v) { return u.first.code < v.first.code; });
+      uint64_t at = run.end + pass.band_bytes;
+      int64_t bricks = 0;
+      size_t n = 0;  // this rank's runs met so far, in order
+      for (const auto& [brick_run, rank] : every) {
+        if (rank == run.r) pass.top_mine[n++].to = at;
+        at += brick_run.bytes;
+        bricks += static_cast<int64_t>(brick_run.count);
+      }
+      if (bricks != layout_.band(pass.top).brick_count())
+        throw IoError(output_ + ": the ranks' band " + std::to_string(pass.top) + " holds " + std::to_string(bricks) +
+                      " bricks, not " + std::to_string(layout_.band(pass.top).brick_count()));
+      pass.top_bytes = at - (run.end + pass.band_bytes);
+    });
+  }
+
+  // Ranks > 0 copy their run into place, every rank its runs of a pair's band top.
+  void copy_into_place(SharedRun& run, SharedPass& pass) {
+    settle_together(run.group, [&] {
+      const Band& band = layout_.band(pass.j);
+      for (int64_t i = band.first_brick; i < band.first_brick + band.brick_count(); ++i) {
+        BrickEntry& e = run.entries[static_cast<size_t>(i)];
+        if (e.total() == 0) continue;            // not this rank's
+        if (!run.root) e.offset += pass.offset;  // was relative to the rank's scratch file
+      }
+      if (pass.pair) {
+        std::optional<SharedFile> own;  // rank 0's file, written where its appends do not reach
+        if (run.root) own.emplace(out_->temp_path(), SharedFile::Mode::open);
+        for (const TopRun& t : pass.top_mine) {
+          uint64_t at = t.to;
+          for (const int64_t i : t.bricks) {
+            BrickEntry& e = run.entries[static_cast<size_t>(i)];
+            e.offset = at;
+            at += e.total();
+          }
+          pass.held->copy_to(t.from, t.run.bytes, run.root ? *own : *run.temp,
+                             t.to);  // one after the other in `held` too
+        }
+      }
+      if (!run.root) {
+        // Its bricks are durable when rank 0 commits the store (rank 0's fsync covers only its own
+        // node's writes). The hand-over is not synced: a POSIX-coherent file system (Lustre,
+        // GPFS, BeeGFS, or one node's) shows other ranks its rows without (docs/DISTRIBUTED.md).
+        pass.scratch->copy_to(*run.temp, pass.offset);
+        run.temp->sync();
+      }
+    });
+  }
+
+  // Every rank tells rank 0 where its bricks are.
+  void gather_entries(SharedRun& run, const SharedPass& pass) {
+    ByteWriter placed;
+    settle_together(run.group, [&] {
+      std::vector<PlacedEntry> mine, mine_top;
+      const Band& band = layout_.band(pass.j);
+      for (int64_t i = band.first_brick; i < band.first_brick + band.brick_count(); ++i)
+        if (run.entries[static_cast<size_t>(i)].total() != 0) mine.push_back({i, run.entries[static_cast<size_t>(i)]});
+      for (const TopRun& t : pass.top_mine)
+        for (const int64_t i : t.bricks) mine_top.push_back({i, run.entries[static_cast<size_t>(i)]});
+      placed.put_array(mine);
+      placed.put_array(mine_top);
+    });
+    std::vector<std::vector<uint8_t>> where;
+    settle_together(run.group,
+                    [&] { where = run.group.gather(placed.bytes()); });  // rank 0 may run out of memory receiving
+    settle_together(run.group, [&] {
+      if (!run.root) return;
+      std::vector<std::vector<PlacedEntry>> runs(where.size()), runs_top(where.size());
+      for (size_t i = 0; i < where.size(); ++i) {
+        ByteReader rd(where[i]);
+        rd.get_array(runs[i]);
+        rd.get_array(runs_top[i]);
+      }
+      place_band(runs, layout_.band(pass.j), run.entries);
+      if (pass.pair) place_band(runs_top, layout_.band(pass.top), run.entries);
+    });
   }
 
   // A sink's entries of one band into `entries` (the others' are still empty there).
