@@ -177,8 +177,7 @@ struct Source::Impl {
   // padding (StoreLayout::memory_brick_bits: the hierarchy in memory takes bricks of 4^3 there).
   // With the sections FIELDS need alone (StoreSections) the first time, with all when made again:
   // a source whose extractions change modes converts its volume twice at most.
-  std::shared_ptr<const ScratchStore> paged_hierarchy(const RecordFields& fields,
-                                                      const ProgressCallback& progress) const {
+  std::shared_ptr<const ScratchStore> paged_hierarchy(const RecordFields& fields, const RunContext& call) const {
     const std::lock_guard<std::mutex> lock(build_mutex);
     if (hierarchy_in_memory || (scratch && scratch->serves(fields))) return scratch;
     const StoreSections sections = scratch ? kAllSections : sections_for(fields);
@@ -215,7 +214,8 @@ struct Source::Impl {
     };
     ConvertOptions options;
     RunContext run;
-    run.progress = progress;
+    run.progress = call.progress;
+    run.cancel = call.cancel;  // a build stopped is the extraction's cancellation (below)
     // Before the build, as `isotope convert` sets it: its tiles' buffers, freed and allocated
     // again tile after tile, then serve the bricks and the mesh from memory already faulted in.
     if (tune_allocator) keep_freed_memory();
@@ -232,6 +232,10 @@ struct Source::Impl {
       built->store = std::make_unique<StoreReader>(name);
     } catch (const IoError& e) {
       remove_folder();
+      // A convert stopped by its cancel flag says "interrupted"; the extraction that asked for the
+      // build was cancelled, and says so as every extraction does (RunContext::cancel).
+      if (call.cancel && call.cancel->load() && std::string_view(e.what()) == "interrupted")
+        throw ExtractionCancelled{};
       // What the store's own files met (a full disk, a file size limit), named in its folder: the
       // hierarchy in memory instead. The input's errors, and whatever stopped the build (a progress
       // callback that throws, as a host's cancel does), are the caller's.
@@ -338,7 +342,7 @@ Mesh Source::extract(const ExtractOptions& options, const RunContext& run, Extra
                                   : extract_validated(volume, extracted, stats, run.progress);
   }
   const RecordFields fields = fields_for(extracted);
-  if (const std::shared_ptr<const ScratchStore> scratch = impl_->paged_hierarchy(fields, run.progress))
+  if (const std::shared_ptr<const ScratchStore> scratch = impl_->paged_hierarchy(fields, run))
     return isotope::extract(*scratch->paged, extracted, stats, &impl_->budgets);
   const std::shared_ptr<const Hierarchy> hierarchy = impl_->hierarchy(fields, run.progress);
   return isotope::extract(*hierarchy, extracted, stats, &impl_->budgets);
@@ -358,8 +362,7 @@ void Source::prepare(const std::vector<ExtractOptions>& planned, const RunContex
     needed = needed || hierarchy;
     whole = whole || (!hierarchy && !impl_->streams(call));  // eps 0 from the volume held whole
   }
-  if (needed && !impl_->paged_hierarchy(fields, run.progress))
-    impl_->hierarchy(fields, run.progress);  // reads the volume whole
+  if (needed && !impl_->paged_hierarchy(fields, run)) impl_->hierarchy(fields, run.progress);  // reads the volume whole
   if (whole) impl_->whole();
 }
 

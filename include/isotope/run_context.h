@@ -25,8 +25,9 @@ struct RunContext {
   // calls that run at the same time share the smallest of their limits.
   int threads = 0;
   // Set (by another thread, or a signal handler) to stop: an extraction then throws
-  // ExtractionCancelled at its next piece or slab, a convert IoError("interrupted") at its next
-  // tile, and nothing is left behind. nullptr: never.
+  // ExtractionCancelled at its next piece or slab (or at the next tile of the hierarchy a Source
+  // builds for it), a convert IoError("interrupted") at its next tile, and nothing is left behind.
+  // nullptr: never.
   const std::atomic<bool>* cancel = nullptr;
   // Hears the fraction done of the call's long step (ProgressCallback): a convert, or the hierarchy
   // of a volume that an extraction builds first (isotope::Source). May throw to stop it.

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <new>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -399,11 +400,15 @@ class Converter {
     std::optional<HeldBoxReader> held;
     const uint64_t memory = static_cast<uint64_t>(options_.memory_mb) << 20;
     if (input_.reads_box_alone() && !input_.in_memory() && HeldBoxReader::held_bytes(input_) <= memory / 4) {
-      held.emplace(input_);
-      input_held_bytes_ = HeldBoxReader::held_bytes(input_);
+      try {
+        held.emplace(input_);
+        input_held_bytes_ = HeldBoxReader::held_bytes(input_);
+      } catch (const std::bad_alloc&) {  // read box by box instead, as a larger volume is
+      }
     }
     const BandedBuildStats built =
         build_bands(layout_, reader(held ? *held : input_), sink, sink_brick_bytes(), build_options());
+    held.reset();  // the input is read by band 0 alone
     finish(sink.entries(), built);
     return built;
   }

@@ -10,14 +10,6 @@
 
 namespace isotope {
 
-namespace {
-
-// About this much read a call: enough that a call's cost is nothing beside its copy, few enough
-// planes that the first box waits for little more than its own.
-constexpr int64_t kReadBytes = int64_t{4} << 20;
-
-}  // namespace
-
 void HeldBoxReader::Free::operator()(unsigned char* p) const noexcept {
   if (huge)
     detail::free_huge(p);
@@ -32,12 +24,14 @@ uint64_t HeldBoxReader::held_bytes(const BoxReader& input) {
   return nodes * (input.stored_type() ? static_cast<uint64_t>(i.element_bytes) : sizeof(float));
 }
 
-HeldBoxReader::HeldBoxReader(const BoxReader& input) : input_(input) {
+// About kReadBytes a call by default: enough that a call's cost is nothing beside its copy, few
+// enough planes that the first box waits for little more than its own.
+HeldBoxReader::HeldBoxReader(const BoxReader& input, int64_t read_bytes) : input_(input) {
   info_ = input.info();
   stored_ = input.stored_type().has_value();
   value_bytes_ = stored_ ? info_.element_bytes : static_cast<int64_t>(sizeof(float));
   plane_nodes_ = info_.dims[0] * info_.dims[1];
-  read_planes_ = std::clamp<int64_t>(kReadBytes / std::max<int64_t>(1, plane_nodes_ * value_bytes_), 1, info_.dims[2]);
+  read_planes_ = std::clamp<int64_t>(read_bytes / std::max<int64_t>(1, plane_nodes_ * value_bytes_), 1, info_.dims[2]);
   // Not zero-filled: each plane is written by its read before any box reads it. In huge pages,
   // few faults, where the volume is large enough that zeroing a huge page at its first touch
   // costs no more than what it holds (a 66^3 volume of bytes would pay for 2 MB to hold 0.3).

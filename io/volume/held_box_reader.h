@@ -20,7 +20,9 @@ class HeldBoxReader final : public BoxReader {
   // INPUT must outlive the reader. Nothing is read until a box asks for it: the planes up to a
   // box's last are read then, by the thread that asks, while the others that need them wait, so
   // that the reads overlap the work on the planes read before (and a disk's read-ahead the rest).
-  explicit HeldBoxReader(const BoxReader& input);
+  // READ_BYTES: about what one read of planes takes (at least a plane).
+  explicit HeldBoxReader(const BoxReader& input, int64_t read_bytes = kReadBytes);
+  static constexpr int64_t kReadBytes = int64_t{4} << 20;
   ~HeldBoxReader() override;
   HeldBoxReader(const HeldBoxReader&) = delete;
   HeldBoxReader& operator=(const HeldBoxReader&) = delete;
@@ -29,8 +31,9 @@ class HeldBoxReader final : public BoxReader {
   // (integers of one or two bytes, BoxReader::stored_type), or as float.
   static uint64_t held_bytes(const BoxReader& input);
 
-  // Checked as INPUT checks them: a plane with a NaN or an infinite value fails every box that
-  // reaches it, with INPUT's message (the first such value in the file's order).
+  // Checked as INPUT checks them: a NaN or an infinite value fails every box that reaches the
+  // planes read with it, with INPUT's message (the first such value of that read, in the file's
+  // order), and the read is not tried again.
   void read_box(const std::array<int64_t, 3>& lo, const std::array<int64_t, 3>& size, float* out) const override;
   bool reads_box_alone() const override { return true; }
   bool in_memory() const override { return true; }

@@ -722,6 +722,8 @@ class CountingReader final : public BoxReader {
   const BoxReader& input_;
 };
 
+// Every box of a held reader equals the same nodes of the volume, whichever threads ask first and
+// however many planes a read takes (a plane, or the whole file), each value read from its input once.
 TEST_F(BoxReaderTest, AHeldReaderGivesEveryBoxOfItsInputReadingEachValueOnce) {
   // uint16 beyond a byte's range, so that a value decoded as the wrong type shows.
   std::vector<uint16_t> u16(23 * 17 * 29);
@@ -731,19 +733,34 @@ TEST_F(BoxReaderTest, AHeldReaderGivesEveryBoxOfItsInputReadingEachValueOnce) {
   std::vector<std::string> files = {wide};
   for (const char* name : kSharedRaw) files.push_back((kData / name).string());
   for (const std::string& file : files) {
-    SCOPED_TRACE(file);
     const auto input = open_reader(file, dir_.string());
-    const CountingReader counted(*input);
-    const HeldBoxReader held(counted);
     const Volume whole = read_volume({file, {}, {}});
     // Integers of one or two bytes are held as the file stores them, the rest as float.
     const uint64_t nodes = static_cast<uint64_t>(whole.node_count());
     EXPECT_EQ(HeldBoxReader::held_bytes(*input),
               nodes * (input->info().is_integer ? static_cast<uint64_t>(input->info().element_bytes) : 4));
-    EXPECT_TRUE(held.in_memory());
-    expect_concurrent_reads_match(held, 3);
-    expect_boxes_match(held, whole, 5);
-    EXPECT_EQ(counted.nodes.load(), whole.node_count());
+    const std::vector<Box> boxes = test_boxes(whole.dims, 5);
+    for (const int64_t read_bytes : {int64_t{1}, HeldBoxReader::kReadBytes}) {
+      SCOPED_TRACE(file + ", " + std::to_string(read_bytes) + " bytes a read");
+      const CountingReader counted(*input);
+      const HeldBoxReader held(counted, read_bytes);
+      EXPECT_TRUE(held.in_memory());
+      // Three threads from the start, each through the boxes in its own order, so that they meet
+      // planes not yet read.
+      std::vector<std::thread> pool;
+      std::atomic<int> wrong{0};
+      for (size_t t = 0; t < 3; ++t)
+        pool.emplace_back([&, t] {
+          for (size_t k = 0; k < boxes.size(); ++k) {
+            const Box& b = boxes[(k * (2 * t + 1) + t) % boxes.size()];
+            if (read(held, b) != cut(whole, b)) ++wrong;
+          }
+        });
+      for (std::thread& th : pool) th.join();
+      EXPECT_EQ(wrong.load(), 0);
+      expect_boxes_match(held, whole, 7);
+      EXPECT_EQ(counted.nodes.load(), whole.node_count());
+    }
   }
 }
 
@@ -753,13 +770,18 @@ TEST_F(BoxReaderTest, AHeldReaderFailsEveryBoxThatReachesAValueItsInputRefuses) 
   const std::string raw = path("nan_9x8x7_float32.raw");
   write_file(raw, "", bytes_of(values, std::endian::little));
   const auto input = open_reader(raw, dir_.string());
-  const HeldBoxReader held(*input);
-  // Read once, its planes together: every box after them fails as the input's read failed.
+  const CountingReader counted(*input);
+  const HeldBoxReader held(counted, 1);  // a plane a read
+  EXPECT_EQ(read(held, {{0, 0, 0}, {9, 8, 3}}), std::vector<float>(9 * 8 * 3, 1.5f));
+  // The read of plane 5 fails, and every box that reaches it after, with the input's message;
+  // the planes before it stay held, and the failed read is not tried again.
   for (int i = 0; i < 2; ++i) {
-    const std::string nan = io_error_of([&] { read(held, {{0, 0, 0}, {2, 2, 1}}); });
+    const std::string nan = io_error_of([&] { read(held, {{0, 0, 4}, {2, 2, 2}}); });
     EXPECT_CONTAINS(nan, raw);
     EXPECT_CONTAINS(nan, "(x,y,z) = (3,4,5)");
   }
+  EXPECT_EQ(read(held, {{1, 1, 1}, {8, 7, 4}}), std::vector<float>(8 * 7 * 4, 1.5f));
+  EXPECT_EQ(counted.nodes.load(), 9 * 8 * 6);  // planes 0 .. 5, each once
   EXPECT_THROW(read(held, {{0, 0, 0}, {10, 1, 1}}), InvalidInput);
 }
 

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -124,6 +125,33 @@ TEST_F(PublicApi, ARunContextChangesHowACallRunsNotWhatItGives) {
     seen.clear();
     source.extract(o, run);
     EXPECT_TRUE(seen.empty()) << "the hierarchy is built once";
+  }
+}
+
+// A cancel flag set while a Source builds its hierarchy (a first coarse extraction) stops the build
+// as it stops an extraction, with ExtractionCancelled, and leaves no half-made hierarchy: the next
+// extraction builds it whole and gives the mesh a fresh Source gives.
+TEST_F(PublicApi, ACancelStopsTheHierarchyASourceBuildsAndLeavesItToBeBuiltAgain) {
+  const Volume v = sphere();
+  ExtractOptions o;
+  o.eps = 0.25;
+  const Mesh reference = open_volume(v).extract(o);
+  for (const bool file : {false, true}) {  // the array's hierarchy, and a raw file's
+    SCOPED_TRACE(file ? "a raw file" : "an array");
+    const std::string raw = path("sphere_33x33x33_float32.raw");
+    if (file)
+      std::ofstream(raw, std::ios::binary)
+          .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
+    const Source source = file ? open_volume({raw}) : open_volume(v);
+    std::atomic<bool> stop{false};
+    RunContext run;
+    run.cancel = &stop;
+    run.progress = [&](double) { stop = true; };  // set at the build's first report
+    expect_error<ExtractionCancelled>([&] { source.extract(o, run); }, "cancelled");
+    EXPECT_TRUE(stop);
+    EXPECT_FALSE(source.info().hierarchy_built);
+    const Mesh mesh = source.extract(o);
+    EXPECT_TRUE(mesh.positions == reference.positions && mesh.triangles == reference.triangles);
   }
 }
 
