@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -142,7 +143,7 @@ TEST_F(PublicApi, ACancelStopsTheHierarchyASourceBuildsAndLeavesItToBeBuiltAgain
     if (file)
       std::ofstream(raw, std::ios::binary)
           .write(reinterpret_cast<const char*>(v.values.data()), static_cast<std::streamsize>(v.values.size() * 4));
-    const Source source = file ? open_volume({raw}) : open_volume(v);
+    const Source source = file ? open_volume({raw, std::nullopt, std::nullopt}) : open_volume(v);
     std::atomic<bool> stop{false};
     RunContext run;
     run.cancel = &stop;
