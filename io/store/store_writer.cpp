@@ -399,10 +399,11 @@ class Converter {
     // whole"). Not under a distribution, where each process reads only its share of the tiles.
     std::optional<HeldBoxReader> held;
     const uint64_t memory = static_cast<uint64_t>(options_.memory_mb) << 20;
-    if (input_.reads_box_alone() && !input_.in_memory() && HeldBoxReader::held_bytes(input_) <= memory / 4) {
+    const uint64_t held_bytes = HeldBoxReader::held_bytes(input_);
+    if (input_.reads_box_alone() && !input_.in_memory() && held_bytes <= memory / 4) {
       try {
         held.emplace(input_);
-        input_held_bytes_ = HeldBoxReader::held_bytes(input_);
+        input_held_bytes_ = held_bytes;
       } catch (const std::bad_alloc&) {  // read box by box instead, as a larger volume is
       }
     }

@@ -6,22 +6,18 @@
 #include <string>
 
 #include "io/volume/raw_reader.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 
-void HeldBoxReader::Free::operator()(unsigned char* p) const noexcept {
-  if (huge)
-    detail::free_huge(p);
-  else
-    delete[] p;
+int64_t HeldBoxReader::value_bytes_of(const BoxReader& input) {
+  return input.stored_type() ? input.info().element_bytes : static_cast<int64_t>(sizeof(float));
 }
 
 uint64_t HeldBoxReader::held_bytes(const BoxReader& input) {
   const VolumeInfo& i = input.info();
   const auto nodes =
       static_cast<uint64_t>(i.dims[0]) * static_cast<uint64_t>(i.dims[1]) * static_cast<uint64_t>(i.dims[2]);
-  return nodes * (input.stored_type() ? static_cast<uint64_t>(i.element_bytes) : sizeof(float));
+  return nodes * static_cast<uint64_t>(value_bytes_of(input));
 }
 
 // About kReadBytes a call by default: enough that a call's cost is nothing beside its copy, few
@@ -29,16 +25,17 @@ uint64_t HeldBoxReader::held_bytes(const BoxReader& input) {
 HeldBoxReader::HeldBoxReader(const BoxReader& input, int64_t read_bytes) : input_(input) {
   info_ = input.info();
   stored_ = input.stored_type().has_value();
-  value_bytes_ = stored_ ? info_.element_bytes : static_cast<int64_t>(sizeof(float));
+  value_bytes_ = value_bytes_of(input);
   plane_nodes_ = info_.dims[0] * info_.dims[1];
   read_planes_ = std::clamp<int64_t>(read_bytes / std::max<int64_t>(1, plane_nodes_ * value_bytes_), 1, info_.dims[2]);
   // Not zero-filled: each plane is written by its read before any box reads it. In huge pages,
   // few faults, where the volume is large enough that zeroing a huge page at its first touch
   // costs no more than what it holds (a 66^3 volume of bytes would pay for 2 MB to hold 0.3).
   const auto bytes = static_cast<size_t>(held_bytes(input));
-  const bool huge = bytes >= 4 * detail::kHugePage;
-  held_ = std::unique_ptr<unsigned char[], Free>(
-      huge ? static_cast<unsigned char*>(detail::allocate_huge(bytes)) : new unsigned char[bytes], Free{huge});
+  if (bytes >= 4 * detail::kHugePage)
+    held_ = (huge_ = detail::make_huge_array<unsigned char>(bytes)).get();
+  else
+    held_ = (small_ = std::make_unique_for_overwrite<unsigned char[]>(bytes)).get();
 }
 
 HeldBoxReader::~HeldBoxReader() = default;
@@ -49,7 +46,7 @@ void HeldBoxReader::read_planes_to(int64_t end) const {
   if (failed_) std::rethrow_exception(failed_);
   for (int64_t z = held_planes_.load(std::memory_order_relaxed); z < end;) {
     const int64_t n = std::min(read_planes_, info_.dims[2] - z);
-    unsigned char* at = held_.get() + z * plane_nodes_ * value_bytes_;
+    unsigned char* at = held_ + z * plane_nodes_ * value_bytes_;
     try {
       if (stored_)
         input_.read_box_stored({0, 0, z}, {info_.dims[0], info_.dims[1], n}, at);
@@ -72,7 +69,7 @@ void HeldBoxReader::read_box(const std::array<int64_t, 3>& lo, const std::array<
   const ScalarType type = stored_ ? *input_.stored_type() : ScalarType::float32;
   for (int64_t z = 0; z < size[2]; ++z)
     for (int64_t y = 0; y < size[1]; ++y) {
-      const unsigned char* row = held_.get() + (((lo[2] + z) * d[1] + lo[1] + y) * d[0] + lo[0]) * value_bytes_;
+      const unsigned char* row = held_ + (((lo[2] + z) * d[1] + lo[1] + y) * d[0] + lo[0]) * value_bytes_;
       float* to = out + (z * size[1] + y) * size[0];
       if (stored_)  // held in this machine's byte order (read_box_stored)
         decode_scalars(type, std::endian::native == std::endian::big, row, static_cast<size_t>(size[0]), to);

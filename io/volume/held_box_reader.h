@@ -12,6 +12,7 @@
 #include <mutex>
 
 #include "io/volume/box_reader.h"
+#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 
@@ -41,16 +42,16 @@ class HeldBoxReader final : public BoxReader {
  private:
   void read_planes_to(int64_t end) const;  // planes [0, end) held, or throws
 
-  struct Free {
-    bool huge;  // from allocate_huge, else new[]
-    void operator()(unsigned char* p) const noexcept;
-  };
+  // Bytes a node of INPUT is held in.
+  static int64_t value_bytes_of(const BoxReader& input);
   const BoxReader& input_;
-  bool stored_ = false;      // held as stored (integers), else as float
-  int64_t value_bytes_ = 0;  // held bytes a node
-  int64_t plane_nodes_ = 0;  // nodes of a plane
-  int64_t read_planes_ = 1;  // planes a read
-  std::unique_ptr<unsigned char[], Free> held_;
+  bool stored_ = false;                     // held as stored (integers), else as float
+  int64_t value_bytes_ = 0;                 // held bytes a node
+  int64_t plane_nodes_ = 0;                 // nodes of a plane
+  int64_t read_planes_ = 1;                 // planes a read
+  detail::HugeArray<unsigned char> huge_;   // the held values: in huge pages,
+  std::unique_ptr<unsigned char[]> small_;  // or, for a small volume, in the heap's
+  unsigned char* held_ = nullptr;           // whichever holds them
   mutable std::mutex read_mutex_;
   mutable std::atomic<int64_t> held_planes_{0};
   mutable std::exception_ptr failed_;  // under read_mutex_: the read that failed, for every box after it
