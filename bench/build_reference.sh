@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the isotope command of another commit, for `isotope bench --reference`: the commit's files
 # exported (git archive) into DIR/src and built in Release into DIR/build, the command alone, with
-# the packages scripts/install-deps.sh installs. Prints the executable's path on its last line.
+# the packages the install-deps script installs. Prints the executable's path on its last line.
 #
 #   bench/build_reference.sh COMMIT [DIR]     DIR: $TMPDIR/isotope-reference-<commit> by default
 #   build/tools/isotope bench --reference "$(bench/build_reference.sh 24e105d | tail -n 1)"
@@ -27,7 +27,7 @@ rm -rf "$dir/src"
 mkdir -p "$dir/src"
 git -C "$repo" archive "$sha" | tar -x -C "$dir/src"
 # The viewer's npm packages (the command embeds the viewer): this checkout's where the lock files
-# agree, else installed from the reference's lock file as scripts/install-deps.sh installs them.
+# agree, else installed from the reference's lock file as the install-deps script installs them.
 viewer=$dir/src/viewer
 if [[ -f $viewer/package-lock.json ]]; then
   if [[ -d $repo/viewer/node_modules ]] && cmp -s "$viewer/package-lock.json" "$repo/viewer/package-lock.json"; then

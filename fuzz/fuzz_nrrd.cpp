@@ -1,5 +1,5 @@
 // libFuzzer target: an NRRD header with attached data (raw or gzip), read as `isotope extract
-// FILE.nrrd` and `convert` read it (io/volume/nrrd_reader.h). Every failure must be an IoError. A detached
+// FILE.nrrd` and `convert` read it (the NRRD reader). Every failure must be an IoError. A detached
 // data file the header names is read too: the reader refuses what is not a regular file, and the
 // data's size is checked against the file before anything is allocated.
 #include <filesystem>

@@ -1,5 +1,5 @@
 // libFuzzer target: what isotope reads from a raw volume's name and from --dims/--type
-// (io/volume/raw_reader.h): NAME_XxYxZ_TYPE.raw, "XxYxZ", a type name. Each either parses to dimensions
+// (the raw reader's naming rule): NAME_XxYxZ_TYPE.raw, "XxYxZ", a type name. Each either parses to dimensions
 // that are all >= 1 and a known type, or is refused (nullopt); nothing else.
 #include <cstdlib>
 #include <string>

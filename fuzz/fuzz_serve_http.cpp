@@ -1,7 +1,7 @@
 // libFuzzer target: whatever a client sends on one connection to `isotope serve` (docs/SERVE.md),
 // answered by the server itself: the request line, every header (Range, Expect, Connection,
 // Content-Length among them), a body, several requests kept alive, through cpp-httplib's parser,
-// the connection limits of tools/serve/bounded_http.h and the server's routes, extractions included
+// the server's connection limits (docs/SERVE.md) and the server's routes, extractions included
 // (from a small store made once). Whatever the bytes, the server must answer or close the
 // connection within the fuzzer's timeout, without a crash, a sanitizer report or a large allocation.
 #include <fcntl.h>

@@ -1,5 +1,5 @@
 // libFuzzer target: the query string of GET /api/extract as `isotope serve` takes it (docs/SERVE.md):
-// decoded by cpp-httplib, then checked by tools/serve/serve_request.cpp. Every refusal must be a
+// decoded by cpp-httplib, then checked as the server checks a request. Every refusal must be a
 // BadRequest (HTTP 400 with its message); an accepted request must hold options the engine accepts.
 #include <httplib.h>
 

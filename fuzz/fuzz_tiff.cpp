@@ -1,5 +1,5 @@
 // libFuzzer target: a TIFF stack (a multi-page file), opened as `isotope convert` opens it
-// (io/volume/tiff_reader.h: every page's size, type and data checked at open) and read back in
+// (the TIFF reader: every page's size, type and data checked at open) and read back in
 // boxes. Every failure must be an IoError; memory stays bounded whatever the header claims (a page
 // may not claim more values than its strips can hold).
 #include <algorithm>

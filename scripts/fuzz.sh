@@ -3,12 +3,12 @@
 # one for a bounded time from its seed corpus (fuzz/corpus/TARGET, copied: the repository is not
 # changed), one target per core at a time. A finding (crash, sanitizer report, leak, timeout, out-of-memory) fails the script and
 # leaves its reproducer in build-fuzz/findings; add it to tests/golden (docs/RELIABILITY.md) once
-# fixed. CI runs this after the tests (scripts/test.sh).
+# fixed. CI runs this after the tests (the test script beside this one).
 #
 #   scripts/fuzz.sh [--seconds N] [--stats FILE] [--no-build] [TARGET...]
 #
 # --seconds: per target (default 60); --stats: one line per target, "TARGET EXECUTIONS SECONDS",
-# for scripts/reliability.sh.
+# for the reliability script beside this one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

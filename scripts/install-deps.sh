@@ -20,13 +20,13 @@ packages=(
 # npm already (e.g. from NodeSource) keeps them.
 if ! command -v node > /dev/null || ! command -v npm > /dev/null; then packages+=(nodejs npm); fi
 # python3-skimage: the peer that isotope bench (and its test) times beside ours. clang-14 and its
-# runtime libraries (libFuzzer, the sanitizers): the fuzz targets of fuzz/ (scripts/fuzz.sh).
-# clang-format: the style check (scripts/format.sh --check). python3-pytest, python3-vtk9 (VTK's
-# readers: the mesh formats read back, tests/formats) and python3-tifffile (TIFF stacks written by
+# runtime libraries (libFuzzer, the sanitizers): the fuzz targets (the fuzz script beside this one).
+# clang-format: the style check (format.sh --check beside this one). python3-pytest, python3-vtk9 (VTK's
+# readers: the mesh formats read back by the tests) and python3-tifffile (TIFF stacks written by
 # the Python tests). libopenmpi-dev and openmpi-bin: the build finds MPI and makes `mpirun -n R
-# isotope` share its work (dist/, optional: without them the command runs as one process), which
-# tests/mpi checks. hdf5-filter-plugin: HDF5 datasets compressed by filter plugins (lz4, bzip2),
-# which the command reads with its static HDF5 beside the plugins' shared one (tests/io/volume_read_test.cpp).
+# isotope` share its work (optional: without them the command runs as one process), which
+# the MPI tests check. hdf5-filter-plugin: HDF5 datasets compressed by filter plugins (lz4, bzip2),
+# which the command reads with its static HDF5 beside the plugins' shared one (a volume-reading test).
 if [ "${1:-}" = "--tests" ]; then
   packages+=(chromium python3-skimage clang-14 libclang-rt-14-dev clang-format python3-pytest python3-vtk9 python3-tifffile
     libopenmpi-dev openmpi-bin hdf5-filter-plugin)

@@ -165,7 +165,7 @@ def bad_paths(iso, work):
         r.problems.append(f'exit {rc}, link or target wrong: {out[:200]}')
     os.remove(os.path.join(d, 'link.ply'))
     os.remove(target)
-    # --parts DIR writes a folder (io/file/output_folder.h): never over one that holds the input or
+    # --parts DIR writes a folder (docs/RELIABILITY.md, "Outputs"): never over one that holds the input or
     # files isotope did not write, which it deleted before, exit 0.
     p = os.path.join(d, 'p')
     os.makedirs(os.path.join(p, 'sub'))

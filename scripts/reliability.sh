@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Regenerates docs/RELIABILITY.md: builds isotope (build/, Release) and the fuzz targets
-# (build-fuzz/), fuzzes every parser for a bounded time (scripts/fuzz.sh), then tries the command
-# and the server as a hostile user would (scripts/reliability.py) and writes the table. Fails when a
-# row does not hold. CI (scripts/test.sh) runs the same with --out to a scratch file.
+# (build-fuzz/), fuzzes every parser for a bounded time (fuzz.sh), then tries the command and the
+# server as a hostile user would (reliability.py) and writes the table. Fails when a row does not
+# hold. CI (the test script) runs the same with --out to a scratch file.
 #
 #   scripts/reliability.sh [--fuzz-seconds N] [--out FILE] [--isotope BIN] [--python PY] [--no-fuzz-build]
 #
-# --python: a Python with the isotope module installed (scripts/test.sh passes build-ci/venv's), for
+# --python: a Python with the isotope module installed (the test script passes its venv's), for
 # the module's rows; without it they do not hold.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -101,7 +101,7 @@ phase "ASan+UBSan tests"
 run_ctest --test-dir build-asan --output-on-failure --no-tests=error -j2 -LE "slow|e2e" \
   -E 'PagedEqualsInMemory\.SharedVolumes|Store\.ExtractionFromStoreEqualsInMemory|PagedExtract\.(ClosedShapes|SameBytesForAnyThreadsAndCacheBudget|TriangleBudgetTakesTheFinestEpsThatFits)|Cli\.StoreExtractIsTheSameFileForAnyThreadsAndCache|TopologyPreservation\.ExactRuleKeepsComponentsAndEulerCharacteristicEverywhere|Simplify\.(TrianglesFallAsDeltaGrows|EveryTopologyChangeIsExplainedByADroppedCriticalPoint)|CrackFree\.(RealVolumesEndOnlyOnTheDataBoxAndNeverLeaveIt|IntegerIsovaluesOnUint8DataTieConsistently)|TriangleBudget\.CountsEveryCutAsTheWalkDownTheCutDoesPaged|CompactRecord\.MeshesRefineOnlyMoreAndStayWithinFivePercent|ExactAtEpsZero\.RealVolumesAtTheirIsovaluesAndAtIntegerTies|ErrorBound\.EpsBoundsHowFarTheDataIsFromTheIsovalueAtEveryVertex|Cli\.BenchTimes(TheSuiteAgainstTheBaseline|ConvertAndOneShotsBesideAReference)'
 
-# The parallel paths under ThreadSanitizer (engine/core/parallel.h runs them on std::threads there), and
+# The parallel paths under ThreadSanitizer (the engine's parallel loops run on std::threads there), and
 # the server: its worker threads, concurrent extractions and supersession. Convert's threads run in
 # Store.FileDoesNotDependOnThreadsOrMemoryBudget; the round trips over odd dimensions (68 s here) check
 # the format, which ASan+UBSan covers. The streamed march runs its reader and its windows here on
@@ -133,7 +133,7 @@ rm -f "$log.reliability.md"
 total=0
 for n in $(sed -n 's/.*tests failed out of \([0-9]*\).*/\1/p' "$log"); do total=$((total + n)); done
 skipped=$(grep -c '\*\*\*Skipped' "$log" || true)
-# pytest's closing line, e.g. "== 33 passed in 20.1s ==" (python/tests/conftest.py fails its run on a skip).
+# pytest's closing line, e.g. "== 33 passed in 20.1s ==" (the Python tests' conftest fails its run on a skip).
 py_passed=$(tail -1 "$log.pytest" | sed -n 's/.* \([0-9][0-9]*\) passed.*/\1/p')
 py_skipped=$(tail -1 "$log.pytest" | sed -n 's/.* \([0-9][0-9]*\) skipped.*/\1/p')
 rm -f "$log.pytest"

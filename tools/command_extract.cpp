@@ -48,7 +48,7 @@ struct ExtractArgs {
   std::string delta;
   bool compare_full = false;
   // --compare-full relates components whose surfaces lie within this many voxel spacings: a
-  // coarse mesh moves the surface by up to a few voxels (engine/diagnostics/component_report.h).
+  // coarse mesh moves the surface by up to a few voxels (compare_components).
   double compare_voxels = 3;
   std::string dims;
   std::string type;
@@ -56,7 +56,7 @@ struct ExtractArgs {
   std::string parts;  // --parts DIR: one .vtp per rank and DIR/mesh.pvtp
   std::string report;
   int threads = 0;
-  int64_t cache_mb = 512;
+  int64_t cache_mb = OpenOptions{}.cache_mb;
   std::string focus;
   std::string radius;
   std::string max_triangles;
@@ -79,7 +79,7 @@ int write_outputs(const ExtractArgs& a, ExtractionRun& run, Mesh& mesh, const Me
 // --parts DIR: every rank writes its share's mesh as part-RRRRR.vtp into a new folder beside DIR,
 // rank 0 adds mesh.pvtp naming them all (ParaView opens it as one dataset), and only then does the
 // folder take DIR's place: a failure on any rank leaves DIR as it was (docs/DISTRIBUTED.md). DIR
-// must be new, empty or an earlier --parts output holding nothing else (io/file/output_folder.h).
+// must be new, empty or an earlier --parts output holding nothing else (OutputFolder).
 int write_parts(const ExtractArgs& a, const ExtractionRun& run, const Mesh& mesh) {
   const Distribution* group = process_group();
   const int rank = group ? group->rank() : 0, ranks = group ? group->ranks() : 1;
@@ -161,7 +161,7 @@ int run_extract(const ExtractArgs& a) {
   if (!a.parts.empty() && !a.report.empty())
     throw CLI::ValidationError("--report", "needs one mesh (-o); --parts leaves it in pieces");
   // Below 2^-11 (about 0.00049) voxel spacings the comparison's sampling grid of a 2^19-node axis would overflow
-  // (engine/diagnostics/component_report.cpp): refused here, before the work, not after it.
+  // (compare_components): refused here, before the work, not after it.
   if (!(a.compare_voxels >= 5e-4) || !std::isfinite(a.compare_voxels) || a.compare_voxels > 1e6) {
     char shown[32];
     std::snprintf(shown, sizeof shown, "%g", a.compare_voxels);  // 1e-300, not 0.000000
@@ -238,7 +238,7 @@ int run_extract(const ExtractArgs& a) {
 // Rank 0's (or the one process's) part: measure the mesh, write it and the report.
 int write_outputs(const ExtractArgs& a, ExtractionRun& run, Mesh& mesh, const Mesh& full) {
   // Both outputs are written to temporary files and finished (flushed to disk) before either is
-  // renamed into place (io/file/atomic_file.h): a failure on the way, a full disk included, leaves the
+  // renamed into place (AtomicFile): a failure on the way, a full disk included, leaves the
   // files named by -o and --report as they were. On more than one thread the mesh is written while
   // its topology is measured: the write ends waiting for the disk (fsync), which the measuring
   // overlaps.

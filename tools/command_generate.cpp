@@ -1,4 +1,4 @@
-// isotope generate: synthetic volumes with known isosurfaces (engine/synthetic/fields.h), written as
+// isotope generate: synthetic volumes with known isosurfaces (the engine's synthetic fields), written as
 // .raw (x fastest; float32, or uint8/uint16 stretched over the field's range) or as float32
 // HDF5 dataset /volume, chosen by the output's extension.
 #include <CLI/CLI.hpp>

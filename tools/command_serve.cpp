@@ -1,5 +1,5 @@
 // isotope serve: a store in the browser (docs/SERVE.md). The options are read here; the server
-// itself is a module of the command (tools/serve/serve_module.h), opened only by this command.
+// itself is a module of the command (the server module, isotope_serve), opened only by this command.
 #include <CLI/CLI.hpp>
 #include <memory>
 

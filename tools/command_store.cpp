@@ -30,9 +30,9 @@ namespace {
 
 struct ConvertArgs {
   std::string input, output, dims, type;
-  int64_t memory_mb = 1024;
+  int64_t memory_mb = ConvertOptions{}.memory_mb;
   int threads = 0;
-  int zstd_level = 3;
+  int zstd_level = ConvertOptions{}.zstd_level;
   int quantize = 0;
   int brick_bits = kDefaultBrickBits;
   bool quiet = false;
@@ -59,7 +59,7 @@ int run_convert(const ConvertArgs& a) {
   run.distribution = process_group();  // under mpirun: the ranks share the tiles (docs/DISTRIBUTED.md)
   if (progress_enabled(a.quiet)) run.progress = progress_bar("converting");
   // Alone: Ctrl-C stops the convert between tiles, and its temporary output is removed as it
-  // unwinds. Under mpirun the signal ends the rank at once instead (tools/main.cpp).
+  // unwinds. Under mpirun the signal ends the rank at once instead (the command's main).
   std::optional<InterruptGuard> guard;
   if (!process_group()) {
     guard.emplace();

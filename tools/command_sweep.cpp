@@ -32,7 +32,7 @@ struct SweepArgs {
   std::string csv;
   std::string plot;
   int threads = 0;
-  int64_t cache_mb = 512;
+  int64_t cache_mb = OpenOptions{}.cache_mb;
   bool quiet = false;
 };
 

@@ -1,4 +1,6 @@
 // The huge-block store behind detail::HugePageAllocator.
+#include "engine/core/huge_blocks.h"
+
 #include <sys/mman.h>
 #include <sys/resource.h>
 
@@ -12,7 +14,6 @@
 #include <new>
 
 #include "engine/core/parallel.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope::detail {
 namespace {

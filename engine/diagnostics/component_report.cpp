@@ -9,9 +9,9 @@
 #include <stdexcept>
 #include <string>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/mix_hash.h"
 #include "engine/topology/filed_edges.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {

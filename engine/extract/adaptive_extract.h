@@ -1,5 +1,5 @@
 #pragma once
-// Adaptive extraction over any source of values and records (engine/extract/traversal.h): the traversal
+// Adaptive extraction over any source of values and records (any TraversalSource): the traversal
 // is cut into pieces, the pieces run as parallel tasks, and their meshes are welded in order.
 #include <algorithm>
 #include <array>

@@ -17,7 +17,7 @@
 namespace isotope {
 namespace {
 
-// MultiresVolume as a traversal source (engine/extract/traversal.h).
+// MultiresVolume as a traversal source (the TraversalSource concept).
 class InMemory {
  public:
   explicit InMemory(const MultiresVolume& mv) : mv_(mv) {}

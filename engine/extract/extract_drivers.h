@@ -20,7 +20,7 @@ Mesh extract(const MultiresVolume& mv, const ExtractCall& options, ExtractStats*
 class BudgetMemo;
 class Hierarchy;
 // extract() over an in-memory hierarchy. Throws InvalidInput when the options read a field
-// the hierarchy was built without. `memo`: as extract_adaptive's (engine/extract/adaptive_extract.h),
+// the hierarchy was built without. `memo`: as extract_adaptive's (a budget's choice remembered),
 // for a hierarchy kept open.
 Mesh extract(const Hierarchy& hierarchy, const ExtractCall& options, ExtractStats* stats = nullptr,
              BudgetMemo* memo = nullptr);

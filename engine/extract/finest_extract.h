@@ -4,7 +4,7 @@
 // the isosurface cuts (docs/DESIGN.md, invariant 2). Rather than walk the bisection tree down to each
 // leaf, the cells are marched block by block: the range record of a block's cube diamond culls
 // it when the isovalue misses it, then the range of the block's own nodes (docs/METHOD.md). A
-// source without records (a plain array: engine/extract/array_source.h) is culled by the block's own
+// source without records (a plain array: ArraySource) is culled by the block's own
 // nodes alone, which marches the same blocks: the record's range holds every node of the block.
 #include <algorithm>
 #include <array>
@@ -150,7 +150,7 @@ inline Mesh march_finest_share(const SlabPlan& plan, const MarchSlab& march, con
   return mesh;
 }
 
-// extract_finest's slabs shared among processes (include/isotope/distribution.h), by their cost
+// extract_finest's slabs shared among processes (isotope/distribution.h), by their cost
 // estimated from the source's records (slab_costs).
 template <ValueSource Source>
 Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,

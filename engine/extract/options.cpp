@@ -62,20 +62,6 @@ std::string_view to_string(TopologyMode t) {
   return "unknown";
 }
 
-std::optional<ErrorIndicator> parse_error_indicator(std::string_view s) {
-  if (s == "bound") return ErrorIndicator::bound;
-  if (s == "surplus") return ErrorIndicator::surplus;
-  return std::nullopt;
-}
-
-std::optional<TopologyMode> parse_topology_mode(std::string_view s) {
-  if (s == "none") return TopologyMode::none;
-  if (s == "paper") return TopologyMode::paper;
-  if (s == "preserve") return TopologyMode::preserve;
-  if (s == "simplify") return TopologyMode::simplify;
-  return std::nullopt;
-}
-
 std::string_view to_string(SimplificationWeight w) {
   switch (w) {
     case SimplificationWeight::interval: return "interval";
@@ -83,13 +69,6 @@ std::string_view to_string(SimplificationWeight w) {
     case SimplificationWeight::size: return "size";
   }
   return "unknown";
-}
-
-std::optional<SimplificationWeight> parse_simplification_weight(std::string_view s) {
-  if (s == "interval") return SimplificationWeight::interval;
-  if (s == "gradient") return SimplificationWeight::gradient;
-  if (s == "size") return SimplificationWeight::size;
-  return std::nullopt;
 }
 
 RecordFields fields_for(const ExtractOptions& o) {

@@ -2,7 +2,7 @@
 #include <atomic>
 
 // The engine's side of the extraction options (isotope/extract.h): which record fields an
-// extraction reads (engine/hierarchy/record_fields.h), and the cancellation check its loops make.
+// extraction reads (RecordFields), and the cancellation check its loops make.
 #include "engine/hierarchy/record_fields.h"
 #include "isotope/extract.h"
 #include "isotope/run_context.h"
@@ -25,16 +25,19 @@ RecordFields fields_for(const ExtractOptions& options);
 double threshold_in_codes(double value, double factor);
 inline double threshold_in_data(double codes, double factor) { return codes * factor; }
 
-// One extraction as the engine carries it through its passes: the method's settings, and what the
-// passes read of its run context (isotope/run_context.h; the threads and the progress are the
-// entry point's). From options alone: this process alone, never cancelled.
-struct ExtractCall : ExtractOptions {
+// One extraction as the engine carries it through its passes: the method's settings and the run
+// context they run under (isotope/run_context.h), held whole so that a field the context gains
+// reaches every pass (the threads and the progress are the entry point's to apply). From options
+// alone: this process alone, never cancelled.
+struct ExtractCall : ExtractOptions, RunContext {
   ExtractCall() = default;
   ExtractCall(const ExtractOptions& options, const RunContext& run = {})  // NOLINT: options alone convert
-      : ExtractOptions(options), cancel(run.cancel), distribution(run.distribution), keep_shares(run.keep_shares) {}
-  const std::atomic<bool>* cancel = nullptr;
-  const Distribution* distribution = nullptr;
-  bool keep_shares = false;
+      : ExtractOptions(options), RunContext(run) {}
+  // Both halves, each in the words every face uses.
+  void validate() const {
+    ExtractOptions::validate();
+    RunContext::validate();
+  }
 };
 
 // Throws ExtractionCancelled when `options` asks to stop; cheap enough for every piece or slab.

@@ -20,10 +20,7 @@ class ProcessGroup {
 
   template <class Work>
   void step(const Work& work) const {
-    if (distribution_)
-      settle_together(*distribution_, work);
-    else
-      work();
+    settle_together(distribution_, work);
   }
   int64_t sum(int64_t mine) const { return distribution_ ? sum_over_ranks(*distribution_, mine) : mine; }
   // Spread over ranks: a memo of earlier choices must then be ignored, so that every rank searches

@@ -14,10 +14,10 @@
 #include <vector>
 
 #include "engine/core/gather_items.h"
+#include "engine/core/huge_blocks.h"
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/edge_vertex_map.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {

@@ -12,12 +12,12 @@
 #include <thread>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/parallel.h"
 #include "engine/core/volume_check.h"
 #include "engine/extract/array_source.h"
 #include "engine/extract/extract_drivers.h"
 #include "engine/extract/finest_extract.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -210,10 +210,7 @@ Mesh march_windows(const LayerSource& source, const ExtractCall& options, const 
   const auto make_ring = [&] {
     ring.emplace(read, source, options, s.first, s.end, s.layers, plan.slab_layers, s.held);
   };
-  if (group)
-    settle_together(*group, make_ring);
-  else
-    make_ring();
+  settle_together(group, make_ring);
   std::atomic<int64_t> blocks{0}, cells{0};
   std::atomic<bool> met_non_finite{false};
   // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
@@ -289,7 +286,7 @@ Mesh extract_streamed(const LayerSource& source, const ExtractCall& options, Ext
   const SlabPlan plan = finest_plan(lattice, dims, options.iso, source.origin, source.spacing);
   // Under several processes each streams the layers of its own share of the slabs only. Their
   // costs are their cells, as for a volume in memory, which has no records to tell which blocks
-  // are cut (finest_extract.h's slab_costs): the same shares.
+  // are cut (the finest extraction's slab_costs): the same shares.
   const Distribution* group = options.distribution;
   std::vector<double> costs;
   std::vector<size_t> shares{0, static_cast<size_t>(slab_count(plan))};

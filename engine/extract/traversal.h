@@ -1,6 +1,6 @@
 #pragma once
 // The adaptive traversal (paper Sec. 3.2 with the stopping rule of docs/METHOD.md), generic over where
-// values and records come from: any TraversalSource (engine/extract/traversal_source.h), a
+// values and records come from: any TraversalSource (a C++20 concept), a
 // hierarchy in memory or a store paged through a brick cache.
 #include <algorithm>
 #include <array>
@@ -52,7 +52,7 @@ inline std::array<std::array<float, 4>, 2> bisect_values(const std::array<float,
   return {{{f[0], f[2], f[3], at_v}, {f[1], f[2], f[3], at_v}}};
 }
 
-// Triangles marching tetrahedra makes of one tetrahedron (engine/mesh/marching_tetrahedra.cpp).
+// Triangles marching tetrahedra makes of one tetrahedron (as TetCutter cuts it).
 inline int triangles_of(const std::array<float, 4>& f, float iso) {
   const int above = (f[0] > iso) + (f[1] > iso) + (f[2] > iso) + (f[3] > iso);
   return above == 2 ? 2 : (above == 1 || above == 3) ? 1 : 0;
@@ -67,7 +67,7 @@ inline int triangles_of(const std::array<float, 4>& f, float iso) {
 class SplitRule {
  public:
   // error_fold: added to every error before it is compared (a quantized store's rounding,
-  // io/store/store_format.h): the records are those of the quantized field.
+  // docs/FORMAT.md, "Quantization"): the records are those of the quantized field.
   SplitRule(const ExtractCall& o, const Lattice& lattice, const std::array<double, 3>& origin,
             const std::array<double, 3>& spacing, double error_fold = 0)
       : options_(o), origin_(origin), spacing_(spacing), fold_(error_fold) {
@@ -247,7 +247,7 @@ class Traversal {
     return out;
   }
 
-  // A cost estimate of running piece p (include/isotope/distribution.h): how many subtrees of
+  // A cost estimate of running piece p (isotope/distribution.h): how many subtrees of
   // `level` below it the traversal reaches (cull and stop as run() would above that level),
   // reading only the records of the levels above. An emitting piece costs 1.
   int64_t reach(const Piece& p, int level) {
@@ -280,7 +280,7 @@ class Traversal {
     *key = rule_.key(b, reader_.topology(h, rule_.fields()), v, level);
     return Fate::split_key;
   }
-  // For the choice of delta (engine/extract/triangle_budget.h): the fate as judge's, the error's part of
+  // For the choice of delta (choose_delta_for_budget): the fate as judge's, the error's part of
   // the key, and `weight`: the diamond's saturated weight when the exact rule fires at the
   // isovalue below it, else -infinity (never split for its topology).
   Fate judge_topology(const PackedTet& t, int level, double* error_key, double* weight) {
@@ -295,7 +295,7 @@ class Traversal {
     return Fate::split_key;
   }
   // The triangles the mesh will have of t if it stops there, from the values at its corners:
-  // marching tetrahedra's, clipped to the data box where t reaches past it (engine/mesh/box_clip.h),
+  // marching tetrahedra's, clipped to the data box where t reaches past it (clipped_triangles),
   // as the extraction clips its mesh.
   int triangles(const PackedTet& t, const std::array<float, 4>& f, bool positive) const {
     const int n = triangles_of(f, rule_.options().iso);

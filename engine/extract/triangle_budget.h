@@ -2,7 +2,7 @@
 // The finest uniform eps whose mesh stays within a triangle budget, counted in parallel passes
 // without building any mesh.
 //
-// A tetrahedron bisected at diamond v is refined iff key(v) >= eps (engine/extract/traversal.h), and keys
+// A tetrahedron bisected at diamond v is refined iff key(v) >= eps (the traversal's SplitRule), and keys
 // never grow downwards, so the mesh for eps is the cut "every tetrahedron with key >= eps split".
 // A tetrahedron t whose parent has key kp and whose own key is kt (-infinity at a leaf) lies on
 // that cut exactly for eps in (kt, kp]. Hence the triangle count of every cut at once:
@@ -73,7 +73,7 @@ struct BudgetSample {
 };
 
 // The search for any key that never grows from a diamond to its children: `key(t, level, &k)`
-// judges tetrahedron t (engine/extract/traversal.h, Traversal::judge's fates) and, when it may be split,
+// judges tetrahedron t (with the fates of Traversal::judge) and, when it may be split,
 // sets its key. Returns the smallest threshold x (a key, or just above the largest) such that
 // splitting every tetrahedron with key >= x gives at most max_triangles; throws when even the
 // keys of +infinity alone exceed it (TriangleBudgetTooSmall). With `ties`, the steps go on within
@@ -86,7 +86,7 @@ BudgetChoice choose_cut_for_budget(const Source& source, const traversal::SplitR
                                    bool ties, const Key& judge, BudgetSample sample = {});
 
 // Where a sampled choice aims, and the least part of the budget its mesh must reach to be kept
-// (engine/extract/adaptive_extract.h): an estimate off by up to 5% either way still lands in
+// (docs/METHOD.md, "Focus and triangle budget"): an estimate off by up to 5% either way still lands in
 // [kSampleFloor, 1] of the budget.
 inline constexpr double kSampleAim = 0.95, kSampleFloor = 0.9;
 
@@ -101,7 +101,7 @@ BudgetChoice choose_eps_for_budget(const Source& source, const traversal::SplitR
       sample);
 }
 
-// Simplify mode with a budget and no delta (engine/extract/options.h, ExtractOptions::auto_delta): at
+// Simplify mode with a budget and no delta (ExtractOptions::auto_delta): at
 // eps = infinity a tetrahedron is split iff the exact rule fires below it with a weight >= delta
 // (or its error key is infinite: at a focus's centre); the weight (saturated, so never growing
 // downwards) is the key. The smallest delta whose mesh at eps = infinity has at most max_triangles: the

@@ -12,11 +12,11 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/hierarchy/diamond.h"
 #include "engine/hierarchy/record.h"
 #include "engine/hierarchy/record_builder.h"
 #include "engine/hierarchy/store_layout.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 

@@ -24,11 +24,11 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/parallel.h"
 #include "engine/core/progress_reporter.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/store_layout.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 

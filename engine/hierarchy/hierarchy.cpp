@@ -5,11 +5,11 @@
 #include <cmath>
 #include <string>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/volume_check.h"
 #include "engine/hierarchy/band_tile.h"
 #include "engine/hierarchy/banded_build.h"
 #include "engine/hierarchy/record_builder.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 

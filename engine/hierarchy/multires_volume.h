@@ -7,11 +7,11 @@
 #include <cstdint>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/progress_reporter.h"
 #include "engine/hierarchy/brick_layout.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/hierarchy/record.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/volume.h"
 
 namespace isotope {

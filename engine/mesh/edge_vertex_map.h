@@ -11,7 +11,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "isotope/detail/huge_page_allocator.h"
+#include "engine/core/huge_blocks.h"
 
 namespace isotope {
 

@@ -8,9 +8,9 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/hierarchy/lattice.h"
 #include "engine/mesh/edge_vertex_map.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/mesh.h"
 
 namespace isotope {

@@ -8,10 +8,10 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_parts.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 #include "isotope/mesh.h"
 

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/parallel.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {

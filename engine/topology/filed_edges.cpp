@@ -5,9 +5,9 @@
 #include <cstdint>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_parts.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 namespace {

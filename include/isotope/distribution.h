@@ -1,7 +1,7 @@
 #pragma once
 // Work shared among processes: what the engine asks of a group of processes (MPI ranks) when one
 // extraction or one conversion is spread over them, without depending on MPI. The MPI group is
-// dist/mpi_distribution.h; a host program with its own communicator implements the two gathers.
+// the command's MpiDistribution; a host program with its own communicator implements the two gathers.
 //
 // Every process runs the same call with the same options and the same Distribution (rank r of R):
 // each takes a contiguous share of the work, chosen the same way on every process, and rank 0
@@ -37,6 +37,14 @@ class Distribution {
 // threw. When any did, every process throws DistributedError with the message of the lowest
 // failing rank (a DistributedError from a nested call passes through as it is).
 void settle_together(const Distribution& group, const std::function<void()>& work);
+// The same where the call may run alone (GROUP null, as RunContext::distribution): WORK just runs,
+// so that a driver calls one step either way.
+inline void settle_together(const Distribution* group, const std::function<void()>& work) {
+  if (group)
+    settle_together(*group, work);
+  else
+    work();
+}
 
 // Where each of `ranks` contiguous shares of items with these costs begins (ranks + 1 bounds, the
 // last = costs.size()): each share's cost as close to total / ranks as whole items allow. The

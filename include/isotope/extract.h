@@ -85,16 +85,12 @@ struct ExtractOptions {
   void validate() const;
 };
 
-// The names of the values, as every face spells them ("preserve", "surplus"); nullopt for a name
-// that is none.
+// The names of the values, as every face spells them ("preserve", "surplus").
 std::string_view to_string(ErrorIndicator e);
 std::string_view to_string(TopologyMode t);
 std::string_view to_string(SimplificationWeight w);
-std::optional<ErrorIndicator> parse_error_indicator(std::string_view s);
-std::optional<TopologyMode> parse_topology_mode(std::string_view s);
-std::optional<SimplificationWeight> parse_simplification_weight(std::string_view s);
 
-// What one process of a distributed extraction did (include/isotope/distribution.h).
+// What one process of a distributed extraction did (isotope/distribution.h).
 struct RankLoad {
   double cost = 0;          // its share of the estimated cost (the unit is the estimate's own)
   int64_t items = 0;        // pieces (or slabs at eps 0) in its share

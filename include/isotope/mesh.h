@@ -2,6 +2,7 @@
 // An indexed, welded triangle mesh in physical coordinates, and what can be measured of it.
 #include <array>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -11,11 +12,17 @@ namespace isotope {
 
 struct Mesh {
   // Meshes run to hundreds of megabytes: in large blocks, and resize() leaves the new elements
-  // unwritten (detail::UninitializedHugePageAllocator), for the writer to fill.
+  // unwritten (detail::UninitializedHugePageAllocator), for the writer to fill. A caller takes them
+  // as the views below (pointer and count, whatever the allocator), and copies them where a
+  // std::vector of its own is wanted: std::vector<std::array<float, 3>> v(m.vertices().begin(),
+  // m.vertices().end()).
   template <class T>
   using Array = std::vector<T, detail::UninitializedHugePageAllocator<T>>;
   Array<std::array<float, 3>> positions;
   Array<std::array<uint32_t, 3>> triangles;  // counter-clockwise seen from the outside (value <= iso)
+
+  std::span<const std::array<float, 3>> vertices() const { return positions; }
+  std::span<const std::array<uint32_t, 3>> faces() const { return triangles; }
 };
 
 // Combinatorial measures of a triangle mesh: what "same topology" is checked against.
@@ -29,7 +36,7 @@ struct MeshTopology {
   int64_t nonmanifold_edges = 0;     // edges with three or more
 };
 
-// On all threads (engine/topology/mesh_topology.cpp).
+// On all threads.
 MeshTopology measure_topology(const Mesh& mesh);
 
 // Per-vertex unit normals, for shading: the sum of the normals of the triangles around a vertex,

@@ -39,7 +39,7 @@
 namespace isotope {
 
 namespace detail {
-struct SourceAccess;  // the library's own faces' view of a store (io/source_access.h)
+struct SourceAccess;  // the library's own faces' view of a store (defined by the io layer)
 }  // namespace detail
 
 // What names an input, as a user types it on the command line.

@@ -18,7 +18,7 @@ struct Volume {
   std::vector<float> values;               // dims[0]*dims[1]*dims[2], x fastest
   // Instead of `values`: values that live elsewhere (a numpy array, a simulation's field), read
   // where they are, never copied. The caller keeps them alive and unchanged while this Volume, or
-  // a Source opened from it, is in use (the Python module holds the array: python/src/module.cpp):
+  // a Source opened from it, is in use (the Python module holds the array: isotope._isotope):
   // its values are checked once, when it is opened, and read as they are at each later moment.
   std::span<const float> borrowed;
 

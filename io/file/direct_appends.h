@@ -23,7 +23,7 @@
 #include <mutex>
 #include <thread>
 
-#include "isotope/detail/huge_page_allocator.h"
+#include "engine/core/huge_blocks.h"
 
 namespace isotope {
 

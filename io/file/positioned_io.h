@@ -13,7 +13,7 @@
 #include <memory>
 #include <new>
 
-#include "isotope/detail/huge_page_allocator.h"
+#include "engine/core/huge_blocks.h"
 
 namespace isotope {
 

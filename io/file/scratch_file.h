@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "isotope/detail/huge_page_allocator.h"
+#include "engine/core/huge_blocks.h"
 
 namespace isotope {
 

@@ -16,10 +16,10 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/parallel.h"
 #include "engine/mesh/vertex_normals.h"
 #include "io/file/extension.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 #include "isotope/version.h"
 

@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "isotope/detail/huge_page_allocator.h"
+#include "engine/core/huge_blocks.h"
 
 namespace isotope {
 

@@ -19,11 +19,11 @@
 #include <type_traits>
 #include <utility>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/volume_check.h"
 #include "io/file/checked_size.h"
 #include "io/store/field_codec.h"
 #include "io/store/held_words.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {

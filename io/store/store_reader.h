@@ -12,11 +12,11 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/progress_reporter.h"
 #include "engine/hierarchy/hierarchy.h"
 #include "engine/hierarchy/store_layout.h"
 #include "io/store/store_format.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 

@@ -86,7 +86,7 @@ class QuantizingReader : public BoxReader {
 
 // The fields of the brick whose first node is `origin` (G_j units) of a built tile, as the store
 // holds them: values, and for bands that store records each field rounded as the compact record
-// (engine/hierarchy/compact_record.h). Band 0 and the corners: values only. Into `f`, a thread's
+// (docs/FORMAT.md, "Compact records"). Band 0 and the corners: values only. Into `f`, a thread's
 // own, whose arrays keep their size from brick to brick: a brick within the band's grid writes
 // every entry, so that only one past it (nodes beyond the grid: 0 in every field) fills them first.
 // Without `topology`, the records' core fields alone (lo, hi, bound: a store without sections of
@@ -332,10 +332,7 @@ class Converter {
     auto commit = [this] {
       if (out_) out_->commit();
     };
-    if (options_.distribution)  // a rename that fails on rank 0 fails every rank
-      settle_together(*options_.distribution, commit);
-    else
-      commit();
+    settle_together(options_.distribution, commit);  // a rename that fails on rank 0 fails every rank
     stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return stats;
   }
@@ -414,7 +411,7 @@ class Converter {
     return built;
   }
 
-  // The distributed convert (include/isotope/distribution.h; docs/DISTRIBUTED.md), a pass a
+  // The distributed convert (isotope/distribution.h; docs/DISTRIBUTED.md), a pass a
   // band or, where the tiles allow, two bands a pass (j and j+1, as one process fuses them):
   //  1. rank 0 creates the output's temporary file; the ranks agree on the tile size (the
   //     smallest any of them would choose), so that the tiles are the same on all;
@@ -829,10 +826,7 @@ ConvertStats convert_to_store(const BoxReader& input, const std::string& output,
   if (options.distribution && (life != StoreLife::kept || sections != kAllSections))
     throw std::logic_error("convert_to_store: a distributed store is kept, with all its records' fields");
   auto make = [&] { converter.emplace(input, output, options, life, sections); };
-  if (options.distribution)
-    settle_together(*options.distribution, make);
-  else
-    make();
+  settle_together(options.distribution, make);
   return converter->run();
 }
 
@@ -847,10 +841,7 @@ ConvertStats convert(const VolumeSpec& input, const std::string& output, const C
     const std::string scratch = std::filesystem::absolute(output).parent_path().string();
     reader = open_box_reader(input, scratch);
   };
-  if (run.distribution)  // every rank opens the input; one that cannot stops them all
-    settle_together(*run.distribution, open);
-  else
-    open();
+  settle_together(run.distribution, open);  // every rank opens the input; one that cannot stops them all
   return convert_to_store(*reader, output, ConvertCall(options, run));
 }
 

@@ -1,6 +1,6 @@
 #pragma once
 // `isotope convert`: a volume on disk -> a store (docs/FORMAT.md), band by band and tile by
-// tile (engine/hierarchy/band_tile.h), so that memory stays within a budget whatever the volume's size.
+// tile (docs/METHOD.md, "Per-vertex records"), so that memory stays within a budget whatever the volume's size.
 #include <atomic>
 #include <cstdint>
 #include <string>
@@ -19,16 +19,14 @@ namespace isotope {
 // and never synced, the same bytes.
 enum class StoreLife { kept, transient };
 
-// One convert as the store's writer carries it: the store's settings, and what the build reads of
-// its run context (the threads are the entry point's). From options alone: this process alone,
-// never cancelled, heard by no one.
-struct ConvertCall : ConvertOptions {
+// One convert as the store's writer carries it: the store's settings and the run context they run
+// under (isotope/run_context.h), held whole (the threads are the entry point's to apply; a cancel
+// gives IoError("interrupted") at the next tile). From options alone: this process alone, never
+// cancelled, heard by no one.
+struct ConvertCall : ConvertOptions, RunContext {
   ConvertCall() = default;
   ConvertCall(const ConvertOptions& options, const RunContext& run = {})  // NOLINT: options alone convert
-      : ConvertOptions(options), progress(run.progress), cancel(run.cancel), distribution(run.distribution) {}
-  ProgressCallback progress;
-  const std::atomic<bool>* cancel = nullptr;  // IoError("interrupted") at the next tile
-  const Distribution* distribution = nullptr;
+      : ConvertOptions(options), RunContext(run) {}
 };
 
 // Writes OUTPUT atomically (temporary name, renamed when complete); on any error or

@@ -10,12 +10,12 @@
 #include <mutex>
 #include <new>
 
+#include "engine/core/huge_blocks.h"
 #include "io/file/input_file.h"
 #include "io/volume/box_reader.h"
 #include "io/volume/hdf5_handle.h"
 #include "io/volume/raw_data_reader.h"
 #include "io/volume/raw_reader.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {

@@ -11,8 +11,8 @@
 #include <memory>
 #include <mutex>
 
+#include "engine/core/huge_blocks.h"
 #include "io/volume/box_reader.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope {
 

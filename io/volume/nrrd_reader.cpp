@@ -21,10 +21,10 @@
 #include <system_error>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "io/file/input_file.h"
 #include "io/volume/raw_data_reader.h"
 #include "io/volume/raw_reader.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {

@@ -17,13 +17,13 @@
 #include <type_traits>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/parallel.h"
 #include "engine/core/volume_check.h"
 #include "io/file/checked_size.h"
 #include "io/file/input_file.h"
 #include "io/file/positioned_io.h"
 #include "io/volume/raw_data_reader.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 
 namespace isotope {

@@ -96,7 +96,8 @@ class Source:
     cannot take the store is the hierarchy built in memory (the volume read whole, 16 bytes a node).
     """
 
-    def __init__(self, input, *, dims=None, type=None, spacing=None, origin=None, cache_mb=512, progress=None):
+    def __init__(self, input, *, dims=None, type=None, spacing=None, origin=None, cache_mb=_isotope.DEFAULT_CACHE_MB,
+                 progress=None):
         self._source = _isotope.Source(_input(input), _triple("dims", dims, int), type,
                                        _triple("spacing", spacing, float), _triple("origin", origin, float),
                                        _integer("cache-mb", cache_mb), progress)
@@ -140,16 +141,17 @@ Store = Source
 
 
 def extract(volume, iso, *, eps=0, topology="preserve", error="bound", weight=None, delta=None, focus=None,
-            radius=None, max_triangles=None, eps_ties=None, dims=None, type=None, spacing=None, origin=None, cache_mb=512,
-            threads=0, progress=None):
+            radius=None, max_triangles=None, eps_ties=None, dims=None, type=None, spacing=None, origin=None,
+            cache_mb=_isotope.DEFAULT_CACHE_MB, threads=0, progress=None):
     """One extraction: ``Source(volume, ...).extract(iso, ...)``; see :class:`Source`."""
     store = Source(volume, dims=dims, type=type, spacing=spacing, origin=origin, cache_mb=cache_mb, progress=progress)
     return store.extract(iso, eps=eps, topology=topology, error=error, weight=weight, delta=delta, focus=focus,
                          radius=radius, max_triangles=max_triangles, eps_ties=eps_ties, threads=threads)
 
 
-def convert(volume, output, *, dims=None, type=None, spacing=None, origin=None, memory_mb=1024, zstd_level=3,
-            brick_bits=4, quantize_bits=0, threads=0, progress=None):
+def convert(volume, output, *, dims=None, type=None, spacing=None, origin=None, memory_mb=_isotope.DEFAULT_MEMORY_MB,
+            zstd_level=_isotope.DEFAULT_ZSTD_LEVEL, brick_bits=_isotope.DEFAULT_BRICK_BITS, quantize_bits=0, threads=0,
+            progress=None):
     """A volume (a file, as :class:`Source` takes, or an array) into a store at ``output``.
 
     The store holds the hierarchy in compressed, checksummed bricks, so that later extractions

@@ -1,5 +1,5 @@
-// isotope._isotope: the Python face of the library (include/isotope/isotope.h), wrapped by
-// python/isotope/__init__.py. What it adds to the C++ API, and only that:
+// isotope._isotope: the Python face of the library (isotope/isotope.h), wrapped by the
+// isotope package. What it adds to the C++ API, and only that:
 // - numpy arrays a[z, y, x] as volumes: float32 C-contiguous ones read where they are
 //   (Volume::borrowed, the array held alive by the Python object), other dtypes converted once;
 // - meshes as numpy views of the C++ arrays, without a copy;
@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "tools/support/option_text.h"
+#include "tools/support/stats_fields.h"
 #include <isotope/isotope.h>
 
 namespace py = pybind11;
@@ -133,7 +134,7 @@ ProgressCallback progress_of(const py::object& callback, const std::shared_ptr<R
 
 // The thread the library's work runs on, one per calling Python thread, kept while that thread
 // lives: a fresh thread per call would start with a cold malloc arena and a cold oneTBB slot, which
-// cost bolt's 4 ms extraction 2 ms and its 42 ms coarse one 11 ms (bench/python_overhead.py).
+// cost bolt's 4 ms extraction 2 ms and its 42 ms coarse one 11 ms (the bench's Python overhead script).
 class Worker {
  public:
   Worker() {
@@ -307,18 +308,10 @@ py::dict stats_dict(const Mesh& mesh, const ExtractStats& s) {
   py::dict d;
   d["vertices"] = mesh.positions.size();
   d["triangles"] = mesh.triangles.size();
-  d["seconds"] = s.seconds;
-  d["tets_visited"] = s.tets_visited;
-  d["tets_emitted"] = s.tets_emitted;
-  d["tets_simplified"] = s.tets_simplified;
-  d["chosen_eps"] = s.chosen_eps;
-  d["chosen_eps_ties"] = s.chosen_eps_ties;
-  d["next_eps"] = s.next_eps;
-  d["next_eps_ties"] = s.next_eps_ties;
-  d["next_triangles"] = s.next_triangles;
-  d["budget_sampled"] = s.budget_sampled;
-  d["budget_remembered"] = s.budget_remembered;
-  d["chosen_delta"] = s.chosen_delta;
+  const auto put = [&d](const char* name, const auto& value) { d[name] = value; };
+  tools::for_each_work_stat(s, put);
+  tools::for_each_budget_stat(s, put);
+  tools::for_each_delta_stat(s, put);
   return d;
 }
 
@@ -472,6 +465,12 @@ PYBIND11_MODULE(_isotope, m) {
   using namespace isotope::python;
   m.doc() = "isotope's C++ library; use the isotope package (python/isotope/__init__.py)";
   m.attr("__version__") = ISOTOPE_VERSION_STRING;
+  // The library's defaults, for the package's signatures: one value per default (isotope/source.h,
+  // isotope/convert.h).
+  m.attr("DEFAULT_CACHE_MB") = OpenOptions{}.cache_mb;
+  m.attr("DEFAULT_MEMORY_MB") = ConvertOptions{}.memory_mb;
+  m.attr("DEFAULT_ZSTD_LEVEL") = ConvertOptions{}.zstd_level;
+  m.attr("DEFAULT_BRICK_BITS") = ConvertOptions{}.brick_bits;
 
   static py::exception<IoError> io_error(m, "IoError", PyExc_OSError);
   static py::exception<OptionError> option_error(m, "OptionError", PyExc_ValueError);

@@ -4,6 +4,7 @@ repeated extraction; progress, cancellation and the GIL; errors with the command
 against scikit-image's marching_cubes on the same volume, the same enclosed volume and box."""
 
 import ctypes
+import json
 import os
 import re
 import subprocess
@@ -136,6 +137,24 @@ def test_a_store_is_opened_once_and_extracted_from_repeatedly(data, tmp_path):
     # the file converted by the command is the same store
     isotope.convert(data / "bolt_70x123x66_uint8.raw", tmp_path / "from_file.isotope")
     assert (tmp_path / "from_file.isotope").read_bytes() != b""
+
+
+def test_the_command_and_the_module_report_the_stats_under_the_same_names(data, isotope_command, tmp_path):
+    # a budget (its choice reported) under simplify with an automatic delta (its choice reported)
+    volume = data / "bolt_70x123x66_uint8.raw"
+    mesh = isotope.Source(volume).extract(iso=64.5, max_triangles=20000, topology="simplify")
+    report = tmp_path / "r.json"
+    r = command(isotope_command, "extract", str(volume), "--iso", "64.5", "--max-triangles", "20000",
+                "--topology", "simplify", "-q", "-o", str(tmp_path / "m.ply"), "--report", str(report))
+    assert r.returncode == 0, r.stderr
+    j = json.loads(report.read_text())
+    fields = {**{k: v for k, v in j["extract"].items() if k != "seconds"},
+              **{k: j[k] for k in ("chosen_eps", "chosen_eps_ties", "next_eps", "next_eps_ties", "next_triangles",
+                                   "budget_steps", "budget_sampled", "budget_remembered", "chosen_delta",
+                                   "delta_floor_triangles")}}
+    assert j["triangles"] == mesh.stats["triangles"] > 0 and fields["chosen_delta"] >= 0
+    assert {k: mesh.stats[k] for k in fields} == fields
+    assert set(mesh.stats) == set(fields) | {"seconds", "vertices", "triangles"}
 
 
 def test_options_reach_the_library(data):

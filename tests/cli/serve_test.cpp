@@ -337,7 +337,7 @@ TEST_F(Serve, ExtractAnswersTheMeshExtractGivesWithItsReport) {
 
 // A triangle budget: the server's search chooses the eps the command's does, and the report says
 // which, with the next finer step's count beyond the budget. The same budget asked for again is
-// that choice remembered (engine/extract/budget_memo.h): the same mesh and report, without the
+// that choice remembered (BudgetMemo): the same mesh and report, without the
 // search. A budget below the coarsest mesh a topology mode allows is the client's to change: 400,
 // with how many triangles that mesh has.
 TEST_F(Serve, ATriangleBudgetChoosesTheEpsExtractChooses) {
@@ -769,7 +769,7 @@ TEST_F(ServeStalledReadersPaced, AreDroppedBehindThePace) {
 
 // 200 clients at once, each asking for a full-resolution mesh: every one is answered, with the
 // mesh (200) or with 503 and Retry-After, and the server's memory stays what a few extractions
-// take: 2 run, 16 wait (tools/serve/viewer_server.cpp), the rest are refused at once. Unbounded, the
+// take: 2 run, 16 wait (docs/SERVE.md, "Limits"), the rest are refused at once. Unbounded, the
 // server would hold every mesh at the same time.
 TEST_F(Serve, ACrowdIsAnsweredOrRefusedWithBoundedMemory) {
   ExtractOptions o;

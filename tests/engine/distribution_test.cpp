@@ -1,8 +1,8 @@
-// A distributed extraction and conversion (include/isotope/distribution.h) with the ranks as
-// threads of this process, so that the engine's side of it runs under the sanitizers (scripts/test.sh:
-// ASan and TSan) without MPI: the same mesh and the same store, byte for byte, as one process; a
+// A distributed extraction and conversion (isotope/distribution.h) with the ranks as
+// threads of this process, so that the engine's side of it runs under the sanitizers (the test
+// script's ASan and TSan runs) without MPI: the same mesh and the same store, byte for byte, as one process; a
 // failure on one rank thrown on every rank with its message; nothing left behind. The MPI face
-// itself is tested through mpirun in tests/mpi/test_mpi.py.
+// itself is tested through mpirun by the MPI tests.
 #include "isotope/distribution.h"
 
 #include <gtest/gtest.h>
@@ -211,7 +211,7 @@ TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
   }
 }
 
-// A budget from a sample (engine/extract/adaptive_extract.h): every rank counts the guess's whole
+// A budget from a sample (docs/METHOD.md, "Focus and triangle budget"): every rank counts the guess's whole
 // mesh, so all of them stand by it or all fall back to the exact choice, as one process does, and
 // rank 0 has that process's mesh. Both outcomes are met: a sample of level 9 stands, one of 12 of
 // the 96 subtrees of level 4 does not.
@@ -357,7 +357,7 @@ TEST(DistributedExtract, EpsZeroStreamedSharesAreTheInMemoryOnes) {
   }
 }
 
-// A fresh folder per test (tests/support/temp_dir_test.h): what a failed convert must leave empty.
+// A fresh folder per test (TempDirTest): what a failed convert must leave empty.
 class DistributedStore : public testing::TempDirTest {};
 
 TEST_F(DistributedStore, FourRanksWriteTheSingleProcessFileAndExtractFromIt) {

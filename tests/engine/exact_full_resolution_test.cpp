@@ -30,6 +30,7 @@
 #include <thread>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/extract/column_extremes.h"
 #include "engine/extract/extract_drivers.h"
 #include "engine/extract/slab_march.h"
@@ -44,7 +45,6 @@
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_reader.h"
 #include "isotope/convert.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 #include "isotope/source.h"
 #include "tests/support/io_error_of.h"
@@ -102,7 +102,7 @@ TEST(ExactAtEpsZero, RealVolumesAtTheirIsovaluesAndAtIntegerTies) {
   }
 }
 
-// At eps 0 cells are marched block by block (engine/extract/finest_extract.h): blocks of 2, 4 and 8
+// At eps 0 cells are marched block by block (extract_finest): blocks of 2, 4 and 8
 // cells, cut by the data box on any side, and lattices too small for a block at all.
 TEST(ExactAtEpsZero, BlocksOfAnySizeAndBlocksCutByTheDataBox) {
   const Volume noise = generate_noise(21, 5);

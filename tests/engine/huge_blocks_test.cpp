@@ -1,6 +1,8 @@
 // The huge-block store (behind detail::HugePageAllocator): once asked to keep freed blocks,
 // it hands a freed block out again where it lay, already faulted in, whole or in part, and keeps
 // no more than it was told.
+#include "engine/core/huge_blocks.h"
+
 #include <gtest/gtest.h>
 #include <sys/mman.h>
 #include <sys/resource.h>
@@ -19,7 +21,6 @@
 #include <vector>
 
 #include "io/volume/raw_reader.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope::detail {
 namespace {

@@ -1,4 +1,4 @@
-// The triangle budget's search (engine/extract/triangle_budget.h) against the walk it replaced: the
+// The triangle budget's search (choose_cut_for_budget) against the walk it replaced: the
 // cut moved down one group of equal keys at a time through a max-heap, the running triangle count
 // of the front checked after each group (docs/METHOD.md, "Focus and triangle budget"). That walk
 // is kept here as the reference, its groups cut by tie class within a key (SplitRule::refines) as
@@ -8,7 +8,7 @@
 // take few values (a quantized store: halves of a code), for keys that take many (float data, a
 // focus), for the choice of delta (simplify), on a clipped lattice and on a 2^k + 1 one, in memory
 // and paged. TriangleBudgetParallel, a small version, also runs under ThreadSanitizer
-// (scripts/test.sh).
+// (the test script's TSan run).
 #include "engine/extract/triangle_budget.h"
 
 #include <gtest/gtest.h>

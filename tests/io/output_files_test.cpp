@@ -21,11 +21,11 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "io/file/atomic_file.h"
 #include "io/file/direct_appends.h"
 #include "io/file/region_writes.h"
 #include "io/file/temporary_registry.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
 #include "tests/support/byte_files.h"
 #include "tests/support/io_error_of.h"

@@ -4,11 +4,14 @@
 #include <gtest/gtest.h>
 #include <oneapi/tbb/global_control.h>
 
+#include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -103,6 +106,22 @@ TEST_F(PublicApi, ARunContextOutOfRangeIsRefusedInTheFacesWords) {
 // The context's threads bound the call while it runs (seen from its progress, which runs inside
 // it), and its progress hears the hierarchy that the extraction builds; the mesh is the same bytes
 // under any context.
+// The mesh's arrays reach code that takes a std::span (the views), or a std::vector of its own (a
+// copy), whatever allocator the mesh keeps them in.
+TEST_F(PublicApi, AMeshIsTakenAsViewsOrCopiedIntoPlainVectors) {
+  const Mesh mesh = extract(sphere(), {});
+  ASSERT_GT(mesh.triangles.size(), 500u);
+  const std::span<const std::array<float, 3>> vertices = mesh.vertices();
+  const std::span<const std::array<uint32_t, 3>> faces = mesh.faces();
+  EXPECT_EQ(vertices.data(), mesh.positions.data());
+  EXPECT_EQ(vertices.size(), mesh.positions.size());
+  EXPECT_EQ(faces.data(), mesh.triangles.data());
+  EXPECT_EQ(faces.size(), mesh.triangles.size());
+  const std::vector<std::array<uint32_t, 3>> own(faces.begin(), faces.end());
+  ASSERT_EQ(own.size(), mesh.triangles.size());
+  EXPECT_TRUE(std::equal(own.begin(), own.end(), mesh.triangles.begin()));
+}
+
 TEST_F(PublicApi, ARunContextChangesHowACallRunsNotWhatItGives) {
   const Volume v = sphere();
   ExtractOptions o;

@@ -106,7 +106,7 @@ class Store : public TempDirTest {
 
   // Every value and record of the store, read as an extraction reads it (band 0's records
   // computed from the values), equals the in-memory build's bit for bit, and each record is the
-  // exact one (MultiresVolume) rounded as engine/hierarchy/compact_record.h says.
+  // exact one (MultiresVolume) rounded to a compact record (docs/FORMAT.md, "Compact records").
   void expect_round_trip(const Volume& v, const std::string& store, int brick_bits = kDefaultBrickBits) {
     const Hierarchy loaded = load(store);
     const Hierarchy built = Hierarchy::build(v, kAll, brick_bits);
@@ -197,7 +197,7 @@ TEST_F(Store, ValueRangeKeepsTheFirstOfEqualZeros) {
 }
 
 // Each real volume as floats, and converted from its raw file in its own type: a uint8 store's
-// cache holds its records in narrow words (io/store/held_words.h), which must read back as the
+// cache holds its records in narrow words (narrow_bounds), which must read back as the
 // very records.
 TEST_F(Store, RoundTripIsExactOnRealVolumesAsFloatsAndInTheirOwnType) {
   for (const auto& shared : testing::shared_volumes()) {
@@ -229,7 +229,7 @@ TEST_F(Store, RoundTripIsExactFromAStoreNotInThePageCache) {
 }
 
 // Band 0's records of a uint8 store read for their range and bound alone (an extraction with
-// --error bound, the default): computed in the narrow words' integers (io/store/paged_volume.h),
+// --error bound, the default): computed in the narrow words' integers (PagedVolume),
 // they must be the very words of the build in memory, at every node of every brick.
 TEST_F(Store, BandZeroRangesAndBoundsOfAUint8StoreAreTheBuildsWithNoOtherField) {
   int volumes = 0;
@@ -1023,8 +1023,8 @@ TEST_F(StoreCorruption, ConsistentChecksumsButContradictoryBricksAreCaught) {
   EXPECT_CONTAINS(verify_message(read_bytes(bad_)), "value outside its record's range");
 }
 
-// A uint8 store's cache holds each record's range and bound in 32 bits (io/store/held_words.h,
-// narrow bounds). A record those bits cannot hold exactly, under valid checksums, is named as a
+// A uint8 store's cache holds each record's range and bound in 32 bits (narrow_bounds
+// packs them). A record those bits cannot hold exactly, under valid checksums, is named as a
 // corrupt brick by the read that finds it, never rounded into another record.
 TEST_F(StoreCorruption, ARecordNarrowWordsCannotHoldIsACorruptBrickOfAUint8Store) {
   const std::string good = path("neghip.isotope");

@@ -1,11 +1,13 @@
 #pragma once
 // The benchmark suite `isotope bench` runs (its definition beside this header): the product timed as a
 // user meets it on a fixed set of volumes, beside full-resolution marching tetrahedra and the
-// peers, with the performance targets met or missed row by row. The Google Benchmark binaries of
-// bench/ time the same engine paths stage by stage (bench/README.md).
+// peers, with the performance targets met or missed row by row. The Google Benchmark binaries
+// time the same engine paths stage by stage.
 #include <cstdint>
 #include <string>
 #include <vector>
+
+#include "isotope/source.h"
 
 namespace isotope::bench {
 
@@ -16,7 +18,7 @@ struct SuiteOptions {
   std::string data;  // the shared volumes' folder
   std::vector<std::string> datasets;
   std::string work_dir;
-  int64_t cache_mb = 512;
+  int64_t cache_mb = OpenOptions{}.cache_mb;
   bool quiet = false;
   bool scale = false;
   int64_t scale_size = 2048;

@@ -15,8 +15,8 @@
 #include <utility>
 #include <vector>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/extract/slab_march.h"
-#include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope::tools {
 namespace {

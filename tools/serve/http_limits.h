@@ -1,6 +1,6 @@
 #pragma once
 // What one HTTP client may hold of `isotope serve` (docs/SERVE.md, "Limits"), as numbers; the server
-// that enforces them is tools/serve/bounded_http.h.
+// that enforces them is BoundedHttpServer.
 #include <chrono>
 #include <cstddef>
 

@@ -1,4 +1,4 @@
-// The server module (tools/serve/serve_module.h): `isotope serve` once its options are parsed. The
+// The server module (isotope_serve, its entry point): `isotope serve` once its options are parsed. The
 // server runs until Ctrl-C; a watcher thread turns the interrupt flag into a stop, so the
 // listening socket is closed cleanly.
 #include "tools/serve/serve_module.h"

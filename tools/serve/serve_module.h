@@ -1,8 +1,10 @@
 #pragma once
-// The server module's entry point (tools/support/command_module.h): cpp-httplib, and OpenSSL with
+// The server module's entry point (a command module, opened at run time): cpp-httplib, and OpenSSL with
 // it, are loaded only by `isotope serve`.
 #include <cstdint>
 #include <string>
+
+#include "isotope/source.h"
 
 namespace isotope::tools {
 
@@ -10,7 +12,7 @@ struct ServeArgs {
   std::string store;
   std::string host = "127.0.0.1";
   int port = 8080;
-  int64_t cache_mb = 512;
+  int64_t cache_mb = OpenOptions{}.cache_mb;
   int threads = 0;
   bool quiet = false;
 };

@@ -40,7 +40,7 @@ constexpr int64_t kHistogramSamples = int64_t{4} << 20;  // a fraction of a seco
 constexpr std::ptrdiff_t kConcurrentExtractions = 2;
 // Requests waiting for one of those slots, at most; a request beyond them, or one that has waited
 // kMaxWaitSeconds, gets 503 with Retry-After (docs/SERVE.md, "Limits"): the memory and the delay a
-// crowd of clients can cause stay bounded (tests/cli/serve_test.cpp, ACrowdIsAnsweredOrRefusedWithBoundedMemory).
+// crowd of clients can cause stay bounded (the test Serve.ACrowdIsAnsweredOrRefusedWithBoundedMemory).
 constexpr int kWaitingExtractions = 16;
 constexpr int kMaxWaitSeconds = 30;
 // Requests carry no body (docs/SERVE.md, "Limits"; the others are HttpLimits).
@@ -69,7 +69,7 @@ nlohmann::ordered_json store_info_json(const StoreReader& store) {
 
 // Only a store is served (the viewer pages it; a raw volume would be read whole per server).
 Source open_store(const ViewerServer::Settings& s) {
-  require_regular_file(s.store, s.store, "an isotope store");  // a missing file says so (io/file/input_file.h)
+  require_regular_file(s.store, s.store, "an isotope store");  // a missing file, a folder or a FIFO says so
   if (!is_store_file(s.store))
     throw IoError(s.store + ": not an isotope store (isotope serve shows stores; run isotope convert first)");
   OpenOptions options;
@@ -176,7 +176,7 @@ struct ViewerServer::Impl {
       describe(input.info(), run);
       const auto measure_start = std::chrono::steady_clock::now();
       std::vector<std::array<float, 3>> normals;  // meanwhile, on the other core
-      parallel_for(0, 2, [&](int64_t part) {      // engine/core/parallel.h: std::threads under TSan
+      parallel_for(0, 2, [&](int64_t part) {      // under TSan: two std::threads
         if (part == 0)
           run.topology = measure_topology(mesh);
         else
@@ -189,7 +189,7 @@ struct ViewerServer::Impl {
       report["seq"] = r.seq ? nlohmann::ordered_json(*r.seq) : nlohmann::ordered_json(nullptr);
       report["server_seconds"] = seconds_since(start);
       // The body is held, against the budget, until its client has taken it (or the pace of
-      // tools/serve/bounded_http.h ends the connection): the mesh and normals themselves, sent
+      // BoundedHttpServer ends the connection): the mesh and normals themselves, sent
       // from where they lie after the wire format's header.
       struct Held {
         std::shared_ptr<void> hold;  // released last, once the body is freed (the release trims)

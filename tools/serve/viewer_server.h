@@ -7,6 +7,7 @@
 #include <memory>
 #include <string>
 
+#include "isotope/source.h"
 #include "tools/serve/http_limits.h"
 
 namespace isotope::tools {
@@ -14,10 +15,10 @@ namespace isotope::tools {
 class ViewerServer {
  public:
   struct Settings {
-    std::string store;       // made by isotope convert
-    int64_t cache_mb = 512;  // decoded bricks, shared by all requests
-    bool log = false;        // a line per extraction on stderr
-    HttpLimits limits;       // what one client may hold (docs/SERVE.md, "Limits")
+    std::string store;                          // made by isotope convert
+    int64_t cache_mb = OpenOptions{}.cache_mb;  // decoded bricks, shared by all requests
+    bool log = false;                           // a line per extraction on stderr
+    HttpLimits limits;                          // what one client may hold (docs/SERVE.md, "Limits")
     // The bodies of the responses being sent, at most (one alone may be larger): clients that
     // do not read what they asked for cannot make the server hold more.
     size_t response_budget_bytes = size_t{512} << 20;

@@ -87,12 +87,7 @@ const Distribution* g_group = nullptr;
 }
 const Distribution* process_group() { return g_group; }
 void set_process_group(const Distribution* group) { g_group = group; }
-void on_every_rank(const std::function<void()>& work) {
-  if (g_group)
-    settle_together(*g_group, work);
-  else
-    work();
-}
+void on_every_rank(const std::function<void()>& work) { settle_together(g_group, work); }
 
 std::function<void(double)> progress_bar(std::string label) {
   return [label = std::move(label)](double fraction) {

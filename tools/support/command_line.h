@@ -45,13 +45,13 @@ inline double seconds_since(std::chrono::steady_clock::time_point start) {
 // Progress and timing lines go to stderr only when it is a terminal and --quiet is not given.
 bool progress_enabled(bool quiet);
 
-// The group of processes an MPI launcher started this one in (tools/main.cpp, dist/), or nullptr
+// The group of processes an MPI launcher started this one in (set by main, over MPI), or nullptr
 // when it runs alone. Every rank runs the same command; only rank 0 speaks (progress, the summary,
 // the error message) and writes the outputs.
 const Distribution* process_group();
 void set_process_group(const Distribution* group);
 inline bool speaking_rank() { return !process_group() || process_group()->rank() == 0; }
-// Runs work under settle_together (include/isotope/distribution.h) in a group, else just runs it.
+// Runs work under settle_together (isotope/distribution.h) in a group, else just runs it.
 void on_every_rank(const std::function<void()>& work);
 
 // A one-line bar on stderr ("isotope: preprocessing  42%"), redrawn in place, ended at 100%.

@@ -11,6 +11,19 @@
 namespace isotope {
 namespace {
 
+// The value of an enumeration whose name (to_string) is TEXT, among VALUES; nullopt for none.
+template <class Enum, size_t N>
+std::optional<Enum> value_named(std::string_view text, const Enum (&values)[N]) {
+  for (const Enum v : values)
+    if (to_string(v) == text) return v;
+  return std::nullopt;
+}
+constexpr TopologyMode kTopologyModes[] = {TopologyMode::none, TopologyMode::paper, TopologyMode::preserve,
+                                           TopologyMode::simplify};
+constexpr SimplificationWeight kWeights[] = {SimplificationWeight::interval, SimplificationWeight::gradient,
+                                             SimplificationWeight::size};
+constexpr ErrorIndicator kErrorIndicators[] = {ErrorIndicator::bound, ErrorIndicator::surplus};
+
 constexpr size_t kMaxValueChars = kMaxOptionTextChars;
 
 // A number's shortest exact form, which reads back as the same double.
@@ -121,15 +134,15 @@ void set_extract_option(ExtractOptions& o, std::string_view name, std::string_vi
     }
     focus_of(o).point = p;
   } else if (name == "topology") {
-    const auto t = parse_topology_mode(text);
+    const auto t = value_named(text, kTopologyModes);
     if (!t) throw OptionError("topology", "must be none, paper, preserve or simplify, got " + quoted(text));
     o.topology = *t;
   } else if (name == "weight") {
-    const auto w = parse_simplification_weight(text);
+    const auto w = value_named(text, kWeights);
     if (!w) throw OptionError("weight", "must be interval, gradient or size, got " + quoted(text));
     o.weight = *w;
   } else if (name == "error") {
-    const auto e = parse_error_indicator(text);
+    const auto e = value_named(text, kErrorIndicators);
     if (!e) throw OptionError("error", "must be bound or surplus, got " + quoted(text));
     o.error = *e;
   } else {

@@ -1,4 +1,4 @@
-// The extraction report and summary line (tools/support/report.h).
+// The extraction report and summary line.
 #include "tools/support/report.h"
 
 #include <algorithm>
@@ -7,10 +7,16 @@
 #include <string_view>
 
 #include "io/file/atomic_file.h"
+#include "tools/support/stats_fields.h"
 
 namespace isotope::tools {
 
 namespace {
+
+// A visitor of the stats' field walks that puts each field into J under its name.
+auto put_into(nlohmann::ordered_json& j) {
+  return [&j](const char* name, const auto& value) { j[name] = value; };
+}
 
 constexpr ChangeKind kChangeKinds[] = {ChangeKind::lost,           ChangeKind::appeared,     ChangeKind::merged,
                                        ChangeKind::split,          ChangeKind::rearranged,   ChangeKind::handles_closed,
@@ -172,17 +178,10 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
   }
   if (run.options.max_triangles > 0) {
     j["max_triangles"] = run.options.max_triangles;
-    j["chosen_eps"] = run.extract.chosen_eps;
-    j["chosen_eps_ties"] = run.extract.chosen_eps_ties;
-    j["next_eps"] = run.extract.next_eps;
-    j["next_eps_ties"] = run.extract.next_eps_ties;
-    j["next_triangles"] = run.extract.next_triangles;
-    j["budget_sampled"] = run.extract.budget_sampled;
-    j["budget_remembered"] = run.extract.budget_remembered;
+    for_each_budget_stat(run.extract, put_into(j));
   }
   if (run.extract.chosen_delta >= 0) {
-    j["chosen_delta"] = run.extract.chosen_delta;
-    j["delta_floor_triangles"] = run.extract.delta_floor_triangles;
+    for_each_delta_stat(run.extract, put_into(j));
     j["tets_dropped"] = run.extract.tets_simplified;
   }
   j["data_dims"] = run.data_dims;
@@ -209,20 +208,16 @@ nlohmann::ordered_json report_json(const ExtractionRun& run) {
         {"critical_exact", counts(p.critical_exact)},
     };
   }
-  j["extract"] = {
-      {"seconds", run.extract.seconds},
-      {"tets_visited", run.extract.tets_visited},
-      {"tets_emitted", run.extract.tets_emitted},
-      {"tets_simplified", run.extract.tets_simplified},
-  };
+  nlohmann::ordered_json work = nlohmann::ordered_json::object();
+  for_each_work_stat(run.extract, put_into(work));
+  j["extract"] = std::move(work);
   if (!run.extract.ranks.empty()) {
     nlohmann::ordered_json ranks = nlohmann::ordered_json::array();
-    for (const RankLoad& l : run.extract.ranks)
-      ranks.push_back({{"cost", l.cost},
-                       {"items", l.items},
-                       {"work", l.work},
-                       {"seconds", l.seconds},
-                       {"bytes_read", l.bytes_read}});
+    for (const RankLoad& l : run.extract.ranks) {
+      nlohmann::ordered_json load = nlohmann::ordered_json::object();
+      for_each_load_stat(l, put_into(load));
+      ranks.push_back(std::move(load));
+    }
     const Balance b = balance_of(run.extract.ranks);
     j["ranks"] = ranks;
     j["balance"] = {{"cost_max_over_mean", b.cost},

@@ -56,7 +56,7 @@ nlohmann::ordered_json report_json(const ExtractionRun& run);
 // "MESH.ply: 1234 triangles, 620 vertices, 1 component, chi 2, ..." for stdout.
 std::string summary_line(const ExtractionRun& run);
 // "; 3 ranks, max/mean: cost 1.01, work 1.04, bytes read 1.10, time 1.05" for a distributed
-// run's summary (include/isotope/distribution.h); empty for one process.
+// run's summary (isotope/distribution.h); empty for one process.
 std::string balance_text(const std::vector<RankLoad>& loads);
 // "against full resolution (12 components): 3 lost, 1 merged; 8 unchanged" for stdout.
 std::string comparison_line(const ComponentComparison& c);

@@ -1,10 +1,11 @@
-#include "isotope/distribution.h"
-
+// Work shared among a group of processes (isotope/distribution.h): a failure settled together, and
+// shares of items by cost.
 #include <algorithm>
 #include <exception>
 #include <string>
 
 #include "engine/core/byte_codec.h"
+#include "isotope/distribution.h"
 #include "isotope/extract.h"  // OptionError
 
 namespace isotope {

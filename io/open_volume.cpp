@@ -3,8 +3,6 @@
 // into a store of its own, in the temporary directory, on demand. Every
 // face (the isotope command's extract, sweep and serve, the C++ API, the bench) opens its input
 // here (docs/DESIGN.md, "Seams").
-#include "isotope/source.h"
-
 #include <malloc.h>
 #include <unistd.h>
 
@@ -16,6 +14,7 @@
 #include <string_view>
 #include <utility>
 
+#include "engine/core/huge_blocks.h"
 #include "engine/core/parallel.h"
 #include "engine/core/volume_check.h"
 #include "engine/extract/budget_memo.h"
@@ -36,8 +35,8 @@
 #include "io/volume/raw_reader.h"
 #include "io/volume/volume_box_reader.h"
 #include "io/volume/volume_reader.h"
-#include "isotope/detail/huge_page_allocator.h"
 #include "isotope/error.h"
+#include "isotope/source.h"
 
 namespace isotope {
 namespace {
