@@ -20,6 +20,7 @@
 #include "engine/extract/block_march.h"
 #include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract_drivers.h"
+#include "engine/extract/process_group.h"
 #include "engine/extract/slab_march.h"
 #include "engine/extract/traversal.h"
 #include "engine/extract/traversal_source.h"
@@ -79,90 +80,55 @@ class SlabClaims {
   int64_t last_ = std::numeric_limits<int64_t>::max();  // the last slab the process marches
 };
 
-// The cost of each slab of `plan`, for sharing them among processes: from the records of the
-// cube diamonds of scale 2 (the blocks' own, cubes of 8 cells a side, in band 2: 1/64 of the
-// data), the cells of the cubes the isovalue may cut. Coarser cubes (scale 3 or 4, 1/512 or
-// 1/4096 of the data) read less but left the largest of 4 ranks 1.46x the mean on embryo, against
-// 1.22x (docs/DISTRIBUTED.md). A source without records, or a cube whose centre lies beyond the
-// data: counted as cut.
+// The cost of slabs [first, last) of `plan` into OUT, for sharing them among processes
+// (ProcessGroup::share_of): from the records of the cube diamonds of scale 2 (the blocks' own,
+// cubes of 8 cells a side, in band 2: 1/64 of the data; a slab is one layer of them), the cells of
+// the cubes the isovalue may cut, once for each layer of cells the slab holds. Coarser cubes
+// (scale 3 or 4, 1/512 or 1/4096 of the data) read less but left the largest of 4 ranks 1.46x the
+// mean on embryo, against 1.22x (docs/DISTRIBUTED.md). A source without records, or a cube whose
+// centre lies beyond the data: counted as cut.
 template <ValueSource Source>
-std::vector<double> slab_costs(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,
-                               const Distribution& group) {
+void slab_costs(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan, size_t first, size_t last,
+                double* out) {
   const std::array<int64_t, 3>& dims = source.data_dims();
-  const int scale = std::min(source.lattice().k - 1, 2);
-  const int64_t cube = int64_t{2} << scale;
-  const auto layers = static_cast<size_t>((dims[2] - 1 + cube - 1) / cube);
-  // Per layer of cubes: the cells of its cut cubes. Each rank reads a share of the layers.
-  const std::vector<double> per_layer = share_costs(group, layers, [&](size_t first, size_t last, double* out) {
-    parallel_for(static_cast<int64_t>(first), static_cast<int64_t>(last), [&](int64_t l) {
-      auto reader = source.reader();
-      double cells = 0;
-      for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += cube)
-        for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += cube) {
-          const Coord centre{x0 + cube / 2, y0 + cube / 2, l * cube + cube / 2};
-          if constexpr (RecordReader<decltype(reader)>)
-            if (centre[0] < dims[0] && centre[1] < dims[1] && centre[2] < dims[2] &&
-                !rule.in_range(
-                    reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
-              continue;
-          cells += static_cast<double>(std::min(cube, dims[0] - 1 - x0) * std::min(cube, dims[1] - 1 - y0));
-        }
-      out[static_cast<size_t>(l) - first] = cells;
-    });
+  const int64_t cube = plan.slab_layers;
+  parallel_for(static_cast<int64_t>(first), static_cast<int64_t>(last), [&](int64_t l) {
+    auto reader = source.reader();
+    double cells = 0;
+    for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += cube)
+      for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += cube) {
+        const Coord centre{x0 + cube / 2, y0 + cube / 2, l * cube + cube / 2};
+        if constexpr (RecordReader<decltype(reader)>)
+          if (centre[0] < dims[0] && centre[1] < dims[1] && centre[2] < dims[2] &&
+              !rule.in_range(
+                  reader.bounds(reader.locate(traversal::pack(centre)), RecordFields{false, false, false, false})))
+            continue;
+        cells += static_cast<double>(std::min(cube, dims[0] - 1 - x0) * std::min(cube, dims[1] - 1 - y0));
+      }
+    const int64_t cell_layers = std::min(cube, plan.cell_layers - l * cube);
+    out[static_cast<size_t>(l) - first] = cells * static_cast<double>(cell_layers);
   });
-  std::vector<double> costs(static_cast<size_t>(slab_count(plan)));
-  for (size_t s = 0; s < costs.size(); ++s) {
-    const int64_t z0 = static_cast<int64_t>(s) * plan.slab_layers;
-    const int64_t z1 = std::min(z0 + plan.slab_layers, plan.cell_layers);
-    for (int64_t z = z0; z < z1; ++z) costs[s] += per_layer[static_cast<size_t>(z / cube)];
-  }
-  return costs;
 }
 
-// Each process marches its share of `plan`'s slabs, [shares[rank], shares[rank + 1]) of
-// share_by_cost over `costs`: rank 0 gets the mesh (or, with keep_shares, each rank its own share's),
-// every rank the counts of all and each rank's load. `bytes_read`: what this process read, asked
-// after its march. `on_failure`: as march_in_slabs's.
-inline Mesh march_finest_share(const SlabPlan& plan, const MarchSlab& march, const Distribution& group,
-                               const std::vector<double>& costs, const std::vector<size_t>& shares, bool keep_shares,
-                               std::atomic<int64_t>& blocks, std::atomic<int64_t>& cells,
-                               const std::function<uint64_t()>& bytes_read, ExtractStats* stats,
-                               const std::function<void()>& on_failure = {}) {
-  const auto r = static_cast<size_t>(group.rank());
+// This process marches its share of `plan`'s slabs (SHARE: all of them alone): the mesh on rank 0
+// (or, with keep_shares, each rank its own share's; alone, this process's), the counts of every
+// rank's, and each rank's load. `bytes_read`: what this process read, asked after its march.
+// `on_failure`: as march_in_slabs's.
+inline Mesh march_finest_share(const SlabPlan& plan, const MarchSlab& march, const ProcessGroup& group,
+                               const ProcessGroup::Share& share, bool keep_shares, std::atomic<int64_t>& blocks,
+                               std::atomic<int64_t>& cells, const std::function<uint64_t()>& bytes_read,
+                               ExtractStats* stats, const std::function<void()>& on_failure = {}) {
   RankLoad load;
-  Mesh mesh = march_in_slabs(plan, march, group, static_cast<int64_t>(shares[r]), static_cast<int64_t>(shares[r + 1]),
-                             &load.seconds, keep_shares, on_failure);
-  for (size_t s = shares[r]; s < shares[r + 1]; ++s) load.cost += costs[s];
-  load.items = static_cast<int64_t>(shares[r + 1] - shares[r]);
+  Mesh mesh = group.march_slabs(plan, march, share, &load.seconds, keep_shares, on_failure);
+  for (size_t s = share.first; s < share.last && s < share.costs.size(); ++s) load.cost += share.costs[s];
+  load.items = static_cast<int64_t>(share.last - share.first);
   load.work = cells;
   if (bytes_read) load.bytes_read = bytes_read();
-  // The blocks each rank looked at, for the counts: a second small gather keeps RankLoad plain.
-  const std::vector<RankLoad> loads = gather_loads(group, load);
-  RankLoad seen;
-  seen.work = blocks;
-  const std::vector<RankLoad> seen_all = gather_loads(group, seen);
-  if (stats) {
-    int64_t all_blocks = 0, all_cells = 0;
-    for (size_t i = 0; i < loads.size(); ++i) all_blocks += seen_all[i].work, all_cells += loads[i].work;
-    count_finest(all_blocks, all_cells, stats);
-    stats->ranks = loads;
-  }
+  std::vector<RankLoad> loads = group.loads(load);
+  const int64_t all_cells = group.sum(cells), all_blocks = group.sum(blocks);
+  count_finest(all_blocks, all_cells, stats);
+  if (stats) stats->ranks = std::move(loads);
   return mesh;
-}
-
-// extract_finest's slabs shared among processes (isotope/distribution.h), by their cost
-// estimated from the source's records (slab_costs).
-template <ValueSource Source>
-Mesh extract_finest_shared(const Source& source, const traversal::SplitRule& rule, const SlabPlan& plan,
-                           const MarchSlab& march, const Distribution& group, std::atomic<int64_t>& blocks,
-                           std::atomic<int64_t>& cells, SlabClaims& claims, ExtractStats* stats) {
-  const std::vector<double> costs = slab_costs(source, rule, plan, group);
-  std::function<uint64_t()> bytes_read;
-  if constexpr (requires { source.bytes_read(); }) bytes_read = [&] { return source.bytes_read(); };
-  const std::vector<size_t> shares = share_by_cost(costs, group.ranks());
-  claims.end_at(static_cast<int64_t>(shares[static_cast<size_t>(group.rank()) + 1]) - 1);
-  return march_finest_share(plan, march, group, costs, shares, rule.options().keep_shares, blocks, cells, bytes_read,
-                            stats);
 }
 
 // Blocks are cubes of 8 cells a side (4 or 2 on lattices of side 5 or 3), whose centres are the
@@ -280,23 +246,27 @@ void march_finest_slab(Reader& reader, const traversal::SplitRule& rule, const S
   }
 }
 
-// The mesh is the same bit for bit on any number of threads, paged or not.
+// The mesh is the same bit for bit on any number of threads, paged or not, and on any number of
+// processes (the slabs shared by their cost, estimated from the source's records: slab_costs).
 template <ValueSource Source>
 Mesh extract_finest(const Source& source, const traversal::SplitRule& rule, ExtractStats* stats) {
   const std::array<int64_t, 3>& dims = source.data_dims();
   const SlabPlan plan = finest_plan(source.lattice(), dims, rule.options().iso, source.origin(), source.spacing());
+  const ProcessGroup group(rule.options().distribution);
+  const ProcessGroup::Share share =
+      group.share_of(static_cast<size_t>(slab_count(plan)),
+                     [&](size_t first, size_t last, double* out) { slab_costs(source, rule, plan, first, last, out); });
   std::atomic<int64_t> blocks{0}, cells{0};
   SlabClaims claims;
+  claims.end_at(static_cast<int64_t>(share.last) - 1);
   const MarchSlab march = [&](int64_t z0, int64_t z1, MeshBuilder& builder) {
     throw_if_cancelled(rule.options());
     auto reader = source.reader();
     march_finest_slab(reader, rule, plan, dims, z0, z1, builder, blocks, cells, claims);
   };
-  const Distribution* group = rule.options().distribution;
-  if (group) return extract_finest_shared(source, rule, plan, march, *group, blocks, cells, claims, stats);
-  Mesh mesh = march_in_slabs(plan, march);
-  count_finest(blocks, cells, stats);
-  return mesh;
+  std::function<uint64_t()> bytes_read;
+  if constexpr (requires { source.bytes_read(); }) bytes_read = [&] { return source.bytes_read(); };
+  return march_finest_share(plan, march, group, share, rule.options().keep_shares, blocks, cells, bytes_read, stats);
 }
 
 }  // namespace isotope

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "engine/extract/distributed_parts.h"
+#include "engine/extract/slab_march.h"
 #include "isotope/distribution.h"
 
 namespace isotope {
@@ -52,6 +53,14 @@ class ProcessGroup {
   std::vector<PartMesh> to_welder(std::vector<PartMesh> mine, bool keep_shares) const {
     if (distribution_ && !keep_shares) return gather_parts(*distribution_, std::move(mine));
     return mine;  // moved, not copied (a conditional expression would copy it)
+  }
+  // This process's SHARE of `plan`'s slabs marched: alone, every slab (march_in_slabs); spread,
+  // its share, joined on rank 0 (or kept, with keep_shares), `seconds` its own time.
+  Mesh march_slabs(const SlabPlan& plan, const MarchSlab& march, const Share& share, double* seconds, bool keep_shares,
+                   const std::function<void()>& on_failure = {}) const {
+    if (!distribution_) return march_in_slabs(plan, march, on_failure);
+    return march_in_slabs(plan, march, *distribution_, static_cast<int64_t>(share.first),
+                          static_cast<int64_t>(share.last), seconds, keep_shares, on_failure);
   }
   // Whether this process makes a mesh: alone, keeping its share, or rank 0.
   bool makes_mesh(bool keep_shares) const { return !distribution_ || keep_shares || distribution_->rank() == 0; }

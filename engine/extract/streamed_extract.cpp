@@ -18,6 +18,7 @@
 #include "engine/extract/array_source.h"
 #include "engine/extract/extract_drivers.h"
 #include "engine/extract/finest_extract.h"
+#include "engine/extract/process_group.h"
 #include "isotope/error.h"
 
 namespace isotope {
@@ -190,9 +191,8 @@ void read_checked(const LayerSource& source, const ExtractCall& options, int64_t
 struct StreamPlan {
   traversal::SplitRule rule;
   SlabPlan plan;
-  const Distribution* group;
-  std::vector<double> costs;
-  std::vector<size_t> shares;
+  ProcessGroup group;
+  ProcessGroup::Share share;
   int64_t first, end, layers, held;
 };
 
@@ -203,14 +203,14 @@ Mesh march_windows(const LayerSource& source, const ExtractCall& options, const 
                    const std::function<void(int64_t, int64_t, T*)>& read, bool march_checks, ExtractStats* stats) {
   const std::array<int64_t, 3>& dims = source.dims;
   const SlabPlan& plan = s.plan;
-  const Distribution* group = s.group;
+  const ProcessGroup& group = s.group;
   // The ring's buffers may be more than one process has memory for: under several processes made
   // where a failure on one stops them all, as reading the volume whole was.
   std::optional<LayerRing<T>> ring;
   const auto make_ring = [&] {
     ring.emplace(read, source, options, s.first, s.end, s.layers, plan.slab_layers, s.held);
   };
-  settle_together(group, make_ring);
+  group.step(make_ring);
   std::atomic<int64_t> blocks{0}, cells{0};
   std::atomic<bool> met_non_finite{false};
   // A slab that fails anywhere (its march, or its builder before it) fails the ring, so that no
@@ -232,9 +232,7 @@ Mesh march_windows(const LayerSource& source, const ExtractCall& options, const 
   if (stats) *stats = ExtractStats{};
   Mesh mesh;
   try {
-    mesh = group ? march_finest_share(plan, march, *group, s.costs, s.shares, options.keep_shares, blocks, cells, {},
-                                      stats, on_failure)
-                 : march_in_slabs(plan, march, on_failure);
+    mesh = march_finest_share(plan, march, group, s.share, options.keep_shares, blocks, cells, {}, stats, on_failure);
   } catch (...) {
     // Read unchecked, the failure that stopped the march may not be the first a checked read
     // meets: a value that is not finite only the march sees, and the reader, windows ahead, may
@@ -250,7 +248,6 @@ Mesh march_windows(const LayerSource& source, const ExtractCall& options, const 
         "the volume held a value that is not finite (NaN or infinite) when read, and none when read again: it "
         "changed meanwhile");
   }
-  if (stats && !group) count_finest(blocks, cells, stats);  // march_finest_share counts every rank's
   return mesh;
 }
 
@@ -287,22 +284,19 @@ Mesh extract_streamed(const LayerSource& source, const ExtractCall& options, Ext
   // Under several processes each streams the layers of its own share of the slabs only. Their
   // costs are their cells, as for a volume in memory, which has no records to tell which blocks
   // are cut (the finest extraction's slab_costs): the same shares.
-  const Distribution* group = options.distribution;
-  std::vector<double> costs;
-  std::vector<size_t> shares{0, static_cast<size_t>(slab_count(plan))};
-  if (group) {
-    costs.resize(shares[1]);
-    for (size_t s = 0; s < costs.size(); ++s)
-      costs[s] = static_cast<double>((dims[0] - 1) * (dims[1] - 1) *
-                                     (std::min(static_cast<int64_t>(s + 1) * plan.slab_layers, plan.cell_layers) -
-                                      static_cast<int64_t>(s) * plan.slab_layers));
-    shares = share_by_cost(costs, group->ranks());
-  }
-  const auto rank = static_cast<size_t>(group ? group->rank() : 0);
-  const int64_t first = static_cast<int64_t>(shares[rank]) * plan.slab_layers;
-  const int64_t end = std::min(static_cast<int64_t>(shares[rank + 1]) * plan.slab_layers, plan.cell_layers);
+  const ProcessGroup group(options.distribution);
+  ProcessGroup::Share share =
+      group.share_of(static_cast<size_t>(slab_count(plan)), [&](size_t first_slab, size_t last_slab, double* out) {
+        for (size_t s = first_slab; s < last_slab; ++s)
+          out[s - first_slab] =
+              static_cast<double>((dims[0] - 1) * (dims[1] - 1) *
+                                  (std::min(static_cast<int64_t>(s + 1) * plan.slab_layers, plan.cell_layers) -
+                                   static_cast<int64_t>(s) * plan.slab_layers));
+      });
+  const int64_t first = static_cast<int64_t>(share.first) * plan.slab_layers;
+  const int64_t end = std::min(static_cast<int64_t>(share.last) * plan.slab_layers, plan.cell_layers);
   // Windows of whole slabs, none larger than this process's share.
-  const int64_t share_slabs = static_cast<int64_t>(shares[rank + 1] - shares[rank]);
+  const int64_t share_slabs = static_cast<int64_t>(share.last - share.first);
   const int64_t layers =
       std::min(window_layers(dims, plan.slab_layers), plan.slab_layers * std::max<int64_t>(share_slabs, 1));
   const int64_t held = std::max<int64_t>(2, std::min(thread_count() + 1, kRingBytes / window_bytes(dims, layers)));
@@ -310,8 +304,8 @@ Mesh extract_streamed(const LayerSource& source, const ExtractCall& options, Ext
   // every node lies in a block's rows when each axis has two nodes (ArrayReader::block_cut). Under
   // several processes each reads checked, as one that met a bad value could not name it alone.
   const bool march_checks =
-      source.read_unchecked && !group && std::ranges::all_of(dims, [](int64_t d) { return d >= 2; });
-  const StreamPlan s{rule, plan, group, std::move(costs), std::move(shares), first, end, layers, held};
+      source.read_unchecked && !group.spread() && std::ranges::all_of(dims, [](int64_t d) { return d >= 2; });
+  const StreamPlan s{rule, plan, group, std::move(share), first, end, layers, held};
   Mesh mesh;
   // Integers as the file stores them, converted in the blocks marched only: a quarter of the
   // bytes of floats for uint8, and no pass converting every value on the reader's thread.

@@ -190,8 +190,10 @@ ExtractOptions options_for(double eps, int64_t budget = 0) {
 TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
   const Volume volume = generate_noise(61, 3);  // 61: the lattice (65) is clipped to the data
   for (const ExtractOptions& o : {options_for(0), options_for(0.02), options_for(0, 20000)}) {
-    const Mesh single = extract(volume, o);
+    ExtractStats alone;
+    const Mesh single = extract(volume, o, {}, &alone);
     ASSERT_GT(single.triangles.size(), 1000u);
+    ASSERT_GT(alone.tets_emitted, 0);
     const auto out = on_ranks<std::pair<Mesh, ExtractStats>>(3, [&](const Distribution& g) {
       RunContext run;
       run.distribution = &g;
@@ -203,6 +205,12 @@ TEST(DistributedExtract, ThreeRanksGiveTheSingleProcessMeshOnRankZero) {
       ASSERT_FALSE(out[static_cast<size_t>(r)].error) << "rank " << r;
       const auto& [mesh, stats] = *out[static_cast<size_t>(r)].value;
       EXPECT_EQ(stats.ranks.size(), 3u);
+      // Rank 0 reports the counts of all, as the single process counts them (at eps 0 every rank
+      // does; above it, a rank other than 0 counts what it kept).
+      if (r == 0 || (o.eps == 0 && o.max_triangles == 0)) {
+        EXPECT_EQ(stats.tets_visited, alone.tets_visited) << "rank " << r << ", eps " << o.eps;
+        EXPECT_EQ(stats.tets_emitted, alone.tets_emitted) << "rank " << r << ", eps " << o.eps;
+      }
       if (r == 0)
         expect_same(mesh, single);
       else
@@ -262,7 +270,8 @@ TEST(DistributedExtract, EpsZeroStreamedReadsEachRanksShareOnly) {
   });
   ASSERT_EQ(streamed_window_bytes(volume.dims), 520 * 520 * 9 * 4);
   const ExtractOptions o = options_for(0);
-  const Mesh single = extract(volume, o);
+  ExtractStats alone;
+  const Mesh single = extract(volume, o, {}, &alone);
   ASSERT_GT(single.triangles.size(), 1000u);
   std::array<std::vector<std::array<int64_t, 2>>, 2> reads;  // per rank: (first layer, layers) per call
   const auto source_for = [&](int rank, int64_t unreadable) {
@@ -287,6 +296,8 @@ TEST(DistributedExtract, EpsZeroStreamedReadsEachRanksShareOnly) {
     const auto& [mesh, stats] = *out[static_cast<size_t>(r)].value;
     ASSERT_EQ(stats.ranks.size(), 2u);
     EXPECT_EQ(stats.ranks[static_cast<size_t>(r)].items, 2) << "rank " << r;
+    EXPECT_EQ(stats.tets_visited, alone.tets_visited) << "rank " << r;
+    EXPECT_EQ(stats.tets_emitted, alone.tets_emitted) << "rank " << r;
     if (r == 0)
       expect_same(mesh, single);
     else
