@@ -5,6 +5,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <cstdlib>
 #include <deque>
@@ -366,5 +367,9 @@ size_t kept_huge_block_bytes() noexcept {
   const std::lock_guard<std::mutex> lock(b.mutex);
   return b.kept_bytes;
 }
+
+// The mesh's arrays' allocators (isotope/mesh.h), which every user of the library takes from here.
+template struct HugePageAllocator<std::array<float, 3>>;
+template struct HugePageAllocator<std::array<uint32_t, 3>>;
 
 }  // namespace isotope::detail

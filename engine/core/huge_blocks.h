@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
 #include <new>
 #include <type_traits>
@@ -12,6 +13,16 @@
 #include "isotope/detail/huge_page_allocator.h"
 
 namespace isotope::detail {
+
+// A block of at least BYTES, aligned to 2 MB and advised for huge pages; throws std::bad_alloc.
+// By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
+// store's own, outside malloc's heap: a freed block is kept (up to the bytes given) and handed out
+// again whole or in part, so a process that repeats the same work (a server answering the same
+// request) finds its large arrays where the last run left them, already faulted in, whatever
+// smaller allocations came and went in between. In malloc's one heap, a small long-lived allocation
+// in the hole a freed array left pushes the next array to fresh pages.
+void* allocate_huge(size_t bytes);
+void free_huge(void* p) noexcept;  // P from allocate_huge
 
 // Asks the kernel for transparent huge pages over the whole 2 MB pages inside [p, p + bytes): a
 // hint, whose refusal only costs speed (a kernel whose policy is `never` ignores it, one whose
@@ -177,6 +188,24 @@ template <class T>
 HugeArray<T> make_huge_array(size_t count) {
   static_assert(std::is_trivially_default_constructible_v<T> && std::is_trivially_destructible_v<T>);
   return HugeArray<T>(static_cast<T*>(allocate_huge(count * sizeof(T))));
+}
+
+template <class T>
+T* HugePageAllocator<T>::allocate(size_t n) {
+  if (!huge(n)) {
+    void* p = std::malloc(n * sizeof(T));
+    if (!p) throw std::bad_alloc();
+    return static_cast<T*>(p);
+  }
+  return static_cast<T*>(allocate_huge(n * sizeof(T)));
+}
+
+template <class T>
+void HugePageAllocator<T>::deallocate(T* p, size_t n) noexcept {
+  if (huge(n))
+    free_huge(p);
+  else
+    std::free(p);
 }
 
 }  // namespace isotope::detail

@@ -5,11 +5,12 @@
 // first touch costs 12-14 us, a fresh huge page's a quarter of that per byte or less, and every
 // extraction and convert measured ran as fast or faster on huge pages (docs/METHOD.md, "Fresh
 // memory", where an earlier machine measured the other way). Public for the mesh's arrays
-// (isotope/mesh.h); what else the engine does with huge blocks (reservations, prefaulting, blocks
-// kept for the next run) is the engine's own.
+// (isotope/mesh.h), as a declaration: the allocation itself, and what else the engine does with
+// huge blocks (reservations, prefaulting, blocks kept for the next run), are the engine's own.
 
+#include <array>
 #include <cstddef>
-#include <cstdlib>
+#include <cstdint>
 #include <new>
 #include <type_traits>
 #include <utility>
@@ -17,16 +18,6 @@
 namespace isotope::detail {
 
 inline constexpr size_t kHugePage = size_t{2} << 20;
-
-// A block of at least BYTES, aligned to 2 MB and advised for huge pages; throws std::bad_alloc.
-// By default from malloc. Once keep_freed_huge_blocks() was called, from mappings of the block
-// store's own, outside malloc's heap: a freed block is kept (up to the bytes given) and handed out
-// again whole or in part, so a process that repeats the same work (a server answering the same
-// request) finds its large arrays where the last run left them, already faulted in, whatever
-// smaller allocations came and went in between. In malloc's one heap, a small long-lived allocation
-// in the hole a freed array left pushes the next array to fresh pages.
-void* allocate_huge(size_t bytes);
-void free_huge(void* p) noexcept;  // P from allocate_huge
 
 template <class T>
 struct HugePageAllocator {
@@ -36,20 +27,11 @@ struct HugePageAllocator {
   template <class U>
   HugePageAllocator(const HugePageAllocator<U>&) noexcept {}  // NOLINT: allocators convert implicitly
 
-  T* allocate(size_t n) {
-    if (!huge(n)) {
-      void* p = std::malloc(n * sizeof(T));
-      if (!p) throw std::bad_alloc();
-      return static_cast<T*>(p);
-    }
-    return static_cast<T*>(allocate_huge(n * sizeof(T)));
-  }
-  void deallocate(T* p, size_t n) noexcept {
-    if (huge(n))
-      free_huge(p);
-    else
-      std::free(p);
-  }
+  // Defined with the huge-block store, in the engine (engine/core/huge_blocks.h): from malloc below
+  // a huge page, from the store (allocate_huge) at or above one. The mesh's element types are
+  // compiled into the library (below).
+  T* allocate(size_t n);
+  void deallocate(T* p, size_t n) noexcept;
 
   template <class U>
   bool operator==(const HugePageAllocator<U>&) const noexcept {
@@ -87,5 +69,9 @@ struct UninitializedHugePageAllocator : HugePageAllocator<T> {
     ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
   }
 };
+
+// The mesh's arrays (isotope/mesh.h), allocated by the library's own instances.
+extern template struct HugePageAllocator<std::array<float, 3>>;
+extern template struct HugePageAllocator<std::array<uint32_t, 3>>;
 
 }  // namespace isotope::detail
