@@ -18,7 +18,6 @@
 
 #include "engine/core/parallel.h"
 #include "engine/extract/block_march.h"
-#include "engine/extract/distributed_parts.h"
 #include "engine/extract/extract_drivers.h"
 #include "engine/extract/process_group.h"
 #include "engine/extract/slab_march.h"

@@ -103,9 +103,6 @@ TEST_F(PublicApi, ARunContextOutOfRangeIsRefusedInTheFacesWords) {
   EXPECT_FALSE(std::filesystem::exists(dir_ / "t.isotope"));
 }
 
-// The context's threads bound the call while it runs (seen from its progress, which runs inside
-// it), and its progress hears the hierarchy that the extraction builds; the mesh is the same bytes
-// under any context.
 // The mesh's arrays reach code that takes a std::span (the views), or a std::vector of its own (a
 // copy), whatever allocator the mesh keeps them in.
 TEST_F(PublicApi, AMeshIsTakenAsViewsOrCopiedIntoPlainVectors) {
@@ -122,6 +119,9 @@ TEST_F(PublicApi, AMeshIsTakenAsViewsOrCopiedIntoPlainVectors) {
   EXPECT_TRUE(std::equal(own.begin(), own.end(), mesh.triangles.begin()));
 }
 
+// The context's threads bound the call while it runs (seen from its progress, which runs inside
+// it), and its progress hears the hierarchy that the extraction builds; the mesh is the same bytes
+// under any context.
 TEST_F(PublicApi, ARunContextChangesHowACallRunsNotWhatItGives) {
   const Volume v = sphere();
   ExtractOptions o;

@@ -27,7 +27,7 @@ struct HugePageAllocator {
   template <class U>
   HugePageAllocator(const HugePageAllocator<U>&) noexcept {}  // NOLINT: allocators convert implicitly
 
-  // Defined with the huge-block store, in the engine (engine/core/huge_blocks.h): from malloc below
+  // Defined with the engine's huge-block store: from malloc below
   // a huge page, from the store (allocate_huge) at or above one. The mesh's element types are
   // compiled into the library (below).
   T* allocate(size_t n);
