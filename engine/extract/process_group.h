@@ -37,11 +37,16 @@ class ProcessGroup {
   };
   Share share_of(size_t n, const std::function<void(size_t first, size_t last, double* out)>& cost_of) const {
     if (!distribution_) return {0, n, {}};
+    return share_of(share_costs(*distribution_, n, cost_of));
+  }
+  // The same where every rank knows every item's cost alike (COSTS): no rank asks the others.
+  Share share_of(std::vector<double> costs) const {
+    if (!distribution_) return {0, costs.size(), {}};
     Share share;
-    share.costs = share_costs(*distribution_, n, cost_of);
-    const std::vector<size_t> bounds = share_by_cost(share.costs, distribution_->ranks());
+    const std::vector<size_t> bounds = share_by_cost(costs, distribution_->ranks());
     share.first = bounds[static_cast<size_t>(distribution_->rank())];
     share.last = bounds[static_cast<size_t>(distribution_->rank()) + 1];
+    share.costs = std::move(costs);
     return share;
   }
   // Every rank's load, in rank order, on every rank; none alone.

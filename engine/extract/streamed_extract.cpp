@@ -285,14 +285,12 @@ Mesh extract_streamed(const LayerSource& source, const ExtractCall& options, Ext
   // costs are their cells, as for a volume in memory, which has no records to tell which blocks
   // are cut (the finest extraction's slab_costs): the same shares.
   const ProcessGroup group(options.distribution);
-  ProcessGroup::Share share =
-      group.share_of(static_cast<size_t>(slab_count(plan)), [&](size_t first_slab, size_t last_slab, double* out) {
-        for (size_t s = first_slab; s < last_slab; ++s)
-          out[s - first_slab] =
-              static_cast<double>((dims[0] - 1) * (dims[1] - 1) *
-                                  (std::min(static_cast<int64_t>(s + 1) * plan.slab_layers, plan.cell_layers) -
-                                   static_cast<int64_t>(s) * plan.slab_layers));
-      });
+  std::vector<double> costs(static_cast<size_t>(slab_count(plan)));
+  for (size_t s = 0; s < costs.size(); ++s)
+    costs[s] = static_cast<double>((dims[0] - 1) * (dims[1] - 1) *
+                                   (std::min(static_cast<int64_t>(s + 1) * plan.slab_layers, plan.cell_layers) -
+                                    static_cast<int64_t>(s) * plan.slab_layers));
+  ProcessGroup::Share share = group.share_of(std::move(costs));
   const int64_t first = static_cast<int64_t>(share.first) * plan.slab_layers;
   const int64_t end = std::min(static_cast<int64_t>(share.last) * plan.slab_layers, plan.cell_layers);
   // Windows of whole slabs, none larger than this process's share.
