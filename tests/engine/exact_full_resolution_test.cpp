@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -1274,7 +1275,7 @@ TEST_F(SourceOfAFile, AValueThatIsNotFiniteIsRefusedWhereItIs) {
 
 // The check of an array's values finds the first value that is not finite in any block of its
 // parallel scan (at a block's first and last value too), whatever comes after it, on any number of
-// threads; the largest finite floats, -0 and denormals pass.
+// threads, of either sign and any mantissa; the largest finite floats, -0 and denormals pass.
 TEST(FiniteValues, TheFirstValueThatIsNotFiniteIsFoundInAnyBlock) {
   constexpr size_t kBlock = size_t{1} << 16, kCount = 5 * kBlock + 123;
   std::vector<float> values(kCount);
@@ -1291,8 +1292,11 @@ TEST(FiniteValues, TheFirstValueThatIsNotFiniteIsFoundInAnyBlock) {
       for (const size_t later : {at + 1, at + kBlock, kCount - 1})
         if (later < kCount && later > at) bad[later] = -std::numeric_limits<float>::infinity();
       EXPECT_EQ(first_non_finite(bad.data(), kCount), at) << threads << " threads";
-      bad[at] = std::numeric_limits<float>::infinity();
-      EXPECT_EQ(first_non_finite(bad.data(), kCount), at) << threads << " threads";
+      // Every value whose exponent bits are all set, whatever its sign and mantissa.
+      for (const uint32_t bits : {0x7f800000u, 0xff800000u, 0xffc00000u, 0x7f800001u, 0xffffffffu}) {
+        bad[at] = std::bit_cast<float>(bits);
+        EXPECT_EQ(first_non_finite(bad.data(), kCount), at) << threads << " threads, bits " << bits;
+      }
     }
   }
 }
