@@ -2,6 +2,7 @@
 
 #include <bit>
 
+#include "engine/core/lending_pool.h"
 #include "engine/extract/traversal.h"
 #include "engine/hierarchy/kuhn.h"
 
@@ -118,23 +119,32 @@ CellTables make_cell_tables() {
   return out;
 }
 
+LendingPool<EdgeMemo>& edge_memos() {
+  static LendingPool<EdgeMemo> pool;
+  return pool;
+}
+
 }  // namespace
 
+LentEdgeMemo::LentEdgeMemo() : memo_(edge_memos().take([] { return std::make_unique<EdgeMemo>(); })) {}
+LentEdgeMemo::~LentEdgeMemo() { edge_memos().give(std::move(memo_)); }
+void give_back_edge_memos() { edge_memos().clear(); }
+
 void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells, float iso,
-                 EdgeMemo& memo, MeshBuilder& builder) {
+                 int64_t row_y, int64_t slab_z, EdgeMemo& memo, MeshBuilder& builder) {
   static const CellTables kTables = make_cell_tables();
   int64_t offset[8];  // each cell corner's value, from the cell's lowest corner's
   for (int k = 0; k < 8; ++k) offset[k] = (dz(k) * stride + dy(k)) * stride + dx(k);
   // The step from a cell's memo slot (its lowest corner doubled) to the slot of the edge between
   // two of its corners.
-  const int64_t w = memo.width();
+  const int64_t wyz = memo.width_yz();
   int64_t slot_step[8][8];
   for (int a = 0; a < 8; ++a)
-    for (int b = 0; b < 8; ++b) slot_step[a][b] = ((dz(a) + dz(b)) * w + dy(a) + dy(b)) * w + dx(a) + dx(b);
-  memo.start();
-  uint64_t* const slots = memo.slots();
+    for (int b = 0; b < 8; ++b) slot_step[a][b] = ((dx(a) + dx(b)) * wyz + dz(a) + dz(b)) * wyz + dy(a) + dy(b);
+  // The slot of the box's lowest corner, doubled.
+  uint64_t* const slots = memo.slots() + ((2 * base[0]) * wyz + 2 * (base[2] - slab_z)) * wyz + 2 * (base[1] - row_y);
   const uint64_t stamp = memo.stamp();
-  const TetCutter& cutter = builder.cutter();
+  memo.marched(2 * base[0], 2 * (base[0] + cells[0]));
   // Each node's sign once, a row to a word, rather than each cell's eight corners from its values:
   // a row's cells that the isovalue cuts are then a few bit operations on four rows' words.
   const int64_t row_words = cells[1] + 1;
@@ -166,7 +176,7 @@ void march_block(const float* f, int64_t stride, const Coord& base, const std::a
         const CellCut& cell = kTables.cuts[parity][above];
         const size_t far = static_cast<size_t>((o[0] & 7) == 7) | static_cast<size_t>((o[1] & 7) == 7) << 1 |
                            static_cast<size_t>((o[2] & 7) == 7) << 2;
-        const int64_t cell_slot = ((2 * z) * w + 2 * y) * w + 2 * x;
+        const int64_t cell_slot = ((2 * x) * wyz + 2 * z) * wyz + 2 * y;
         uint32_t vertex[19];  // of each of the cell's cut edges
         for (size_t e = 0; e < cell.edges; ++e) {
           const int a = cell.edge[e] & 7, b = cell.edge[e] >> 3;
@@ -175,15 +185,10 @@ void march_block(const float* f, int64_t stride, const Coord& base, const std::a
             vertex[e] = static_cast<uint32_t>(slot);
             continue;
           }
+          // Not made in this row of boxes yet (nor in the last one's highest plane): no other box
+          // of the slab has it.
           const Coord p{o[0] + dx(a), o[1] + dy(a), o[2] + dz(a)}, q{o[0] + dx(b), o[1] + dy(b), o[2] + dz(b)};
-          const float fp = c[offset[a]], fq = c[offset[b]];
-          // p + q from the box's doubled lowest corner: strictly inside the box, the edge belongs
-          // to the box's cells alone, so no other box will ask for its vertex.
-          const int64_t ex = 2 * x + dx(a) + dx(b), ey = 2 * y + dy(a) + dy(b), ez = 2 * z + dz(a) + dz(b);
-          if (ex > 0 && ex < 2 * cells[0] && ey > 0 && ey < 2 * cells[1] && ez > 0 && ez < 2 * cells[2])
-            vertex[e] = builder.unwelded_vertex(p, fp, q, fq);
-          else
-            vertex[e] = builder.welded_vertex(cutter.edge_key(p, q), p, fp, q, fq);
+          vertex[e] = builder.unwelded_vertex(p, c[offset[a]], q, c[offset[b]]);
           slot = stamp << 32 | vertex[e];
         }
         for (size_t t = 0; t < cell.tets; ++t) {

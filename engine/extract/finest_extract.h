@@ -181,9 +181,15 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
   const int64_t side = plan.slab_layers;
   const int64_t stride = side + 1;
   std::vector<float> f(static_cast<size_t>(stride * stride * stride));
-  EdgeMemo memo(side);
+  // A slab is one layer of blocks, marched by a builder of its own (march_in_slabs): the memo
+  // holds every vertex its blocks share, a row of blocks at a time.
+  LentEdgeMemo lent;
+  EdgeMemo& memo = *lent;
+  memo.reshape(side, dims[0]);
+  memo.start_slab();
   int64_t seen = 0, marched = 0;
-  for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side)
+  for (int64_t y0 = 0; y0 + 1 < dims[1]; y0 += side) {
+    memo.start_row();
     for (int64_t x0 = 0; x0 + 1 < dims[0]; x0 += side) {
       ++seen;
       if (!finest_block_in_range(reader, rule, side, x0, y0, z0)) continue;
@@ -203,9 +209,10 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
       // The record's range is saturated over the diamonds below, which reach into the
       // neighbouring blocks: the block's own range culls most of what it lets through.
       if (!kCutsInPlace && !cut_by(f.data(), stride, n, plan.iso)) continue;
-      march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, memo, builder);
+      march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, y0, z0, memo, builder);
       marched += n[0] * n[1] * n[2];
     }
+  }
   blocks += seen;
   cells += marched;
 }

@@ -17,6 +17,7 @@
 #include "engine/core/huge_blocks.h"
 #include "engine/core/lending_pool.h"
 #include "engine/core/parallel.h"
+#include "engine/extract/block_march.h"
 #include "engine/mesh/edge_vertex_map.h"
 #include "isotope/error.h"
 
@@ -286,7 +287,10 @@ std::optional<std::pair<size_t, size_t>> mesh_bound(const SlabPlan& plan) {
 
 }  // namespace
 
-void give_back_slab_memory() { slab_memory_shelf().clear(); }
+void give_back_slab_memory() {
+  slab_memory_shelf().clear();
+  give_back_edge_memos();
+}
 
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const Distribution& group, int64_t first,
                     int64_t last, double* seconds, bool keep_share, const std::function<void()>& on_failure) {

@@ -37,8 +37,8 @@ using MarchSlab = std::function<void(int64_t z_begin, int64_t z_end, MeshBuilder
 // march functions that wait on one another.
 Mesh march_in_slabs(const SlabPlan& plan, const MarchSlab& march, const std::function<void()>& on_failure = {});
 
-// An extraction leaves its slabs' builders and arrays, up to 64 MB, to the next one in the process;
-// this lets them go (a server gone idle).
+// An extraction leaves its slabs' builders and arrays, up to 64 MB, and its threads' edge memos
+// (march_block) to the next one in the process; this lets them go (a server gone idle).
 void give_back_slab_memory();
 
 inline int64_t slab_count(const SlabPlan& plan) {
