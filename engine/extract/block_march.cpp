@@ -119,9 +119,10 @@ CellTables make_cell_tables() {
   return out;
 }
 
+// Never destroyed: an extraction may end at exit, and give its memo back then.
 LendingPool<EdgeMemo>& edge_memos() {
-  static LendingPool<EdgeMemo> pool;
-  return pool;
+  static auto* pool = new LendingPool<EdgeMemo>;
+  return *pool;
 }
 
 }  // namespace

@@ -35,7 +35,7 @@ class EdgeMemo {
     wyz_ = 2 * cells + 1;
     const auto slots = static_cast<size_t>(wx_ * wyz_ * wyz_);
     if (slot_count_ < slots) {
-      // On huge pages: a megabyte or more a thread, whose 4 KB pages faulted one by one cost a
+      // On huge pages: up to megabytes a thread, whose 4 KB pages faulted one by one cost a
       // one-shot 257^3 extraction 5% (docs/METHOD.md, "Fresh memory").
       slots_ = detail::make_huge_array<uint64_t>(slots);
       std::fill(slots_.get(), slots_.get() + slots, uint64_t{0});
@@ -45,18 +45,26 @@ class EdgeMemo {
     rows_.resize(static_cast<size_t>((cells + 1) * (cells + 1)));
     boxes_.clear();
   }
-  // A new slab: no vertex known.
+  // A new slab: no vertex known. A slot keeps the low 32 bits of its stamp: the stamps start over
+  // (the slots zeroed) at a slab's start once they pass kStampLimit, which leaves a slab's rows
+  // (a stamp each) room below 2^32.
   void start_slab() {
-    next_stamp();
+    if (stamp_ >= kStampLimit) {
+      std::fill(slots_.get(), slots_.get() + slot_count_, uint64_t{0});
+      stamp_ = 0;
+    }
+    ++stamp_;
     boxes_.clear();
   }
+  static constexpr uint64_t kStampLimit = uint64_t{1} << 31;
+  // Tests: the stamps as if `to` had been reached, to run the start over.
+  void advance_stamp_to(uint64_t to) { stamp_ = std::max(stamp_, to); }
   // The next row of boxes of the slab: the vertices of the last row's highest plane (p_y + q_y =
   // 2 * cells from its lowest) become this row's lowest (0), the rest are forgotten. Only the
   // boxes marched in the last row have vertices there: a smooth surface culls most boxes, and
   // copying whole planes cost a 257^3 extraction 10%.
   void start_row() {
-    const uint64_t last = stamp_;
-    next_stamp();
+    const uint64_t last = stamp_++;
     const int64_t top = wyz_ - 1;
     for (const auto& [x0, x1] : boxes_)
       for (int64_t x = x0; x <= x1; ++x)
@@ -81,12 +89,6 @@ class EdgeMemo {
   uint32_t* rows() { return rows_.data(); }
 
  private:
-  void next_stamp() {
-    if (++stamp_ == 0) {  // the stamps wrapped: no slot may look current
-      std::fill(slots_.get(), slots_.get() + slot_count_, 0);
-      stamp_ = 1;
-    }
-  }
   int64_t wx_ = 1, wyz_ = 1;
   uint64_t stamp_ = 0;
   std::vector<std::pair<int64_t, int64_t>> boxes_;  // marched in this row: doubled x, first and last
@@ -115,9 +117,12 @@ void give_back_edge_memos();
 // node (x, y, z) of the box (0 <= x <= cells[0]) has value f[(z * stride + y) * stride + x].
 // Cells are walked z slowest, then y, then x; each cell's six Kuhn tetrahedra
 // (cell_tetrahedra) in their order, cut as MeshBuilder::add_tet cuts them,
-// so the mesh is the one add_tet makes of them, welded as the builder's table would weld it. The
-// memo must hold boxes of stride - 1 cells; base is the box's lowest corner, and (0, row_y, slab_z)
-// that of the memo's current row of the slab.
+// so the mesh is the one add_tet makes of them, welded as the builder's table would weld it,
+// provided the builder marches one slab one box deep (cells[2] <= stride - 1 from slab_z) and
+// keeps the keys of its two planes (march_in_slabs), and the memo was started for that slab and
+// for each row of its boxes in turn (march_finest_layers). The memo must hold boxes of
+// stride - 1 cells; base is the box's lowest corner, and (0, row_y, slab_z) that of the memo's
+// current row of the slab.
 void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells, float iso,
                  int64_t row_y, int64_t slab_z, EdgeMemo& memo, MeshBuilder& builder);
 

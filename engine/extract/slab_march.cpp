@@ -33,9 +33,10 @@ struct Slab {
   std::vector<PlaneVertex> bottom, top;
 };
 
-// A slab's builder is lent from slab to slab (LendingPool): its welding table grows to hundreds of
-// thousands of slots, and a table per slab was fresh memory, grown by doubling, every time
-// (docs/METHOD.md, "eps = 0 by blocks").
+// A slab's builder is lent from slab to slab (LendingPool): its welding table (the full-resolution
+// baseline's; the block march welds in its own memo) grows to hundreds of thousands of slots, and a
+// table per slab was fresh memory, grown by doubling, every time (docs/METHOD.md, "eps = 0 by
+// blocks").
 using BuilderPool = LendingPool<MeshBuilder>;
 
 // A slab's builder, and the memory its mesh is built in, come from these: both are lent from slab

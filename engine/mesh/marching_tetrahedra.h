@@ -83,12 +83,8 @@ class MeshBuilder {
   void add_tet(const std::array<Coord, 4>& corners, const std::array<float, 4>& values, bool positive);
 
   // The pieces of add_tet, for a kernel that cuts its tetrahedra itself and remembers the vertices
-  // it made (march_block): the vertex of edge (p, q) welded by its key, a new
-  // vertex for an edge the kernel knows no other tetrahedron outside its own box has (so it skips
-  // the welding table), and a triangle.
-  uint32_t welded_vertex(uint64_t key, const Coord& p, float fp, const Coord& q, float fq) {
-    return vertex(key, p, fp, q, fq);
-  }
+  // it made, welding them itself (march_block): a new vertex on edge (p, q), whose key is kept if
+  // it lies on one of the builder's two planes, without the welding table; and a triangle.
   uint32_t unwelded_vertex(const Coord& p, float fp, const Coord& q, float fq) { return new_vertex(0, p, fp, q, fq); }
   void add_triangle(uint32_t a, uint32_t b, uint32_t c) {
     detail::grow_prefaulted(mesh_.triangles);

@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "engine/core/huge_blocks.h"
+#include "engine/extract/block_march.h"
 #include "engine/extract/column_extremes.h"
 #include "engine/extract/extract_drivers.h"
 #include "engine/extract/slab_march.h"
@@ -113,6 +114,29 @@ TEST(ExactAtEpsZero, BlocksOfAnySizeAndBlocksCutByTheDataBox) {
     for (float iso : {-0.2f, 0.0f, 0.3f})
       expect_exact_at_eps0(
           v, iso, "noise " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
+  }
+}
+
+// The block march's memo keeps the low 32 bits of a stamp in each slot and is lent from one
+// extraction to the next for the life of the process: its stamps start over before they pass 2^32,
+// at a slab's start, and a memo whose stamps ran that far still welds every vertex.
+TEST(ExactAtEpsZero, TheEdgeMemoStartsItsStampsOverAndStillWeldsEveryVertex) {
+  const Volume v = generate_sphere(33);
+  ExtractOptions o;
+  o.iso = 0.0f;
+  const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+  give_back_slab_memory();
+  const Mesh fresh = extract(v, o);
+  for (const uint64_t to : {EdgeMemo::kStampLimit - 1, (uint64_t{1} << 32) - 3}) {
+    give_back_slab_memory();
+    {
+      LentEdgeMemo lent;       // the one memo the extraction below takes, slab after slab
+      (*lent).reshape(8, 33);  // blocks of 8 cells on a 33-node lattice: it keeps its slots, and stamps
+      (*lent).advance_stamp_to(to);
+    }
+    const Mesh m = extract(v, o);
+    EXPECT_EQ(m.positions.size(), fresh.positions.size()) << "stamps from " << to;
+    EXPECT_TRUE(m.positions == fresh.positions && m.triangles == fresh.triangles) << "stamps from " << to;
   }
 }
 

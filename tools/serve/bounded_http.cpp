@@ -253,7 +253,7 @@ void MemoryReturner::run() {
   while (!wake_.wait_for(lock, std::chrono::milliseconds(250), [this] { return stop_; })) {
     const auto since_busy = Clock::now().time_since_epoch() - std::chrono::nanoseconds(last_busy_ns_.load());
     const size_t kept = since_busy > kIdleAfter ? kKeptIdle : kKeptBusy;
-    if (since_busy > kIdleAfter) give_back_slab_memory();  // malloc's, given back below
+    if (since_busy > kIdleAfter) give_back_slab_memory();  // to malloc and the huge-block store, given back below
     detail::give_back_huge_blocks(kept);
     const size_t free_bytes = mallinfo2().fordblks;
     given_back = std::min(given_back, free_bytes);
