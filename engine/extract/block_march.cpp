@@ -132,7 +132,7 @@ LentEdgeMemo::~LentEdgeMemo() { edge_memos().give(std::move(memo_)); }
 void give_back_edge_memos() { edge_memos().clear(); }
 
 void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells, float iso,
-                 int64_t row_y, int64_t slab_z, EdgeMemo& memo, MeshBuilder& builder) {
+                 EdgeMemo& memo, MeshBuilder& builder) {
   static const CellTables kTables = make_cell_tables();
   int64_t offset[8];  // each cell corner's value, from the cell's lowest corner's
   for (int k = 0; k < 8; ++k) offset[k] = (dz(k) * stride + dy(k)) * stride + dx(k);
@@ -142,8 +142,8 @@ void march_block(const float* f, int64_t stride, const Coord& base, const std::a
   int64_t slot_step[8][8];
   for (int a = 0; a < 8; ++a)
     for (int b = 0; b < 8; ++b) slot_step[a][b] = ((dx(a) + dx(b)) * wyz + dz(a) + dz(b)) * wyz + dy(a) + dy(b);
-  // The slot of the box's lowest corner, doubled.
-  uint64_t* const slots = memo.slots() + ((2 * base[0]) * wyz + 2 * (base[2] - slab_z)) * wyz + 2 * (base[1] - row_y);
+  // The slot of the box's lowest corner, doubled: y and z from its row's and slab's lowest planes.
+  uint64_t* const slots = memo.slots() + 2 * base[0] * wyz * wyz;
   const uint64_t stamp = memo.stamp();
   memo.marched(2 * base[0], 2 * (base[0] + cells[0]));
   // Each node's sign once, a row to a word, rather than each cell's eight corners from its values:

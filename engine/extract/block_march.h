@@ -31,9 +31,9 @@ class EdgeMemo {
   EdgeMemo() = default;
   // Boxes of at most `cells` cells per axis, fewer than 32, in a slab of `nodes_x` nodes along x.
   void reshape(int64_t cells, int64_t nodes_x) {
-    wx_ = 2 * std::max<int64_t>(1, nodes_x - 1) + 1;
+    const int64_t wx = 2 * std::max<int64_t>(1, nodes_x - 1) + 1;
     wyz_ = 2 * cells + 1;
-    const auto slots = static_cast<size_t>(wx_ * wyz_ * wyz_);
+    const auto slots = static_cast<size_t>(wx * wyz_ * wyz_);
     if (slot_count_ < slots) {
       // On huge pages: up to megabytes a thread, whose 4 KB pages faulted one by one cost a
       // one-shot 257^3 extraction 5% (docs/METHOD.md, "Fresh memory").
@@ -43,7 +43,6 @@ class EdgeMemo {
       stamp_ = 0;
     }
     rows_.resize(static_cast<size_t>((cells + 1) * (cells + 1)));
-    boxes_.clear();
   }
   // A new slab: no vertex known. A slot keeps the low 32 bits of its stamp: the stamps start over
   // (the slots zeroed) at a slab's start once they pass kStampLimit, which leaves a slab's rows
@@ -80,7 +79,6 @@ class EdgeMemo {
   // from the row's, z from the slab's) is (x * width_yz() + z) * width_yz() + y: x slowest, so
   // that a box's slots are one run of memory (a box's 17^3 slots spread over 289 pages, with x
   // fastest across a 2049-node slab, missed the TLB on most lines).
-  int64_t width_x() const { return wx_; }
   int64_t width_yz() const { return wyz_; }
   // stamp() << 32 | vertex once filled in this row.
   uint64_t* slots() { return slots_.get(); }
@@ -89,7 +87,7 @@ class EdgeMemo {
   uint32_t* rows() { return rows_.data(); }
 
  private:
-  int64_t wx_ = 1, wyz_ = 1;
+  int64_t wyz_ = 1;
   uint64_t stamp_ = 0;
   std::vector<std::pair<int64_t, int64_t>> boxes_;  // marched in this row: doubled x, first and last
   detail::HugeArray<uint64_t> slots_;
@@ -121,9 +119,9 @@ void give_back_edge_memos();
 // provided the builder marches one slab one box deep (cells[2] <= stride - 1 from slab_z) and
 // keeps the keys of its two planes (march_in_slabs), and the memo was started for that slab and
 // for each row of its boxes in turn (march_finest_layers). The memo must hold boxes of
-// stride - 1 cells; base is the box's lowest corner, and (0, row_y, slab_z) that of the memo's
-// current row of the slab.
+// stride - 1 cells; base is the box's lowest corner, on the lowest plane of its row (y) and of its
+// slab (z).
 void march_block(const float* f, int64_t stride, const Coord& base, const std::array<int64_t, 3>& cells, float iso,
-                 int64_t row_y, int64_t slab_z, EdgeMemo& memo, MeshBuilder& builder);
+                 EdgeMemo& memo, MeshBuilder& builder);
 
 }  // namespace isotope

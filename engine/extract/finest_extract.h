@@ -209,7 +209,7 @@ void march_finest_layers(Reader& reader, const traversal::SplitRule& rule, const
       // The record's range is saturated over the diamonds below, which reach into the
       // neighbouring blocks: the block's own range culls most of what it lets through.
       if (!kCutsInPlace && !cut_by(f.data(), stride, n, plan.iso)) continue;
-      march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, y0, z0, memo, builder);
+      march_block(f.data(), stride, {x0, y0, z0}, n, plan.iso, memo, builder);
       marched += n[0] * n[1] * n[2];
     }
   }
